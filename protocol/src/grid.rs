@@ -1,0 +1,182 @@
+//! The ground grid every set lives on, shared by every process.
+//!
+//! Square cells of side `cell_m` tile the region of interest `[-h, h]^2` from its south-west
+//! corner; cell `(ix, iy)` covers `[x0 + ix*d, x0 + (ix+1)*d] x [y0 + iy*d, y0 + (iy+1)*d]`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::math::{Point2, Real};
+
+/// A cell index: column `ix` (east), row `iy` (north).
+pub type CellIndex = (u32, u32);
+
+/// The ground grid: origin at the RoI's south-west corner, `nx x ny` square cells.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GroundGrid {
+    /// South-west corner of cell `(0, 0)`.
+    pub origin: Point2,
+    /// Cell side, metres.
+    pub cell_m: Real,
+    /// Cells along x.
+    pub nx: u32,
+    /// Cells along y.
+    pub ny: u32,
+}
+
+/// An axis-aligned rectangle on the ground.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Rect {
+    /// South-west corner.
+    pub min: Point2,
+    /// North-east corner.
+    pub max: Point2,
+}
+
+impl Rect {
+    /// Whether `p` lies in the closed rectangle.
+    pub fn contains(&self, p: &Point2) -> bool {
+        p.x >= self.min.x && p.x <= self.max.x && p.y >= self.min.y && p.y <= self.max.y
+    }
+
+    /// The four corners, counter-clockwise from the south-west one.
+    pub fn corners(&self) -> [Point2; 4] {
+        [
+            self.min,
+            Point2::new(self.max.x, self.min.y),
+            self.max,
+            Point2::new(self.min.x, self.max.y),
+        ]
+    }
+}
+
+impl GroundGrid {
+    /// The grid over `[-half_extent_m, half_extent_m]^2` with cells of side `cell_m`
+    /// (the last row and column may reach past the RoI when `cell_m` does not divide it).
+    pub fn new(half_extent_m: Real, cell_m: Real) -> Self {
+        let n = ((2.0 * half_extent_m / cell_m) - 1e-9).ceil().max(1.0) as u32;
+        Self {
+            origin: Point2::new(-half_extent_m, -half_extent_m),
+            cell_m,
+            nx: n,
+            ny: n,
+        }
+    }
+
+    /// Total number of cells.
+    pub fn cell_count(&self) -> usize {
+        self.nx as usize * self.ny as usize
+    }
+
+    /// Area of one cell, m².
+    pub fn cell_area(&self) -> Real {
+        self.cell_m * self.cell_m
+    }
+
+    /// Area covered by the grid, m².
+    pub fn area(&self) -> Real {
+        self.cell_count() as Real * self.cell_area()
+    }
+
+    /// The rectangle covered by the grid.
+    pub fn bounds(&self) -> Rect {
+        Rect {
+            min: self.origin,
+            max: Point2::new(
+                self.origin.x + self.nx as Real * self.cell_m,
+                self.origin.y + self.ny as Real * self.cell_m,
+            ),
+        }
+    }
+
+    /// The cell containing `p` (cells are half-open `[lo, hi)`), or `None` outside the grid.
+    pub fn cell_of(&self, p: &Point2) -> Option<CellIndex> {
+        let fx = ((p.x - self.origin.x) / self.cell_m).floor();
+        let fy = ((p.y - self.origin.y) / self.cell_m).floor();
+        if fx >= 0.0 && fy >= 0.0 && fx < self.nx as Real && fy < self.ny as Real {
+            Some((fx as u32, fy as u32))
+        } else {
+            None
+        }
+    }
+
+    /// The rectangle of cell `(ix, iy)`.
+    pub fn cell_rect(&self, (ix, iy): CellIndex) -> Rect {
+        let min = Point2::new(
+            self.origin.x + ix as Real * self.cell_m,
+            self.origin.y + iy as Real * self.cell_m,
+        );
+        Rect {
+            min,
+            max: Point2::new(min.x + self.cell_m, min.y + self.cell_m),
+        }
+    }
+
+    /// Centre of cell `(ix, iy)`.
+    pub fn cell_centre(&self, (ix, iy): CellIndex) -> Point2 {
+        Point2::new(
+            self.origin.x + (ix as Real + 0.5) * self.cell_m,
+            self.origin.y + (iy as Real + 0.5) * self.cell_m,
+        )
+    }
+
+    /// The range of cell columns whose closed extent meets `[x_lo, x_hi]`, clamped to the grid
+    /// (`None` if empty). Useful for outer rasterisation.
+    pub fn columns_touching(&self, x_lo: Real, x_hi: Real) -> Option<(u32, u32)> {
+        Self::touching(self.origin.x, self.cell_m, self.nx, x_lo, x_hi)
+    }
+
+    /// As [`GroundGrid::columns_touching`], for rows and `y`.
+    pub fn rows_touching(&self, y_lo: Real, y_hi: Real) -> Option<(u32, u32)> {
+        Self::touching(self.origin.y, self.cell_m, self.ny, y_lo, y_hi)
+    }
+
+    fn touching(origin: Real, d: Real, n: u32, lo: Real, hi: Real) -> Option<(u32, u32)> {
+        if !(lo <= hi) {
+            return None;
+        }
+        // A cell [k d, (k+1) d] touches [lo, hi] when k d <= hi and (k+1) d >= lo.
+        let k0 = ((lo - origin) / d).floor() - 1.0;
+        let k1 = ((hi - origin) / d).floor() + 1.0;
+        let k0 = k0.max(0.0);
+        let k1 = k1.min(n as Real - 1.0);
+        if k0 > k1 {
+            return None;
+        }
+        let (mut a, mut b) = (k0 as u32, k1 as u32);
+        while a <= b && origin + (a as Real + 1.0) * d < lo {
+            a += 1;
+        }
+        while b >= a && origin + b as Real * d > hi {
+            if b == 0 {
+                return None;
+            }
+            b -= 1;
+        }
+        (a <= b).then_some((a, b))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_grid_is_1000_by_1000() {
+        let g = GroundGrid::new(250.0, 0.5);
+        assert_eq!((g.nx, g.ny), (1000, 1000));
+        assert_eq!(g.cell_of(&Point2::new(-250.0, -250.0)), Some((0, 0)));
+        assert_eq!(g.cell_of(&Point2::new(249.99, 249.99)), Some((999, 999)));
+        assert_eq!(g.cell_of(&Point2::new(250.0, 0.0)), None);
+        assert!((g.area() - 250_000.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn touching_includes_shared_edges() {
+        let g = GroundGrid::new(5.0, 1.0);
+        // x = -4.0 is the edge between columns 0 and 1: both touch.
+        assert_eq!(g.columns_touching(-4.0, -4.0), Some((0, 1)));
+        assert_eq!(g.columns_touching(-4.5, -4.2), Some((0, 0)));
+        assert_eq!(g.columns_touching(-20.0, -10.0), None);
+        assert_eq!(g.columns_touching(4.5, 30.0), Some((9, 9)));
+    }
+}

@@ -1,0 +1,25 @@
+//! # protocol
+//!
+//! The shared vocabulary of setfleet: everything two processes must agree on.
+//!
+//! - [`math`]: geometry aliases (`Point3`, `Vector3`, `Isometry3` over nalgebra, `f64`).
+//! - [`camera`]: the pinhole camera used by both the renderer and the estimator.
+//! - [`grid`] and [`raster`]: the ground grid and the bit-raster [`raster::CellSet`] with the
+//!   algebra that keeps the sets' guarantee.
+//! - [`scenario`]: the TOML scenario with the paper's defaults built in.
+//! - [`frame`]: the fixed-size CVS frame rendered in place into shared memory.
+//! - [`wire`]: commands, truth, estimates and the guidance token.
+//! - [`service`]: run ids and every iceoryx2 service name.
+//! - [`codec`]: the one place that encodes and decodes variable-size messages.
+
+#![warn(missing_docs)]
+
+pub mod camera;
+pub mod codec;
+pub mod frame;
+pub mod grid;
+pub mod math;
+pub mod raster;
+pub mod scenario;
+pub mod service;
+pub mod wire;

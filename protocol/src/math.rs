@@ -1,0 +1,95 @@
+//! Geometry aliases shared by every crate, so that geometry reads the same everywhere.
+//!
+//! World frame: x east, y north, z up, ground at z = 0; lengths in metres, angles in radians.
+//! All geometry is `f64`; frames carry `f32` depth only on the wire.
+
+/// Scalar type of all geometry.
+pub type Real = f64;
+/// A point in the world frame.
+pub type Point3 = nalgebra::Point3<Real>;
+/// A vector in the world frame.
+pub type Vector3 = nalgebra::Vector3<Real>;
+/// A point on the ground plane (x east, y north).
+pub type Point2 = nalgebra::Point2<Real>;
+/// A vector on the ground plane.
+pub type Vector2 = nalgebra::Vector2<Real>;
+/// A rigid motion (rotation + translation).
+pub type Isometry3 = nalgebra::Isometry3<Real>;
+/// A rotation in 3D.
+pub type Rotation3 = nalgebra::Rotation3<Real>;
+
+/// Wraps an angle into `(-pi, pi]`.
+pub fn wrap_angle(a: Real) -> Real {
+    let two_pi = std::f64::consts::TAU;
+    let mut w = a.rem_euclid(two_pi);
+    if w > std::f64::consts::PI {
+        w -= two_pi;
+    }
+    w
+}
+
+/// Convex hull (counter-clockwise, no repeated points) of a set of ground points,
+/// by Andrew's monotone chain. Collinear points on the hull are dropped.
+pub fn convex_hull(points: &[Point2]) -> Vec<Point2> {
+    let mut pts: Vec<Point2> = points
+        .iter()
+        .copied()
+        .filter(|p| p.x.is_finite() && p.y.is_finite())
+        .collect();
+    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    pts.dedup();
+    if pts.len() < 3 {
+        return pts;
+    }
+    let cross =
+        |o: &Point2, a: &Point2, b: &Point2| (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+    let mut hull: Vec<Point2> = Vec::with_capacity(pts.len() + 1);
+    // Lower hull left to right, then upper hull right to left; `floor` keeps the upper pass
+    // from popping points of the lower hull.
+    for pass in 0..2 {
+        let floor = hull.len();
+        let ordered: Box<dyn Iterator<Item = &Point2>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
+        for p in ordered {
+            while hull.len() >= floor + 2
+                && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(*p);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wrap_angle_stays_in_half_open_interval() {
+        for k in -10..10 {
+            let a = 0.3 + k as f64 * std::f64::consts::TAU;
+            assert!((wrap_angle(a) - 0.3).abs() < 1e-9);
+        }
+        assert!((wrap_angle(-std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
+    }
+
+    #[test]
+    fn hull_of_square_with_inner_point() {
+        let pts = [
+            Point2::new(0.0, 0.0),
+            Point2::new(1.0, 0.0),
+            Point2::new(1.0, 1.0),
+            Point2::new(0.0, 1.0),
+            Point2::new(0.5, 0.5),
+        ];
+        let h = convex_hull(&pts);
+        assert_eq!(h.len(), 4);
+        assert!(!h.contains(&Point2::new(0.5, 0.5)));
+    }
+}

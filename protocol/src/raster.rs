@@ -1,0 +1,313 @@
+//! Bit-raster sets on the [`GroundGrid`]: the representation of every guaranteed set.
+//!
+//! A [`CellSet`] is `ny` rows of `u64` words, bit `ix % 64` of word `ix / 64` of row `iy` set
+//! when cell `(ix, iy)` belongs to the set. The algebra keeps the guarantee when used by the
+//! rules of DESIGN.md section 3:
+//! - a set that must *contain* something is rasterised [`Coverage::Outer`] (every cell the true
+//!   set touches); a set *proven free* is rasterised [`Coverage::Inner`] (only cells wholly
+//!   inside);
+//! - `outer \ inner`, `outer ∩ outer` and `outer ∪ outer` are outer;
+//! - [`CellSet::dilate`] contains every point within the radius of the set.
+
+use serde::{Deserialize, Serialize};
+
+use crate::grid::{CellIndex, GroundGrid};
+use crate::math::{Point2, Real};
+
+/// How a continuous shape is turned into cells.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Coverage {
+    /// Every cell whose closed square meets the shape (a superset).
+    Outer,
+    /// Only cells whose closed square lies wholly inside the shape (a subset).
+    Inner,
+}
+
+/// An inclusive rectangle of cells.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CellBox {
+    /// First column.
+    pub x0: u32,
+    /// First row.
+    pub y0: u32,
+    /// Last column (inclusive).
+    pub x1: u32,
+    /// Last row (inclusive).
+    pub y1: u32,
+}
+
+/// A set of ground cells as a bitmap over the whole grid.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct CellSet {
+    nx: u32,
+    ny: u32,
+    words_per_row: usize,
+    words: Vec<u64>,
+}
+
+/// A compact, self-describing encoding of a [`CellSet`] for messages: the bounding box of the
+/// set and run lengths of alternating empty/full cells inside it, row-major, starting with an
+/// empty run.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EncodedSet {
+    /// Grid width the set was encoded on.
+    pub nx: u32,
+    /// Grid height the set was encoded on.
+    pub ny: u32,
+    /// Bounding box of the set; `None` for the empty set.
+    pub bbox: Option<CellBox>,
+    /// Alternating run lengths (empty first) covering the box row by row.
+    pub runs: Vec<u32>,
+}
+
+/// Why an [`EncodedSet`] could not be decoded.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum SetDecodeError {
+    /// The set was encoded on a grid of another size.
+    #[error("set encoded on a {got_nx}x{got_ny} grid, expected {nx}x{ny}")]
+    GridMismatch {
+        /// Expected width.
+        nx: u32,
+        /// Expected height.
+        ny: u32,
+        /// Width in the message.
+        got_nx: u32,
+        /// Height in the message.
+        got_ny: u32,
+    },
+    /// The bounding box is empty or reaches outside the grid.
+    #[error("bounding box {0:?} is outside the grid")]
+    BadBox(CellBox),
+    /// The runs do not add up to the box's cell count.
+    #[error("runs cover {got} cells, the box holds {expected}")]
+    RunLength {
+        /// Cells in the box.
+        expected: u64,
+        /// Cells the runs cover.
+        got: u64,
+    },
+}
+
+impl CellSet {
+    /// The empty set on `grid`.
+    pub fn empty(grid: &GroundGrid) -> Self {
+        let words_per_row = (grid.nx as usize).div_ceil(64);
+        Self {
+            nx: grid.nx,
+            ny: grid.ny,
+            words_per_row,
+            words: vec![0; words_per_row * grid.ny as usize],
+        }
+    }
+
+    /// The set of every cell of `grid`.
+    pub fn full(grid: &GroundGrid) -> Self {
+        let mut s = Self::empty(grid);
+        for iy in 0..s.ny {
+            s.fill_row_span(iy, 0, s.nx - 1);
+        }
+        s
+    }
+
+    /// Grid width in cells.
+    pub fn nx(&self) -> u32 {
+        self.nx
+    }
+
+    /// Grid height in cells.
+    pub fn ny(&self) -> u32 {
+        self.ny
+    }
+
+    /// Words per row.
+    pub fn words_per_row(&self) -> usize {
+        self.words_per_row
+    }
+
+    /// The words of row `iy`.
+    pub fn row(&self, iy: u32) -> &[u64] {
+        let s = iy as usize * self.words_per_row;
+        &self.words[s..s + self.words_per_row]
+    }
+
+    /// The words of row `iy`, mutable. Bits past `nx` must stay clear.
+    pub fn row_mut(&mut self, iy: u32) -> &mut [u64] {
+        let s = iy as usize * self.words_per_row;
+        &mut self.words[s..s + self.words_per_row]
+    }
+
+    /// Whether `other` lives on a grid of the same size.
+    pub fn same_shape(&self, other: &CellSet) -> bool {
+        self.nx == other.nx && self.ny == other.ny
+    }
+
+    /// Whether cell `(ix, iy)` is in the set (`false` outside the grid).
+    pub fn contains(&self, (ix, iy): CellIndex) -> bool {
+        if ix >= self.nx || iy >= self.ny {
+            return false;
+        }
+        let w = self.words[iy as usize * self.words_per_row + ix as usize / 64];
+        w >> (ix % 64) & 1 == 1
+    }
+
+    /// Adds or removes cell `(ix, iy)`; ignored outside the grid.
+    pub fn set(&mut self, (ix, iy): CellIndex, value: bool) {
+        if ix >= self.nx || iy >= self.ny {
+            return;
+        }
+        let w = &mut self.words[iy as usize * self.words_per_row + ix as usize / 64];
+        let bit = 1u64 << (ix % 64);
+        if value {
+            *w |= bit;
+        } else {
+            *w &= !bit;
+        }
+    }
+
+    /// Adds cells `x0..=x1` of row `iy` (clamped to the grid).
+    pub fn fill_row_span(&mut self, iy: u32, x0: u32, x1: u32) {
+        if iy >= self.ny || x0 > x1 || x0 >= self.nx {
+            return;
+        }
+        let x1 = x1.min(self.nx - 1);
+        let row = self.row_mut(iy);
+        let (w0, w1) = (x0 as usize / 64, x1 as usize / 64);
+        for (w, word) in row.iter_mut().enumerate().take(w1 + 1).skip(w0) {
+            let lo = if w == w0 { x0 % 64 } else { 0 };
+            let hi = if w == w1 { x1 % 64 } else { 63 };
+            let mask = (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
+            *word |= mask;
+        }
+    }
+
+    /// Whether the set has no cell.
+    pub fn is_empty(&self) -> bool {
+        self.words.iter().all(|&w| w == 0)
+    }
+
+    /// Number of cells in the set.
+    pub fn count(&self) -> u64 {
+        self.words.iter().map(|w| w.count_ones() as u64).sum()
+    }
+
+    /// Area of the set, m² (an upper bound of the true set's area for outer sets).
+    pub fn area(&self, grid: &GroundGrid) -> Real {
+        self.count() as Real * grid.cell_area()
+    }
+
+    /// `self ← self ∩ other`. Both sets must share the grid.
+    pub fn and_assign(&mut self, other: &CellSet) {
+        debug_assert!(self.same_shape(other));
+        self.words
+            .iter_mut()
+            .zip(&other.words)
+            .for_each(|(a, b)| *a &= b);
+    }
+
+    /// `self ← self ∪ other`. Both sets must share the grid.
+    pub fn or_assign(&mut self, other: &CellSet) {
+        debug_assert!(self.same_shape(other));
+        self.words
+            .iter_mut()
+            .zip(&other.words)
+            .for_each(|(a, b)| *a |= b);
+    }
+
+    /// `self ← self \ other`. Both sets must share the grid.
+    pub fn and_not_assign(&mut self, other: &CellSet) {
+        debug_assert!(self.same_shape(other));
+        self.words
+            .iter_mut()
+            .zip(&other.words)
+            .for_each(|(a, b)| *a &= !b);
+    }
+
+    /// Number of cells in `self ∩ other`, without building it.
+    pub fn intersection_count(&self, other: &CellSet) -> u64 {
+        self.words
+            .iter()
+            .zip(&other.words)
+            .map(|(a, b)| (a & b).count_ones() as u64)
+            .sum()
+    }
+
+    /// Iterates over the cells of the set, row by row.
+    pub fn iter(&self) -> impl Iterator<Item = CellIndex> + '_ {
+        (0..self.ny).flat_map(move |iy| {
+            self.row(iy).iter().enumerate().flat_map(move |(w, &word)| {
+                let mut bits = word;
+                std::iter::from_fn(move || {
+                    if bits == 0 {
+                        return None;
+                    }
+                    let b = bits.trailing_zeros();
+                    bits &= bits - 1;
+                    Some((w as u32 * 64 + b, iy))
+                })
+            })
+        })
+    }
+
+    /// Adds the cells of a convex polygon (any orientation, >= 3 vertices; fewer or
+    /// non-finite vertices add nothing for `Inner` and the touched cells of the degenerate
+    /// shape for `Outer`) by `coverage`: `Outer` adds every cell whose closed square meets the
+    /// polygon, `Inner` only cells whose closed square lies inside it. Geometry is exact up to
+    /// an epsilon that always errs the safe way. Cells outside the grid are ignored.
+    pub fn fill_convex_polygon(
+        &mut self,
+        grid: &GroundGrid,
+        polygon: &[Point2],
+        coverage: Coverage,
+    ) {
+        let _ = (grid, polygon, coverage);
+        todo!("raster helper")
+    }
+
+    /// Adds the cells of the closed disc of `radius` around `centre` by `coverage`.
+    pub fn fill_disc(
+        &mut self,
+        grid: &GroundGrid,
+        centre: Point2,
+        radius: Real,
+        coverage: Coverage,
+    ) {
+        let _ = (grid, centre, radius, coverage);
+        todo!("raster helper")
+    }
+
+    /// Conservative dilation by a disc of `radius` metres: cell `(x+dx, y+dy)` joins when the
+    /// squares of the two cells are within `radius` of each other, so the result contains every
+    /// point within `radius` of the set.
+    pub fn dilate(&self, grid: &GroundGrid, radius: Real) -> CellSet {
+        let _ = (grid, radius);
+        todo!("raster helper")
+    }
+
+    /// The smallest box holding every cell of the set, `None` when empty.
+    pub fn bounding_box(&self) -> Option<CellBox> {
+        todo!("raster helper")
+    }
+
+    /// Removes every cell outside `bbox`.
+    pub fn crop(&mut self, bbox: &CellBox) {
+        let _ = bbox;
+        todo!("raster helper")
+    }
+
+    /// Barycentre of the cell centres, `None` when empty.
+    pub fn barycentre(&self, grid: &GroundGrid) -> Option<Point2> {
+        let _ = grid;
+        todo!("raster helper")
+    }
+
+    /// The compact encoding for messages.
+    pub fn encode(&self) -> EncodedSet {
+        todo!("raster helper")
+    }
+
+    /// Decodes a set received from a peer on `grid`; never panics on bad input.
+    pub fn decode(grid: &GroundGrid, encoded: &EncodedSet) -> Result<CellSet, SetDecodeError> {
+        let _ = (grid, encoded);
+        todo!("raster helper")
+    }
+}

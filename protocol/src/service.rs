@@ -1,0 +1,145 @@
+//! Run ids and every iceoryx2 service name, built here and nowhere else.
+//!
+//! | service | from -> to |
+//! |---|---|
+//! | [`cvs`] `{run}/uav/{i}/cvs` | world-server -> agent i and observers |
+//! | [`cmd`] `{run}/uav/{i}/cmd` | agent i -> world-server |
+//! | [`estimate`] `{run}/uav/{i}/estimate` | agent i -> peers and observers |
+//! | [`guidance`] `{run}/guidance` | agent -> agents (the token) |
+//! | [`truth`] `{run}/truth` | world-server -> observers |
+//! | [`agent_wake`] `{run}/uav/{i}/wake` | anyone sending to agent i -> agent i (event) |
+//! | [`world_wake`] `{run}/world/wake` | agents -> world-server (event) |
+//! | [`observer_wake`] `{run}/observer/wake` | world and agents -> observers (event) |
+
+use std::fmt;
+
+use iceoryx2::prelude::ServiceName;
+
+/// Why a run id was refused.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum RunIdError {
+    /// Empty or longer than [`RunId::MAX_LEN`].
+    #[error("run id must be 1 to {max} characters, got {0}", max = RunId::MAX_LEN)]
+    Length(usize),
+    /// A character other than ASCII letters, digits, '-' and '_'.
+    #[error("run id may hold only ASCII letters, digits, '-' and '_', got {0:?}")]
+    Character(char),
+}
+
+/// The id of one run: prefixes every service and every shared-memory file of the run, so runs
+/// and tests never see each other.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct RunId(String);
+
+impl RunId {
+    /// Longest accepted id.
+    pub const MAX_LEN: usize = 40;
+
+    /// Validates a run id.
+    pub fn new(id: &str) -> Result<Self, RunIdError> {
+        if id.is_empty() || id.len() > Self::MAX_LEN {
+            return Err(RunIdError::Length(id.len()));
+        }
+        if let Some(c) = id
+            .chars()
+            .find(|c| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_'))
+        {
+            return Err(RunIdError::Character(c));
+        }
+        Ok(Self(id.to_owned()))
+    }
+
+    /// The id as text.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// A 64-bit tag (FNV-1a of the id) stamped on every message, so a message of another run
+    /// is recognised and dropped.
+    pub fn tag(&self) -> u64 {
+        self.0.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+            (h ^ b as u64).wrapping_mul(0x100_0000_01b3)
+        })
+    }
+
+    /// Prefix of every iceoryx2 file of this run (starts with `iox2_` like iceoryx2's own).
+    pub fn file_prefix(&self) -> String {
+        format!("iox2_sf_{}_", self.0)
+    }
+}
+
+impl fmt::Display for RunId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::str::FromStr for RunId {
+    type Err = RunIdError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::new(s)
+    }
+}
+
+fn name(s: String) -> ServiceName {
+    // Names built from a validated run id and numbers are always valid service names.
+    ServiceName::new(&s).unwrap_or_else(|e| unreachable!("invalid service name {s:?}: {e:?}"))
+}
+
+/// `{run}/uav/{i}/cvs`: frames for UAV `i`.
+pub fn cvs(run: &RunId, uav: u32) -> ServiceName {
+    name(format!("{run}/uav/{uav}/cvs"))
+}
+
+/// `{run}/uav/{i}/cmd`: commands and lockstep acks from agent `i`.
+pub fn cmd(run: &RunId, uav: u32) -> ServiceName {
+    name(format!("{run}/uav/{uav}/cmd"))
+}
+
+/// `{run}/uav/{i}/estimate`: agent `i`'s estimates.
+pub fn estimate(run: &RunId, uav: u32) -> ServiceName {
+    name(format!("{run}/uav/{uav}/estimate"))
+}
+
+/// `{run}/guidance`: the round-robin token.
+pub fn guidance(run: &RunId) -> ServiceName {
+    name(format!("{run}/guidance"))
+}
+
+/// `{run}/truth`: ground truth for observers.
+pub fn truth(run: &RunId) -> ServiceName {
+    name(format!("{run}/truth"))
+}
+
+/// `{run}/uav/{i}/wake`: event that wakes agent `i` (frame, peer estimate or token arrived).
+pub fn agent_wake(run: &RunId, uav: u32) -> ServiceName {
+    name(format!("{run}/uav/{uav}/wake"))
+}
+
+/// `{run}/world/wake`: event that wakes the world-server (a command arrived).
+pub fn world_wake(run: &RunId) -> ServiceName {
+    name(format!("{run}/world/wake"))
+}
+
+/// `{run}/observer/wake`: event that wakes observers (truth or an estimate was published).
+pub fn observer_wake(run: &RunId) -> ServiceName {
+    name(format!("{run}/observer/wake"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_prefixed_by_the_run() {
+        let run = RunId::new("t-1").unwrap();
+        assert_eq!(cvs(&run, 3).as_str(), "t-1/uav/3/cvs");
+        assert_eq!(guidance(&run).as_str(), "t-1/guidance");
+        assert!(RunId::new("a/b").is_err());
+        assert!(RunId::new("").is_err());
+        assert_ne!(
+            RunId::new("a").unwrap().tag(),
+            RunId::new("b").unwrap().tag()
+        );
+    }
+}

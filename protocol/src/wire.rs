@@ -1,0 +1,224 @@
+//! Messages other than frames: commands, truth, estimates and the guidance token.
+//!
+//! Fixed-size messages (commands, truth) are `#[repr(C)]` [`ZeroCopySend`] types whose
+//! iceoryx2 type names carry the protocol version, so a process speaking another version cannot
+//! open the service. Variable-size messages (estimates, token) travel as bincode in a `[u8]`
+//! slice behind a versioned [`WireHeader`] user header, encoded by [`crate::codec`].
+
+use iceoryx2::prelude::ZeroCopySend;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::CameraPose;
+use crate::math::Point2;
+use crate::raster::EncodedSet;
+
+/// Version of every message layout in this module and in [`crate::frame`].
+pub const PROTOCOL_VERSION: u32 = 1;
+/// Targets a truth message can hold.
+pub const TRUTH_MAX_TARGETS: usize = 64;
+/// UAVs a truth message can hold, and the largest fleet.
+pub const MAX_UAVS: usize = 32;
+
+/// Agent -> world: the yaw reference for a UAV, and the lockstep ack of `step`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("setfleet.UavCommand.v1")]
+pub struct UavCommand {
+    /// [`crate::service::RunId::tag`] of the run.
+    pub run_tag: u64,
+    /// The frame step this command answers.
+    pub step: u64,
+    /// Sender's UAV index.
+    pub uav: u32,
+    /// 1 when `yaw_ref_rad` holds a new reference, 0 to keep the current one.
+    pub has_yaw_ref: u32,
+    /// Yaw reference, radians.
+    pub yaw_ref_rad: f64,
+}
+
+/// Ground truth of one target.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("setfleet.TargetTruth.v1")]
+pub struct TargetTruth {
+    /// Target id.
+    pub id: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Ground point under the car's centre, world frame.
+    pub ground: [f64; 2],
+    /// Heading, radians.
+    pub heading: f64,
+    /// Speed, m/s.
+    pub speed: f64,
+}
+
+/// Ground truth of one UAV.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("setfleet.UavTruth.v1")]
+pub struct UavTruth {
+    /// UAV index.
+    pub id: u32,
+    /// 1 while the world considers the UAV's agent live.
+    pub agent_live: u32,
+    /// Position of the camera's optical centre.
+    pub position: [f64; 3],
+    /// Yaw, radians.
+    pub yaw: f64,
+    /// Current yaw reference, radians.
+    pub yaw_ref: f64,
+}
+
+/// World -> observers: the true state at a step (agents never subscribe).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("setfleet.TruthState.v1")]
+pub struct TruthState {
+    /// [`crate::service::RunId::tag`] of the run.
+    pub run_tag: u64,
+    /// Step index.
+    pub step: u64,
+    /// Simulated time, seconds.
+    pub time_s: f64,
+    /// Targets in use.
+    pub target_count: u32,
+    /// UAVs in use.
+    pub uav_count: u32,
+    /// Target states.
+    pub targets: [TargetTruth; TRUTH_MAX_TARGETS],
+    /// UAV states.
+    pub uavs: [UavTruth; MAX_UAVS],
+}
+
+impl Default for TruthState {
+    fn default() -> Self {
+        Self {
+            run_tag: 0,
+            step: 0,
+            time_s: 0.0,
+            target_count: 0,
+            uav_count: 0,
+            targets: [TargetTruth::default(); TRUTH_MAX_TARGETS],
+            uavs: [UavTruth::default(); MAX_UAVS],
+        }
+    }
+}
+
+impl TruthState {
+    /// The targets in use.
+    pub fn targets(&self) -> &[TargetTruth] {
+        &self.targets[..(self.target_count as usize).min(TRUTH_MAX_TARGETS)]
+    }
+
+    /// The UAVs in use.
+    pub fn uavs(&self) -> &[UavTruth] {
+        &self.uavs[..(self.uav_count as usize).min(MAX_UAVS)]
+    }
+}
+
+/// What kind of payload follows a [`WireHeader`].
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WireKind {
+    /// An [`EstimateMsg`].
+    Estimate = 1,
+    /// A [`GuidanceToken`].
+    Token = 2,
+}
+
+/// User header of every variable-size message: who sent what, for which run, in which version.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("setfleet.WireHeader.v1")]
+pub struct WireHeader {
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub version: u32,
+    /// [`WireKind`] as a number.
+    pub kind: u32,
+    /// [`crate::service::RunId::tag`] of the run.
+    pub run_tag: u64,
+    /// Sender's UAV index.
+    pub sender: u32,
+    /// Payload length in bytes.
+    pub len: u32,
+    /// Step the payload belongs to.
+    pub step: u64,
+}
+
+/// One target's set in an estimate.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TargetSetMsg {
+    /// Target id.
+    pub id: u32,
+    /// Outer set `X_j`.
+    pub set: EncodedSet,
+}
+
+/// One occupancy elevation map cell that changed.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OemCellUpdate {
+    /// Cell column on the OEM grid.
+    pub ix: u16,
+    /// Cell row on the OEM grid.
+    pub iy: u16,
+    /// 0 unknown, 1 obstacle, 2 ground.
+    pub status: u8,
+    /// Height of the obstacle, metres (0 for ground).
+    pub height_m: f32,
+}
+
+/// Agent -> peers and observers: the agent's sets after correction at a step.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EstimateMsg {
+    /// Sender's UAV index.
+    pub uav: u32,
+    /// Step the sets belong to.
+    pub step: u64,
+    /// Simulated time, seconds.
+    pub time_s: f64,
+    /// Counts every message this agent process sent (a heartbeat).
+    pub seq: u64,
+    /// Changes each time the agent (re)starts, so peers can tell a restart.
+    pub incarnation: u64,
+    /// The camera pose of the frame.
+    pub pose: CameraPose,
+    /// Outer set `X̄` of targets not yet identified.
+    pub undetected: EncodedSet,
+    /// Outer sets `X_j` of identified targets.
+    pub targets: Vec<TargetSetMsg>,
+    /// Inner set `S^o` of ground near obstacles, accumulated.
+    pub obstacle_free: EncodedSet,
+    /// Ground hidden in this frame, `H^CVS`.
+    pub hidden: EncodedSet,
+    /// OEM cells changed since the last message, or the whole known map when `oem_full`.
+    pub oem: Vec<OemCellUpdate>,
+    /// Whether `oem` holds every known cell rather than a delta.
+    pub oem_full: bool,
+}
+
+/// One UAV's predicted fields of view for the steps of its horizon.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlannedView {
+    /// UAV index.
+    pub uav: u32,
+    /// Predicted ground footprint (convex polygon) at each horizon step.
+    pub footprints: Vec<Vec<Point2>>,
+}
+
+/// The round-robin guidance token.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GuidanceToken {
+    /// Round number, one per guidance period.
+    pub round: u64,
+    /// Step at which the round started.
+    pub step: u64,
+    /// The order of live UAVs this round.
+    pub order: Vec<u32>,
+    /// The UAV that must plan next.
+    pub holder: u32,
+    /// The UAV that issued (or reissued) the token.
+    pub issued_by: u32,
+    /// Plans of the UAVs that already decided this round.
+    pub plans: Vec<PlannedView>,
+}
