@@ -212,6 +212,17 @@ impl CvsFrame {
     }
 }
 
+/// Prints the header and the boxes in use, not the 864 KB of pixels (iceoryx2 requires
+/// `Debug` of every payload type).
+impl std::fmt::Debug for CvsFrame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CvsFrame")
+            .field("header", &self.header)
+            .field("boxes", &self.boxes())
+            .finish_non_exhaustive()
+    }
+}
+
 fn mix_bytes(mut h: u64, bytes: &[u8]) -> u64 {
     let mut chunks = bytes.chunks_exact(8);
     for c in &mut chunks {

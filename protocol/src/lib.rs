@@ -10,14 +10,18 @@
 //! - [`frame`]: the fixed-size CVS frame rendered in place into shared memory.
 //! - [`wire`]: commands, truth, estimates and the guidance token.
 //! - [`service`]: run ids and every iceoryx2 service name.
+//! - [`ipc`]: iceoryx2 nodes and services with the fleet's quality of service, wake-up events,
+//!   cleanup after dead processes.
 //! - [`codec`]: the one place that encodes and decodes variable-size messages.
 
 #![warn(missing_docs)]
 
 pub mod camera;
 pub mod codec;
+pub mod flight;
 pub mod frame;
 pub mod grid;
+pub mod ipc;
 pub mod math;
 pub mod raster;
 pub mod scenario;

@@ -8,11 +8,36 @@
 //!   inside);
 //! - `outer \ inner`, `outer ∩ outer` and `outer ∪ outer` are outer;
 //! - [`CellSet::dilate`] contains every point within the radius of the set.
+//!
+//! The operations live one per file: `polygon` and `disc` rasterise shapes, `dilate` grows a
+//! set, `extent` measures and crops it, `encode` turns it into an [`EncodedSet`] and back.
+//!
+//! ```
+//! use protocol::grid::GroundGrid;
+//! use protocol::math::Point2;
+//! use protocol::raster::{CellSet, Coverage};
+//!
+//! let grid = GroundGrid::new(10.0, 0.5);
+//! let mut seen = CellSet::empty(&grid);
+//! seen.fill_disc(&grid, Point2::new(0.0, 0.0), 3.0, Coverage::Outer);
+//! let grown = seen.dilate(&grid, 1.0);
+//! assert!(seen.is_subset_of(&grown));
+//! let back = CellSet::decode(&grid, &grown.encode()).unwrap();
+//! assert_eq!(back, grown);
+//! ```
+
+mod dilate;
+mod disc;
+mod encode;
+mod extent;
+mod polygon;
 
 use serde::{Deserialize, Serialize};
 
 use crate::grid::{CellIndex, GroundGrid};
-use crate::math::{Point2, Real};
+use crate::math::Real;
+
+pub use polygon::polygon_is_finite;
 
 /// How a continuous shape is turned into cells.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -34,6 +59,39 @@ pub struct CellBox {
     pub x1: u32,
     /// Last row (inclusive).
     pub y1: u32,
+}
+
+impl CellBox {
+    /// Whether cell `(ix, iy)` lies in the box.
+    pub fn contains(&self, (ix, iy): CellIndex) -> bool {
+        ix >= self.x0 && ix <= self.x1 && iy >= self.y0 && iy <= self.y1
+    }
+
+    /// Number of cells in the box (0 when inverted), in `u64` so no grid can overflow it.
+    pub fn cell_count(&self) -> u64 {
+        if self.x0 > self.x1 || self.y0 > self.y1 {
+            return 0;
+        }
+        (u64::from(self.x1 - self.x0) + 1) * (u64::from(self.y1 - self.y0) + 1)
+    }
+}
+
+/// The tolerance of the geometric tests at coordinate magnitude `scale`: far above the
+/// rounding of f64 arithmetic on such numbers, far below any cell size. Outer rasterisation
+/// widens shapes by it, inner rasterisation narrows them by it.
+fn margin(scale: Real) -> Real {
+    1e-9 * (1.0 + scale.abs())
+}
+
+/// The largest coordinate magnitude of the grid's corners, the floor of every margin.
+fn grid_scale(grid: &GroundGrid) -> Real {
+    let b = grid.bounds();
+    b.min
+        .x
+        .abs()
+        .max(b.min.y.abs())
+        .max(b.max.x.abs())
+        .max(b.max.y.abs())
 }
 
 /// A set of ground cells as a bitmap over the whole grid.
@@ -103,8 +161,25 @@ impl CellSet {
     /// The set of every cell of `grid`.
     pub fn full(grid: &GroundGrid) -> Self {
         let mut s = Self::empty(grid);
-        for iy in 0..s.ny {
-            s.fill_row_span(iy, 0, s.nx - 1);
+        s.fill_all();
+        s
+    }
+
+    /// Adds every cell of the grid.
+    fn fill_all(&mut self) {
+        if self.nx == 0 {
+            return;
+        }
+        for iy in 0..self.ny {
+            self.fill_row_span(iy, 0, self.nx - 1);
+        }
+    }
+
+    /// The set of the given cells of `grid`; cells outside the grid are ignored.
+    pub fn from_cells(grid: &GroundGrid, cells: impl IntoIterator<Item = CellIndex>) -> Self {
+        let mut s = Self::empty(grid);
+        for c in cells {
+            s.set(c, true);
         }
         s
     }
@@ -231,6 +306,43 @@ impl CellSet {
             .sum()
     }
 
+    /// Whether every cell of `self` is in `other`.
+    pub fn is_subset_of(&self, other: &CellSet) -> bool {
+        debug_assert!(self.same_shape(other));
+        self.words
+            .iter()
+            .zip(&other.words)
+            .all(|(a, b)| a & !b == 0)
+    }
+
+    /// Whether `self` and `other` share a cell.
+    pub fn intersects(&self, other: &CellSet) -> bool {
+        debug_assert!(self.same_shape(other));
+        self.words.iter().zip(&other.words).any(|(a, b)| a & b != 0)
+    }
+
+    /// Number of cells of `self \ other`, without building it.
+    pub fn difference_count(&self, other: &CellSet) -> u64 {
+        debug_assert!(self.same_shape(other));
+        self.words
+            .iter()
+            .zip(&other.words)
+            .map(|(a, b)| (a & !b).count_ones() as u64)
+            .sum()
+    }
+
+    /// Whether row `iy` holds no cell (`true` outside the grid).
+    pub fn row_is_empty(&self, iy: u32) -> bool {
+        iy >= self.ny || self.row(iy).iter().all(|&w| w == 0)
+    }
+
+    /// The first and last non-empty rows, `None` when the set is empty.
+    pub fn row_range(&self) -> Option<(u32, u32)> {
+        let first = (0..self.ny).find(|&iy| !self.row_is_empty(iy))?;
+        let last = (first..self.ny).rev().find(|&iy| !self.row_is_empty(iy))?;
+        Some((first, last))
+    }
+
     /// Iterates over the cells of the set, row by row.
     pub fn iter(&self) -> impl Iterator<Item = CellIndex> + '_ {
         (0..self.ny).flat_map(move |iy| {
@@ -246,68 +358,5 @@ impl CellSet {
                 })
             })
         })
-    }
-
-    /// Adds the cells of a convex polygon (any orientation, >= 3 vertices; fewer or
-    /// non-finite vertices add nothing for `Inner` and the touched cells of the degenerate
-    /// shape for `Outer`) by `coverage`: `Outer` adds every cell whose closed square meets the
-    /// polygon, `Inner` only cells whose closed square lies inside it. Geometry is exact up to
-    /// an epsilon that always errs the safe way. Cells outside the grid are ignored.
-    pub fn fill_convex_polygon(
-        &mut self,
-        grid: &GroundGrid,
-        polygon: &[Point2],
-        coverage: Coverage,
-    ) {
-        let _ = (grid, polygon, coverage);
-        todo!("raster helper")
-    }
-
-    /// Adds the cells of the closed disc of `radius` around `centre` by `coverage`.
-    pub fn fill_disc(
-        &mut self,
-        grid: &GroundGrid,
-        centre: Point2,
-        radius: Real,
-        coverage: Coverage,
-    ) {
-        let _ = (grid, centre, radius, coverage);
-        todo!("raster helper")
-    }
-
-    /// Conservative dilation by a disc of `radius` metres: cell `(x+dx, y+dy)` joins when the
-    /// squares of the two cells are within `radius` of each other, so the result contains every
-    /// point within `radius` of the set.
-    pub fn dilate(&self, grid: &GroundGrid, radius: Real) -> CellSet {
-        let _ = (grid, radius);
-        todo!("raster helper")
-    }
-
-    /// The smallest box holding every cell of the set, `None` when empty.
-    pub fn bounding_box(&self) -> Option<CellBox> {
-        todo!("raster helper")
-    }
-
-    /// Removes every cell outside `bbox`.
-    pub fn crop(&mut self, bbox: &CellBox) {
-        let _ = bbox;
-        todo!("raster helper")
-    }
-
-    /// Barycentre of the cell centres, `None` when empty.
-    pub fn barycentre(&self, grid: &GroundGrid) -> Option<Point2> {
-        let _ = grid;
-        todo!("raster helper")
-    }
-
-    /// The compact encoding for messages.
-    pub fn encode(&self) -> EncodedSet {
-        todo!("raster helper")
-    }
-
-    /// Decodes a set received from a peer on `grid`; never panics on bad input.
-    pub fn decode(grid: &GroundGrid, encoded: &EncodedSet) -> Result<CellSet, SetDecodeError> {
-        let _ = (grid, encoded);
-        todo!("raster helper")
     }
 }

@@ -1,13 +1,132 @@
 //! The scenario: one TOML file, every key with the paper's value built in (DESIGN.md §5).
 //!
-//! An empty file (or none) is the paper's scenario. Unknown keys, wrong types and out-of-range
-//! values are errors that name the key and the accepted range ([`ScenarioError`]). Any key can
-//! be overridden from the command line as `KEY=VALUE` with a TOML value ([`Scenario::load`]).
+//! An empty file (or none) is the paper's scenario; a file names only what it changes:
+//!
+//! ```toml
+//! seed = 7
+//! duration_s = 120            # an integer is fine where a float is expected
+//!
+//! [uavs]
+//! count = 3
+//! altitudes_m = [80.0, 90.0, 100.0]
+//!
+//! [comms]
+//! range_m = 150.0             # inf: perfect links
+//! ```
+//!
+//! Any key can be overridden as `KEY=VALUE`, the value written in TOML (`guidance.kappa=0`,
+//! `uavs.altitudes_m=[80,90]`, `guidance.use_map=false`, `comms.range_m=inf`); overrides apply
+//! in order, after the file:
+//!
+//! ```
+//! use protocol::scenario::Scenario;
+//!
+//! let overrides = ["guidance.kappa=0".to_owned(), "comms.range_m=inf".to_owned()];
+//! let scenario = Scenario::load(None, &overrides)?;
+//! assert_eq!(scenario.guidance.kappa, 0.0);
+//! assert_eq!(Scenario::from_toml_str(&scenario.to_toml_string())?, scenario);
+//! # Ok::<(), protocol::scenario::ScenarioError>(())
+//! ```
+//!
+//! Loading goes text -> TOML table -> overrides -> keys and types checked against the default
+//! scenario's own table (so every error names the full dotted key, e.g. `guidance.kappa`) ->
+//! serde -> [`Scenario::validate`] (every value against its range). Every failure is a
+//! [`ScenarioError`] a user can act on.
+
+use std::io;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use toml::{Table, Value};
 
 use crate::camera::CameraModel;
 use crate::grid::GroundGrid;
+
+mod overrides;
+mod validate;
+
+use overrides::Override;
+
+/// Why a scenario could not be read, parsed or accepted.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// The scenario file could not be read (missing, unreadable, not UTF-8).
+    #[error("cannot read the scenario file {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What the operating system said.
+        source: io::Error,
+    },
+    /// The text is not valid TOML.
+    #[error("{origin}:{line}:{column}: invalid TOML: {message}")]
+    Syntax {
+        /// Where the text came from: the file's path, or `<string>`.
+        origin: String,
+        /// Line of the error, from 1.
+        line: usize,
+        /// Column of the error in characters, from 1.
+        column: usize,
+        /// What the TOML parser expected.
+        message: String,
+    },
+    /// A key the scenario does not have (often a typo).
+    #[error("unknown key `{key}`; {}", list_keys(key, expected))]
+    UnknownKey {
+        /// The full dotted key, e.g. `guidance.kapa`.
+        key: String,
+        /// The valid keys at that level, sorted.
+        expected: Vec<String>,
+    },
+    /// A value of the wrong kind, e.g. a string where a number belongs.
+    #[error("`{key}` must be {expected}, found {found}")]
+    WrongType {
+        /// The full dotted key.
+        key: String,
+        /// The kind the key takes, e.g. "a number (float or integer)".
+        expected: String,
+        /// The kind found, with the value when short, e.g. `string "fast"`.
+        found: String,
+    },
+    /// A value outside the key's accepted range.
+    #[error("`{key}` = {value} is out of range; accepted: {accepted}")]
+    OutOfRange {
+        /// The full dotted key.
+        key: String,
+        /// The value given.
+        value: String,
+        /// The accepted range as text, e.g. "0 < value <= 100".
+        accepted: String,
+    },
+    /// An override not of the form `KEY=VALUE` with a dotted key and a TOML value.
+    #[error(
+        "bad override `{text}`: {reason} (expected KEY=VALUE with a TOML value, \
+         e.g. guidance.kappa=0 or uavs.altitudes_m=[80,90])"
+    )]
+    BadOverride {
+        /// The override as given.
+        text: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The table passed the key and type checks, yet serde refused it: the schema walk and the
+    /// [`Scenario`] struct disagree, which is a bug in setfleet, not in the scenario.
+    #[error("internal scenario schema error (a bug in setfleet, please report it): {message}")]
+    Schema {
+        /// What serde said.
+        message: String,
+    },
+}
+
+/// "the top-level keys are: a, b" or "the keys of [guidance] are: ...".
+fn list_keys(key: &str, expected: &[String]) -> String {
+    let keys = expected.join(", ");
+    match key.rsplit_once('.') {
+        Some((parent, _)) if expected.is_empty() => format!("`{parent}` holds no keys"),
+        Some((parent, _)) => format!("the keys of [{parent}] are: {keys}"),
+        None => format!("the top-level keys are: {keys}"),
+    }
+}
 
 /// The whole scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -228,10 +347,12 @@ impl Default for EstimatorConfig {
 
 impl Default for GuidanceConfig {
     fn default() -> Self {
-        use std::f64::consts::{FRAC_PI_3, FRAC_PI_6};
+        use std::f64::consts::PI;
         Self {
             horizon: 2,
-            yaw_increments_rad: vec![-FRAC_PI_3, -FRAC_PI_6, 0.0, FRAC_PI_6, FRAC_PI_3],
+            // `PI / 3.0`, not `FRAC_PI_3` (one ulp apart): these are the very numbers DESIGN.md
+            // §5 writes, so its example file is exactly the default.
+            yaw_increments_rad: vec![-PI / 3.0, -PI / 6.0, 0.0, PI / 6.0, PI / 3.0],
             lambda: 1e-5,
             kappa: 1.0,
             use_map: true,
@@ -278,5 +399,139 @@ impl Scenario {
         (self.timing.guidance_period_s / self.timing.cvs_period_s)
             .round()
             .max(1.0) as u64
+    }
+}
+
+impl Scenario {
+    /// Parses and checks a scenario from TOML text; missing keys take the paper's values.
+    pub fn from_toml_str(text: &str) -> Result<Scenario, ScenarioError> {
+        let table = parse_document(text, "<string>")?;
+        resolve(table, &schema()?)
+    }
+
+    /// Loads the scenario: the file at `path` (none: the paper's scenario), then each
+    /// `KEY=VALUE` override in order, then the key, type and range checks.
+    pub fn load(path: Option<&Path>, overrides: &[String]) -> Result<Scenario, ScenarioError> {
+        let mut table = match path {
+            Some(path) => {
+                let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
+                parse_document(&text, &path.display().to_string())?
+            }
+            None => Table::new(),
+        };
+        let schema = schema()?;
+        for text in overrides {
+            Override::parse(text)?.apply(&mut table, &schema)?;
+        }
+        resolve(table, &schema)
+    }
+
+    /// The scenario as TOML, every key written: what the orchestrator stores next to the
+    /// results so a run can be replayed. A valid scenario round-trips exactly through
+    /// [`Scenario::from_toml_str`] (floats are written in shortest round-trip form, an infinite
+    /// link range as `inf`).
+    pub fn to_toml_string(&self) -> String {
+        match toml::to_string(self) {
+            Ok(text) => text,
+            // Only a seed beyond TOML's i64 integers gets here, and `validate` rejects it. A
+            // key that does not exist makes loading the text fail loudly instead of silently
+            // running the default scenario.
+            Err(error) => format!(
+                "# This scenario cannot be written as TOML: {error}\nunwritable_scenario = true\n"
+            ),
+        }
+    }
+}
+
+/// Parses TOML text into a table, turning syntax errors into line and column.
+fn parse_document(text: &str, origin: &str) -> Result<Table, ScenarioError> {
+    text.parse::<Table>().map_err(|error| {
+        let (line, column) = match error.span() {
+            Some(span) => line_and_column(text, span.start),
+            None => (1, 1),
+        };
+        ScenarioError::Syntax {
+            origin: origin.to_owned(),
+            line,
+            column,
+            message: error.message().trim().to_owned(),
+        }
+    })
+}
+
+/// 1-based line and character column of byte `offset` in `text`.
+fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
+    let offset = (0..=offset.min(text.len()))
+        .rev()
+        .find(|&i| text.is_char_boundary(i))
+        .unwrap_or(0);
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    (line, before[line_start..].chars().count() + 1)
+}
+
+/// The default scenario as a TOML table: the schema that user tables are checked against.
+///
+/// Vectors that are empty by default get one sample element, so that the kind of their
+/// elements is known.
+fn schema() -> Result<Table, ScenarioError> {
+    let mut sample = Scenario::default();
+    if sample.uavs.altitudes_m.is_empty() {
+        sample.uavs.altitudes_m.push(100.0);
+    }
+    if sample.guidance.yaw_increments_rad.is_empty() {
+        sample.guidance.yaw_increments_rad.push(0.0);
+    }
+    Table::try_from(&sample).map_err(|error| ScenarioError::Schema {
+        message: error.to_string(),
+    })
+}
+
+/// Checks keys and types, deserialises, then checks ranges.
+fn resolve(mut table: Table, schema: &Table) -> Result<Scenario, ScenarioError> {
+    validate::check_keys_and_types(&mut table, schema)?;
+    let scenario: Scenario = Value::Table(table)
+        .try_into()
+        .map_err(|error: toml::de::Error| ScenarioError::Schema {
+            message: error.to_string(),
+        })?;
+    scenario.validate()?;
+    Ok(scenario)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_and_column_count_characters_from_one() {
+        let text = "a = 1\nbé = = 2\n";
+        let offset = text.find("= 2").unwrap();
+        assert_eq!(line_and_column(text, offset), (2, 6));
+        assert_eq!(line_and_column(text, 0), (1, 1));
+        assert_eq!(line_and_column(text, text.len() + 10), (3, 1));
+    }
+
+    #[test]
+    fn key_lists_name_their_level() {
+        let keys = ["a".to_owned(), "b".to_owned()];
+        assert_eq!(list_keys("x", &keys), "the top-level keys are: a, b");
+        assert_eq!(list_keys("s.x", &keys), "the keys of [s] are: a, b");
+    }
+
+    #[test]
+    fn schema_arrays_have_a_sample_element() {
+        let schema = schema().unwrap();
+        for (section, key) in [("uavs", "altitudes_m"), ("guidance", "yaw_increments_rad")] {
+            let array = schema[section][key].as_array().unwrap();
+            assert!(
+                array.first().is_some_and(Value::is_float),
+                "{section}.{key}"
+            );
+        }
     }
 }

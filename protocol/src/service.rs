@@ -10,6 +10,7 @@
 //! | [`agent_wake`] `{run}/uav/{i}/wake` | anyone sending to agent i -> agent i (event) |
 //! | [`world_wake`] `{run}/world/wake` | agents -> world-server (event) |
 //! | [`observer_wake`] `{run}/observer/wake` | world and agents -> observers (event) |
+//! | [`observer_ack`] `{run}/observer/ack` | observer -> world-server (lockstep ack) |
 
 use std::fmt;
 
@@ -124,6 +125,11 @@ pub fn world_wake(run: &RunId) -> ServiceName {
 /// `{run}/observer/wake`: event that wakes observers (truth or an estimate was published).
 pub fn observer_wake(run: &RunId) -> ServiceName {
     name(format!("{run}/observer/wake"))
+}
+
+/// `{run}/observer/ack`: an observer's lockstep acks, for a world that waits for it.
+pub fn observer_ack(run: &RunId) -> ServiceName {
+    name(format!("{run}/observer/ack"))
 }
 
 #[cfg(test)]

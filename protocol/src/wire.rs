@@ -9,7 +9,6 @@ use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::CameraPose;
-use crate::math::Point2;
 use crate::raster::EncodedSet;
 
 /// Version of every message layout in this module and in [`crate::frame`].
@@ -18,6 +17,12 @@ pub const PROTOCOL_VERSION: u32 = 1;
 pub const TRUTH_MAX_TARGETS: usize = 64;
 /// UAVs a truth message can hold, and the largest fleet.
 pub const MAX_UAVS: usize = 32;
+
+/// The `step` of a [`UavCommand`] that means "agent ready": an agent sends it once its
+/// subscribers are open (and again every so often until its first frame arrives, since a
+/// command sent before the world subscribed is lost). Also the `step` of an [`ObserverAck`]
+/// that means "observer ready".
+pub const HELLO_STEP: u64 = u64::MAX;
 
 /// Agent -> world: the yaw reference for a UAV, and the lockstep ack of `step`.
 #[repr(C)]
@@ -34,6 +39,19 @@ pub struct UavCommand {
     pub has_yaw_ref: u32,
     /// Yaw reference, radians.
     pub yaw_ref_rad: f64,
+}
+
+/// Observer -> world: the observer has processed the truth (and whatever else it needs) of
+/// `step`, so a lockstep world that waits for its observer may advance. `step ==`
+/// [`HELLO_STEP`] means "observer ready".
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("setfleet.ObserverAck.v1")]
+pub struct ObserverAck {
+    /// [`crate::service::RunId::tag`] of the run.
+    pub run_tag: u64,
+    /// The step acknowledged.
+    pub step: u64,
 }
 
 /// Ground truth of one target.
@@ -189,6 +207,8 @@ pub struct EstimateMsg {
     pub targets: Vec<TargetSetMsg>,
     /// Inner set `S^o` of ground near obstacles, accumulated.
     pub obstacle_free: EncodedSet,
+    /// Ground proven free at some frame so far (union of `P^g`), for the explored metric.
+    pub explored: EncodedSet,
     /// Ground hidden in this frame, `H^CVS`.
     pub hidden: EncodedSet,
     /// OEM cells changed since the last message, or the whole known map when `oem_full`.
@@ -197,13 +217,15 @@ pub struct EstimateMsg {
     pub oem_full: bool,
 }
 
-/// One UAV's predicted fields of view for the steps of its horizon.
+/// One UAV's plan for the horizon, as the next UAVs in the token need it: its predicted camera
+/// poses at every CVS step of the horizon (the receiver derives the fields of view and what
+/// its own map says buildings hide, with the same functions the sender used).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PlannedView {
     /// UAV index.
     pub uav: u32,
-    /// Predicted ground footprint (convex polygon) at each horizon step.
-    pub footprints: Vec<Vec<Point2>>,
+    /// Predicted camera pose after each CVS step of the horizon, in order.
+    pub poses: Vec<CameraPose>,
 }
 
 /// The round-robin guidance token.

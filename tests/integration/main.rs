@@ -1,1 +1,6 @@
+//! setfleet's integration tests: one test binary, one module per topic. They spawn the real
+//! binaries (built on demand by the harness in `tests/src/lib.rs`).
 
+mod cli;
+mod frames;
+mod render;

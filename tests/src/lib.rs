@@ -1,1 +1,234 @@
-//! placeholder
+//! # tests
+//!
+//! The harness of setfleet's integration tests, which spawn the real binaries:
+//!
+//! - [`binary`] finds `world-server`, `uav-agent`, `fleet` next to the test executable
+//!   (`target/<profile>/`), building each package once on demand (`$CARGO build --bins -p
+//!   PACKAGE` with the test's profile): `cargo test --workspace` does not build other
+//!   packages' binaries for this package's tests.
+//! - [`TestRun`] gives each test a unique [`RunId`] (so its own iceoryx2 prefix) and a temp
+//!   dir; dropping it removes both, including the run's iceoryx2 files.
+//! - [`ChildGuard`] kills (SIGKILL) and reaps its child when dropped, so a failing test never
+//!   leaves a process behind. Declare it after the [`TestRun`]: locals drop in reverse order,
+//!   so the child is gone before the run's files are removed.
+//! - Every wait takes a timeout ([`ChildGuard::wait_timeout`]).
+
+#![warn(missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Output, Stdio};
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use protocol::ipc;
+use protocol::service::RunId;
+
+/// The binaries the tests run and the packages that build them.
+const BINARIES: [(&str, &str); 3] = [
+    ("world-server", "world-server"),
+    ("uav-agent", "uav-agent"),
+    ("fleet", "orchestrator"),
+];
+
+/// Longest wait for a process that should end on its own.
+pub const EXIT_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// The directory holding the test executable's sibling binaries (`target/<profile>/`).
+pub fn target_dir() -> PathBuf {
+    let exe = std::env::current_exe().unwrap_or_default();
+    // target/<profile>/deps/integration-<hash>
+    exe.parent()
+        .and_then(Path::parent)
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
+}
+
+/// Path of binary `name` (`world-server`, `fleet`, ...), built first (once per test process,
+/// with the test's profile) if it is missing or older than the test executable. Panics,
+/// failing the test, if it cannot be built.
+pub fn binary(name: &str) -> PathBuf {
+    static BUILT: [OnceLock<Result<(), String>>; BINARIES.len()] =
+        [OnceLock::new(), OnceLock::new(), OnceLock::new()];
+    let Some(index) = BINARIES.iter().position(|(bin, _)| *bin == name) else {
+        panic!("unknown binary {name:?}");
+    };
+    let path = target_dir().join(name);
+    if is_stale(&path)
+        && let Err(e) = BUILT[index].get_or_init(|| build_package(BINARIES[index].1))
+    {
+        panic!("cannot build {name}: {e}");
+    }
+    assert!(path.exists(), "binary {} not found", path.display());
+    path
+}
+
+fn is_stale(bin: &Path) -> bool {
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    let exe = std::env::current_exe().ok();
+    match (modified(bin), exe.as_deref().and_then(modified)) {
+        (Some(b), Some(t)) => b < t,
+        _ => true,
+    }
+}
+
+fn build_package(package: &str) -> Result<(), String> {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let dir = target_dir();
+    let profile = match dir.file_name().and_then(|n| n.to_str()) {
+        Some("debug") | None => "dev".to_owned(),
+        Some(other) => other.to_owned(),
+    };
+    let mut cmd = Command::new(cargo);
+    cmd.args(["build", "--bins", "--profile", &profile, "-p", package]);
+    if let Some(target) = dir.parent() {
+        cmd.arg("--target-dir").arg(target);
+    }
+    let out = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .output()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(String::from_utf8_lossy(&out.stderr).into_owned())
+    }
+}
+
+/// One test's run: a unique run id and a temp dir, both removed on drop.
+pub struct TestRun {
+    /// The run id (and so the iceoryx2 prefix) of this test.
+    pub run: RunId,
+    /// A fresh directory for this test's files.
+    pub dir: PathBuf,
+}
+
+impl TestRun {
+    /// A new run for the test `topic` (a short name, letters, digits and '-').
+    pub fn new(topic: &str) -> TestRun {
+        static COUNTER: AtomicU32 = AtomicU32::new(0);
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let topic: String = topic
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric() || *c == '-')
+            .take(20)
+            .collect();
+        let id = format!("t{}-{n}-{topic}", std::process::id());
+        let run = RunId::new(&id).unwrap_or_else(|e| panic!("bad test run id {id:?}: {e}"));
+        let dir = std::env::temp_dir().join(format!("setfleet-{id}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir)
+            .unwrap_or_else(|e| panic!("cannot create {}: {e}", dir.display()));
+        TestRun { run, dir }
+    }
+
+    /// Writes a file into the test's dir and returns its path.
+    pub fn write(&self, name: &str, text: &str) -> PathBuf {
+        let path = self.dir.join(name);
+        std::fs::write(&path, text)
+            .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+        path
+    }
+
+    /// The run's files still in `/dev/shm` and under iceoryx2's root.
+    pub fn ipc_files(&self) -> Vec<PathBuf> {
+        ipc::run_files(&self.run).unwrap_or_default()
+    }
+}
+
+impl Drop for TestRun {
+    fn drop(&mut self) {
+        let _ = ipc::remove_run_files(&self.run);
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// A spawned child that is killed (SIGKILL) and reaped when dropped.
+pub struct ChildGuard {
+    child: Option<Child>,
+}
+
+impl ChildGuard {
+    /// Spawns `cmd` with stdout and stderr captured.
+    pub fn spawn(cmd: &mut Command) -> ChildGuard {
+        let child = cmd
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot spawn {cmd:?}: {e}"));
+        ChildGuard { child: Some(child) }
+    }
+
+    /// The process id.
+    pub fn id(&self) -> u32 {
+        self.child.as_ref().map(Child::id).unwrap_or_default()
+    }
+
+    /// Sends a signal (e.g. `libc::SIGTERM`).
+    pub fn signal(&self, signal: i32) {
+        if let Ok(pid) = i32::try_from(self.id())
+            && pid > 0
+        {
+            // SAFETY: kill(2) on our own child's pid; no memory is involved.
+            unsafe {
+                libc::kill(pid, signal);
+            }
+        }
+    }
+
+    /// Whether the child is still running.
+    pub fn is_running(&mut self) -> bool {
+        self.child
+            .as_mut()
+            .is_some_and(|c| matches!(c.try_wait(), Ok(None)))
+    }
+
+    /// Waits at most `timeout` for the child to exit; returns its status and output, or
+    /// `None` if it is still running (it is then killed when the guard drops).
+    pub fn wait_timeout(&mut self, timeout: Duration) -> Option<Output> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let child = self.child.as_mut()?;
+            match child.try_wait() {
+                Ok(Some(_)) => break,
+                Ok(None) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(20))
+                }
+                _ => return None,
+            }
+        }
+        self.child.take()?.wait_with_output().ok()
+    }
+}
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Runs a command to completion (bounded by [`EXIT_TIMEOUT`]) and returns its output.
+pub fn run_to_end(cmd: &mut Command) -> Output {
+    let mut guard = ChildGuard::spawn(cmd);
+    guard
+        .wait_timeout(EXIT_TIMEOUT)
+        .unwrap_or_else(|| panic!("{cmd:?} did not end within {EXIT_TIMEOUT:?}"))
+}
+
+/// The exit code of a finished process (`None` if a signal ended it).
+pub fn exit_code(status: &ExitStatus) -> Option<i32> {
+    status.code()
+}
+
+/// A small, fast scenario: few UAVs and cars, a small camera, a short run.
+pub fn small_scenario_toml(duration_s: f64) -> String {
+    format!(
+        "seed = 7\nduration_s = {duration_s}\n\n[region]\nhalf_extent_m = 100.0\n\n\
+         [targets]\ncount = 3\n\n[uavs]\ncount = 2\n\n[camera]\nrows = 36\ncols = 48\n"
+    )
+}

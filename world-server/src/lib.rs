@@ -3,9 +3,39 @@
 //! The scene and the ground truth of a setfleet run: a procedural city, cars on its roads,
 //! the UAVs' dynamics, and the rendering of every UAV's camera frame (depth, labels, boxes)
 //! by parry3d ray casts, published in place into iceoryx2 shared memory.
+//!
+//! - [`scene`]: the city, a road grid with a ring road and prism buildings in its blocks.
+//! - [`traffic`]: the cars, driving on the lanes and keeping their safety distances.
+//! - [`fleet`]: the UAVs, flying [`protocol::flight::advance`] behind a geofence.
+//! - [`render`]: the CVS frame of a camera, with the paper's assumptions built in.
+//! - [`world`]: the [`World`] that holds them and steps them together.
+//! - [`server`]: the process loop that publishes frames and truth over iceoryx2 and collects
+//!   the agents' commands, in lockstep or in real time.
+//!
+//! ```
+//! use protocol::frame::CvsFrame;
+//! use protocol::scenario::Scenario;
+//! use world_server::World;
+//!
+//! let mut scenario = Scenario::default();
+//! scenario.camera.rows = 48;
+//! scenario.camera.cols = 64;
+//! let mut world = World::new(&scenario)?;
+//! let mut frame = CvsFrame::new_boxed();
+//! world.set_yaw_ref(0, 0.3);
+//! world.advance();
+//! world.render(0, 7, &mut frame);
+//! assert_eq!(frame.header.step, 1);
+//! # Ok::<(), world_server::WorldBuildError>(())
+//! ```
 
 #![warn(missing_docs)]
 
+pub mod fleet;
+pub mod render;
+pub mod scene;
+pub mod server;
+pub mod traffic;
 pub mod world;
 
 pub use world::{World, WorldBuildError};

@@ -1,72 +1,320 @@
 //! The simulated world: scene, cars and UAVs advanced together, one CVS period at a time.
 
-use protocol::frame::CvsFrame;
+use protocol::camera::{Camera, CameraPose};
+use protocol::flight::UavState;
+use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, TargetBox};
+use protocol::math::{Point3, Real};
 use protocol::scenario::Scenario;
-use protocol::wire::TruthState;
+use protocol::wire::{MAX_UAVS, TRUTH_MAX_TARGETS, TargetTruth, TruthState, UavTruth};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::fleet::{Fleet, Uav};
+use crate::render::{self, FrameSpec, ObjectKind, SceneObject};
+use crate::scene::City;
+use crate::traffic::{Car, Traffic};
+
+/// Size of a UAV's body as the other cameras see it: length, width, height, metres.
+pub const UAV_BODY_M: [Real; 3] = [1.0, 1.0, 0.3];
+
+/// Random streams of the world's seed, one per concern, so that adding a draw in one never
+/// changes another.
+const CITY_STREAM: u64 = 1;
+const TRAFFIC_STREAM: u64 = 2;
 
 /// Why a world could not be built from a scenario.
 #[derive(Debug, thiserror::Error)]
 pub enum WorldBuildError {
     /// The scenario asks for something the generator cannot place (e.g. more cars than the
-    /// roads hold with their safety distances).
+    /// roads hold with their safety distances), or a value the world cannot simulate.
     #[error("cannot build the world: {0}")]
     Placement(String),
 }
 
 /// The whole simulated world of one run. Deterministic: the same scenario gives the same
 /// city, the same trajectories and the same frames, bit for bit.
+#[derive(Clone, Debug)]
 pub struct World {
-    _private: (),
+    scenario: Scenario,
+    city: City,
+    traffic: Traffic,
+    fleet: Fleet,
+    step: u64,
 }
 
 impl World {
     /// Builds the city, the cars and the fleet from the scenario's seed.
     pub fn new(scenario: &Scenario) -> Result<World, WorldBuildError> {
-        let _ = scenario;
-        todo!("world helper")
+        check(scenario)?;
+        let mut city_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+        city_rng.set_stream(CITY_STREAM);
+        let city = City::generate(scenario, &mut city_rng)?;
+        let mut traffic_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+        traffic_rng.set_stream(TRAFFIC_STREAM);
+        let traffic = Traffic::place(&city.roads, scenario, traffic_rng)?;
+        let fleet = Fleet::launch(scenario, city.tallest())?;
+        Ok(World {
+            scenario: scenario.clone(),
+            city,
+            traffic,
+            fleet,
+            step: 0,
+        })
     }
 
     /// The scenario the world was built from.
     pub fn scenario(&self) -> &Scenario {
-        todo!("world helper")
+        &self.scenario
     }
 
     /// Steps taken so far (`k`).
     pub fn step(&self) -> u64 {
-        todo!("world helper")
+        self.step
     }
 
     /// Simulated time, seconds (`k * T`).
     pub fn time_s(&self) -> f64 {
-        todo!("world helper")
+        self.step as Real * self.scenario.timing.cvs_period_s
     }
 
     /// Number of UAVs.
     pub fn uav_count(&self) -> usize {
-        todo!("world helper")
+        self.fleet.uavs().len()
     }
 
     /// Sets the yaw reference of a UAV (ignored for an unknown index or a non-finite value).
     pub fn set_yaw_ref(&mut self, uav: usize, yaw_ref_rad: f64) {
-        let _ = (uav, yaw_ref_rad);
-        todo!("world helper")
+        self.fleet.command(uav, yaw_ref_rad);
     }
 
     /// Advances cars and UAVs by one CVS period.
     pub fn advance(&mut self) {
-        todo!("world helper")
+        let dt = self.scenario.timing.cvs_period_s;
+        self.traffic.step(&self.city.roads, dt);
+        self.fleet.step(dt);
+        self.step += 1;
     }
 
     /// Renders UAV `uav`'s camera frame at the current step into `frame`, in place (header,
-    /// boxes, depth, labels, checksum). `run_tag` goes into the header.
+    /// boxes, depth, labels, checksum). `run_tag` goes into the header. An unknown UAV index
+    /// gets an empty frame (0 x 0 pixels, no boxes).
     pub fn render(&self, uav: usize, run_tag: u64, frame: &mut CvsFrame) {
-        let _ = (uav, run_tag, frame);
-        todo!("world helper")
+        let spec = FrameSpec {
+            run_tag,
+            seed: self.scenario.seed,
+            step: self.step,
+            time_s: self.time_s(),
+            uav: uav as u32,
+            depth_noise: self.scenario.camera.depth_noise,
+            unknown_fraction: self.scenario.camera.unknown_fraction,
+            min_pixels: self.scenario.camera.min_pixels,
+        };
+        match self.camera(uav) {
+            Some(camera) => {
+                let objects = self.scene_objects(Some(uav));
+                render::render(&camera, &objects, &spec, frame);
+            }
+            None => {
+                let h = &mut frame.header;
+                *h = Default::default();
+                h.run_tag = run_tag;
+                h.step = spec.step;
+                h.time_s = spec.time_s;
+                h.uav = spec.uav;
+                h.depth_noise = spec.depth_noise;
+                frame.boxes = [TargetBox::default(); FRAME_MAX_BOXES];
+                frame.header.checksum = frame.checksum();
+            }
+        }
     }
 
     /// Writes the ground truth of the current step.
     pub fn truth(&self, run_tag: u64, out: &mut TruthState) {
-        let _ = (run_tag, out);
-        todo!("world helper")
+        out.run_tag = run_tag;
+        out.step = self.step;
+        out.time_s = self.time_s();
+        let cars = self.traffic.cars();
+        out.target_count = cars.len().min(TRUTH_MAX_TARGETS) as u32;
+        for (slot, car) in out.targets.iter_mut().zip(cars) {
+            *slot = TargetTruth {
+                id: car.id,
+                reserved: 0,
+                ground: [car.position.x, car.position.y],
+                heading: car.heading,
+                speed: car.speed_mps,
+            };
+        }
+        let uavs = self.fleet.uavs();
+        out.uav_count = uavs.len().min(MAX_UAVS) as u32;
+        for (i, (slot, u)) in out.uavs.iter_mut().zip(uavs).enumerate() {
+            let p = u.state.position;
+            *slot = UavTruth {
+                id: i as u32,
+                agent_live: 1,
+                position: [p.x, p.y, p.z],
+                yaw: u.state.yaw,
+                yaw_ref: u.yaw_ref,
+            };
+        }
     }
+
+    /// The static city (roads and buildings).
+    pub fn scene(&self) -> &City {
+        &self.city
+    }
+
+    /// The cars, by target id.
+    pub fn targets(&self) -> &[Car] {
+        self.traffic.cars()
+    }
+
+    /// The UAVs, by index.
+    pub fn uavs(&self) -> &[Uav] {
+        self.fleet.uavs()
+    }
+
+    /// State of UAV `uav`, if it exists.
+    pub fn uav_state(&self, uav: usize) -> Option<UavState> {
+        self.fleet.uavs().get(uav).map(|u| u.state)
+    }
+
+    /// Moves UAV `uav` to `state`, with the state's yaw as reference (for tools and tests that
+    /// need a given viewpoint; ignored for an unknown index).
+    pub fn set_uav_state(&mut self, uav: usize, state: UavState) {
+        self.fleet.teleport(uav, state);
+    }
+
+    /// The posed camera of UAV `uav`, if it exists.
+    pub fn camera(&self, uav: usize) -> Option<Camera> {
+        let s = self.uav_state(uav)?;
+        Some(Camera::new(
+            self.scenario.camera_model(),
+            CameraPose {
+                position: s.position,
+                yaw: s.yaw,
+            },
+        ))
+    }
+
+    /// The box of a car as the cameras see it: standing on the ground, along its heading.
+    pub fn target_object(&self, car: &Car) -> SceneObject {
+        let [l, w, h] = self.scenario.targets.size_m;
+        SceneObject::new(
+            ObjectKind::Target(car.id),
+            Point3::new(car.position.x, car.position.y, h / 2.0),
+            [l / 2.0, w / 2.0, h / 2.0],
+            car.heading,
+        )
+    }
+
+    /// Every box in the scene at the current step: buildings, cars, and the UAVs other than
+    /// `viewer` (a camera does not see its own UAV).
+    pub fn scene_objects(&self, viewer: Option<usize>) -> Vec<SceneObject> {
+        let mut out = Vec::with_capacity(
+            self.city.buildings.len() + self.traffic.cars().len() + self.uav_count(),
+        );
+        for (k, b) in self.city.buildings.iter().enumerate() {
+            out.push(SceneObject::new(
+                ObjectKind::Obstacle(k as u32),
+                b.centre(),
+                b.half_extents(),
+                0.0,
+            ));
+        }
+        for car in self.traffic.cars() {
+            out.push(self.target_object(car));
+        }
+        let [l, w, h] = UAV_BODY_M;
+        for (i, u) in self.fleet.uavs().iter().enumerate() {
+            if Some(i) != viewer {
+                out.push(SceneObject::new(
+                    ObjectKind::Uav(i as u32),
+                    u.state.position,
+                    [l / 2.0, w / 2.0, h / 2.0],
+                    u.state.yaw,
+                ));
+            }
+        }
+        out
+    }
+}
+
+/// The values the world cannot simulate, named by key (the scenario loader checks ranges too;
+/// this keeps the world from panicking on a scenario built in code).
+fn check(s: &Scenario) -> Result<(), WorldBuildError> {
+    let bad =
+        |key: &str, range: &str| Err(WorldBuildError::Placement(format!("{key} must be {range}")));
+    let finite_pos = |v: Real| v.is_finite() && v > 0.0;
+    let finite_non_neg = |v: Real| v.is_finite() && v >= 0.0;
+    let r = &s.region;
+    if !finite_pos(r.half_extent_m) {
+        return bad("region.half_extent_m", "finite and > 0");
+    }
+    if !(r.building_fraction >= 0.0 && r.building_fraction < 1.0) {
+        return bad("region.building_fraction", "in [0, 1)");
+    }
+    let [h_lo, h_hi] = r.building_height_m;
+    if !(finite_pos(h_lo) && h_hi.is_finite() && h_lo <= h_hi) {
+        return bad(
+            "region.building_height_m",
+            "[lo, hi] with 0 < lo <= hi, finite",
+        );
+    }
+    let t = &s.targets;
+    if t.count as usize > TRUTH_MAX_TARGETS {
+        return bad("targets.count", &format!("at most {TRUTH_MAX_TARGETS}"));
+    }
+    if !finite_non_neg(t.max_speed_mps) {
+        return bad("targets.max_speed_mps", "finite and >= 0");
+    }
+    if !t.size_m.iter().all(|&v| finite_pos(v)) {
+        return bad("targets.size_m", "three finite lengths > 0");
+    }
+    if !(finite_non_neg(t.radius_m) && finite_non_neg(t.safety_distance_m)) {
+        return bad(
+            "targets.radius_m and targets.safety_distance_m",
+            "finite and >= 0",
+        );
+    }
+    let u = &s.uavs;
+    if u.count as usize > MAX_UAVS {
+        return bad("uavs.count", &format!("at most {MAX_UAVS}"));
+    }
+    if !(finite_non_neg(u.speed_mps) && finite_non_neg(u.max_yaw_rate_rps)) {
+        return bad(
+            "uavs.speed_mps and uavs.max_yaw_rate_rps",
+            "finite and >= 0",
+        );
+    }
+    if !u.altitudes_m.iter().all(|&z| finite_pos(z)) {
+        return bad("uavs.altitudes_m", "finite altitudes > 0");
+    }
+    let c = &s.camera;
+    let pixels = c.rows as usize * c.cols as usize;
+    if pixels == 0 || pixels > FRAME_MAX_PIXELS {
+        return bad(
+            "camera.rows x camera.cols",
+            &format!("between 1 and {FRAME_MAX_PIXELS} pixels"),
+        );
+    }
+    if !(c.aperture_rad > 0.0 && c.aperture_rad < std::f64::consts::PI) {
+        return bad("camera.aperture_rad", "in (0, pi)");
+    }
+    if !c.tilt_rad.is_finite() {
+        return bad("camera.tilt_rad", "finite");
+    }
+    let [w_lo, w_hi] = c.depth_noise;
+    if !(w_lo > -1.0 && w_lo <= w_hi && w_hi.is_finite()) {
+        return bad(
+            "camera.depth_noise",
+            "[w_lo, w_hi] with -1 < w_lo <= w_hi, finite",
+        );
+    }
+    if !(c.unknown_fraction >= 0.0 && c.unknown_fraction <= 1.0) {
+        return bad("camera.unknown_fraction", "in [0, 1]");
+    }
+    if !finite_pos(s.timing.cvs_period_s) {
+        return bad("timing.cvs_period_s", "finite and > 0");
+    }
+    Ok(())
 }

@@ -1,0 +1,290 @@
+//! `fleet bench`: whole-system measurements, each written as a [`BenchReport`] (JSON) and
+//! printed as a table. The report type is shared by every kind (`render` now; `ipc`,
+//! `estimator`, `guidance` later): a headline `summary` (the keys DESIGN.md names, flattened at
+//! the top level of the JSON), one [`BenchCase`] per configuration measured, the machine, the
+//! command line and the date.
+
+pub mod render;
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::Path;
+
+use serde::Serialize;
+use serde::ser::SerializeMap;
+
+/// Order statistics of a sample of timings (or any measure).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Stats {
+    /// Sample size.
+    pub n: usize,
+    /// Smallest value.
+    pub min: f64,
+    /// 10th percentile.
+    pub p10: f64,
+    /// Median.
+    pub median: f64,
+    /// 90th percentile.
+    pub p90: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest value.
+    pub max: f64,
+    /// Mean.
+    pub mean: f64,
+}
+
+impl Stats {
+    /// Statistics of `samples` (non-finite values are dropped); `None` if nothing is left.
+    pub fn from_samples(samples: &[f64]) -> Option<Stats> {
+        let mut v: Vec<f64> = samples.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        let q = |p: f64| {
+            // Nearest-rank percentile: the smallest value with at least p of the sample at or
+            // below it.
+            let rank = ((p * v.len() as f64).ceil() as usize).clamp(1, v.len());
+            v[rank - 1]
+        };
+        let median = if v.len() % 2 == 1 {
+            v[v.len() / 2]
+        } else {
+            (v[v.len() / 2 - 1] + v[v.len() / 2]) / 2.0
+        };
+        Some(Stats {
+            n: v.len(),
+            min: v[0],
+            p10: q(0.10),
+            median,
+            p90: q(0.90),
+            p99: q(0.99),
+            max: v[v.len() - 1],
+            mean: v.iter().sum::<f64>() / v.len() as f64,
+        })
+    }
+}
+
+/// The machine a benchmark ran on.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MachineInfo {
+    /// CPU model name from `/proc/cpuinfo` ("unknown" elsewhere).
+    pub cpu_model: String,
+    /// Logical CPUs this process may use.
+    pub cores: usize,
+    /// Operating system and architecture.
+    pub os: String,
+}
+
+impl MachineInfo {
+    /// Reads the machine's description.
+    pub fn detect() -> MachineInfo {
+        let cpu_model = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|text| {
+                text.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split_once(':'))
+                    .map(|(_, v)| v.trim().to_owned())
+            })
+            .unwrap_or_else(|| "unknown".to_owned());
+        MachineInfo {
+            cpu_model,
+            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            os: format!("{} {}", std::env::consts::OS, std::env::consts::ARCH),
+        }
+    }
+}
+
+/// Named measures in the order they were added (printed in that order; JSON as an object).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Metrics(pub Vec<(String, f64)>);
+
+impl Metrics {
+    /// Adds a measure.
+    pub fn push(&mut self, name: &str, value: f64) {
+        self.0.push((name.to_owned(), value));
+    }
+
+    /// A measure by name.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.0.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
+    }
+}
+
+impl Serialize for Metrics {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut map = s.serialize_map(Some(self.0.len()))?;
+        for (k, v) in &self.0 {
+            map.serialize_entry(k, v)?;
+        }
+        map.end()
+    }
+}
+
+/// One configuration measured (e.g. one thread count).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BenchCase {
+    /// Short name, e.g. `threads=2`.
+    pub name: String,
+    /// Parameters of the configuration.
+    pub params: BTreeMap<String, serde_json::Value>,
+    /// What was measured.
+    pub metrics: Metrics,
+}
+
+/// A benchmark's report: what `fleet bench KIND --out FILE.json` writes.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BenchReport {
+    /// `render`, `ipc`, `estimator`, `guidance`.
+    pub kind: String,
+    /// The command line that produced it.
+    pub command: String,
+    /// UTC date and time, RFC 3339.
+    pub date: String,
+    /// The machine.
+    pub machine: MachineInfo,
+    /// Headline figures (DESIGN.md's keys), at the top level of the JSON.
+    #[serde(flatten)]
+    pub summary: BTreeMap<String, serde_json::Value>,
+    /// Per configuration.
+    pub cases: Vec<BenchCase>,
+}
+
+impl BenchReport {
+    /// An empty report of `kind`, stamped with this process's command line, the date and the
+    /// machine.
+    pub fn new(kind: &str) -> BenchReport {
+        BenchReport {
+            kind: kind.to_owned(),
+            command: std::env::args().collect::<Vec<_>>().join(" "),
+            date: utc_now_rfc3339(),
+            machine: MachineInfo::detect(),
+            summary: BTreeMap::new(),
+            cases: Vec::new(),
+        }
+    }
+
+    /// Prints the machine and a table of the cases.
+    pub fn print_table(&self, out: &mut impl Write) -> std::io::Result<()> {
+        writeln!(
+            out,
+            "bench {} on {} ({} cores)",
+            self.kind, self.machine.cpu_model, self.machine.cores
+        )?;
+        let Some(first) = self.cases.first() else {
+            return Ok(());
+        };
+        let names: Vec<&str> = first.metrics.0.iter().map(|(n, _)| n.as_str()).collect();
+        let width = names.iter().map(|n| n.len()).max().unwrap_or(8).max(12);
+        write!(out, "{:<12}", "case")?;
+        for n in &names {
+            write!(out, " {n:>width$}")?;
+        }
+        writeln!(out)?;
+        for case in &self.cases {
+            write!(out, "{:<12}", case.name)?;
+            for n in &names {
+                match case.metrics.get(n) {
+                    Some(v) => write!(out, " {:>width$}", format_value(v))?,
+                    None => write!(out, " {:>width$}", "-")?,
+                }
+            }
+            writeln!(out)?;
+        }
+        for (k, v) in &self.summary {
+            writeln!(out, "{k}: {v}")?;
+        }
+        Ok(())
+    }
+
+    /// Writes the report as pretty JSON.
+    pub fn write_json(&self, path: &Path) -> anyhow::Result<()> {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)?;
+        }
+        std::fs::write(path, serde_json::to_string_pretty(self)? + "\n")?;
+        Ok(())
+    }
+}
+
+fn format_value(v: f64) -> String {
+    if v.abs() >= 1e6 {
+        format!("{v:.3e}")
+    } else if v.abs() >= 100.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+/// The current UTC time as RFC 3339 (seconds), without a date crate.
+pub fn utc_now_rfc3339() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    format_utc(secs)
+}
+
+fn format_utc(secs: u64) -> String {
+    let days = (secs / 86_400) as i64;
+    let rem = secs % 86_400;
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stats_use_nearest_rank_percentiles() {
+        let v: Vec<f64> = (1..=10).map(f64::from).collect();
+        let s = Stats::from_samples(&v).unwrap();
+        assert_eq!(
+            (s.min, s.p10, s.median, s.p90, s.max),
+            (1.0, 1.0, 5.5, 9.0, 10.0)
+        );
+        assert_eq!(s.p99, 10.0);
+        assert!(Stats::from_samples(&[f64::NAN]).is_none());
+    }
+
+    #[test]
+    fn dates_are_rfc3339_utc() {
+        assert_eq!(format_utc(0), "1970-01-01T00:00:00Z");
+        assert_eq!(format_utc(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(format_utc(1_700_000_000), "2023-11-14T22:13:20Z");
+    }
+
+    #[test]
+    fn report_json_has_the_headline_keys_at_the_top() {
+        let mut r = BenchReport::new("render");
+        r.summary.insert("frames_per_s".into(), 12.5.into());
+        let mut m = Metrics::default();
+        m.push("median_ms", 3.0);
+        r.cases.push(BenchCase {
+            name: "threads=1".into(),
+            params: BTreeMap::new(),
+            metrics: m,
+        });
+        let v = serde_json::to_value(&r).unwrap();
+        assert_eq!(v["frames_per_s"], 12.5);
+        assert_eq!(v["cases"][0]["metrics"]["median_ms"], 3.0);
+        assert!(v["machine"]["cores"].as_u64().unwrap() >= 1);
+    }
+}

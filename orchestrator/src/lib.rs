@@ -1,0 +1,94 @@
+//! # orchestrator
+//!
+//! The `fleet` command, the one a user types. Its library holds every subcommand so tests
+//! and other tools can drive them in-process:
+//!
+//! - [`cli`]: raw clap arguments and their validation into configs (errors name the flag or
+//!   the scenario key and the accepted range: exit code 2).
+//! - [`render_cmd`]: `fleet render`, one frame as pictures.
+//! - [`bench`]: `fleet bench`, whole-system measurements as [`bench::BenchReport`]s.
+//! - [`pictures`]: plotters drawings with the bundled font.
+//!
+//! The library uses `anyhow` for a command's failures (exit code 1): it is the body of the
+//! `fleet` binary, and [`cli::UsageError`] is the one error a caller must tell apart.
+//!
+//! ```no_run
+//! use clap::Parser;
+//! use orchestrator::cli::Cli;
+//! let cli = Cli::parse_from(["fleet", "render", "--uav", "0", "--time", "10", "--out", "frame"]);
+//! let code = orchestrator::run(cli);
+//! assert_eq!(code, orchestrator::Outcome::Success);
+//! ```
+
+#![warn(missing_docs)]
+
+pub mod bench;
+pub mod cli;
+pub mod pictures;
+pub mod render_cmd;
+
+use cli::{BenchKind, Cli, FleetCommand, UsageError};
+
+/// How a `fleet` command ended, and its exit code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// Exit 0.
+    Success,
+    /// Exit 1: the command failed.
+    Failed,
+    /// Exit 2: bad arguments or scenario.
+    BadInput,
+}
+
+impl Outcome {
+    /// The process exit code.
+    pub fn code(self) -> u8 {
+        match self {
+            Outcome::Success => 0,
+            Outcome::Failed => 1,
+            Outcome::BadInput => 2,
+        }
+    }
+}
+
+/// Runs a parsed command line, printing errors to stderr.
+pub fn run(cli: Cli) -> Outcome {
+    if let Err(e) = pictures::register_fonts() {
+        eprintln!("fleet: {e}");
+        return Outcome::Failed;
+    }
+    let result = match cli.command {
+        FleetCommand::Render(args) => match args.validate() {
+            Ok(config) => render_cmd::run(&config),
+            Err(e) => return bad_input(e),
+        },
+        FleetCommand::Bench(args) => match args.kind {
+            BenchKind::Render(args) => match args.validate() {
+                Ok(config) => bench_render(&config),
+                Err(e) => return bad_input(e),
+            },
+        },
+    };
+    match result {
+        Ok(()) => Outcome::Success,
+        Err(e) => {
+            eprintln!("fleet: {e:#}");
+            Outcome::Failed
+        }
+    }
+}
+
+fn bad_input(e: UsageError) -> Outcome {
+    eprintln!("fleet: {e}");
+    Outcome::BadInput
+}
+
+fn bench_render(config: &cli::BenchRenderConfig) -> anyhow::Result<()> {
+    let report = bench::render::run(config)?;
+    report.print_table(&mut std::io::stdout().lock())?;
+    if let Some(path) = &config.out {
+        report.write_json(path)?;
+        println!("report written to {}", path.display());
+    }
+    Ok(())
+}

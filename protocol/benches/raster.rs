@@ -1,0 +1,160 @@
+//! Bit-raster set operations on the default 1000 x 1000 grid (0.5 m cells):
+//! `cargo bench -p protocol --bench raster`.
+
+use divan::{Bencher, black_box};
+use protocol::grid::GroundGrid;
+use protocol::math::{Point2, Real};
+use protocol::raster::{CellSet, Coverage};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn main() {
+    divan::main();
+}
+
+fn grid() -> GroundGrid {
+    GroundGrid::new(250.0, 0.5)
+}
+
+/// Discs of 3 to 20 m placed at random until about `fraction` of the grid is covered: the
+/// shape of an undetected set after a while of searching.
+fn blobs(grid: &GroundGrid, seed: u64, fraction: Real) -> CellSet {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut set = CellSet::empty(grid);
+    let target = (grid.cell_count() as Real * fraction) as u64;
+    while set.count() < target {
+        for _ in 0..20 {
+            let c = Point2::new(
+                rng.random_range(-250.0..250.0),
+                rng.random_range(-250.0..250.0),
+            );
+            set.fill_disc(grid, c, rng.random_range(3.0..20.0), Coverage::Outer);
+        }
+    }
+    set
+}
+
+/// A regular octagon 100 m across, turned so no edge is axis-aligned.
+fn octagon() -> Vec<Point2> {
+    (0..8)
+        .map(|k| {
+            let a = 0.3 + k as Real * std::f64::consts::TAU / 8.0;
+            Point2::new(12.0 + 50.0 * a.cos(), -7.0 + 50.0 * a.sin())
+        })
+        .collect()
+}
+
+#[divan::bench(args = [1.0, 6.0])]
+fn dilate(bencher: Bencher, radius_m: Real) {
+    let g = grid();
+    let set = blobs(&g, 1, 0.2);
+    bencher.bench(|| black_box(&set).dilate(&g, radius_m));
+}
+
+#[divan::bench(args = [Coverage::Outer, Coverage::Inner])]
+fn fill_polygon_100m(bencher: Bencher, coverage: Coverage) {
+    let g = grid();
+    let poly = octagon();
+    bencher.bench(|| {
+        let mut s = CellSet::empty(&g);
+        s.fill_convex_polygon(&g, black_box(&poly), coverage);
+        s
+    });
+}
+
+#[divan::bench(args = [Coverage::Outer, Coverage::Inner])]
+fn fill_disc_3m(bencher: Bencher, coverage: Coverage) {
+    let g = grid();
+    let mut s = CellSet::empty(&g);
+    bencher.bench_local(|| {
+        s.fill_disc(&g, black_box(Point2::new(1.3, 2.7)), 3.0, coverage);
+    });
+}
+
+mod codec {
+    use super::*;
+
+    /// The undetected set: 20 % of the grid in blobs.
+    #[divan::bench]
+    fn encode_blobs(bencher: Bencher) {
+        let set = blobs(&grid(), 2, 0.2);
+        bencher.bench(|| black_box(&set).encode());
+    }
+
+    #[divan::bench]
+    fn decode_blobs(bencher: Bencher) {
+        let g = grid();
+        let e = blobs(&g, 2, 0.2).encode();
+        bencher.bench(|| CellSet::decode(&g, black_box(&e)));
+    }
+
+    /// A target set: one disc of 10 m.
+    #[divan::bench]
+    fn encode_target(bencher: Bencher) {
+        let g = grid();
+        let mut set = CellSet::empty(&g);
+        set.fill_disc(&g, Point2::new(30.0, -40.0), 10.0, Coverage::Outer);
+        bencher.bench(|| black_box(&set).encode());
+    }
+
+    #[divan::bench]
+    fn decode_target(bencher: Bencher) {
+        let g = grid();
+        let mut set = CellSet::empty(&g);
+        set.fill_disc(&g, Point2::new(30.0, -40.0), 10.0, Coverage::Outer);
+        let e = set.encode();
+        bencher.bench(|| CellSet::decode(&g, black_box(&e)));
+    }
+}
+
+mod algebra {
+    use super::*;
+
+    fn pair() -> (CellSet, CellSet) {
+        let g = grid();
+        (blobs(&g, 3, 0.2), blobs(&g, 4, 0.5))
+    }
+
+    #[divan::bench]
+    fn and_assign(bencher: Bencher) {
+        let (mut a, b) = pair();
+        bencher.bench_local(|| a.and_assign(black_box(&b)));
+    }
+
+    #[divan::bench]
+    fn or_assign(bencher: Bencher) {
+        let (mut a, b) = pair();
+        bencher.bench_local(|| a.or_assign(black_box(&b)));
+    }
+
+    #[divan::bench]
+    fn and_not_assign(bencher: Bencher) {
+        let (mut a, b) = pair();
+        bencher.bench_local(|| a.and_not_assign(black_box(&b)));
+    }
+
+    #[divan::bench]
+    fn count(bencher: Bencher) {
+        let (a, _) = pair();
+        bencher.bench(|| black_box(&a).count());
+    }
+
+    #[divan::bench]
+    fn intersection_count(bencher: Bencher) {
+        let (a, b) = pair();
+        bencher.bench(|| black_box(&a).intersection_count(black_box(&b)));
+    }
+
+    #[divan::bench]
+    fn bounding_box(bencher: Bencher) {
+        let (a, _) = pair();
+        bencher.bench(|| black_box(&a).bounding_box());
+    }
+
+    #[divan::bench]
+    fn barycentre(bencher: Bencher) {
+        let g = grid();
+        let (a, _) = pair();
+        bencher.bench(|| black_box(&a).barycentre(&g));
+    }
+}

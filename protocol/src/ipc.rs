@@ -1,0 +1,650 @@
+//! The one place that knows how setfleet uses iceoryx2: node configuration, the quality of
+//! service of every service, the wake-up event ids, and cleaning up after dead processes.
+//!
+//! Every process opens every service through [`RunNode`], so all of them ask for identical
+//! settings and none can open a service with limits another process did not expect.
+//!
+//! # Choices and why
+//!
+//! - **One prefix per run.** Each run's files carry [`RunId::file_prefix`] (iceoryx2's
+//!   `global.prefix`), so runs and tests never see each other and a run's leftovers can be
+//!   removed by prefix ([`remove_run_files`]). The configuration starts from iceoryx2's built-in
+//!   defaults, not from a config file on the machine, so every process agrees.
+//! - **Nobody ever blocks on a dead peer.** Every publish-subscribe service uses safe overflow:
+//!   a full subscriber buffer drops its oldest sample instead of stalling the publisher. Every
+//!   message carries its run tag and step, so a receiver tells what it missed.
+//! - **Room for a whole fleet.** Limits allow [`MAX_UAVS`] agents all-to-all, plus the world,
+//!   [`MAX_OBSERVERS`] observers and [`RESTART_OVERLAP`] restarted agents whose dead predecessor
+//!   was not cleaned up yet.
+//! - **Waiting.** Ports of `ipc::Service` are not `Send`; a process waits on its wake-up
+//!   [`Listener`] with a [`WaitSet`] built by [`RunNode::waitset`]. Senders notify with a
+//!   [`WakeEvent`] id so a woken process knows what to look at.
+//! - **Signals.** The world-server and agents use
+//!   [`SignalHandlingMode::HandleTerminationRequests`]: SIGTERM and SIGINT end their wait loop
+//!   cleanly (after the first wait; before it, the default action applies). Test harnesses and
+//!   tokio processes use [`SignalHandlingMode::Disabled`] and handle signals themselves.
+//!
+//! # Handshake
+//!
+//! An agent opens its subscribers, then sends a [`UavCommand`] with `step ==`
+//! [`crate::wire::HELLO_STEP`] and notifies [`world_wake`](crate::service::world_wake); it
+//! repeats the hello every few hundred milliseconds until its first frame arrives (a message
+//! sent before the world subscribed is lost). The observer does the same with an
+//! [`ObserverAck`]. Each frame, truth and end of run is announced with a [`WakeEvent`].
+//!
+//! # Example
+//!
+//! **World-server (process 1)**
+//!
+//! ```no_run
+//! use iceoryx2::prelude::SignalHandlingMode;
+//! use protocol::frame::CvsFrame;
+//! use protocol::ipc::{RunNode, WakeEvent};
+//! use protocol::service::RunId;
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let run = RunId::new("demo")?;
+//! let node = RunNode::new(&run, "world", SignalHandlingMode::HandleTerminationRequests)?;
+//! let cvs = node.open_cvs(0)?;
+//! let publisher = cvs.publisher_builder().max_loaned_samples(2).create()?;
+//! let wake = node.open_agent_wake(0)?.notifier_builder().create()?;
+//! let mut sample = publisher.loan_uninit()?;
+//! let frame = CvsFrame::init_in_place(sample.payload_mut());
+//! frame.header.step = 0; // ... render in place ...
+//! // SAFETY: init_in_place initialised the whole payload.
+//! unsafe { sample.assume_init() }.send()?;
+//! wake.notify_with_custom_event_id(WakeEvent::Frame.id())?;
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! **Agent 0 (process 2)**
+//!
+//! ```no_run
+//! use std::time::Duration;
+//! use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode};
+//! use protocol::ipc::{RunNode, WakeEvent};
+//! use protocol::service::RunId;
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let run = RunId::new("demo")?;
+//! let node = RunNode::new(&run, &RunNode::agent_name(0), SignalHandlingMode::HandleTerminationRequests)?;
+//! let frames = node.open_cvs(0)?.subscriber_builder().create()?;
+//! let listener = node.open_agent_wake(0)?.listener_builder().create()?;
+//! let waitset = node.waitset()?;
+//! let _guard = waitset.attach_notification(&listener)?;
+//! waitset.wait_and_process_once_with_timeout(
+//!     |_| {
+//!         let _ = listener.try_wait(|e| println!("woken by {:?}", WakeEvent::from_id(e.id)));
+//!         CallbackProgression::Continue
+//!     },
+//!     Duration::from_secs(1),
+//! )?;
+//! while let Some(frame) = frames.receive()? {
+//!     println!("frame {}", frame.payload().header.step);
+//! }
+//! # Ok(())
+//! # }
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use iceoryx2::node::{NodeCreationFailure, NodeListFailure, NodeView};
+use iceoryx2::port::listener::ListenerCreateError;
+use iceoryx2::port::notifier::NotifierCreateError;
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
+use iceoryx2::port::subscriber::SubscriberCreateError;
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenOrCreateError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use iceoryx2::waitset::WaitSetCreateError;
+
+use crate::frame::CvsFrame;
+use crate::service::{self, RunId};
+use crate::wire::{MAX_UAVS, ObserverAck, TruthState, UavCommand, WireHeader};
+
+/// The iceoryx2 service flavour every setfleet process uses (inter-process, single-threaded
+/// ports).
+pub type Ipc = ipc::Service;
+/// A publish-subscribe service of fixed-size messages.
+pub type PubSubService<T> = publish_subscribe::PortFactory<Ipc, T, ()>;
+/// A publish-subscribe service of variable-size messages behind a [`WireHeader`].
+pub type WireService = publish_subscribe::PortFactory<Ipc, [u8], WireHeader>;
+/// A publisher of variable-size messages.
+pub type WirePublisher = Publisher<Ipc, [u8], WireHeader>;
+/// An event service (wake-ups).
+pub type EventService = event::PortFactory<Ipc>;
+
+/// Observers (the orchestrator's observer, a debugging tool) a run allows at once.
+pub const MAX_OBSERVERS: usize = 2;
+/// Restarted processes that may overlap their dead predecessor until it is cleaned up.
+pub const RESTART_OVERLAP: usize = 2;
+/// Nodes that may open one service at once: the whole fleet twice over (restarts), the world
+/// and the observers.
+pub const MAX_NODES: usize = 2 * MAX_UAVS + MAX_OBSERVERS + 4;
+/// Buffer of a frame subscriber: the world waits for acks, so one frame in flight is normal.
+pub const CVS_BUFFER: usize = 2;
+/// Buffer of the other subscribers (commands, estimates, token, truth, acks).
+pub const MESSAGE_BUFFER: usize = 16;
+/// Samples a subscriber may hold at once.
+pub const MAX_BORROWED: usize = 2;
+
+/// What a wake-up notification announces; its value is the iceoryx2 event id.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(usize)]
+pub enum WakeEvent {
+    /// A frame was published for the woken agent.
+    Frame = 1,
+    /// A peer published an estimate.
+    Estimate = 2,
+    /// The guidance token was passed.
+    Token = 3,
+    /// Truth of a step was published.
+    Truth = 4,
+    /// An agent sent a command (ack or hello).
+    Command = 5,
+    /// The run ended: stop after handling what already arrived.
+    EndOfRun = 6,
+    /// The observer acknowledged a step (or said hello).
+    ObserverAck = 7,
+}
+
+impl WakeEvent {
+    /// Every event, in id order.
+    pub const ALL: [WakeEvent; 7] = [
+        WakeEvent::Frame,
+        WakeEvent::Estimate,
+        WakeEvent::Token,
+        WakeEvent::Truth,
+        WakeEvent::Command,
+        WakeEvent::EndOfRun,
+        WakeEvent::ObserverAck,
+    ];
+    /// Largest id, the event services' `event_id_max_value`.
+    pub const MAX_ID: usize = WakeEvent::ObserverAck as usize;
+
+    /// The iceoryx2 event id.
+    pub fn id(self) -> EventId {
+        EventId::new(self as usize)
+    }
+
+    /// Decodes an event id; `None` for an id no setfleet process sends.
+    pub fn from_id(id: EventId) -> Option<WakeEvent> {
+        WakeEvent::ALL
+            .into_iter()
+            .find(|e| *e as usize == id.as_value())
+    }
+}
+
+/// Why a node, a service, a port or a wait set could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcOpenError {
+    /// The node name is not a valid iceoryx2 node name.
+    #[error("invalid node name {0:?}")]
+    NodeName(String),
+    /// The run's file prefix is not a valid iceoryx2 file name.
+    #[error("invalid iceoryx2 prefix {0:?}")]
+    Prefix(String),
+    /// iceoryx2 refused to create the node.
+    #[error("cannot create the iceoryx2 node: {0}")]
+    Node(#[from] NodeCreationFailure),
+    /// A publish-subscribe service could not be opened or created (e.g. another version's
+    /// payload type, or limits that do not match).
+    #[error("cannot open service {service}: {source}")]
+    PubSub {
+        /// The service name.
+        service: String,
+        /// iceoryx2's reason.
+        source: PublishSubscribeOpenOrCreateError,
+    },
+    /// An event service could not be opened or created.
+    #[error("cannot open event service {service}: {source}")]
+    Event {
+        /// The service name.
+        service: String,
+        /// iceoryx2's reason.
+        source: EventOpenOrCreateError,
+    },
+    /// A publisher could not be created (e.g. the service's publisher limit is reached).
+    #[error("cannot create a publisher: {0}")]
+    Publisher(#[from] PublisherCreateError),
+    /// A subscriber could not be created.
+    #[error("cannot create a subscriber: {0}")]
+    Subscriber(#[from] SubscriberCreateError),
+    /// A notifier could not be created.
+    #[error("cannot create a notifier: {0}")]
+    Notifier(#[from] NotifierCreateError),
+    /// A listener could not be created.
+    #[error("cannot create a listener: {0}")]
+    Listener(#[from] ListenerCreateError),
+    /// A wait set could not be created.
+    #[error("cannot create a wait set: {0}")]
+    WaitSet(#[from] WaitSetCreateError),
+}
+
+/// Why the nodes of a run could not be listed.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeScanError {
+    /// The run's file prefix is not a valid iceoryx2 file name.
+    #[error("invalid iceoryx2 prefix {0:?}")]
+    Prefix(String),
+    /// iceoryx2 could not list the nodes.
+    #[error("cannot list iceoryx2 nodes: {0}")]
+    List(#[from] NodeListFailure),
+}
+
+/// The iceoryx2 configuration of a run: built-in defaults with the run's file prefix.
+pub fn run_config(run: &RunId) -> Result<Config, IpcOpenError> {
+    let prefix = run.file_prefix();
+    let mut config = Config::default();
+    config.global.prefix =
+        FileName::new(prefix.as_bytes()).map_err(|_| IpcOpenError::Prefix(prefix.clone()))?;
+    Ok(config)
+}
+
+/// One process's iceoryx2 node in a run, and the typed way to open the run's services.
+pub struct RunNode {
+    node: Node<Ipc>,
+    run: RunId,
+    signals: SignalHandlingMode,
+}
+
+impl RunNode {
+    /// Node name of the world-server.
+    pub const WORLD: &'static str = "world";
+    /// Node name of an observer.
+    pub const OBSERVER: &'static str = "observer";
+
+    /// Node name of agent `uav`: `agent-{uav}`.
+    pub fn agent_name(uav: u32) -> String {
+        format!("agent-{uav}")
+    }
+
+    /// Creates the node `name` of `run` with the given signal handling.
+    pub fn new(
+        run: &RunId,
+        name: &str,
+        signals: SignalHandlingMode,
+    ) -> Result<RunNode, IpcOpenError> {
+        let config = run_config(run)?;
+        let node_name = NodeName::new(name).map_err(|_| IpcOpenError::NodeName(name.to_owned()))?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&config)
+            .signal_handling_mode(signals)
+            .create::<Ipc>()?;
+        Ok(RunNode {
+            node,
+            run: run.clone(),
+            signals,
+        })
+    }
+
+    /// The iceoryx2 node.
+    pub fn node(&self) -> &Node<Ipc> {
+        &self.node
+    }
+
+    /// The run.
+    pub fn run(&self) -> &RunId {
+        &self.run
+    }
+
+    /// A wait set with the node's signal handling.
+    pub fn waitset(&self) -> Result<WaitSet<Ipc>, IpcOpenError> {
+        Ok(WaitSetBuilder::new()
+            .signal_handling_mode(self.signals)
+            .create::<Ipc>()?)
+    }
+
+    /// `{run}/uav/{i}/cvs`: frames, one publisher (the world), lossy, small buffer.
+    pub fn open_cvs(&self, uav: u32) -> Result<PubSubService<CvsFrame>, IpcOpenError> {
+        let name = service::cvs(&self.run, uav);
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<CvsFrame>()
+            .max_publishers(1)
+            .max_subscribers(1 + RESTART_OVERLAP + MAX_OBSERVERS)
+            .max_nodes(MAX_NODES)
+            .subscriber_max_buffer_size(CVS_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
+            .history_size(0)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|source| pub_sub_error(&name, source))
+    }
+
+    /// `{run}/uav/{i}/cmd`: agent `i`'s commands and acks; two publishers (a restarted agent
+    /// may overlap its dead predecessor).
+    pub fn open_cmd(&self, uav: u32) -> Result<PubSubService<UavCommand>, IpcOpenError> {
+        let name = service::cmd(&self.run, uav);
+        self.fixed_message_service(&name, 1 + RESTART_OVERLAP, 1 + MAX_OBSERVERS)
+    }
+
+    /// `{run}/truth`: ground truth for observers, one publisher (the world).
+    pub fn open_truth(&self) -> Result<PubSubService<TruthState>, IpcOpenError> {
+        let name = service::truth(&self.run);
+        self.fixed_message_service(&name, 1, MAX_OBSERVERS + RESTART_OVERLAP)
+    }
+
+    /// `{run}/observer/ack`: observers' lockstep acks, read by the world.
+    pub fn open_observer_ack(&self) -> Result<PubSubService<ObserverAck>, IpcOpenError> {
+        let name = service::observer_ack(&self.run);
+        self.fixed_message_service(&name, MAX_OBSERVERS + RESTART_OVERLAP, 1)
+    }
+
+    /// `{run}/uav/{i}/estimate`: agent `i`'s estimates for every peer and observer.
+    pub fn open_estimate(&self, uav: u32) -> Result<WireService, IpcOpenError> {
+        let name = service::estimate(&self.run, uav);
+        self.wire_service(&name, 1 + RESTART_OVERLAP)
+    }
+
+    /// `{run}/guidance`: the token, sent by any agent (and an observer).
+    pub fn open_guidance(&self) -> Result<WireService, IpcOpenError> {
+        let name = service::guidance(&self.run);
+        self.wire_service(&name, MAX_UAVS + 1 + RESTART_OVERLAP)
+    }
+
+    /// A publisher of variable-size messages whose samples grow as needed (power-of-two
+    /// reallocation), starting at `initial_len` bytes.
+    pub fn wire_publisher(
+        service: &WireService,
+        initial_len: usize,
+    ) -> Result<WirePublisher, IpcOpenError> {
+        Ok(service
+            .publisher_builder()
+            .initial_max_slice_len(initial_len.max(1))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .max_loaned_samples(2)
+            .create()?)
+    }
+
+    /// `{run}/uav/{i}/wake`: wakes agent `i`; notified by the world, every peer and observers.
+    pub fn open_agent_wake(&self, uav: u32) -> Result<EventService, IpcOpenError> {
+        let name = service::agent_wake(&self.run, uav);
+        self.event_service(&name, fleet_senders() + 1, 1 + RESTART_OVERLAP)
+    }
+
+    /// `{run}/world/wake`: wakes the world-server (commands, observer acks).
+    pub fn open_world_wake(&self) -> Result<EventService, IpcOpenError> {
+        let name = service::world_wake(&self.run);
+        self.event_service(&name, fleet_senders(), 2)
+    }
+
+    /// `{run}/observer/wake`: wakes observers (truth, estimates, end of run).
+    pub fn open_observer_wake(&self) -> Result<EventService, IpcOpenError> {
+        let name = service::observer_wake(&self.run);
+        self.event_service(&name, fleet_senders() + 1, MAX_OBSERVERS + RESTART_OVERLAP)
+    }
+
+    fn fixed_message_service<T: std::fmt::Debug + ZeroCopySend>(
+        &self,
+        name: &ServiceName,
+        publishers: usize,
+        subscribers: usize,
+    ) -> Result<PubSubService<T>, IpcOpenError> {
+        self.node
+            .service_builder(name)
+            .publish_subscribe::<T>()
+            .max_publishers(publishers)
+            .max_subscribers(subscribers)
+            .max_nodes(MAX_NODES)
+            .subscriber_max_buffer_size(MESSAGE_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
+            .history_size(0)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|source| pub_sub_error(name, source))
+    }
+
+    fn wire_service(
+        &self,
+        name: &ServiceName,
+        publishers: usize,
+    ) -> Result<WireService, IpcOpenError> {
+        self.node
+            .service_builder(name)
+            .publish_subscribe::<[u8]>()
+            .user_header::<WireHeader>()
+            .max_publishers(publishers)
+            .max_subscribers(MAX_UAVS + RESTART_OVERLAP + MAX_OBSERVERS)
+            .max_nodes(MAX_NODES)
+            .subscriber_max_buffer_size(MESSAGE_BUFFER)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
+            .history_size(0)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|source| pub_sub_error(name, source))
+    }
+
+    fn event_service(
+        &self,
+        name: &ServiceName,
+        notifiers: usize,
+        listeners: usize,
+    ) -> Result<EventService, IpcOpenError> {
+        self.node
+            .service_builder(name)
+            .event()
+            .max_notifiers(notifiers)
+            .max_listeners(listeners)
+            .max_nodes(MAX_NODES)
+            .event_id_max_value(WakeEvent::MAX_ID)
+            .open_or_create()
+            .map_err(|source| IpcOpenError::Event {
+                service: name.as_str().to_owned(),
+                source,
+            })
+    }
+}
+
+/// Processes that may send to one receiver: every agent, restarts, observers.
+fn fleet_senders() -> usize {
+    MAX_UAVS + RESTART_OVERLAP + MAX_OBSERVERS
+}
+
+fn pub_sub_error(name: &ServiceName, source: PublishSubscribeOpenOrCreateError) -> IpcOpenError {
+    IpcOpenError::PubSub {
+        service: name.as_str().to_owned(),
+        source,
+    }
+}
+
+/// The nodes of a run by name, as iceoryx2 sees them now.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct NodeScan {
+    /// Names of nodes whose process is alive.
+    pub alive: Vec<String>,
+    /// Names of nodes whose process died without cleaning up (their resources were removed
+    /// when the scan was made with `cleanup`).
+    pub dead: Vec<String>,
+    /// Dead nodes whose resources could not be removed (permissions, another cleaner).
+    pub cleanup_failures: usize,
+}
+
+impl NodeScan {
+    /// Whether a node of that name is alive.
+    pub fn is_alive(&self, name: &str) -> bool {
+        self.alive.iter().any(|n| n == name)
+    }
+}
+
+/// Lists the nodes of `run`; with `cleanup`, removes the resources of dead ones (a SIGKILLed
+/// process shows up as dead at once).
+pub fn scan_nodes(run: &RunId, cleanup: bool) -> Result<NodeScan, NodeScanError> {
+    let prefix = run.file_prefix();
+    let config = run_config(run).map_err(|_| NodeScanError::Prefix(prefix))?;
+    let mut scan = NodeScan::default();
+    let name_of = |details: &Option<iceoryx2::node::NodeDetails>| {
+        details
+            .as_ref()
+            .map(|d| d.name().as_str().to_owned())
+            .unwrap_or_default()
+    };
+    Node::<Ipc>::list(&config, |state| {
+        match state {
+            NodeState::Alive(view) => scan.alive.push(name_of(view.details())),
+            NodeState::Dead(view) => {
+                scan.dead.push(name_of(view.details()));
+                if cleanup && view.try_remove_stale_resources().is_err() {
+                    scan.cleanup_failures += 1;
+                }
+            }
+            NodeState::Inaccessible(_) | NodeState::Undefined(_) => {}
+        }
+        CallbackProgression::Continue
+    })?;
+    Ok(scan)
+}
+
+/// Removes the resources of every dead node of `run`; returns their names.
+pub fn cleanup_stale(run: &RunId) -> Result<Vec<String>, NodeScanError> {
+    Ok(scan_nodes(run, true)?.dead)
+}
+
+/// Last resort once every process of `run` ended: deletes the run's prefixed files in
+/// `/dev/shm` and under iceoryx2's root directory. Returns how many files were removed.
+/// Never call it while a process of the run is alive.
+pub fn remove_run_files(run: &RunId) -> std::io::Result<usize> {
+    let prefix = run.file_prefix();
+    let config = Config::default();
+    let root = PathBuf::from(config.global.root_path().to_string());
+    let mut removed = remove_prefixed(Path::new("/dev/shm"), &prefix, false)?;
+    if root.exists() {
+        removed += remove_prefixed(&root, &prefix, true)?;
+    }
+    Ok(removed)
+}
+
+/// Files of a run under `dir` (and its subdirectories when `recursive`).
+pub fn run_files(run: &RunId) -> std::io::Result<Vec<PathBuf>> {
+    let prefix = run.file_prefix();
+    let root = PathBuf::from(Config::default().global.root_path().to_string());
+    let mut out = Vec::new();
+    collect_prefixed(Path::new("/dev/shm"), &prefix, false, &mut out)?;
+    if root.exists() {
+        collect_prefixed(&root, &prefix, true, &mut out)?;
+    }
+    Ok(out)
+}
+
+fn remove_prefixed(dir: &Path, prefix: &str, recursive: bool) -> std::io::Result<usize> {
+    let mut files = Vec::new();
+    collect_prefixed(dir, prefix, recursive, &mut files)?;
+    let mut removed = 0;
+    for f in &files {
+        match std::fs::remove_file(f) {
+            Ok(()) => removed += 1,
+            // Another cleaner got there first.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
+        }
+    }
+    // iceoryx2 keeps a node's files in a directory named by the node id (no prefix): remove
+    // the ones this left empty, never the root itself.
+    for f in &files {
+        if let Some(parent) = f.parent().filter(|p| *p != dir) {
+            let _ = std::fs::remove_dir(parent);
+        }
+    }
+    Ok(removed)
+}
+
+fn collect_prefixed(
+    dir: &Path,
+    prefix: &str,
+    recursive: bool,
+    out: &mut Vec<PathBuf>,
+) -> std::io::Result<()> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e),
+    };
+    for entry in entries {
+        let entry = entry?;
+        let kind = entry.file_type()?;
+        if kind.is_dir() {
+            if recursive {
+                collect_prefixed(&entry.path(), prefix, true, out)?;
+            }
+        } else if belongs_to_run(&entry.file_name().to_string_lossy(), prefix) {
+            out.push(entry.path());
+        }
+    }
+    Ok(())
+}
+
+/// Whether a file name carries the run's prefix and nothing that would make it another run's.
+/// Run `a` has prefix `iox2_sf_a_`, and run `a_b`'s files start with it too; iceoryx2 puts
+/// after the prefix a long hex hash, a long decimal node id or `node`, so a first segment
+/// that is none of these (`b`) belongs to a longer run id.
+fn belongs_to_run(file_name: &str, prefix: &str) -> bool {
+    let Some(rest) = file_name.strip_prefix(prefix) else {
+        return false;
+    };
+    let first = rest.split(['_', '.']).next().unwrap_or_default();
+    first == "node" || (first.len() >= 20 && first.bytes().all(|b| b.is_ascii_hexdigit()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wake_events_round_trip_through_their_ids() {
+        for e in WakeEvent::ALL {
+            assert_eq!(WakeEvent::from_id(e.id()), Some(e));
+            assert!(e as usize <= WakeEvent::MAX_ID);
+        }
+        assert_eq!(WakeEvent::from_id(EventId::new(0)), None);
+    }
+
+    #[test]
+    fn run_files_are_told_apart_from_a_longer_run_id() {
+        let a = RunId::new("a").unwrap().file_prefix();
+        let hash = "0354a209029e7d094a819e2d4030ea331e6caaf0";
+        assert!(belongs_to_run(
+            &format!("iox2_sf_a_{hash}_6338__0.data"),
+            &a
+        ));
+        assert!(belongs_to_run(
+            "iox2_sf_a_372037203897852790578837.node_monitor",
+            &a
+        ));
+        assert!(belongs_to_run("iox2_sf_a_node.details", &a));
+        assert!(!belongs_to_run(&format!("iox2_sf_a_b_{hash}.service"), &a));
+        assert!(!belongs_to_run("iox2_other.service", &a));
+    }
+
+    #[test]
+    fn every_service_opens_and_the_run_leaves_no_file_behind() {
+        let run = RunId::new(&format!("ipc-unit-{}", std::process::id())).unwrap();
+        {
+            let node = RunNode::new(&run, RunNode::WORLD, SignalHandlingMode::Disabled).unwrap();
+            let cvs = node.open_cvs(0).unwrap();
+            let _frames = cvs.publisher_builder().create().unwrap();
+            let _sub = cvs.subscriber_builder().create().unwrap();
+            node.open_cmd(0).unwrap();
+            node.open_truth().unwrap();
+            node.open_observer_ack().unwrap();
+            let est = node.open_estimate(0).unwrap();
+            let _est_pub = RunNode::wire_publisher(&est, 64).unwrap();
+            node.open_guidance().unwrap();
+            node.open_agent_wake(0).unwrap();
+            node.open_world_wake().unwrap();
+            node.open_observer_wake().unwrap();
+            let scan = scan_nodes(&run, false).unwrap();
+            assert!(scan.is_alive(RunNode::WORLD), "{scan:?}");
+            assert!(!run_files(&run).unwrap().is_empty());
+        }
+        remove_run_files(&run).unwrap();
+        assert_eq!(run_files(&run).unwrap(), Vec::<PathBuf>::new());
+    }
+
+    #[test]
+    fn config_carries_the_run_prefix() {
+        let run = RunId::new("cfg-test").unwrap();
+        let config = run_config(&run).unwrap();
+        assert_eq!(config.global.prefix.to_string(), run.file_prefix());
+    }
+}

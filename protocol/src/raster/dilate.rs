@@ -1,0 +1,249 @@
+//! Conservative disc dilation on cell distance (DESIGN.md section 3).
+//!
+//! Cell `(x + dx, y + dy)` joins when the closed squares of the two cells are within the
+//! radius: `cell_m * hypot(max(|dx| - 1, 0), max(|dy| - 1, 0)) <= radius` (plus a margin).
+//! The element is a union of horizontal runs, one per row offset `dy` with half-width
+//! `rx(|dy|)`, and `rx` shrinks as `|dy|` grows. So each non-empty source row is smeared
+//! horizontally, word-parallel, from the narrowest run (largest `|dy|`) to the widest, and
+//! each stage is OR-ed into rows `y - dy` and `y + dy`.
+
+use super::{CellSet, margin};
+use crate::grid::GroundGrid;
+use crate::math::Real;
+
+impl CellSet {
+    /// Conservative dilation by a disc of `radius` metres: cell `(x+dx, y+dy)` joins when the
+    /// closed squares of the two cells are within `radius` of each other (up to a margin of
+    /// about `1e-9` relative that only ever adds cells), so the result contains every point
+    /// within `radius` of the set. Only `grid.cell_m` is read from `grid`; the result has the
+    /// shape of `self`.
+    ///
+    /// Radius 0 still adds the 8 neighbours: their closed squares touch the set's. A negative
+    /// radius returns the set unchanged; a NaN or infinite radius (or a grid without a
+    /// positive finite cell size) returns the whole grid when the set is not empty, the only
+    /// safe answer.
+    pub fn dilate(&self, grid: &GroundGrid, radius: Real) -> CellSet {
+        if radius < 0.0 || self.is_empty() {
+            return self.clone();
+        }
+        let d = grid.cell_m;
+        let reach = (radius + margin(radius + d)) / d;
+        if !(reach.is_finite() && d > 0.0) {
+            let mut all = CellSet {
+                words: vec![0; self.words.len()],
+                ..*self
+            };
+            all.fill_all();
+            return all;
+        }
+        let run = row_runs(reach, self.nx, self.ny);
+        let mut out = CellSet {
+            words: vec![0; self.words.len()],
+            ..*self
+        };
+        let wpr = self.words_per_row;
+        let widest = run[0] as usize;
+        // Padding on both sides keeps every bit within `widest` of the row in the buffer,
+        // so the smearing never loses a bit it will need.
+        let pad = widest.div_ceil(64) + 1;
+        let mut smear = vec![0u64; wpr + 2 * pad];
+        let mut scratch = vec![0u64; wpr + 2 * pad];
+        let k_max = run.len() - 1;
+        for y in 0..self.ny {
+            let src = self.row(y);
+            if src.iter().all(|&w| w == 0) {
+                continue;
+            }
+            smear.fill(0);
+            smear[pad..pad + wpr].copy_from_slice(src);
+            let mut half_width = 0;
+            for k in (0..=k_max).rev() {
+                widen(&mut smear, &mut scratch, run[k] - half_width);
+                half_width = run[k];
+                let stage = &smear[pad..pad + wpr];
+                let (k, y) = (k as u64, u64::from(y));
+                if let Some(up) = y.checked_add(k).filter(|&t| t < u64::from(self.ny)) {
+                    or_into(out.row_mut(up as u32), stage);
+                }
+                if k > 0 {
+                    if let Some(down) = y.checked_sub(k) {
+                        or_into(out.row_mut(down as u32), stage);
+                    }
+                }
+            }
+        }
+        out.clear_tails();
+        out
+    }
+
+    /// Clears the bits past `nx` in the last word of every row.
+    fn clear_tails(&mut self) {
+        let used = self.nx % 64;
+        if used == 0 || self.words_per_row == 0 {
+            return;
+        }
+        let mask = (1u64 << used) - 1;
+        let wpr = self.words_per_row;
+        for row in self.words.chunks_exact_mut(wpr) {
+            row[wpr - 1] &= mask;
+        }
+    }
+}
+
+/// Half-widths of the structuring element by row offset: `run[k]` is the largest `dx` with
+/// `max(dx - 1, 0)² + max(k - 1, 0)² <= reach²` (in cells), capped at the grid width; the
+/// offsets stop where no cell joins or at the grid height.
+fn row_runs(reach: Real, nx: u32, ny: u32) -> Vec<u32> {
+    let k_max = (reach.floor() + 1.0).min(Real::from(ny)) as u32;
+    let r2 = reach * reach;
+    (0..=k_max)
+        .map(|k| {
+            let a = Real::from(k.saturating_sub(1));
+            let guess = ((reach - a) * (reach + a)).max(0.0).sqrt().floor();
+            if guess >= Real::from(nx) {
+                return nx;
+            }
+            // Settle the estimate on the defining inequality.
+            let mut b = guess as u32;
+            let fits = |b: u32| Real::from(b) * Real::from(b) + a * a <= r2;
+            while b < nx && fits(b + 1) {
+                b += 1;
+            }
+            while b > 0 && !fits(b) {
+                b -= 1;
+            }
+            (b + 1).min(nx)
+        })
+        .collect()
+}
+
+/// Grows every run of set bits of `bits` by `by` on both sides, using `scratch` (same length).
+/// Each pass ORs the buffer shifted by `±k` with `k` up to `2w + 1` for a current half-width
+/// `w`, so the half-width triples per pass.
+fn widen(bits: &mut [u64], scratch: &mut [u64], by: u32) {
+    let mut w = 0u32;
+    while w < by {
+        let k = (2 * w + 1).min(by - w);
+        scratch.copy_from_slice(bits);
+        or_shifted(bits, scratch, k as usize);
+        w += k;
+    }
+}
+
+/// `dst |= (src << k) | (src >> k)` on a little-endian bit vector (bit `i` is bit `i % 64` of
+/// word `i / 64`); bits shifted past either end are dropped.
+fn or_shifted(dst: &mut [u64], src: &[u64], k: usize) {
+    let n = src.len();
+    let (q, r) = (k / 64, (k % 64) as u32);
+    for (i, out) in dst.iter_mut().enumerate() {
+        let mut acc = 0u64;
+        // Towards higher indices: bit j moves to j + k.
+        if i >= q {
+            acc |= src[i - q] << r;
+            if r > 0 && i > q {
+                acc |= src[i - q - 1] >> (64 - r);
+            }
+        }
+        // Towards lower indices: bit j moves to j - k.
+        if i + q < n {
+            acc |= src[i + q] >> r;
+            if r > 0 && i + q + 1 < n {
+                acc |= src[i + q + 1] << (64 - r);
+            }
+        }
+        *out |= acc;
+    }
+}
+
+fn or_into(dst: &mut [u64], src: &[u64]) {
+    dst.iter_mut().zip(src).for_each(|(a, b)| *a |= b);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::CellIndex;
+
+    fn grid() -> GroundGrid {
+        GroundGrid::new(50.0, 1.0)
+    }
+
+    /// The dilation straight from its definition.
+    fn brute(set: &CellSet, cell_m: Real, radius: Real) -> CellSet {
+        let mut out = set.clone();
+        let cells: Vec<CellIndex> = set.iter().collect();
+        for iy in 0..set.ny() {
+            for ix in 0..set.nx() {
+                let near = cells.iter().any(|&(x, y)| {
+                    let dx = (i64::from(ix) - i64::from(x)).abs();
+                    let dy = (i64::from(iy) - i64::from(y)).abs();
+                    let gx = (dx - 1).max(0) as Real;
+                    let gy = (dy - 1).max(0) as Real;
+                    cell_m * gx.hypot(gy) <= radius + 1e-9
+                });
+                if near {
+                    out.set((ix, iy), true);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn radius_zero_adds_the_touching_neighbours() {
+        let g = grid();
+        let s = CellSet::from_cells(&g, [(10, 10)]);
+        let d = s.dilate(&g, 0.0);
+        assert_eq!(d.count(), 9);
+        assert!(d.contains((9, 9)) && d.contains((11, 11)));
+    }
+
+    #[test]
+    fn matches_the_definition_across_word_boundaries_and_grid_edges() {
+        let g = grid();
+        let s = CellSet::from_cells(
+            &g,
+            [(0, 0), (63, 5), (64, 40), (99, 99), (50, 50), (51, 50)],
+        );
+        for radius in [0.0, 0.5, 1.0, 1.5, 2.0, 3.7, 6.0, 20.0, 70.0] {
+            assert_eq!(
+                s.dilate(&g, radius),
+                brute(&s, 1.0, radius),
+                "radius {radius}"
+            );
+        }
+    }
+
+    #[test]
+    fn exact_reach_is_included() {
+        // Squares 3 cells apart along x have a 2-cell gap: within 2.0, not within 1.99.
+        let g = grid();
+        let s = CellSet::from_cells(&g, [(20, 20)]);
+        assert!(s.dilate(&g, 2.0).contains((23, 20)));
+        assert!(!s.dilate(&g, 1.99).contains((23, 20)));
+        // Diagonal gap of (1, 1) cells: sqrt(2).
+        assert!(s.dilate(&g, 2.0_f64.sqrt()).contains((22, 22)));
+        assert!(!s.dilate(&g, 1.41).contains((22, 22)));
+    }
+
+    #[test]
+    fn invalid_radii_are_handled_safely() {
+        let g = grid();
+        let s = CellSet::from_cells(&g, [(3, 3)]);
+        assert_eq!(s.dilate(&g, -1.0), s);
+        assert_eq!(s.dilate(&g, Real::NAN).count(), 100 * 100);
+        assert_eq!(s.dilate(&g, Real::INFINITY).count(), 100 * 100);
+        assert_eq!(s.dilate(&g, 1e6).count(), 100 * 100);
+        let empty = CellSet::empty(&g);
+        assert!(empty.dilate(&g, Real::NAN).is_empty());
+    }
+
+    #[test]
+    fn tails_past_the_grid_width_stay_clear() {
+        let g = GroundGrid::new(35.0, 1.0); // 70 columns: the second word is partly used.
+        let s = CellSet::from_cells(&g, [(69, 3)]);
+        let d = s.dilate(&g, 5.0);
+        assert!(d.row(3)[1] >> 6 == 0);
+        assert_eq!(d, brute(&s, 1.0, 5.0));
+    }
+}

@@ -1,0 +1,751 @@
+//! Checking a scenario: keys and types against the schema, then every value against its range.
+//!
+//! Two passes, because they see different things. The schema pass walks the user's TOML table
+//! before serde touches it, so it can name the full dotted key of an unknown key or a wrong
+//! type (serde's own errors cannot). The range pass runs on the typed [`Scenario`], so a
+//! scenario built in code (the orchestrator's `--seed`, `--uavs`) is held to the same ranges as
+//! one read from a file.
+
+use std::f64::consts::PI;
+use std::fmt;
+
+use toml::{Table, Value};
+
+use super::{Scenario, ScenarioError};
+use crate::frame::{FRAME_MAX_BOXES, FRAME_MAX_PIXELS};
+use crate::grid::GroundGrid;
+use crate::wire::{MAX_UAVS, TRUTH_MAX_TARGETS};
+
+/// Arrays whose length the user chooses; every other array has the length of its default.
+const VARIABLE_LENGTH_ARRAYS: &[&str] = &["uavs.altitudes_m", "guidance.yaw_increments_rad"];
+
+/// Longest run, seconds (about 11.5 days of simulated time).
+const MAX_DURATION_S: f64 = 1e6;
+/// Finest bit-raster cell side, metres.
+const MIN_CELL_M: f64 = 0.05;
+/// Coarsest bit-raster cell side, metres.
+const MAX_CELL_M: f64 = 10.0;
+/// Bit-raster cells along one side of the RoI (20000^2 bits = 50 MB per set).
+const MAX_CELLS_PER_SIDE: u32 = 20_000;
+/// Most yaw increments in `U`.
+const MAX_YAW_INCREMENTS: usize = 9;
+/// Most control sequences `|U|^h` the MPC evaluates per decision.
+const MAX_CONTROL_SEQUENCES: usize = 10_000;
+/// Smallest image side, pixels.
+const MIN_IMAGE_SIDE: u32 = 8;
+/// Relative tolerance of "a whole number of CVS periods".
+const PERIOD_MULTIPLE_TOLERANCE: f64 = 1e-9;
+
+/// Targets a scenario may hold: as many as both a truth message and a frame can carry.
+const MAX_TARGETS: usize = if TRUTH_MAX_TARGETS < FRAME_MAX_BOXES {
+    TRUTH_MAX_TARGETS
+} else {
+    FRAME_MAX_BOXES
+};
+
+/// The accepted range of every integer key, inclusive.
+///
+/// The schema pass uses it before deserialising (a TOML integer is an `i64`, the fields are
+/// `u32`/`u64`, so a value out of the field's type must be caught while the key is still known);
+/// [`Scenario::validate`] uses it again on the typed values.
+pub(super) fn integer_range(key: &str) -> Option<(i128, i128)> {
+    let range = match key {
+        // TOML integers are i64: a larger seed could not be written into the resolved scenario.
+        "seed" => (0, i64::MAX as i128),
+        "targets.count" => (0, MAX_TARGETS as i128),
+        "uavs.count" => (1, MAX_UAVS as i128),
+        "camera.rows" | "camera.cols" => (
+            MIN_IMAGE_SIDE as i128,
+            (FRAME_MAX_PIXELS / MIN_IMAGE_SIDE as usize) as i128,
+        ),
+        "camera.min_pixels" => (1, FRAME_MAX_PIXELS as i128),
+        "guidance.horizon" => (1, 4),
+        _ => return None,
+    };
+    Some(range)
+}
+
+/// Checks the keys and value kinds of `user` against `schema` (the default scenario as a
+/// table), naming full dotted keys. Integers given where a float is expected become floats.
+pub(super) fn check_keys_and_types(user: &mut Table, schema: &Table) -> Result<(), ScenarioError> {
+    check_table(user, schema, "")
+}
+
+fn check_table(user: &mut Table, schema: &Table, prefix: &str) -> Result<(), ScenarioError> {
+    for (name, value) in user.iter_mut() {
+        let key = dotted(prefix, name);
+        let Some(expected) = schema.get(name) else {
+            return Err(unknown_key(key, schema));
+        };
+        check_value(value, expected, &key)?;
+    }
+    Ok(())
+}
+
+/// The error for `key`, absent from `level` (the schema table it would sit in).
+pub(super) fn unknown_key(key: String, level: &Table) -> ScenarioError {
+    let mut expected: Vec<String> = level.keys().cloned().collect();
+    expected.sort();
+    ScenarioError::UnknownKey { key, expected }
+}
+
+/// `prefix.name`, or `name` at the top level.
+pub(super) fn dotted(prefix: &str, name: &str) -> String {
+    if prefix.is_empty() {
+        name.to_owned()
+    } else {
+        format!("{prefix}.{name}")
+    }
+}
+
+fn check_value(value: &mut Value, expected: &Value, key: &str) -> Result<(), ScenarioError> {
+    match (expected, &mut *value) {
+        (Value::Table(schema), Value::Table(user)) => check_table(user, schema, key),
+        (Value::Float(_), Value::Float(_)) | (Value::Boolean(_), Value::Boolean(_)) => Ok(()),
+        (Value::Float(_), Value::Integer(i)) => {
+            // `duration_s = 60` means 60.0; serde would accept it too, but converting here
+            // keeps the table that is deserialised, and any later dump of it, uniform.
+            let as_float = *i as f64;
+            *value = Value::Float(as_float);
+            Ok(())
+        }
+        (Value::Integer(_), Value::Integer(i)) => check_integer(key, i128::from(*i)),
+        (Value::Array(schema), Value::Array(user)) => check_array(user, schema, key),
+        (_, found) => Err(ScenarioError::WrongType {
+            key: key.to_owned(),
+            expected: describe_expected(expected, key),
+            found: describe_found(found),
+        }),
+    }
+}
+
+fn check_array(user: &mut [Value], schema: &[Value], key: &str) -> Result<(), ScenarioError> {
+    let fixed = !VARIABLE_LENGTH_ARRAYS.contains(&key);
+    let wrong_type = |found: String| ScenarioError::WrongType {
+        key: key.to_owned(),
+        expected: describe_expected(&Value::Array(schema.to_vec()), key),
+        found,
+    };
+    if fixed && user.len() != schema.len() {
+        return Err(wrong_type(format!("an array of {} values", user.len())));
+    }
+    let Some(element) = schema.first() else {
+        // Every array of the schema has a sample element (see `super::schema`).
+        return Ok(());
+    };
+    for (index, item) in user.iter_mut().enumerate() {
+        let kind_matches = matches!(
+            (element, &*item),
+            (Value::Float(_), Value::Float(_) | Value::Integer(_))
+                | (Value::Integer(_), Value::Integer(_))
+                | (Value::Boolean(_), Value::Boolean(_))
+                | (Value::String(_), Value::String(_))
+        );
+        if !kind_matches {
+            return Err(wrong_type(format!(
+                "an array holding {} at index {index}",
+                describe_found(item)
+            )));
+        }
+        if let Value::Integer(i) = item
+            && element.is_float()
+        {
+            let as_float = *i as f64;
+            *item = Value::Float(as_float);
+        }
+    }
+    Ok(())
+}
+
+fn describe_expected(expected: &Value, key: &str) -> String {
+    match expected {
+        Value::Float(_) => "a number (float or integer)".to_owned(),
+        Value::Integer(_) => match integer_range(key) {
+            Some((lo, hi)) => format!("an integer in {lo}..={hi}"),
+            None => "an integer".to_owned(),
+        },
+        Value::Boolean(_) => "a boolean (true or false)".to_owned(),
+        Value::String(_) => "a string".to_owned(),
+        Value::Datetime(_) => "a date-time".to_owned(),
+        Value::Table(_) => "a table".to_owned(),
+        Value::Array(items) => {
+            let of = match items.first() {
+                Some(Value::Float(_)) => "numbers",
+                Some(Value::Integer(_)) => "integers",
+                Some(Value::Boolean(_)) => "booleans",
+                _ => "values",
+            };
+            if VARIABLE_LENGTH_ARRAYS.contains(&key) {
+                format!("an array of {of}")
+            } else {
+                format!("an array of {} {of}", items.len())
+            }
+        }
+    }
+}
+
+fn describe_found(found: &Value) -> String {
+    match found {
+        Value::Table(_) => "a table".to_owned(),
+        Value::Array(items) => format!("an array of {} values", items.len()),
+        other => {
+            let mut shown = other.to_string();
+            if shown.len() > 40 {
+                let cut = (0..=37)
+                    .rev()
+                    .find(|&i| shown.is_char_boundary(i))
+                    .unwrap_or(0);
+                shown.truncate(cut);
+                shown.push_str("...");
+            }
+            format!("{} {shown}", other.type_str())
+        }
+    }
+}
+
+fn check_integer(key: &str, value: i128) -> Result<(), ScenarioError> {
+    match integer_range(key) {
+        Some((lo, hi)) if !(lo..=hi).contains(&value) => Err(ScenarioError::OutOfRange {
+            key: key.to_owned(),
+            value: value.to_string(),
+            accepted: format!("{lo} <= value <= {hi}"),
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// An interval of the real line; `hi = inf` with an open end means "finite".
+#[derive(Clone, Copy, Debug)]
+struct Interval {
+    lo: f64,
+    lo_open: bool,
+    hi: f64,
+    hi_open: bool,
+}
+
+impl Interval {
+    /// `lo < value <= hi`.
+    const fn open_closed(lo: f64, hi: f64) -> Self {
+        Self {
+            lo,
+            lo_open: true,
+            hi,
+            hi_open: false,
+        }
+    }
+
+    /// `lo <= value <= hi`.
+    const fn closed(lo: f64, hi: f64) -> Self {
+        Self {
+            lo,
+            lo_open: false,
+            hi,
+            hi_open: false,
+        }
+    }
+
+    /// `lo <= value < hi`.
+    const fn closed_open(lo: f64, hi: f64) -> Self {
+        Self {
+            lo,
+            lo_open: false,
+            hi,
+            hi_open: true,
+        }
+    }
+
+    /// `lo < value < hi`.
+    const fn open(lo: f64, hi: f64) -> Self {
+        Self {
+            lo,
+            lo_open: true,
+            hi,
+            hi_open: true,
+        }
+    }
+
+    /// `0 < value < inf`.
+    const POSITIVE: Self = Self::open(0.0, f64::INFINITY);
+    /// `0 <= value < inf`.
+    const NON_NEGATIVE: Self = Self::closed_open(0.0, f64::INFINITY);
+
+    /// Whether `v` lies inside; NaN never does.
+    fn contains(&self, v: f64) -> bool {
+        let above = if self.lo_open {
+            v > self.lo
+        } else {
+            v >= self.lo
+        };
+        let below = if self.hi_open {
+            v < self.hi
+        } else {
+            v <= self.hi
+        };
+        above && below
+    }
+
+    fn check(&self, key: &str, v: f64) -> Result<(), ScenarioError> {
+        require(self.contains(v), key, v, self.to_string())
+    }
+}
+
+impl fmt::Display for Interval {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let lo = if self.lo_open { "<" } else { "<=" };
+        let hi = if self.hi_open { "<" } else { "<=" };
+        write!(f, "{} {lo} value {hi} {}", self.lo, self.hi)
+    }
+}
+
+/// `Ok` when `ok`, else the out-of-range error for `key`.
+fn require(
+    ok: bool,
+    key: &str,
+    value: impl fmt::Debug,
+    accepted: impl Into<String>,
+) -> Result<(), ScenarioError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ScenarioError::OutOfRange {
+            key: key.to_owned(),
+            value: format!("{value:?}"),
+            accepted: accepted.into(),
+        })
+    }
+}
+
+impl Scenario {
+    /// Checks every value against its accepted range, cross-key constraints included.
+    ///
+    /// The first value out of range is reported with its full dotted key, the value and the
+    /// accepted range as text. Checks run in dependency order, so a constraint that involves
+    /// two keys is only tested once both are individually sane.
+    ///
+    /// Beyond the plain ranges: the target model (radius `radius_m`, height
+    /// `cylinder_height_m`) must contain the car `size_m`; explicit UAV altitudes must be
+    /// distinct and above every building; the top image row must look below the horizon; the
+    /// guidance period must be a whole number of CVS periods; the run must last at least one
+    /// CVS period; `seed` must fit a TOML integer (at most `i64::MAX`) so that the resolved
+    /// scenario can be written back.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        check_integer("seed", i128::from(self.seed))?;
+        Interval::open_closed(0.0, MAX_DURATION_S).check("duration_s", self.duration_s)?;
+        self.validate_region()?;
+        self.validate_targets()?;
+        self.validate_uavs()?;
+        self.validate_camera()?;
+        self.validate_timing()?;
+        self.validate_estimator()?;
+        self.validate_guidance()?;
+        Interval::open_closed(0.0, f64::INFINITY).check("comms.range_m", self.comms.range_m)
+    }
+
+    fn validate_region(&self) -> Result<(), ScenarioError> {
+        let region = &self.region;
+        Interval::closed(20.0, 5000.0).check("region.half_extent_m", region.half_extent_m)?;
+        Interval::closed(0.0, 0.3).check("region.building_fraction", region.building_fraction)?;
+        let [lo, hi] = region.building_height_m;
+        require(
+            lo > 0.0 && lo <= hi && hi <= 500.0,
+            "region.building_height_m",
+            region.building_height_m,
+            "[lo, hi] with 0 < lo <= hi <= 500",
+        )
+    }
+
+    fn validate_targets(&self) -> Result<(), ScenarioError> {
+        let targets = &self.targets;
+        check_integer("targets.count", i128::from(targets.count))?;
+        Interval::open_closed(0.0, 50.0).check("targets.max_speed_mps", targets.max_speed_mps)?;
+        Interval::POSITIVE.check("targets.radius_m", targets.radius_m)?;
+        Interval::POSITIVE.check("targets.cylinder_height_m", targets.cylinder_height_m)?;
+        let [length, width, height] = targets.size_m;
+        let half_diagonal = 0.5 * length.hypot(width);
+        require(
+            targets
+                .size_m
+                .iter()
+                .all(|&s| Interval::POSITIVE.contains(s))
+                && half_diagonal <= targets.radius_m
+                && height <= targets.cylinder_height_m,
+            "targets.size_m",
+            targets.size_m,
+            format!(
+                "[length, width, height], each finite and > 0, such that the target model \
+                 contains the car: half the diagonal of length x width (here {half_diagonal:.3} m) \
+                 <= targets.radius_m ({} m) and height <= targets.cylinder_height_m ({} m)",
+                targets.radius_m, targets.cylinder_height_m
+            ),
+        )?;
+        Interval::POSITIVE.check("targets.safety_distance_m", targets.safety_distance_m)
+    }
+
+    fn validate_uavs(&self) -> Result<(), ScenarioError> {
+        let uavs = &self.uavs;
+        check_integer("uavs.count", i128::from(uavs.count))?;
+        Interval::open_closed(0.0, 100.0).check("uavs.speed_mps", uavs.speed_mps)?;
+        Interval::open_closed(0.0, 10.0).check("uavs.max_yaw_rate_rps", uavs.max_yaw_rate_rps)?;
+        let roof = self.region.building_height_m[1];
+        let above_roofs = Interval::open(roof, f64::INFINITY);
+        let altitudes = &uavs.altitudes_m;
+        let distinct = altitudes
+            .iter()
+            .enumerate()
+            .all(|(i, a)| altitudes[..i].iter().all(|b| a != b));
+        require(
+            altitudes.is_empty()
+                || (altitudes.len() == uavs.count as usize
+                    && altitudes.iter().all(|&a| above_roofs.contains(a))
+                    && distinct),
+            "uavs.altitudes_m",
+            altitudes,
+            format!(
+                "[] (automatic), or exactly uavs.count ({}) distinct finite altitudes above \
+                 every building (> region.building_height_m[1] = {roof} m)",
+                uavs.count
+            ),
+        )
+    }
+
+    fn validate_camera(&self) -> Result<(), ScenarioError> {
+        let camera = &self.camera;
+        check_integer("camera.rows", i128::from(camera.rows))?;
+        check_integer("camera.cols", i128::from(camera.cols))?;
+        let pixels = u64::from(camera.rows) * u64::from(camera.cols);
+        require(
+            pixels <= FRAME_MAX_PIXELS as u64,
+            "camera.cols",
+            camera.cols,
+            format!(
+                "value >= {MIN_IMAGE_SIDE} and camera.rows x value <= {FRAME_MAX_PIXELS} \
+                 pixels (the frame's capacity); camera.rows is {}",
+                camera.rows
+            ),
+        )?;
+        let aperture = Interval::open_closed(0.0, 0.9 * PI);
+        require(
+            aperture.contains(camera.aperture_rad),
+            "camera.aperture_rad",
+            camera.aperture_rad,
+            format!("{aperture} (0.9 pi)"),
+        )?;
+        let tilt = Interval::open_closed(0.0, 0.5 * PI);
+        let half_vertical = self.camera_model().vertical_half_aperture();
+        require(
+            tilt.contains(camera.tilt_rad) && camera.tilt_rad > half_vertical,
+            "camera.tilt_rad",
+            camera.tilt_rad,
+            format!(
+                "{tilt} (pi/2), and greater than the vertical half aperture \
+                 ({half_vertical:.6} rad for these rows, cols and aperture) so that the top \
+                 image row looks below the horizon"
+            ),
+        )?;
+        let [lo, hi] = camera.depth_noise;
+        require(
+            lo > -1.0 && lo <= hi && hi < 1.0,
+            "camera.depth_noise",
+            camera.depth_noise,
+            "[lo, hi] with -1 < lo <= hi < 1",
+        )?;
+        Interval::closed_open(0.0, 1.0)
+            .check("camera.unknown_fraction", camera.unknown_fraction)?;
+        require(
+            camera.min_pixels >= 1 && u64::from(camera.min_pixels) <= pixels,
+            "camera.min_pixels",
+            camera.min_pixels,
+            format!("1 <= value <= camera.rows x camera.cols ({pixels})"),
+        )
+    }
+
+    fn validate_timing(&self) -> Result<(), ScenarioError> {
+        let timing = &self.timing;
+        Interval::open_closed(0.0, 10.0).check("timing.cvs_period_s", timing.cvs_period_s)?;
+        let periods = timing.guidance_period_s / timing.cvs_period_s;
+        let whole = periods.round();
+        require(
+            timing.guidance_period_s.is_finite()
+                && whole >= 1.0
+                && (timing.guidance_period_s - whole * timing.cvs_period_s).abs()
+                    <= PERIOD_MULTIPLE_TOLERANCE * timing.guidance_period_s,
+            "timing.guidance_period_s",
+            timing.guidance_period_s,
+            format!(
+                "a whole multiple of timing.cvs_period_s ({0} s): {0}, {1}, {2}, ...",
+                timing.cvs_period_s,
+                2.0 * timing.cvs_period_s,
+                3.0 * timing.cvs_period_s
+            ),
+        )?;
+        require(
+            self.duration_s >= timing.cvs_period_s,
+            "duration_s",
+            self.duration_s,
+            format!(
+                "timing.cvs_period_s ({} s) <= value <= {MAX_DURATION_S}: at least one step",
+                timing.cvs_period_s
+            ),
+        )
+    }
+
+    fn validate_estimator(&self) -> Result<(), ScenarioError> {
+        let estimator = &self.estimator;
+        let cell = Interval::closed(MIN_CELL_M, MAX_CELL_M);
+        cell.check("estimator.cell_m", estimator.cell_m)?;
+        let per_side = GroundGrid::new(self.region.half_extent_m, estimator.cell_m).nx;
+        require(
+            per_side <= MAX_CELLS_PER_SIDE,
+            "estimator.cell_m",
+            estimator.cell_m,
+            format!(
+                "{cell}, and at most {MAX_CELLS_PER_SIDE} cells per side of the RoI: \
+                 value >= 2 x region.half_extent_m / {MAX_CELLS_PER_SIDE} = {} m",
+                2.0 * self.region.half_extent_m / f64::from(MAX_CELLS_PER_SIDE)
+            ),
+        )?;
+        require(
+            estimator.oem_cell_m >= estimator.cell_m && estimator.oem_cell_m.is_finite(),
+            "estimator.oem_cell_m",
+            estimator.oem_cell_m,
+            format!("estimator.cell_m ({} m) <= value < inf", estimator.cell_m),
+        )
+    }
+
+    fn validate_guidance(&self) -> Result<(), ScenarioError> {
+        let guidance = &self.guidance;
+        check_integer("guidance.horizon", i128::from(guidance.horizon))?;
+        let increments = &guidance.yaw_increments_rad;
+        let sequences = u32::try_from(increments.len())
+            .ok()
+            .and_then(|n| n.checked_pow(guidance.horizon));
+        let yaw = Interval::closed(-PI, PI);
+        require(
+            (1..=MAX_YAW_INCREMENTS).contains(&increments.len())
+                && increments.iter().all(|&u| yaw.contains(u))
+                && sequences.is_some_and(|n| n as usize <= MAX_CONTROL_SEQUENCES),
+            "guidance.yaw_increments_rad",
+            increments,
+            format!(
+                "1 to {MAX_YAW_INCREMENTS} values, each in [-pi, pi], with at most \
+                 {MAX_CONTROL_SEQUENCES} control sequences (count ^ guidance.horizon)"
+            ),
+        )?;
+        Interval::NON_NEGATIVE.check("guidance.lambda", guidance.lambda)?;
+        Interval::NON_NEGATIVE.check("guidance.kappa", guidance.kappa)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn out_of_range_key(scenario: &Scenario) -> String {
+        match scenario.validate() {
+            Err(ScenarioError::OutOfRange { key, .. }) => key,
+            other => format!("not out of range: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn default_is_valid() {
+        assert!(Scenario::default().validate().is_ok());
+    }
+
+    #[test]
+    fn every_integer_key_of_the_schema_has_a_range() {
+        fn walk(table: &Table, prefix: &str, missing: &mut Vec<String>) {
+            for (name, value) in table {
+                let key = dotted(prefix, name);
+                match value {
+                    Value::Table(inner) => walk(inner, &key, missing),
+                    Value::Integer(_) if integer_range(&key).is_none() => missing.push(key),
+                    _ => {}
+                }
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&super::super::schema().unwrap(), "", &mut missing);
+        assert!(
+            missing.is_empty(),
+            "integer keys without a range: {missing:?}"
+        );
+    }
+
+    #[test]
+    fn variable_length_arrays_are_exactly_the_vec_fields() {
+        // A fixed array of the struct rejects one more element; a Vec accepts it.
+        fn walk(table: &Table, prefix: &str, arrays: &mut Vec<(String, usize)>) {
+            for (name, value) in table {
+                let key = dotted(prefix, name);
+                match value {
+                    Value::Table(inner) => walk(inner, &key, arrays),
+                    Value::Array(items) => arrays.push((key, items.len())),
+                    _ => {}
+                }
+            }
+        }
+        let schema = super::super::schema().unwrap();
+        let mut arrays = Vec::new();
+        walk(&schema, "", &mut arrays);
+        assert!(arrays.len() >= 5);
+        for (key, len) in arrays {
+            let mut table = schema.clone();
+            let (section, name) = key.split_once('.').unwrap();
+            let section = table.get_mut(section).unwrap().as_table_mut().unwrap();
+            section.insert(
+                name.to_owned(),
+                Value::Array(vec![Value::Float(1.0); len + 1]),
+            );
+            let serde_accepts = table.try_into::<Scenario>().is_ok();
+            assert_eq!(
+                serde_accepts,
+                VARIABLE_LENGTH_ARRAYS.contains(&key.as_str()),
+                "{key}"
+            );
+        }
+    }
+
+    #[test]
+    fn interval_text_reads_as_a_range() {
+        assert_eq!(
+            Interval::open_closed(0.0, 100.0).to_string(),
+            "0 < value <= 100"
+        );
+        assert_eq!(Interval::NON_NEGATIVE.to_string(), "0 <= value < inf");
+        assert!(!Interval::NON_NEGATIVE.contains(f64::NAN));
+        assert!(!Interval::NON_NEGATIVE.contains(f64::INFINITY));
+        assert!(Interval::open_closed(0.0, f64::INFINITY).contains(f64::INFINITY));
+    }
+
+    #[test]
+    fn each_range_rejects_its_bad_values() {
+        type Edit = fn(&mut Scenario);
+        let cases: &[(&str, Edit)] = &[
+            ("duration_s", |s| s.duration_s = 0.0),
+            ("duration_s", |s| s.duration_s = f64::INFINITY),
+            ("duration_s", |s| s.duration_s = 0.1),
+            ("region.half_extent_m", |s| s.region.half_extent_m = 10.0),
+            ("region.building_fraction", |s| {
+                s.region.building_fraction = 0.5
+            }),
+            ("region.building_height_m", |s| {
+                s.region.building_height_m = [70.0, 60.0]
+            }),
+            ("region.building_height_m", |s| {
+                s.region.building_height_m = [0.0, 60.0]
+            }),
+            ("targets.count", |s| {
+                s.targets.count = MAX_TARGETS as u32 + 1
+            }),
+            ("targets.max_speed_mps", |s| s.targets.max_speed_mps = 0.0),
+            ("targets.size_m", |s| s.targets.size_m = [6.0, 2.0, 1.5]),
+            ("targets.size_m", |s| s.targets.size_m = [4.6, 1.8, 2.5]),
+            ("targets.size_m", |s| s.targets.size_m = [4.6, -1.0, 1.5]),
+            ("targets.radius_m", |s| s.targets.radius_m = f64::NAN),
+            ("targets.safety_distance_m", |s| {
+                s.targets.safety_distance_m = 0.0
+            }),
+            ("uavs.count", |s| s.uavs.count = 0),
+            ("uavs.count", |s| s.uavs.count = MAX_UAVS as u32 + 1),
+            ("uavs.speed_mps", |s| s.uavs.speed_mps = 101.0),
+            ("uavs.altitudes_m", |s| {
+                s.uavs.altitudes_m = vec![80.0, 90.0]
+            }),
+            ("uavs.altitudes_m", |s| {
+                s.uavs.altitudes_m = vec![80.0, 90.0, 100.0, 80.0]
+            }),
+            ("uavs.altitudes_m", |s| {
+                s.uavs.altitudes_m = vec![80.0, 90.0, 100.0, 50.0]
+            }),
+            ("uavs.altitudes_m", |s| {
+                s.uavs.altitudes_m = vec![80.0, 90.0, 100.0, f64::INFINITY]
+            }),
+            ("uavs.max_yaw_rate_rps", |s| s.uavs.max_yaw_rate_rps = 11.0),
+            ("camera.rows", |s| s.camera.rows = 4),
+            ("camera.cols", |s| s.camera.cols = 481),
+            ("camera.aperture_rad", |s| s.camera.aperture_rad = PI),
+            ("camera.tilt_rad", |s| s.camera.tilt_rad = 0.2),
+            ("camera.tilt_rad", |s| s.camera.tilt_rad = 1.6),
+            ("camera.depth_noise", |s| s.camera.depth_noise = [0.1, -0.1]),
+            ("camera.depth_noise", |s| s.camera.depth_noise = [-1.0, 0.0]),
+            ("camera.unknown_fraction", |s| {
+                s.camera.unknown_fraction = 1.0
+            }),
+            ("camera.min_pixels", |s| s.camera.min_pixels = 0),
+            ("timing.cvs_period_s", |s| s.timing.cvs_period_s = 0.0),
+            ("timing.guidance_period_s", |s| {
+                s.timing.guidance_period_s = 3.2
+            }),
+            ("timing.guidance_period_s", |s| {
+                s.timing.guidance_period_s = 0.2
+            }),
+            ("estimator.cell_m", |s| s.estimator.cell_m = 0.01),
+            ("estimator.cell_m", |s| {
+                s.region.half_extent_m = 5000.0;
+                s.estimator.cell_m = 0.4;
+            }),
+            ("estimator.oem_cell_m", |s| s.estimator.oem_cell_m = 0.25),
+            ("guidance.horizon", |s| s.guidance.horizon = 5),
+            ("guidance.yaw_increments_rad", |s| {
+                s.guidance.yaw_increments_rad.clear()
+            }),
+            ("guidance.yaw_increments_rad", |s| {
+                s.guidance.yaw_increments_rad = vec![0.0; 10]
+            }),
+            ("guidance.yaw_increments_rad", |s| {
+                s.guidance.yaw_increments_rad = vec![4.0]
+            }),
+            ("guidance.lambda", |s| s.guidance.lambda = -1.0),
+            ("guidance.kappa", |s| s.guidance.kappa = f64::INFINITY),
+            ("comms.range_m", |s| s.comms.range_m = 0.0),
+            ("comms.range_m", |s| s.comms.range_m = f64::NAN),
+            ("seed", |s| s.seed = u64::MAX),
+        ];
+        for (key, edit) in cases {
+            let mut scenario = Scenario::default();
+            edit(&mut scenario);
+            assert_eq!(out_of_range_key(&scenario), *key, "{scenario:?}");
+        }
+    }
+
+    #[test]
+    fn edge_values_inside_the_ranges_are_accepted() {
+        let mut s = Scenario {
+            seed: i64::MAX as u64,
+            duration_s: MAX_DURATION_S,
+            ..Scenario::default()
+        };
+        s.targets.count = 0;
+        s.uavs.count = MAX_UAVS as u32;
+        s.uavs.altitudes_m = (0..MAX_UAVS).map(|i| 61.0 + i as f64).collect();
+        s.camera.unknown_fraction = 0.0;
+        s.timing.guidance_period_s = 0.5;
+        s.estimator.oem_cell_m = s.estimator.cell_m;
+        s.guidance.yaw_increments_rad = vec![-PI, PI];
+        s.guidance.horizon = 4;
+        s.guidance.kappa = 0.0;
+        s.comms.range_m = 1.0;
+        assert_eq!(s.validate().map_err(|e| e.to_string()), Ok(()));
+    }
+
+    #[test]
+    fn messages_explain_the_model_constraints() {
+        let mut s = Scenario::default();
+        s.targets.size_m = [6.0, 2.0, 1.5];
+        assert!(
+            s.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("contains the car")
+        );
+        let mut s = Scenario::default();
+        s.camera.tilt_rad = 0.2;
+        assert!(
+            s.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("below the horizon")
+        );
+    }
+}

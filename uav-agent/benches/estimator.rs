@@ -1,0 +1,148 @@
+//! Estimator benchmarks on the default scenario (360 x 480 camera, 0.5 m cells):
+//! one step on a real frame, its phases, fusion, and the estimate message size after ~100 steps.
+//!
+//! `cargo bench -p uav-agent --bench estimator`
+
+use std::sync::OnceLock;
+use std::time::Duration;
+
+use divan::Bencher;
+use divan::counter::BytesCount;
+use protocol::frame::CvsFrame;
+use protocol::scenario::Scenario;
+use uav_agent::estimator::message::{self, EstimateOutbox};
+use uav_agent::estimator::{Estimator, EstimatorConfig, PeerEstimate};
+use world_server::World;
+
+/// Steps run before measuring, so the sets look like a run's rather than a fresh start's.
+const WARMUP_STEPS: u64 = 100;
+
+struct Fixture {
+    /// UAV 0's estimator after the warm-up, fused with its peers.
+    estimator: Estimator,
+    /// A peer's estimate at the same step.
+    peer: PeerEstimate,
+    /// UAV 0's next frame.
+    frame: Box<CvsFrame>,
+    /// The encoded estimate message of UAV 0 after the warm-up (a delta, not a full map).
+    message: Vec<u8>,
+}
+
+fn fixture() -> &'static Fixture {
+    static FIXTURE: OnceLock<Fixture> = OnceLock::new();
+    FIXTURE.get_or_init(|| {
+        let scenario = Scenario::default();
+        let mut world = World::new(&scenario).expect("default world");
+        let config = EstimatorConfig::from_scenario(&scenario);
+        let n = world.uav_count();
+        let mut estimators: Vec<Estimator> =
+            (0..n).map(|_| Estimator::new(config.clone())).collect();
+        let mut outboxes: Vec<EstimateOutbox> = (0..n)
+            .map(|i| EstimateOutbox::new(i as u32, 1, config.oem_full_every))
+            .collect();
+        let mut frame = CvsFrame::new_boxed();
+        let mut sizes = Vec::new();
+        let mut last = Vec::new();
+        for k in 0..WARMUP_STEPS {
+            // Turn now and then so the views sweep the city as the guidance would make them.
+            if k % 12 == 0 {
+                for i in 0..n {
+                    let yaw = world.uav_state(i).map_or(0.0, |s| s.yaw);
+                    world.set_yaw_ref(i, yaw + 0.5);
+                }
+            }
+            for (i, e) in estimators.iter_mut().enumerate() {
+                world.render(i, 1, &mut frame);
+                e.step(&frame).expect("frame");
+            }
+            let mut peers = Vec::new();
+            last.clear();
+            for (e, o) in estimators.iter_mut().zip(&mut outboxes) {
+                let bytes = message::to_bytes(&o.compose(e.state_mut())).expect("encode");
+                sizes.push(bytes.len());
+                peers.push(PeerEstimate::from_bytes(&bytes, &config).expect("decode"));
+                last.push(bytes);
+            }
+            for (i, e) in estimators.iter_mut().enumerate() {
+                for (j, p) in peers.iter().enumerate() {
+                    if i != j {
+                        e.fuse(p);
+                    }
+                }
+            }
+            world.advance();
+        }
+        sizes.sort_unstable();
+        eprintln!(
+            "estimate message bytes over the warm-up: median {}, p99 {}, max {}",
+            sizes[sizes.len() / 2],
+            sizes[sizes.len() * 99 / 100],
+            sizes[sizes.len() - 1]
+        );
+        world.render(0, 1, &mut frame);
+        let estimator = estimators[0].clone();
+        let mut probe = estimator.clone();
+        let report = probe.step(&frame).expect("frame");
+        eprintln!("one step's breakdown: {:#?}", report.timings);
+        let peer = estimators[1].state().to_peer(1);
+        Fixture {
+            estimator,
+            peer,
+            frame,
+            message: last.swap_remove(0),
+        }
+    })
+}
+
+fn main() {
+    fixture();
+    divan::main();
+}
+
+/// One estimator step on a default-scenario frame.
+#[divan::bench(sample_count = 60, sample_size = 1)]
+fn step(bencher: Bencher) {
+    let f = fixture();
+    bencher
+        .with_inputs(|| f.estimator.clone())
+        .bench_local_values(|mut e| e.step(&f.frame).map(|r| r.timings.total));
+}
+
+/// Phases of a step, timed inside the step (median of the samples is what divan reports).
+#[divan::bench(args = ["prediction", "free_ground", "measurement_sets", "obstacle_sets", "oem", "correction"], sample_count = 30, sample_size = 1)]
+fn phase(bencher: Bencher, phase: &str) {
+    let f = fixture();
+    bencher
+        .with_inputs(|| f.estimator.clone())
+        .bench_local_values(|mut e| {
+            let t = e.step(&f.frame).map(|r| r.timings).unwrap_or_default();
+            let d: Duration = match phase {
+                "prediction" => t.prediction,
+                "free_ground" => t.free_ground,
+                "measurement_sets" => t.measurement_sets,
+                "obstacle_sets" => t.obstacle_sets,
+                "oem" => t.oem,
+                _ => t.correction,
+            };
+            d
+        });
+}
+
+/// Fusing one peer's estimate of the same step.
+#[divan::bench(sample_count = 60, sample_size = 1)]
+fn fuse(bencher: Bencher) {
+    let f = fixture();
+    bencher
+        .with_inputs(|| f.estimator.clone())
+        .bench_local_values(|mut e| e.fuse(&f.peer));
+}
+
+/// Decoding and validating a typical estimate message (its size is the byte counter).
+#[divan::bench]
+fn decode_message(bencher: Bencher) {
+    let f = fixture();
+    let config = f.estimator.config().clone();
+    bencher
+        .counter(BytesCount::new(f.message.len()))
+        .bench(|| PeerEstimate::from_bytes(&f.message, &config).map(|p| p.step));
+}

@@ -1,0 +1,198 @@
+//! The agent's iceoryx2 ports: its frames, its commands, its estimates and the peers', the
+//! token, and the wake-up events, opened once with the QoS of [`protocol::ipc`].
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use protocol::frame::CvsFrame;
+use protocol::ipc::{EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, WirePublisher};
+use protocol::wire::{PROTOCOL_VERSION, UavCommand, WireHeader, WireKind};
+
+/// Initial sample size of estimate messages; samples grow when a message is larger.
+const ESTIMATE_INITIAL_BYTES: usize = 64 * 1024;
+/// Initial sample size of tokens.
+const TOKEN_INITIAL_BYTES: usize = 4 * 1024;
+
+/// Keeps the services open for as long as the ports live.
+struct Services {
+    _cvs: PubSubService<CvsFrame>,
+    _cmd: PubSubService<UavCommand>,
+    _estimates: Vec<WireService>,
+    _guidance: WireService,
+    _events: Vec<EventService>,
+}
+
+/// Every port of one agent.
+pub struct Links {
+    /// This UAV's frames.
+    pub frames: Subscriber<Ipc, CvsFrame, ()>,
+    /// Commands and acks to the world.
+    pub commands: Publisher<Ipc, UavCommand, ()>,
+    /// This agent's estimates.
+    pub estimate_out: WirePublisher,
+    /// The peers' estimates, with the sending UAV of each service.
+    pub estimates_in: Vec<(u32, Subscriber<Ipc, [u8], WireHeader>)>,
+    /// Tokens to the ring.
+    pub token_out: WirePublisher,
+    /// Tokens from the ring.
+    pub token_in: Subscriber<Ipc, [u8], WireHeader>,
+    /// This agent's wake-up events.
+    pub wake: Listener<Ipc>,
+    /// Wakes the world-server.
+    pub world_wake: Notifier<Ipc>,
+    /// Wakes the observers.
+    pub observer_wake: Notifier<Ipc>,
+    /// Wakes each peer.
+    pub peer_wakes: Vec<Notifier<Ipc>>,
+    _services: Services,
+}
+
+impl Links {
+    /// Opens every port of agent `uav` in a fleet of `fleet` UAVs.
+    pub fn open(node: &RunNode, uav: u32, fleet: u32) -> anyhow::Result<Links> {
+        let cvs = node.open_cvs(uav)?;
+        let frames = cvs.subscriber_builder().create()?;
+        let cmd = node.open_cmd(uav)?;
+        let commands = cmd.publisher_builder().create()?;
+        let mut estimates = Vec::new();
+        let mut estimates_in = Vec::new();
+        let mut estimate_out = None;
+        let mut events = Vec::new();
+        let mut peer_wakes = Vec::new();
+        for j in 0..fleet {
+            let service = node.open_estimate(j)?;
+            if j == uav {
+                estimate_out = Some(RunNode::wire_publisher(&service, ESTIMATE_INITIAL_BYTES)?);
+            } else {
+                estimates_in.push((j, service.subscriber_builder().create()?));
+                let wake = node.open_agent_wake(j)?;
+                peer_wakes.push(wake.notifier_builder().create()?);
+                events.push(wake);
+            }
+            estimates.push(service);
+        }
+        let estimate_out = estimate_out.ok_or_else(|| anyhow::anyhow!("UAV {uav} is outside a fleet of {fleet}"))?;
+        let guidance = node.open_guidance()?;
+        let token_out = RunNode::wire_publisher(&guidance, TOKEN_INITIAL_BYTES)?;
+        let token_in = guidance.subscriber_builder().create()?;
+        let own_wake = node.open_agent_wake(uav)?;
+        let wake = own_wake.listener_builder().create()?;
+        events.push(own_wake);
+        let world = node.open_world_wake()?;
+        let world_wake = world.notifier_builder().create()?;
+        events.push(world);
+        let observer = node.open_observer_wake()?;
+        let observer_wake = observer.notifier_builder().create()?;
+        events.push(observer);
+        Ok(Links {
+            frames,
+            commands,
+            estimate_out,
+            estimates_in,
+            token_out,
+            token_in,
+            wake,
+            world_wake,
+            observer_wake,
+            peer_wakes,
+            _services: Services {
+                _cvs: cvs,
+                _cmd: cmd,
+                _estimates: estimates,
+                _guidance: guidance,
+                _events: events,
+            },
+        })
+    }
+
+    /// Sends a command (an ack, a hello or a yaw reference) and wakes the world.
+    pub fn send_command(&self, cmd: UavCommand) -> anyhow::Result<()> {
+        self.commands.send_copy(cmd)?;
+        notify(&self.world_wake, WakeEvent::Command);
+        Ok(())
+    }
+
+    /// Publishes a variable-size message and wakes the peers and the observers.
+    pub fn send_wire(
+        &self,
+        kind: WireKind,
+        run_tag: u64,
+        sender: u32,
+        step: u64,
+        bytes: &[u8],
+    ) -> anyhow::Result<()> {
+        let (publisher, event) = match kind {
+            WireKind::Estimate => (&self.estimate_out, WakeEvent::Estimate),
+            WireKind::Token => (&self.token_out, WakeEvent::Token),
+        };
+        let mut sample = publisher.loan_slice_uninit(bytes.len())?;
+        *sample.user_header_mut() = WireHeader {
+            version: PROTOCOL_VERSION,
+            kind: kind as u32,
+            run_tag,
+            sender,
+            len: u32::try_from(bytes.len())?,
+            step,
+        };
+        sample.write_from_slice(bytes).send()?;
+        for peer in &self.peer_wakes {
+            notify(peer, event);
+        }
+        if kind == WireKind::Estimate {
+            notify(&self.observer_wake, event);
+        }
+        Ok(())
+    }
+}
+
+/// Notifies, logging (not failing) when nobody listens or the event cannot be sent: a wake-up
+/// is a hint, the data is in the samples.
+pub fn notify(notifier: &Notifier<Ipc>, event: WakeEvent) {
+    if let Err(e) = notifier.notify_with_custom_event_id(event.id()) {
+        tracing::debug!(error = ?e, ?event, "notify failed");
+    }
+}
+
+/// Why a variable-size message was dropped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum DropReason {
+    /// Another protocol version.
+    Version,
+    /// Another run.
+    OtherRun,
+    /// Another kind of message than the service carries.
+    Kind,
+    /// The sender field does not match the service it came on.
+    Sender,
+    /// The header's length does not match the payload.
+    Length,
+    /// The payload does not decode or does not validate.
+    Malformed,
+}
+
+/// Checks a received header against what the service must carry.
+pub fn check_header(
+    header: &WireHeader,
+    payload_len: usize,
+    kind: WireKind,
+    run_tag: u64,
+    sender: Option<u32>,
+) -> Result<(), DropReason> {
+    if header.version != PROTOCOL_VERSION {
+        return Err(DropReason::Version);
+    }
+    if header.run_tag != run_tag {
+        return Err(DropReason::OtherRun);
+    }
+    if header.kind != kind as u32 {
+        return Err(DropReason::Kind);
+    }
+    if sender.is_some_and(|s| s != header.sender) {
+        return Err(DropReason::Sender);
+    }
+    if header.len as usize != payload_len {
+        return Err(DropReason::Length);
+    }
+    Ok(())
+}

@@ -1,0 +1,598 @@
+//! The agent process's loop: one UAV of a run, over iceoryx2.
+//!
+//! Per frame `k` (DESIGN.md §3 "Estimator step" and §4):
+//! 1. the estimator folds the frame in (predict, correct);
+//! 2. the agent publishes its corrected sets on `{run}/uav/{i}/estimate`;
+//! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are fused when
+//!    they come, dilated by the steps they lag) and fuses them;
+//! 4. on a guidance step it takes its turn in the token ring ([`crate::guidance::ring`]) and
+//!    runs the MPC ([`crate::guidance::plan`]);
+//! 5. it acks step `k` to the world with its yaw reference.
+//!
+//! Every wait is bounded. Peers are live while their iceoryx2 node is (a SIGKILLed peer shows
+//! up dead at once and its resources are cleaned); the world-server is presumed lost when no
+//! frame came for `world_timeout` and its node is gone, and the agent exits with an error.
+//! A restarted agent (same id) starts from the full region and rebuilds its sets and map from
+//! its peers' estimates; peers that see a new incarnation send it their whole map.
+//!
+//! With a finite `comms.range_m`, an agent fuses only the estimates of peers whose camera was
+//! within range at that step (links are simulated by the receiver).
+
+mod links;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSet};
+use iceoryx2::waitset::WaitSetRunResult;
+use protocol::codec;
+use protocol::flight::UavState;
+use protocol::frame::CvsFrame;
+use protocol::ipc::{Ipc, NodeScanError, RunNode, WakeEvent, scan_nodes};
+use protocol::scenario::Scenario;
+use protocol::service::RunId;
+use protocol::wire::{GuidanceToken, HELLO_STEP, UavCommand, WireKind};
+use serde::Serialize;
+
+use crate::estimator::{Estimator, EstimatorConfig, PeerEstimate, message};
+use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
+use crate::occupancy::OemStatus;
+use links::{DropReason, Links, check_header};
+
+/// How an agent runs.
+#[derive(Clone, Debug)]
+pub struct AgentConfig {
+    /// The run to join.
+    pub run_id: RunId,
+    /// This agent's UAV.
+    pub uav: u32,
+    /// The run's scenario (the same file as the world's).
+    pub scenario: Scenario,
+    /// Longest wait for the live peers' estimates of a step.
+    pub peer_wait: Duration,
+    /// Longest wait for this agent's turn in the token ring.
+    pub token_wait: Duration,
+    /// No frame for this long and no live world node: the world is lost.
+    pub world_timeout: Duration,
+    /// Interval of hellos until the first frame arrives.
+    pub hello_interval: Duration,
+}
+
+impl AgentConfig {
+    /// The defaults: 2 s for peers, 3 s for the token, 10 s for the world.
+    pub fn new(run_id: RunId, uav: u32, scenario: Scenario) -> Self {
+        Self {
+            run_id,
+            uav,
+            scenario,
+            peer_wait: Duration::from_secs(2),
+            token_wait: Duration::from_secs(3),
+            world_timeout: Duration::from_secs(10),
+            hello_interval: Duration::from_millis(200),
+        }
+    }
+}
+
+/// Why an agent could not join its run.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentStartError {
+    /// The UAV index is not in the scenario's fleet.
+    #[error("UAV {uav} is outside the fleet: the scenario has {count} UAVs (ids 0..{count})")]
+    OutsideFleet {
+        /// Requested id.
+        uav: u32,
+        /// UAVs in the scenario.
+        count: u32,
+    },
+    /// Another live process already is this agent.
+    #[error("agent {uav} is already live in run {run}: refusing to start a second one")]
+    AlreadyLive {
+        /// Requested id.
+        uav: u32,
+        /// The run.
+        run: String,
+    },
+    /// The run's nodes could not be listed.
+    #[error(transparent)]
+    Scan(#[from] NodeScanError),
+}
+
+/// How the agent's loop ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum EndReason {
+    /// The world announced the end of the run.
+    EndOfRun,
+    /// SIGTERM/SIGINT or the shutdown flag.
+    Interrupted,
+}
+
+/// What an agent did, printed at exit.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct AgentReport {
+    /// Frames folded in.
+    pub frames: u64,
+    /// Frames refused (malformed, other run).
+    pub frames_refused: u64,
+    /// Estimates published.
+    pub estimates_sent: u64,
+    /// Peer estimates fused.
+    pub estimates_received: u64,
+    /// Peer estimates out of comms range, not fused.
+    pub estimates_out_of_range: u64,
+    /// Messages dropped, by reason.
+    pub dropped: BTreeMap<String, u64>,
+    /// Guidance decisions taken.
+    pub decisions: u64,
+    /// Decisions taken after waiting out a silent holder.
+    pub token_timeouts: u64,
+    /// Steps whose peers' estimates did not all arrive in time.
+    pub peer_timeouts: u64,
+    /// How the loop ended.
+    pub end: Option<EndReason>,
+}
+
+/// Runs agent `config.uav` until the run ends, the shutdown flag is set or the world is lost.
+pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentReport> {
+    let count = config.scenario.uavs.count;
+    if config.uav >= count {
+        return Err(AgentStartError::OutsideFleet {
+            uav: config.uav,
+            count,
+        }
+        .into());
+    }
+    let name = RunNode::agent_name(config.uav);
+    let scan = scan_nodes(&config.run_id, true).map_err(AgentStartError::from)?;
+    if scan.is_alive(&name) {
+        return Err(AgentStartError::AlreadyLive {
+            uav: config.uav,
+            run: config.run_id.to_string(),
+        }
+        .into());
+    }
+    let node = RunNode::new(
+        &config.run_id,
+        &name,
+        SignalHandlingMode::HandleTerminationRequests,
+    )?;
+    let links = Links::open(&node, config.uav, count)?;
+    let waitset = node.waitset()?;
+    let _guard = waitset.attach_notification(&links.wake)?;
+    let estimator_config = EstimatorConfig::from_scenario(&config.scenario);
+    let incarnation = incarnation();
+    let mut agent = Agent {
+        run_tag: config.run_id.tag(),
+        outbox: message::EstimateOutbox::new(config.uav, incarnation, estimator_config.oem_full_every),
+        estimator: Estimator::new(estimator_config),
+        guidance: GuidanceParams::from_scenario(&config.scenario),
+        ring: TokenRing::new(config.uav),
+        peers: BTreeMap::new(),
+        live: BTreeSet::new(),
+        world_live: true,
+        links: &links,
+        waitset: &waitset,
+        config: &config,
+        shutdown,
+        report: AgentReport::default(),
+        end_of_run: false,
+        interrupted: false,
+        last_frame: Instant::now(),
+    };
+    agent.refresh_live();
+    tracing::info!(uav = config.uav, run = %config.run_id, incarnation, "agent started");
+    let result = agent.main_loop();
+    let report = agent.report;
+    result.map(|end| AgentReport {
+        end: Some(end),
+        ..report
+    })
+}
+
+/// A number that differs at each start of an agent process.
+fn incarnation() -> u64 {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0);
+    nanos ^ ((std::process::id() as u64) << 32)
+}
+
+#[derive(Default)]
+struct PeerInfo {
+    /// Newest step fused from this peer.
+    fused_step: Option<u64>,
+    incarnation: Option<u64>,
+    /// Estimates received ahead of this agent's step.
+    pending: Vec<PeerEstimate>,
+}
+
+struct Agent<'a> {
+    config: &'a AgentConfig,
+    run_tag: u64,
+    links: &'a Links,
+    waitset: &'a WaitSet<Ipc>,
+    estimator: Estimator,
+    outbox: message::EstimateOutbox,
+    guidance: GuidanceParams,
+    ring: TokenRing,
+    peers: BTreeMap<u32, PeerInfo>,
+    /// Live peers (this agent excluded), from the run's node list.
+    live: BTreeSet<u32>,
+    world_live: bool,
+    shutdown: &'a AtomicBool,
+    report: AgentReport,
+    end_of_run: bool,
+    interrupted: bool,
+    last_frame: Instant,
+}
+
+/// Longest single wait, so the shutdown flag and dead processes are noticed promptly.
+const WAIT_SLICE: Duration = Duration::from_millis(50);
+
+impl Agent<'_> {
+    fn main_loop(&mut self) -> anyhow::Result<EndReason> {
+        let mut last_hello: Option<Instant> = None;
+        let mut first_frame = false;
+        loop {
+            if !first_frame
+                && last_hello.is_none_or(|t| t.elapsed() >= self.config.hello_interval)
+            {
+                self.links.send_command(UavCommand {
+                    run_tag: self.run_tag,
+                    step: HELLO_STEP,
+                    uav: self.config.uav,
+                    has_yaw_ref: 0,
+                    yaw_ref_rad: 0.0,
+                })?;
+                last_hello = Some(Instant::now());
+            }
+            while let Some(sample) = self.links.frames.receive()? {
+                first_frame = true;
+                self.last_frame = Instant::now();
+                self.on_frame(sample.payload())?;
+            }
+            self.drain_estimates();
+            self.drain_tokens();
+            if self.end_of_run {
+                return Ok(EndReason::EndOfRun);
+            }
+            if self.interrupted || self.shutdown.load(Ordering::Relaxed) {
+                return Ok(EndReason::Interrupted);
+            }
+            if self.last_frame.elapsed() >= self.config.world_timeout {
+                self.refresh_live();
+                if !self.world_live {
+                    anyhow::bail!(
+                        "the world-server of run {} is gone (no frame for {:?} and its node is not alive)",
+                        self.config.run_id,
+                        self.config.world_timeout
+                    );
+                }
+            }
+            self.wait(Instant::now() + WAIT_SLICE);
+        }
+    }
+
+    /// Waits for a wake-up until `deadline` at most; notes end-of-run and interrupts.
+    fn wait(&mut self, deadline: Instant) {
+        let timeout = deadline.saturating_duration_since(Instant::now());
+        if timeout.is_zero() {
+            return;
+        }
+        let wake = &self.links.wake;
+        let mut end = false;
+        let result = self.waitset.wait_and_process_once_with_timeout(
+            |_| {
+                let _ = wake.try_wait(|activation| {
+                    if WakeEvent::from_id(activation.id) == Some(WakeEvent::EndOfRun) {
+                        end = true;
+                    }
+                });
+                CallbackProgression::Continue
+            },
+            timeout,
+        );
+        if end {
+            self.end_of_run = true;
+        }
+        match result {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                self.interrupted = true;
+            }
+            Ok(_) => {}
+            Err(e) => {
+                tracing::warn!(error = ?e, "wait failed");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+    }
+
+    fn stopping(&self) -> bool {
+        self.interrupted || self.shutdown.load(Ordering::Relaxed)
+    }
+
+    /// Re-reads which peers and whether the world are alive (and cleans dead nodes).
+    fn refresh_live(&mut self) {
+        match scan_nodes(&self.config.run_id, true) {
+            Ok(scan) => {
+                self.world_live = scan.is_alive(RunNode::WORLD);
+                self.live = (0..self.config.scenario.uavs.count)
+                    .filter(|&j| j != self.config.uav && scan.is_alive(&RunNode::agent_name(j)))
+                    .collect();
+                for dead in &scan.dead {
+                    tracing::info!(node = %dead, "cleaned up a dead node");
+                }
+            }
+            Err(e) => tracing::warn!(error = %e, "cannot list the run's nodes"),
+        }
+    }
+
+    fn drop_message(&mut self, reason: DropReason, what: &str, detail: &str) {
+        tracing::warn!(?reason, what, detail, "message dropped");
+        *self.report.dropped.entry(format!("{what}:{reason:?}")).or_default() += 1;
+    }
+
+    fn on_frame(&mut self, frame: &CvsFrame) -> anyhow::Result<()> {
+        let k = frame.header.step;
+        if frame.header.run_tag != self.run_tag || frame.header.uav != self.config.uav {
+            self.report.frames_refused += 1;
+            tracing::warn!(step = k, "frame of another run or UAV dropped");
+            return Ok(());
+        }
+        let mut yaw_ref = None;
+        match self.estimator.step(frame) {
+            Ok(_) => {
+                self.report.frames += 1;
+                self.publish_estimate(k)?;
+                self.gather(k);
+                if k % self.guidance.steps_per_period as u64 == 0 {
+                    yaw_ref = self.decide(k)?;
+                }
+            }
+            Err(e) => {
+                self.report.frames_refused += 1;
+                tracing::warn!(step = k, error = %e, "frame refused");
+            }
+        }
+        self.links.send_command(UavCommand {
+            run_tag: self.run_tag,
+            step: k,
+            uav: self.config.uav,
+            has_yaw_ref: u32::from(yaw_ref.is_some()),
+            yaw_ref_rad: yaw_ref.unwrap_or(0.0),
+        })
+    }
+
+    fn publish_estimate(&mut self, k: u64) -> anyhow::Result<()> {
+        let msg = self.outbox.compose(self.estimator.state_mut());
+        let bytes = message::to_bytes(&msg)?;
+        self.links
+            .send_wire(WireKind::Estimate, self.run_tag, self.config.uav, k, &bytes)?;
+        self.report.estimates_sent += 1;
+        Ok(())
+    }
+
+    /// Fuses the live peers' estimates of step `k`, waiting for them (bounded).
+    fn gather(&mut self, k: u64) {
+        self.refresh_live();
+        let deadline = Instant::now() + self.config.peer_wait;
+        loop {
+            self.drain_estimates();
+            self.fuse_pending(k);
+            let missing = self
+                .live
+                .iter()
+                .any(|j| self.peers.get(j).and_then(|p| p.fused_step).is_none_or(|s| s < k));
+            if !missing || self.stopping() || self.end_of_run {
+                return;
+            }
+            if Instant::now() >= deadline {
+                self.report.peer_timeouts += 1;
+                tracing::debug!(step = k, "some peers' estimates did not arrive in time");
+                return;
+            }
+            self.wait(deadline.min(Instant::now() + WAIT_SLICE));
+            // A peer that died meanwhile is no longer awaited.
+            self.refresh_live();
+        }
+    }
+
+    /// Reads every pending peer estimate into the peers' queues.
+    fn drain_estimates(&mut self) {
+        for idx in 0..self.links.estimates_in.len() {
+            loop {
+                let (sender, sub) = &self.links.estimates_in[idx];
+                let sender = *sender;
+                let sample = match sub.receive() {
+                    Ok(Some(s)) => s,
+                    Ok(None) => break,
+                    Err(e) => {
+                        tracing::warn!(error = ?e, peer = sender, "receive failed");
+                        break;
+                    }
+                };
+                let header = *sample.user_header();
+                let checked = check_header(
+                    &header,
+                    sample.payload().len(),
+                    WireKind::Estimate,
+                    self.run_tag,
+                    Some(sender),
+                );
+                if let Err(reason) = checked {
+                    drop(sample);
+                    self.drop_message(reason, "estimate", &format!("from UAV {sender}"));
+                    continue;
+                }
+                let parsed = PeerEstimate::from_bytes(sample.payload(), self.estimator.config());
+                drop(sample);
+                match parsed {
+                    Ok(p) if p.uav == sender => self.queue_peer(p),
+                    Ok(p) => self.drop_message(
+                        DropReason::Sender,
+                        "estimate",
+                        &format!("claims UAV {} on UAV {sender}'s service", p.uav),
+                    ),
+                    Err(e) => self.drop_message(DropReason::Malformed, "estimate", &e.to_string()),
+                }
+            }
+        }
+    }
+
+    fn queue_peer(&mut self, p: PeerEstimate) {
+        let info = self.peers.entry(p.uav).or_default();
+        if info.incarnation != Some(p.incarnation) {
+            if info.incarnation.is_some() {
+                tracing::info!(peer = p.uav, "peer restarted: sending it the whole map");
+            }
+            // A newcomer or a restarted peer needs the whole map to rebuild its own.
+            self.outbox.request_full();
+            info.incarnation = Some(p.incarnation);
+            info.fused_step = None;
+        }
+        info.pending.push(p);
+    }
+
+    /// Fuses every queued estimate of a step up to `k` (older ones are dilated by the fusion).
+    fn fuse_pending(&mut self, k: u64) {
+        let my_pose = self.estimator.state().pose;
+        let range = self.config.scenario.comms.range_m;
+        for info in self.peers.values_mut() {
+            let (ready, later): (Vec<_>, Vec<_>) =
+                info.pending.drain(..).partition(|p| p.step <= k);
+            info.pending = later;
+            for p in ready {
+                if info.fused_step.is_some_and(|s| s >= p.step) {
+                    continue;
+                }
+                info.fused_step = Some(p.step);
+                let in_range = range.is_infinite()
+                    || match (my_pose, p.pose) {
+                        (Some(a), Some(b)) => (a.position - b.position).xy().norm() <= range,
+                        _ => false,
+                    };
+                if in_range {
+                    self.estimator.fuse(&p);
+                    self.report.estimates_received += 1;
+                } else {
+                    self.report.estimates_out_of_range += 1;
+                }
+            }
+        }
+    }
+
+    fn drain_tokens(&mut self) {
+        loop {
+            let sample = match self.links.token_in.receive() {
+                Ok(Some(s)) => s,
+                Ok(None) => return,
+                Err(e) => {
+                    tracing::warn!(error = ?e, "token receive failed");
+                    return;
+                }
+            };
+            let header = *sample.user_header();
+            if let Err(reason) =
+                check_header(&header, sample.payload().len(), WireKind::Token, self.run_tag, None)
+            {
+                drop(sample);
+                self.drop_message(reason, "token", &format!("from UAV {}", header.sender));
+                continue;
+            }
+            let parsed: Result<GuidanceToken, _> = codec::decode(sample.payload());
+            drop(sample);
+            match parsed {
+                Ok(token) => self.ring.observe(token),
+                Err(e) => self.drop_message(DropReason::Malformed, "token", &e.to_string()),
+            }
+        }
+    }
+
+    /// Takes this agent's turn in the ring for the round starting at step `k`; returns the
+    /// yaw reference to send.
+    fn decide(&mut self, k: u64) -> anyhow::Result<Option<f64>> {
+        let round = k / self.guidance.steps_per_period as u64;
+        let deadline = Instant::now() + self.config.token_wait;
+        loop {
+            self.drain_tokens();
+            let mut live = self.live.clone();
+            live.insert(self.config.uav);
+            let waited_out = Instant::now() >= deadline;
+            match self.ring.turn(round, &live, waited_out) {
+                Turn::Done => return Ok(None),
+                Turn::Decide { others } => {
+                    if waited_out {
+                        self.report.token_timeouts += 1;
+                        tracing::warn!(round, "token holder silent: deciding without it");
+                    }
+                    return self.plan_and_pass(round, k, &live, &others).map(Some);
+                }
+                Turn::Wait { holder } => {
+                    if self.stopping() || self.end_of_run {
+                        return Ok(None);
+                    }
+                    self.wait(deadline.min(Instant::now() + WAIT_SLICE));
+                    // The holder may have died meanwhile: a dead holder is skipped at once.
+                    // Listing the run's nodes is a directory read, cheap beside a wait slice.
+                    if self.live.contains(&holder) {
+                        self.refresh_live();
+                    }
+                }
+            }
+        }
+    }
+
+    fn plan_and_pass(
+        &mut self,
+        round: u64,
+        k: u64,
+        live: &BTreeSet<u32>,
+        others: &[protocol::wire::PlannedView],
+    ) -> anyhow::Result<f64> {
+        let state = self.estimator.state();
+        let Some(pose) = state.pose else {
+            anyhow::bail!("no pose to plan from at step {k}");
+        };
+        let sets: Vec<&protocol::raster::CellSet> =
+            std::iter::once(&state.undetected).chain(state.targets.values()).collect();
+        let hidden = state.hidden_history.recently_hidden();
+        let oem_grid = *state.oem.grid();
+        let obstacles: Vec<ObstacleCell> = state
+            .oem
+            .known_cells()
+            .filter(|(_, c)| c.status == OemStatus::Obstacle)
+            .map(|(idx, c)| ObstacleCell {
+                rect: oem_grid.cell_rect(idx),
+                height_m: c.height_m as f64,
+            })
+            .collect();
+        let decision = guidance::plan(
+            &self.guidance,
+            &PlanningInput {
+                uav: self.config.uav,
+                state: UavState {
+                    position: pose.position,
+                    yaw: pose.yaw,
+                },
+                sets: &sets,
+                recently_hidden: &hidden,
+                obstacles: &obstacles,
+                others,
+            },
+        );
+        self.report.decisions += 1;
+        let token = self.ring.pass(round, k, live, decision.view);
+        let bytes = codec::encode(&token)?;
+        self.links
+            .send_wire(WireKind::Token, self.run_tag, self.config.uav, k, &bytes)?;
+        tracing::debug!(
+            round,
+            yaw_ref = decision.yaw_ref,
+            cost = decision.cost.total,
+            next = token.holder,
+            "decided"
+        );
+        Ok(decision.yaw_ref)
+    }
+}

@@ -1,0 +1,95 @@
+//! `uav-agent`: one UAV of a setfleet run (usually started by `fleet`).
+//!
+//! Exit codes: 0 the run ended (or SIGTERM/SIGINT stopped it), 1 the agent failed (the world
+//! was lost, the id is already live), 2 bad arguments or scenario.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::AtomicBool;
+
+use clap::Parser;
+use protocol::scenario::Scenario;
+use protocol::service::RunId;
+use uav_agent::agent::{self, AgentConfig, AgentStartError};
+
+/// Runs one UAV's estimator, guidance and peer exchange in a setfleet run.
+#[derive(Debug, Parser)]
+#[command(name = "uav-agent", version)]
+struct Args {
+    /// Run id of the run to join.
+    #[arg(long)]
+    run_id: RunId,
+    /// This agent's UAV index (0-based).
+    #[arg(long)]
+    id: u32,
+    /// Scenario TOML file (the same as the world-server's).
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    /// Overrides a scenario key, e.g. `--set guidance.kappa=0` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    overrides: Vec<String>,
+    /// Longest wait for the peers' estimates of a step, milliseconds.
+    #[arg(long, default_value_t = 2_000)]
+    peer_wait_ms: u64,
+    /// Longest wait for this agent's turn in the token ring, milliseconds.
+    #[arg(long, default_value_t = 3_000)]
+    token_wait_ms: u64,
+    /// Without frames for this long and without a live world node, exit, milliseconds.
+    #[arg(long, default_value_t = 10_000)]
+    world_timeout_ms: u64,
+}
+
+fn main() -> ExitCode {
+    die_with_parent();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    let args = match Args::try_parse() {
+        Ok(args) => args,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(e.exit_code().clamp(0, 255) as u8);
+        }
+    };
+    let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("uav-agent: bad scenario: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let mut config = AgentConfig::new(args.run_id, args.id, scenario);
+    config.peer_wait = std::time::Duration::from_millis(args.peer_wait_ms);
+    config.token_wait = std::time::Duration::from_millis(args.token_wait_ms);
+    config.world_timeout = std::time::Duration::from_millis(args.world_timeout_ms);
+    let shutdown = AtomicBool::new(false);
+    match agent::run(config, &shutdown) {
+        Ok(report) => {
+            match serde_json::to_string(&report) {
+                Ok(json) => println!("{json}"),
+                Err(e) => eprintln!("uav-agent: cannot print the report: {e}"),
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("uav-agent: {e:#}");
+            match e.downcast_ref::<AgentStartError>() {
+                Some(AgentStartError::OutsideFleet { .. }) => ExitCode::from(2),
+                _ => ExitCode::from(1),
+            }
+        }
+    }
+}
+
+/// Children of `fleet` die with it (Linux), so no agent outlives an interrupted run.
+fn die_with_parent() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a process attribute; no memory is involved.
+    unsafe {
+        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+    }
+}

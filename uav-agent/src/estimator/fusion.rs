@@ -1,0 +1,405 @@
+//! Fusion of estimates between UAVs (DESIGN.md §3, estimator step 3).
+//!
+//! Two estimates of the same fleet are combined as a meet of outer sets and a join of proven
+//! facts: `X̄` and every `X_j` are intersected (a target one side has not identified uses that
+//! side's `X̄` in its place, which also holds it), `S^o`, the explored ground, `H^CVS` and the
+//! identified ids are unioned, the maps merged (ground wins, else the taller obstacle).
+//! On estimates of the same step this is idempotent, commutative and associative, so the order
+//! and repetition of messages do not matter.
+//!
+//! An estimate of another step `k'` is first dilated by `v_max |k - k'| T`: a target is within
+//! that distance of where it was (or will be), so the dilated set still holds it at step `k`.
+//! Late messages and restarted peers are handled that way, and an agent that hears nothing
+//! simply keeps its own (guaranteed) state.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use protocol::camera::CameraPose;
+use protocol::grid::GroundGrid;
+use protocol::raster::CellSet;
+
+use super::predict;
+use super::{EstimatorConfig, EstimatorState};
+use crate::occupancy::OccupancyMap;
+
+/// A peer's estimate as received and validated ([`super::message`]), or this agent's own
+/// exchanged sets ([`EstimatorState::to_peer`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerEstimate {
+    /// Sender's UAV index.
+    pub uav: u32,
+    /// Step the sets belong to.
+    pub step: u64,
+    /// Simulated time of that step, s.
+    pub time_s: f64,
+    /// Sender's message counter.
+    pub seq: u64,
+    /// Sender's incarnation (changes when it restarts).
+    pub incarnation: u64,
+    /// Sender's camera pose at that step.
+    pub pose: Option<CameraPose>,
+    /// `X̄`, outer.
+    pub undetected: CellSet,
+    /// `X_j`, outer, per identified id.
+    pub targets: BTreeMap<u32, CellSet>,
+    /// `S^o`, inner.
+    pub obstacle_free: CellSet,
+    /// Explored ground.
+    pub explored: CellSet,
+    /// `H^CVS`.
+    pub hidden: CellSet,
+    /// The sender's map cells carried by the message (all others unknown).
+    pub oem: OccupancyMap,
+    /// Whether `oem` is the sender's whole known map rather than a delta.
+    pub oem_full: bool,
+}
+
+/// What a fusion changed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FuseReport {
+    /// Steps between the two estimates (the peer's sets were dilated over them).
+    pub step_lag: u64,
+    /// Ids this side had not identified.
+    pub new_targets: Vec<u32>,
+    /// Ids whose intersection came out empty (a bug signal; the union was kept).
+    pub empty_intersections: Vec<u32>,
+    /// Whether the peer's sets were on another grid (then nothing was fused).
+    pub grid_mismatch: bool,
+}
+
+/// Mutable views of the fused parts, so one function serves states and peer estimates.
+struct Lattice<'a> {
+    step: u64,
+    undetected: &'a mut CellSet,
+    targets: &'a mut BTreeMap<u32, CellSet>,
+    obstacle_free: &'a mut CellSet,
+    explored: &'a mut CellSet,
+    hidden: &'a mut CellSet,
+    oem: &'a mut OccupancyMap,
+}
+
+fn fuse_into(
+    dst: Lattice<'_>,
+    src: &PeerEstimate,
+    grid: &GroundGrid,
+    radius_per_step: f64,
+) -> FuseReport {
+    let mut report = FuseReport {
+        step_lag: dst.step.abs_diff(src.step),
+        ..FuseReport::default()
+    };
+    let shapes_ok = [
+        &src.undetected,
+        &src.obstacle_free,
+        &src.explored,
+        &src.hidden,
+    ]
+    .into_iter()
+    .chain(src.targets.values())
+    .all(|s| s.same_shape(dst.undetected));
+    if !shapes_ok {
+        report.grid_mismatch = true;
+        return report;
+    }
+    let radius = report.step_lag as f64 * radius_per_step;
+    let widen = |s: &CellSet| predict::grow(s, grid, radius);
+    let src_undetected = widen(&src.undetected);
+    let ids: BTreeSet<u32> = dst
+        .targets
+        .keys()
+        .chain(src.targets.keys())
+        .copied()
+        .collect();
+    let mut fused = BTreeMap::new();
+    for id in ids {
+        let mine = dst.targets.get(&id).unwrap_or(dst.undetected);
+        let theirs = src.targets.get(&id).map(widen);
+        let theirs = theirs.as_ref().unwrap_or(&src_undetected);
+        if !dst.targets.contains_key(&id) {
+            report.new_targets.push(id);
+        }
+        let mut meet = mine.clone();
+        meet.and_assign(theirs);
+        if meet.is_empty() && !(mine.is_empty() && theirs.is_empty()) {
+            tracing::error!(
+                target_id = id,
+                step = dst.step,
+                peer = src.uav,
+                peer_step = src.step,
+                "fused target set is empty: keeping the union"
+            );
+            report.empty_intersections.push(id);
+            meet = mine.clone();
+            meet.or_assign(theirs);
+        }
+        fused.insert(id, meet);
+    }
+    *dst.targets = fused;
+    dst.undetected.and_assign(&src_undetected);
+    dst.obstacle_free.or_assign(&src.obstacle_free);
+    dst.explored.or_assign(&src.explored);
+    dst.hidden.or_assign(&src.hidden);
+    dst.oem.merge(&src.oem);
+    report
+}
+
+impl EstimatorState {
+    /// Fuses a peer's estimate into this state, at this state's step.
+    pub fn fuse(&mut self, peer: &PeerEstimate, config: &EstimatorConfig) -> FuseReport {
+        let step = self.step;
+        let report = fuse_into(
+            Lattice {
+                step,
+                undetected: &mut self.undetected,
+                targets: &mut self.targets,
+                obstacle_free: &mut self.obstacle_free,
+                explored: &mut self.explored,
+                hidden: &mut self.hidden,
+                oem: &mut self.oem,
+            },
+            peer,
+            &config.grid,
+            predict::motion_radius(1, config.period_s, config.max_speed_mps),
+        );
+        if !report.grid_mismatch {
+            self.hidden_history.add_hidden(step, &peer.hidden);
+        }
+        report
+    }
+
+    /// The exchanged part of this state as an estimate (the whole map, marked full).
+    pub fn to_peer(&self, uav: u32) -> PeerEstimate {
+        PeerEstimate {
+            uav,
+            step: self.step,
+            time_s: self.time_s,
+            seq: 0,
+            incarnation: 0,
+            pose: self.pose,
+            undetected: self.undetected.clone(),
+            targets: self.targets.clone(),
+            obstacle_free: self.obstacle_free.clone(),
+            explored: self.explored.clone(),
+            hidden: self.hidden.clone(),
+            oem: self.oem.clone(),
+            oem_full: true,
+        }
+    }
+}
+
+impl PeerEstimate {
+    /// Fuses another estimate into this one, at this one's step (the same law as
+    /// [`EstimatorState::fuse`]).
+    pub fn fuse(&mut self, other: &PeerEstimate, config: &EstimatorConfig) -> FuseReport {
+        fuse_into(
+            Lattice {
+                step: self.step,
+                undetected: &mut self.undetected,
+                targets: &mut self.targets,
+                obstacle_free: &mut self.obstacle_free,
+                explored: &mut self.explored,
+                hidden: &mut self.hidden,
+                oem: &mut self.oem,
+            },
+            other,
+            &config.grid,
+            predict::motion_radius(1, config.period_s, config.max_speed_mps),
+        )
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use proptest::prelude::*;
+    use proptest::strategy::ValueTree;
+    use protocol::math::Point2;
+
+    use super::*;
+    use crate::occupancy::OemCell;
+
+    pub(crate) fn config() -> EstimatorConfig {
+        let mut scenario = protocol::scenario::Scenario::default();
+        scenario.region.half_extent_m = 8.0;
+        scenario.estimator.cell_m = 0.5;
+        scenario.estimator.oem_cell_m = 4.0;
+        EstimatorConfig::from_scenario(&scenario)
+    }
+
+    fn set_strategy(grid: GroundGrid, density: f64) -> impl Strategy<Value = CellSet> {
+        proptest::collection::vec(proptest::bool::weighted(density), grid.cell_count()).prop_map(
+            move |bits| {
+                let mut s = CellSet::empty(&grid);
+                for (i, b) in bits.into_iter().enumerate() {
+                    s.set(((i as u32) % grid.nx, (i as u32) / grid.nx), b);
+                }
+                s
+            },
+        )
+    }
+
+    pub(crate) fn peer_strategy(step: u64) -> impl Strategy<Value = PeerEstimate> {
+        let cfg = config();
+        let g = cfg.grid;
+        let og = cfg.oem_grid;
+        (
+            set_strategy(g, 0.8),
+            proptest::collection::btree_map(0u32..6, set_strategy(g, 0.7), 0..3),
+            set_strategy(g, 0.2),
+            set_strategy(g, 0.3),
+            set_strategy(g, 0.3),
+            proptest::collection::vec((0u32..og.nx, 0u32..og.ny, 0u8..3, 0.0f32..60.0), 0..10),
+            any::<u32>(),
+        )
+            .prop_map(
+                move |(undetected, targets, so, explored, hidden, cells, uav)| {
+                    let mut oem = OccupancyMap::new(og);
+                    for (ix, iy, s, h) in cells {
+                        let status = crate::occupancy::OemStatus::from_code(s).unwrap_or_default();
+                        let height_m = if s == 1 { h } else { 0.0 };
+                        oem.merge_cell((ix, iy), OemCell { status, height_m });
+                    }
+                    PeerEstimate {
+                        uav,
+                        step,
+                        time_s: step as f64 * 0.5,
+                        seq: 0,
+                        incarnation: 0,
+                        pose: None,
+                        undetected,
+                        targets,
+                        obstacle_free: so,
+                        explored,
+                        hidden,
+                        oem,
+                        oem_full: false,
+                    }
+                },
+            )
+    }
+
+    /// The fused content, without sender bookkeeping or the map's pending changes.
+    type Content = (
+        CellSet,
+        BTreeMap<u32, CellSet>,
+        CellSet,
+        CellSet,
+        CellSet,
+        Vec<((u32, u32), OemCell)>,
+    );
+
+    fn content(p: &PeerEstimate) -> Content {
+        (
+            p.undetected.clone(),
+            p.targets.clone(),
+            p.obstacle_free.clone(),
+            p.explored.clone(),
+            p.hidden.clone(),
+            p.oem.known_cells().collect::<Vec<_>>(),
+        )
+    }
+
+    fn fused(a: &PeerEstimate, b: &PeerEstimate) -> PeerEstimate {
+        let mut out = a.clone();
+        out.fuse(b, &config());
+        out
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        #[test]
+        fn fusion_is_idempotent(a in peer_strategy(3)) {
+            prop_assert_eq!(content(&fused(&a, &a)), content(&a));
+        }
+
+        #[test]
+        fn fusion_is_commutative(a in peer_strategy(3), b in peer_strategy(3)) {
+            prop_assert_eq!(content(&fused(&a, &b)), content(&fused(&b, &a)));
+        }
+
+        #[test]
+        fn fusion_is_associative(
+            a in peer_strategy(3), b in peer_strategy(3), c in peer_strategy(3)
+        ) {
+            let left = fused(&fused(&a, &b), &c);
+            let right = fused(&a, &fused(&b, &c));
+            prop_assert_eq!(content(&left), content(&right));
+        }
+
+        #[test]
+        fn fusion_keeps_what_both_sides_contain(a in peer_strategy(3), b in peer_strategy(3)) {
+            // A point both sides hold (for each target, in X_j or, if unidentified, X̄) stays
+            // held: the meet loses nothing the two estimates agree on.
+            let f = fused(&a, &b);
+            let g = config().grid;
+            for iy in 0..g.ny {
+                for ix in 0..g.nx {
+                    let c = (ix, iy);
+                    if a.undetected.contains(c) && b.undetected.contains(c) {
+                        prop_assert!(f.undetected.contains(c));
+                    }
+                    for (id, x) in &f.targets {
+                        let ina = a.targets.get(id).unwrap_or(&a.undetected).contains(c);
+                        let inb = b.targets.get(id).unwrap_or(&b.undetected).contains(c);
+                        if ina && inb {
+                            prop_assert!(x.contains(c));
+                        }
+                    }
+                }
+            }
+        }
+
+        #[test]
+        fn an_older_estimate_is_widened_before_the_meet(
+            a in peer_strategy(10), b in peer_strategy(8)
+        ) {
+            // A target b held at step 8 moved at most 2 steps of v_max T = 2 m by step 10.
+            let f = fused(&a, &b);
+            let g = config().grid;
+            for (ix, iy) in b.undetected.iter() {
+                let p = g.cell_centre((ix, iy));
+                let moved = Point2::new(p.x + 1.9, p.y);
+                if let Some(c) = g.cell_of(&moved)
+                    && a.undetected.contains(c)
+                {
+                    prop_assert!(f.undetected.contains(c));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn fusing_a_state_matches_fusing_its_estimate() {
+        let cfg = config();
+        let mut runner = proptest::test_runner::TestRunner::deterministic();
+        let a = peer_strategy(0)
+            .new_tree(&mut runner)
+            .expect("tree")
+            .current();
+        let b = peer_strategy(0)
+            .new_tree(&mut runner)
+            .expect("tree")
+            .current();
+        let mut state = EstimatorState::new(&cfg);
+        state.undetected = a.undetected.clone();
+        state.targets = a.targets.clone();
+        state.obstacle_free = a.obstacle_free.clone();
+        state.explored = a.explored.clone();
+        state.hidden = a.hidden.clone();
+        state.oem = a.oem.clone();
+        state.fuse(&b, &cfg);
+        assert_eq!(content(&state.to_peer(0)), content(&fused(&a, &b)));
+        assert!(state.hidden_history.recently_hidden().count() >= b.hidden.count());
+    }
+
+    #[test]
+    fn sets_of_another_grid_are_not_fused() {
+        let cfg = config();
+        let mut state = EstimatorState::new(&cfg);
+        let mut other = state.to_peer(1);
+        other.undetected = CellSet::empty(&GroundGrid::new(4.0, 0.5));
+        let r = state.fuse(&other, &cfg);
+        assert!(r.grid_mismatch);
+        assert_eq!(state.undetected, CellSet::full(&cfg.grid));
+    }
+}

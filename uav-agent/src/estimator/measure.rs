@@ -1,0 +1,675 @@
+//! The sets one CVS frame proves (DESIGN.md §3, "How each CVS-derived set is computed").
+//!
+//! Every function here reads a [`FrameView`]: the frame with its posed camera and each pixel's
+//! *effective* label, where a pixel whose depth is not a finite positive number counts as
+//! [`Label::Unknown`] whatever the vision system said, so bad depth can only make sets larger
+//! (outer) or smaller (inner), never wrong.
+//!
+//! Rules and the reason each one keeps the guarantee:
+//! - [`free_ground`] (`P^g`, inner): a cell is free when the pixel bounding box of its four
+//!   projected corners (closed pixel rectangles, widened by [`PIXEL_EPSILON`]) lies inside the
+//!   image and holds only ground pixels. The projected cell is a convex quadrilateral inside
+//!   that box, so every pixel it touches is ground.
+//! - [`target_measurement`] (`X^m_j`, outer): the convex hull of the ground shadows of every
+//!   target pixel's depth frustum in the box ([`Camera::pixel_frustum_ground_hull`]), grown by
+//!   a polygon circumscribing the disc of radius `r_t`. The hull contains the union, the
+//!   circumscribed polygon contains the disc, so the result contains the union dilated by `r_t`.
+//! - [`obstacle_free`] (`S^o`, inner): the depth is the range of a pixel's *centre* ray, so an
+//!   obstacle pixel proves an obstacle point on that ray within `[lo, hi]`; its horizontal
+//!   position is within `e = (hi - lo) / 2 * |ray_xy|` of the interval's midpoint, and the disc
+//!   of radius `r_s - e` around the midpoint is within `r_s` of the obstacle point. This is
+//!   tighter than, and implied by, the design's rule on the frustum corners (the centre-ray
+//!   point lies in the frustum). Discs are drawn for a lattice of obstacle pixels every
+//!   `stride` pixels plus every obstacle pixel on the border of an obstacle region; a subset of
+//!   valid inner discs is still inner.
+//! - [`hidden_ground`] (`H^CVS`, approximate): cells of the view whose centre projects into an
+//!   obstacle, target or unknown pixel.
+//! - [`observe_map`] (OEM, approximate): an obstacle pixel marks the map cell under the midpoint
+//!   of its centre-ray interval as obstacle, at least as tall as that point; a map cell whose
+//!   centre projects into a ground pixel becomes ground.
+
+use protocol::camera::{Camera, range_interval};
+use protocol::frame::{CvsFrame, Label, TargetBox};
+use protocol::grid::GroundGrid;
+use protocol::math::{Point2, Real, Vector3, convex_hull};
+use protocol::raster::{CellSet, Coverage};
+
+use crate::occupancy::OccupancyMap;
+
+/// Slack in pixels added on each side of a projected cell's bounding box, far above the
+/// rounding of the projection, so `P^g` never keeps a cell that grazes a non-ground pixel.
+pub const PIXEL_EPSILON: Real = 1e-6;
+
+/// Sides of the polygon that circumscribes the target disc when growing `X^m_j` by `r_t`.
+const DISC_POLYGON_SIDES: usize = 16;
+
+/// A frame ready to be measured: header checked, camera posed, effective labels computed.
+pub struct FrameView<'a> {
+    frame: &'a CvsFrame,
+    camera: Camera,
+    projector: GroundProjector,
+    noise: [Real; 2],
+    rows: u32,
+    cols: u32,
+    labels: Vec<Label>,
+    invalid_depth: u32,
+}
+
+impl<'a> FrameView<'a> {
+    /// Views a frame the caller checked with [`CvsFrame::is_well_formed`]. `noise` are the depth
+    /// noise bounds the estimator was configured with; the bounds used are the hull of these
+    /// and the frame's, so a frame that under-reports its noise cannot shrink an outer set.
+    pub fn new(frame: &'a CvsFrame, noise: [Real; 2]) -> Self {
+        let camera = frame.camera();
+        let (rows, cols) = (frame.header.rows, frame.header.cols);
+        let n = frame.pixel_count();
+        let mut invalid_depth = 0;
+        let labels = frame.labels[..n]
+            .iter()
+            .zip(&frame.depth[..n])
+            .map(|(&l, &d)| {
+                if d.is_finite() && d > 0.0 {
+                    Label::from_u8(l)
+                } else {
+                    invalid_depth += 1;
+                    Label::Unknown
+                }
+            })
+            .collect();
+        let h = frame.header.depth_noise;
+        Self {
+            frame,
+            camera,
+            projector: GroundProjector::new(&camera),
+            noise: [noise[0].min(h[0]), noise[1].max(h[1])],
+            rows,
+            cols,
+            labels,
+            invalid_depth,
+        }
+    }
+
+    /// The posed camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// Pixels whose depth was not a finite positive number (counted as unknown).
+    pub fn invalid_depth_pixels(&self) -> u32 {
+        self.invalid_depth
+    }
+
+    /// Effective label of pixel `(r, c)`.
+    pub fn label(&self, r: u32, c: u32) -> Label {
+        self.labels[(r * self.cols + c) as usize]
+    }
+
+    /// The range interval of pixel `(r, c)` under the noise bounds in use.
+    fn range(&self, r: u32, c: u32) -> Option<(Real, Real)> {
+        range_interval(self.frame.depth_at(r, c), self.noise)
+    }
+
+    /// Cell rectangle of `grid` worth examining: the cells touching the ground footprint of the
+    /// image, or the whole grid when the image reaches the horizon.
+    fn cell_window(&self, grid: &GroundGrid) -> Option<(u32, u32, u32, u32)> {
+        match self.camera.image_ground_footprint() {
+            Some(quad) => {
+                let (mut x0, mut x1, mut y0, mut y1) = (
+                    Real::INFINITY,
+                    Real::NEG_INFINITY,
+                    Real::INFINITY,
+                    Real::NEG_INFINITY,
+                );
+                for p in quad {
+                    x0 = x0.min(p.x);
+                    x1 = x1.max(p.x);
+                    y0 = y0.min(p.y);
+                    y1 = y1.max(p.y);
+                }
+                let (ix0, ix1) = grid.columns_touching(x0, x1)?;
+                let (iy0, iy1) = grid.rows_touching(y0, y1)?;
+                Some((ix0, ix1, iy0, iy1))
+            }
+            None => Some((0, grid.nx - 1, 0, grid.ny - 1)),
+        }
+    }
+}
+
+/// Projects ground points into the image with one affine map per frame: the camera-frame
+/// coordinates of a ground point are affine in its `(x, y)`. Mirrors [`Camera::project`].
+#[derive(Clone, Copy)]
+struct GroundProjector {
+    base: Vector3,
+    ex: Vector3,
+    ey: Vector3,
+    f: Real,
+    cx: Real,
+    cy: Real,
+    right: Vector3,
+    down: Vector3,
+    forward: Vector3,
+}
+
+impl GroundProjector {
+    fn new(camera: &Camera) -> Self {
+        let (st, ct) = camera.model.tilt_rad.sin_cos();
+        let (sy, cy) = camera.pose.yaw.sin_cos();
+        let forward = Vector3::new(ct * cy, ct * sy, -st);
+        let right = Vector3::new(sy, -cy, 0.0);
+        let down = forward.cross(&right);
+        let o = camera.pose.position.coords;
+        // Camera coordinates of world point p: (right, down, forward) . (p - o).
+        let base = -Vector3::new(right.dot(&o), down.dot(&o), forward.dot(&o));
+        Self {
+            base,
+            ex: Vector3::new(right.x, down.x, forward.x),
+            ey: Vector3::new(right.y, down.y, forward.y),
+            f: camera.model.focal_px(),
+            cx: camera.model.cols as Real / 2.0,
+            cy: camera.model.rows as Real / 2.0,
+            right,
+            down,
+            forward,
+        }
+    }
+
+    /// Camera-frame coordinates of the ground point `(x, y, 0)`.
+    fn camera_coords(&self, x: Real, y: Real) -> Vector3 {
+        self.base + self.ex * x + self.ey * y
+    }
+
+    /// Image point of camera-frame coordinates, `None` when not in front.
+    fn to_image(&self, pc: &Vector3) -> Option<(Real, Real)> {
+        (pc.z > 1e-9).then(|| {
+            (
+                self.cx + self.f * pc.x / pc.z,
+                self.cy + self.f * pc.y / pc.z,
+            )
+        })
+    }
+
+    /// Unit world direction of the centre ray of pixel `(r, c)` (as [`Camera::centre_ray`]).
+    fn centre_ray(&self, r: u32, c: u32) -> Vector3 {
+        let x = (c as Real + 0.5 - self.cx) / self.f;
+        let y = (r as Real + 0.5 - self.cy) / self.f;
+        (self.right * x + self.down * y + self.forward).normalize()
+    }
+}
+
+/// 2D prefix sums of "not ground" over the image, for O(1) box queries.
+struct NotGroundSums {
+    cols: usize,
+    sums: Vec<u32>,
+}
+
+impl NotGroundSums {
+    fn new(view: &FrameView<'_>) -> Self {
+        let (rows, cols) = (view.rows as usize, view.cols as usize);
+        let stride = cols + 1;
+        let mut sums = vec![0u32; (rows + 1) * stride];
+        for r in 0..rows {
+            let mut run = 0u32;
+            for c in 0..cols {
+                run += (view.labels[r * cols + c] != Label::Ground) as u32;
+                sums[(r + 1) * stride + c + 1] = sums[r * stride + c + 1] + run;
+            }
+        }
+        Self { cols, sums }
+    }
+
+    /// Non-ground pixels in rows `r0..=r1`, columns `c0..=c1`.
+    fn count(&self, r0: usize, r1: usize, c0: usize, c1: usize) -> u32 {
+        let s = self.cols + 1;
+        self.sums[(r1 + 1) * s + c1 + 1] + self.sums[r0 * s + c0]
+            - self.sums[r0 * s + c1 + 1]
+            - self.sums[(r1 + 1) * s + c0]
+    }
+}
+
+/// `P^g(Y^g)`, inner: cells whose projection touches only ground pixels (see the module docs).
+pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
+    let mut out = CellSet::empty(grid);
+    let Some((ix0, ix1, iy0, iy1)) = view.cell_window(grid) else {
+        return out;
+    };
+    let sums = NotGroundSums::new(view);
+    let p = &view.projector;
+    let (rows, cols) = (view.rows as Real, view.cols as Real);
+    let width = (ix1 - ix0 + 2) as usize;
+    let vertex_row = |iy: u32, buf: &mut Vec<Option<(Real, Real)>>| {
+        buf.clear();
+        let y = grid.origin.y + iy as Real * grid.cell_m;
+        buf.extend((0..width).map(|k| {
+            let x = grid.origin.x + (ix0 as usize + k) as Real * grid.cell_m;
+            p.to_image(&p.camera_coords(x, y))
+        }));
+    };
+    let (mut south, mut north) = (Vec::with_capacity(width), Vec::with_capacity(width));
+    vertex_row(iy0, &mut north);
+    for iy in iy0..=iy1 {
+        std::mem::swap(&mut south, &mut north);
+        vertex_row(iy + 1, &mut north);
+        for k in 0..width - 1 {
+            let corners = [south[k], south[k + 1], north[k], north[k + 1]];
+            let mut bb = [
+                Real::INFINITY,
+                Real::NEG_INFINITY,
+                Real::INFINITY,
+                Real::NEG_INFINITY,
+            ];
+            let mut in_front = true;
+            for c in corners {
+                match c {
+                    Some((u, v)) => {
+                        bb[0] = bb[0].min(u);
+                        bb[1] = bb[1].max(u);
+                        bb[2] = bb[2].min(v);
+                        bb[3] = bb[3].max(v);
+                    }
+                    None => in_front = false,
+                }
+            }
+            if !in_front {
+                continue;
+            }
+            // Closed pixel c covers [c, c+1]: the columns touching [u0, u1] run from
+            // floor(u0) (minus one when u0 sits on a pixel edge) to floor(u1).
+            let c0 = (bb[0] - PIXEL_EPSILON).floor();
+            let c1 = (bb[1] + PIXEL_EPSILON).floor();
+            let r0 = (bb[2] - PIXEL_EPSILON).floor();
+            let r1 = (bb[3] + PIXEL_EPSILON).floor();
+            if !(c0 >= 0.0 && r0 >= 0.0 && c1 < cols && r1 < rows) {
+                continue;
+            }
+            if sums.count(r0 as usize, r1 as usize, c0 as usize, c1 as usize) == 0 {
+                out.set((ix0 + k as u32, iy), true);
+            }
+        }
+    }
+    out
+}
+
+/// `H^CVS`, approximate: cells whose centre projects into an obstacle, target or unknown pixel.
+pub fn hidden_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
+    let mut out = CellSet::empty(grid);
+    let Some((ix0, ix1, iy0, iy1)) = view.cell_window(grid) else {
+        return out;
+    };
+    let p = &view.projector;
+    for iy in iy0..=iy1 {
+        let y = grid.origin.y + (iy as Real + 0.5) * grid.cell_m;
+        for ix in ix0..=ix1 {
+            let x = grid.origin.x + (ix as Real + 0.5) * grid.cell_m;
+            if let Some((u, v)) = p.to_image(&p.camera_coords(x, y))
+                && u >= 0.0
+                && v >= 0.0
+                && u < view.cols as Real
+                && v < view.rows as Real
+                && view.label(v as u32, u as u32) != Label::Ground
+            {
+                out.set((ix, iy), true);
+            }
+        }
+    }
+    out
+}
+
+/// `X^m_j`, outer, for one box (checked valid by the caller): `None` when the box holds no
+/// target pixel with a usable depth, in which case the frame says nothing about the target.
+pub fn target_measurement(
+    view: &FrameView<'_>,
+    grid: &GroundGrid,
+    target_box: &TargetBox,
+    target_radius_m: Real,
+) -> Option<CellSet> {
+    let mut shadow = Vec::new();
+    for r in target_box.r0..target_box.r1 {
+        for c in target_box.c0..target_box.c1 {
+            if view.label(r, c) != Label::Target {
+                continue;
+            }
+            if let Some((lo, hi)) = view.range(r, c) {
+                shadow.extend(view.camera.pixel_frustum_ground_hull(r, c, lo, hi));
+            }
+        }
+    }
+    let hull = convex_hull(&shadow);
+    if hull.is_empty() {
+        return None;
+    }
+    // The regular polygon with apothem r_t contains the disc of radius r_t; a relative margin
+    // covers the rounding of the trigonometry.
+    let circumradius = target_radius_m / (std::f64::consts::PI / DISC_POLYGON_SIDES as Real).cos()
+        * (1.0 + 1e-9)
+        + 1e-9;
+    let grown: Vec<Point2> = hull
+        .iter()
+        .flat_map(|v| {
+            (0..DISC_POLYGON_SIDES).map(move |k| {
+                let a = std::f64::consts::TAU * k as Real / DISC_POLYGON_SIDES as Real;
+                Point2::new(v.x + circumradius * a.cos(), v.y + circumradius * a.sin())
+            })
+        })
+        .collect();
+    let mut out = CellSet::empty(grid);
+    out.fill_convex_polygon(grid, &convex_hull(&grown), Coverage::Outer);
+    Some(out)
+}
+
+/// `S^o` of this frame, inner (see the module docs for the rule and the pixel subset).
+pub fn obstacle_free(
+    view: &FrameView<'_>,
+    grid: &GroundGrid,
+    safety_distance_m: Real,
+    stride: u32,
+) -> CellSet {
+    let mut out = CellSet::empty(grid);
+    let stride = stride.max(1);
+    let o = view.camera.pose.position;
+    let is_obstacle = |r: u32, c: u32| view.label(r, c) == Label::Obstacle;
+    for r in 0..view.rows {
+        for c in 0..view.cols {
+            if !is_obstacle(r, c) {
+                continue;
+            }
+            let on_lattice = r % stride == 0 && c % stride == 0;
+            let on_border = r == 0
+                || c == 0
+                || r + 1 == view.rows
+                || c + 1 == view.cols
+                || !is_obstacle(r - 1, c)
+                || !is_obstacle(r + 1, c)
+                || !is_obstacle(r, c - 1)
+                || !is_obstacle(r, c + 1);
+            if !(on_lattice || on_border) {
+                continue;
+            }
+            let Some((lo, hi)) = view.range(r, c) else {
+                continue;
+            };
+            let dir = view.projector.centre_ray(r, c);
+            let mid = (lo + hi) / 2.0;
+            let horizontal = dir.x.hypot(dir.y);
+            // Slack for the rounding of the ray direction and of the midpoint.
+            let spread = (hi - lo) / 2.0 * horizontal + 1e-9 * hi + 1e-9;
+            let radius = safety_distance_m - spread;
+            if radius <= 0.0 {
+                continue;
+            }
+            let centre = Point2::new(o.x + dir.x * mid, o.y + dir.y * mid);
+            out.fill_disc(grid, centre, radius, Coverage::Inner);
+        }
+    }
+    out
+}
+
+/// Folds the frame into the occupancy map (see the module docs). Returns the cells changed.
+pub fn observe_map(view: &FrameView<'_>, map: &mut OccupancyMap) -> usize {
+    let mut changed = 0;
+    let o = view.camera.pose.position;
+    for r in 0..view.rows {
+        for c in 0..view.cols {
+            if view.label(r, c) != Label::Obstacle {
+                continue;
+            }
+            let Some((lo, hi)) = view.range(r, c) else {
+                continue;
+            };
+            let p = o + view.projector.centre_ray(r, c) * ((lo + hi) / 2.0);
+            changed += map.observe_obstacle(&Point2::new(p.x, p.y), p.z) as usize;
+        }
+    }
+    let grid = *map.grid();
+    let Some((ix0, ix1, iy0, iy1)) = view.cell_window(&grid) else {
+        return changed;
+    };
+    let pr = &view.projector;
+    for iy in iy0..=iy1 {
+        for ix in ix0..=ix1 {
+            let centre = grid.cell_centre((ix, iy));
+            if let Some((u, v)) = pr.to_image(&pr.camera_coords(centre.x, centre.y))
+                && u >= 0.0
+                && v >= 0.0
+                && u < view.cols as Real
+                && v < view.rows as Real
+                && view.label(v as u32, u as u32) == Label::Ground
+            {
+                changed += map.observe_ground((ix, iy)) as usize;
+            }
+        }
+    }
+    changed
+}
+
+#[cfg(test)]
+mod tests {
+    use protocol::camera::{CameraModel, CameraPose};
+    use protocol::math::Point3;
+
+    use super::*;
+
+    fn small_frame(yaw: Real) -> Box<CvsFrame> {
+        let mut f = CvsFrame::new_boxed();
+        let model = CameraModel {
+            rows: 24,
+            cols: 32,
+            aperture_rad: std::f64::consts::FRAC_PI_4,
+            tilt_rad: 0.9,
+        };
+        let pose = CameraPose {
+            position: Point3::new(3.0, -4.0, 40.0),
+            yaw,
+        };
+        let h = &mut f.header;
+        h.rows = model.rows;
+        h.cols = model.cols;
+        h.camera_aperture = model.aperture_rad;
+        h.camera_tilt = model.tilt_rad;
+        h.camera_position = [pose.position.x, pose.position.y, pose.position.z];
+        h.camera_yaw = pose.yaw;
+        h.depth_noise = [-0.01, 0.01];
+        f
+    }
+
+    /// Labels from a deterministic pattern: mostly ground with blobs of other classes.
+    fn paint(f: &mut CvsFrame, seed: u32) {
+        let cam = f.camera();
+        let (rows, cols) = (f.header.rows, f.header.cols);
+        for r in 0..rows {
+            for c in 0..cols {
+                let i = (r * cols + c) as usize;
+                let h =
+                    (r.wrapping_mul(73) ^ c.wrapping_mul(151) ^ seed).wrapping_mul(2_654_435_761);
+                f.labels[i] = match (h >> 28) % 8 {
+                    0 => Label::Obstacle as u8,
+                    1 => Label::Unknown as u8,
+                    _ => Label::Ground as u8,
+                };
+                let ray = cam.centre_ray(r, c);
+                f.depth[i] = (cam.origin().z / -ray.z) as f32;
+            }
+        }
+    }
+
+    #[test]
+    fn projector_matches_camera_project() {
+        let f = small_frame(0.7);
+        let cam = f.camera();
+        let p = GroundProjector::new(&cam);
+        for &(x, y) in &[(10.0, 20.0), (-3.0, 55.0), (30.0, 5.0)] {
+            let a = cam.project(&Point3::new(x, y, 0.0));
+            let b = p.to_image(&p.camera_coords(x, y));
+            match (a, b) {
+                (Some(a), Some(b)) => assert!((a.0 - b.0).abs() < 1e-9 && (a.1 - b.1).abs() < 1e-9),
+                (None, None) => {}
+                _ => panic!("front tests disagree at ({x}, {y})"),
+            }
+        }
+        for &(r, c) in &[(0, 0), (5, 17), (23, 31)] {
+            assert!((p.centre_ray(r, c) - cam.centre_ray(r, c)).norm() < 1e-12);
+        }
+    }
+
+    /// The naive rule: project the corners with the camera, take the closed pixel box, and
+    /// look at every pixel in it.
+    fn naive_free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
+        let mut out = CellSet::empty(grid);
+        let cam = view.camera();
+        for iy in 0..grid.ny {
+            'cells: for ix in 0..grid.nx {
+                let rect = grid.cell_rect((ix, iy));
+                let mut uv = Vec::new();
+                for p in rect.corners() {
+                    match cam.project(&Point3::new(p.x, p.y, 0.0)) {
+                        Some(q) => uv.push(q),
+                        None => continue 'cells,
+                    }
+                }
+                let u0 = uv.iter().map(|q| q.0).fold(Real::INFINITY, Real::min);
+                let u1 = uv.iter().map(|q| q.0).fold(Real::NEG_INFINITY, Real::max);
+                let v0 = uv.iter().map(|q| q.1).fold(Real::INFINITY, Real::min);
+                let v1 = uv.iter().map(|q| q.1).fold(Real::NEG_INFINITY, Real::max);
+                let (c0, c1) = ((u0 - PIXEL_EPSILON).floor(), (u1 + PIXEL_EPSILON).floor());
+                let (r0, r1) = ((v0 - PIXEL_EPSILON).floor(), (v1 + PIXEL_EPSILON).floor());
+                if c0 < 0.0 || r0 < 0.0 || c1 >= view.cols as Real || r1 >= view.rows as Real {
+                    continue;
+                }
+                for r in r0 as u32..=r1 as u32 {
+                    for c in c0 as u32..=c1 as u32 {
+                        if view.label(r, c) != Label::Ground {
+                            continue 'cells;
+                        }
+                    }
+                }
+                out.set((ix, iy), true);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn free_ground_equals_brute_force() {
+        for (k, &yaw) in [0.0, 0.6, 2.2, -1.3].iter().enumerate() {
+            let mut f = small_frame(yaw);
+            paint(&mut f, k as u32);
+            // A pixel with a bad depth counts as unknown, even when labelled ground.
+            f.depth[40] = f32::NAN;
+            f.labels[40] = Label::Ground as u8;
+            let view = FrameView::new(&f, [-0.01, 0.01]);
+            assert_eq!(view.invalid_depth_pixels(), 1);
+            let grid = GroundGrid::new(100.0, 1.0);
+            let fast = free_ground(&view, &grid);
+            let naive = naive_free_ground(&view, &grid);
+            assert!(fast.count() > 0, "yaw {yaw}: nothing free");
+            assert_eq!(fast, naive, "yaw {yaw}");
+        }
+    }
+
+    #[test]
+    fn free_ground_cells_project_only_onto_ground_pixels() {
+        let mut f = small_frame(0.3);
+        paint(&mut f, 9);
+        let view = FrameView::new(&f, [-0.01, 0.01]);
+        let grid = GroundGrid::new(100.0, 1.0);
+        let free = free_ground(&view, &grid);
+        let cam = view.camera();
+        // Sample points in every free cell: each must land on a ground pixel.
+        for (ix, iy) in free.iter() {
+            let rect = grid.cell_rect((ix, iy));
+            for a in 0..=4 {
+                for b in 0..=4 {
+                    let x = rect.min.x + (rect.max.x - rect.min.x) * a as Real / 4.0;
+                    let y = rect.min.y + (rect.max.y - rect.min.y) * b as Real / 4.0;
+                    let (u, v) = cam.project(&Point3::new(x, y, 0.0)).unwrap();
+                    let (c, r) = (u.floor().min(31.0) as u32, v.floor().min(23.0) as u32);
+                    assert_eq!(view.label(r, c), Label::Ground);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn target_measurement_contains_the_lit_points_grown_by_the_radius() {
+        let mut f = small_frame(1.1);
+        paint(&mut f, 3);
+        let cam = f.camera();
+        let b = TargetBox {
+            id: 4,
+            r0: 10,
+            c0: 12,
+            r1: 14,
+            c1: 17,
+        };
+        for r in b.r0..b.r1 {
+            for c in b.c0..b.c1 {
+                f.labels[(r * 32 + c) as usize] = Label::Target as u8;
+            }
+        }
+        let view = FrameView::new(&f, [-0.01, 0.01]);
+        let grid = GroundGrid::new(100.0, 0.5);
+        let radius = 2.5;
+        let xm = target_measurement(&view, &grid, &b, radius).unwrap();
+        // Any point lit by a target pixel at its measured range, moved by up to r_t, is in.
+        for r in b.r0..b.r1 {
+            for c in b.c0..b.c1 {
+                let (lo, hi) = view.range(r, c).unwrap();
+                for &(du, dv) in &[(0.0, 0.0), (1.0, 1.0), (0.5, 0.5), (1.0, 0.0)] {
+                    for &t in &[lo, hi] {
+                        let p = cam.origin() + cam.ray(c as Real + du, r as Real + dv) * t;
+                        for k in 0..12 {
+                            let a = k as Real * 0.5236;
+                            let q = Point2::new(p.x + radius * a.cos(), p.y + radius * a.sin());
+                            assert!(xm.contains(grid.cell_of(&q).unwrap()));
+                        }
+                    }
+                }
+            }
+        }
+        // A box with no target pixel says nothing.
+        let empty = TargetBox {
+            id: 5,
+            r0: 0,
+            c0: 0,
+            r1: 1,
+            c1: 1,
+        };
+        f.labels[0] = Label::Ground as u8;
+        let view = FrameView::new(&f, [-0.01, 0.01]);
+        assert!(target_measurement(&view, &grid, &empty, radius).is_none());
+    }
+
+    #[test]
+    fn obstacle_discs_stay_within_the_safety_distance() {
+        let mut f = small_frame(-0.4);
+        paint(&mut f, 5);
+        let view = FrameView::new(&f, [-0.01, 0.01]);
+        let grid = GroundGrid::new(100.0, 0.5);
+        let rs = 3.0;
+        let so = obstacle_free(&view, &grid, rs, 1);
+        assert!(so.count() > 0);
+        let cam = view.camera();
+        // Every S^o cell must be within r_s of the obstacle point of some obstacle pixel, at
+        // any range of its interval.
+        let mut points = Vec::new();
+        for r in 0..24 {
+            for c in 0..32 {
+                if view.label(r, c) == Label::Obstacle {
+                    let (lo, hi) = view.range(r, c).unwrap();
+                    let d = cam.centre_ray(r, c);
+                    points.push((cam.origin() + d * lo, cam.origin() + d * hi));
+                }
+            }
+        }
+        for cell in so.iter() {
+            let rect = grid.cell_rect(cell);
+            let ok = points.iter().any(|(a, b)| {
+                [*a, *b].iter().all(|p| {
+                    rect.corners()
+                        .iter()
+                        .all(|q| (q.x - p.x).hypot(q.y - p.y) <= rs + 1e-9)
+                })
+            });
+            assert!(ok, "cell {cell:?} is not within r_s of one obstacle pixel");
+        }
+    }
+}

@@ -1,0 +1,579 @@
+//! The guaranteed set-membership estimator (DESIGN.md §3, "Estimator step").
+//!
+//! An [`Estimator`] pairs an [`EstimatorConfig`] with an explicit [`EstimatorState`]; one call
+//! to [`Estimator::step`] folds one CVS frame into the state and returns a [`StepReport`]:
+//!
+//! 1. predict: `X̄ <- dilate(X̄, v_max dt)` and the same for every `X_j`, `dt` the time since
+//!    the last frame (skipped frames are covered);
+//! 2. correct: `free = P^g ∪ S^o` (this frame's proven-free ground and every obstacle
+//!    neighbourhood seen so far); `X̄ <- X̄ \ free`; a target `j` with a box gets
+//!    `X_j <- (X_j, or X̄ if new) ∩ X^m_j \ free`; other targets `X_j <- X_j \ free`.
+//!
+//! Every set that must contain targets is outer and every set removed from them is inner
+//! ([`measure`] documents why each frame-derived set is), so no target ever leaves its set.
+//! Fusion with peers is in [`fusion`], messages in [`message`].
+
+pub mod fusion;
+mod hidden;
+pub mod measure;
+pub mod message;
+pub mod predict;
+mod snapshot;
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use protocol::camera::CameraPose;
+use protocol::frame::CvsFrame;
+use protocol::grid::GroundGrid;
+use protocol::math::Real;
+use protocol::raster::CellSet;
+use protocol::scenario::Scenario;
+use serde::{Deserialize, Serialize};
+
+pub use fusion::{FuseReport, PeerEstimate};
+pub use hidden::HiddenHistory;
+pub use message::{EstimateOutbox, EstimateReadError};
+
+use crate::occupancy::OccupancyMap;
+use measure::FrameView;
+use snapshot::{cell_set, cell_set_map};
+
+/// Everything the estimator needs from the scenario.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EstimatorConfig {
+    /// The bit-raster grid of every set.
+    pub grid: GroundGrid,
+    /// The occupancy map's grid.
+    pub oem_grid: GroundGrid,
+    /// `v_max`, m/s.
+    pub max_speed_mps: Real,
+    /// Target model radius `r_t`, m.
+    pub target_radius_m: Real,
+    /// Safety distance `r_s` between targets and obstacles, m.
+    pub safety_distance_m: Real,
+    /// CVS period `T`, s.
+    pub period_s: Real,
+    /// Depth noise bounds `[w_lo, w_hi]`; each frame's own bounds are added to them.
+    pub depth_noise: [Real; 2],
+    /// Frames per guidance period (for the hidden-ground history).
+    pub guidance_period_steps: u64,
+    /// Guidance periods of hidden ground remembered (the MPC horizon `h`).
+    pub hidden_periods: u32,
+    /// Obstacle pixels drawn into `S^o` on a lattice of this pitch (plus region borders).
+    pub obstacle_pixel_stride: u32,
+    /// A message carries the whole OEM every this many messages.
+    pub oem_full_every: u64,
+}
+
+impl EstimatorConfig {
+    /// The configuration of `scenario`.
+    pub fn from_scenario(scenario: &Scenario) -> Self {
+        Self {
+            grid: scenario.grid(),
+            oem_grid: scenario.oem_grid(),
+            max_speed_mps: scenario.targets.max_speed_mps,
+            target_radius_m: scenario.targets.radius_m,
+            safety_distance_m: scenario.targets.safety_distance_m,
+            period_s: scenario.timing.cvs_period_s,
+            depth_noise: scenario.camera.depth_noise,
+            guidance_period_steps: scenario.steps_per_guidance(),
+            hidden_periods: scenario.guidance.horizon.max(1),
+            obstacle_pixel_stride: 3,
+            oem_full_every: 20,
+        }
+    }
+}
+
+/// The estimator's whole knowledge, explicit and serialisable (sets as compact encodings).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EstimatorState {
+    /// Step of the last frame folded in (0 before any).
+    pub step: u64,
+    /// Simulated time of that frame, s.
+    pub time_s: Real,
+    /// Frames folded in so far.
+    pub frames: u64,
+    /// Camera pose of the last frame.
+    pub pose: Option<CameraPose>,
+    /// `X̄`, outer: where targets not yet identified can be (it holds every target).
+    #[serde(with = "cell_set")]
+    pub undetected: CellSet,
+    /// `X_j`, outer, per identified target id.
+    #[serde(with = "cell_set_map")]
+    pub targets: BTreeMap<u32, CellSet>,
+    /// `S^o`, inner, accumulated: ground within `r_s` of an obstacle, never a target's.
+    #[serde(with = "cell_set")]
+    pub obstacle_free: CellSet,
+    /// Union of `P^g` over time: ground proven free at some frame (the explored metric).
+    #[serde(with = "cell_set")]
+    pub explored: CellSet,
+    /// `H^CVS` of the last frame (and of peers' fused since).
+    #[serde(with = "cell_set")]
+    pub hidden: CellSet,
+    /// Hidden ground of the last guidance periods and hidden ground not seen since.
+    pub hidden_history: HiddenHistory,
+    /// The occupancy elevation map.
+    pub oem: OccupancyMap,
+}
+
+impl EstimatorState {
+    /// The state before any frame: `X̄` is the whole grid, nothing else is known.
+    pub fn new(config: &EstimatorConfig) -> Self {
+        let g = &config.grid;
+        Self {
+            step: 0,
+            time_s: 0.0,
+            frames: 0,
+            pose: None,
+            undetected: CellSet::full(g),
+            targets: BTreeMap::new(),
+            obstacle_free: CellSet::empty(g),
+            explored: CellSet::empty(g),
+            hidden: CellSet::empty(g),
+            hidden_history: HiddenHistory::new(
+                g,
+                config.guidance_period_steps,
+                config.hidden_periods,
+            ),
+            oem: OccupancyMap::new(config.oem_grid),
+        }
+    }
+
+    /// Identified target ids.
+    pub fn identified(&self) -> impl Iterator<Item = u32> + '_ {
+        self.targets.keys().copied()
+    }
+
+    /// Whether every set lives on `config`'s grids (e.g. after deserialising a snapshot).
+    pub fn fits(&self, config: &EstimatorConfig) -> bool {
+        let probe = CellSet::empty(&config.grid);
+        [
+            &self.undetected,
+            &self.obstacle_free,
+            &self.explored,
+            &self.hidden,
+        ]
+        .into_iter()
+        .chain(self.targets.values())
+        .all(|s| s.same_shape(&probe))
+            && self.hidden_history.unseen().same_shape(&probe)
+            && *self.oem.grid() == config.oem_grid
+    }
+}
+
+/// Why a frame was refused. The state is untouched when it is.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum EstimatorStepError {
+    /// The header is inconsistent ([`CvsFrame::is_well_formed`] is false).
+    #[error("malformed frame (step {step}): inconsistent header")]
+    Malformed {
+        /// Step the header claims.
+        step: u64,
+    },
+    /// The frame is older than the state.
+    #[error("frame of step {frame_step} is older than the state's step {state_step}")]
+    Stale {
+        /// Step of the frame.
+        frame_step: u64,
+        /// Step of the state.
+        state_step: u64,
+    },
+}
+
+/// Why a state could not be paired with a configuration.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum EstimatorRestoreError {
+    /// A set or the map lives on another grid than the configuration's.
+    #[error("state does not fit the configured grids")]
+    GridMismatch,
+}
+
+/// Wall time spent in each phase of a step.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StepTimings {
+    /// Dilating `X̄` and every `X_j`.
+    pub prediction: Duration,
+    /// `P^g` and `H^CVS`.
+    pub free_ground: Duration,
+    /// `X^m_j` of every box.
+    pub measurement_sets: Duration,
+    /// `S^o` of the frame.
+    pub obstacle_sets: Duration,
+    /// The occupancy map.
+    pub oem: Duration,
+    /// Set algebra of the correction and the bookkeeping.
+    pub correction: Duration,
+    /// The whole step.
+    pub total: Duration,
+}
+
+/// What one step changed.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StepReport {
+    /// Step of the frame.
+    pub step: u64,
+    /// Frames elapsed since the previous one (more than 1 when frames were skipped).
+    pub steps_elapsed: u64,
+    /// Area of `X̄` after the step, m².
+    pub undetected_area_m2: Real,
+    /// Area of each `X_j` after the step, m².
+    pub target_areas_m2: BTreeMap<u32, Real>,
+    /// Area of this frame's `P^g`, m².
+    pub free_ground_area_m2: Real,
+    /// Area of the accumulated `S^o`, m².
+    pub obstacle_free_area_m2: Real,
+    /// Area of the explored ground, m².
+    pub explored_area_m2: Real,
+    /// Area of `H^CVS`, m².
+    pub hidden_area_m2: Real,
+    /// Targets identified for the first time by this frame.
+    pub newly_identified: Vec<u32>,
+    /// Targets this frame measured (a usable box).
+    pub measured: Vec<u32>,
+    /// Targets whose intersection came out empty (a bug signal; the measurement was kept).
+    pub empty_intersections: Vec<u32>,
+    /// Boxes ignored: outside the image or with an id used twice.
+    pub ignored_boxes: u32,
+    /// Boxes with no target pixel of usable depth (they tell nothing).
+    pub boxes_without_pixels: u32,
+    /// Pixels whose depth was not a finite positive number (counted as unknown).
+    pub invalid_depth_pixels: u32,
+    /// OEM cells changed.
+    pub oem_cells_changed: usize,
+    /// Time per phase.
+    pub timings: StepTimings,
+}
+
+/// One UAV's estimator: configuration and state.
+#[derive(Clone, Debug)]
+pub struct Estimator {
+    config: EstimatorConfig,
+    state: EstimatorState,
+}
+
+impl Estimator {
+    /// A fresh estimator (see [`EstimatorState::new`]).
+    pub fn new(config: EstimatorConfig) -> Self {
+        let state = EstimatorState::new(&config);
+        Self { config, state }
+    }
+
+    /// Resumes from a saved state, checking that it lives on the configured grids.
+    pub fn with_state(
+        config: EstimatorConfig,
+        state: EstimatorState,
+    ) -> Result<Self, EstimatorRestoreError> {
+        if !state.fits(&config) {
+            return Err(EstimatorRestoreError::GridMismatch);
+        }
+        Ok(Self { config, state })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EstimatorConfig {
+        &self.config
+    }
+
+    /// The state.
+    pub fn state(&self) -> &EstimatorState {
+        &self.state
+    }
+
+    /// The state, mutably (e.g. for the message outbox, which drains the map's changes).
+    pub fn state_mut(&mut self) -> &mut EstimatorState {
+        &mut self.state
+    }
+
+    /// Gives the state back.
+    pub fn into_state(self) -> EstimatorState {
+        self.state
+    }
+
+    /// Folds one frame into the state: predict to the frame's step, then correct with what the
+    /// frame proves. A malformed or stale frame is refused and the state left as it was.
+    pub fn step(&mut self, frame: &CvsFrame) -> Result<StepReport, EstimatorStepError> {
+        let started = Instant::now();
+        let h = &frame.header;
+        if !frame.is_well_formed() {
+            return Err(EstimatorStepError::Malformed { step: h.step });
+        }
+        if self.state.frames > 0 && h.step < self.state.step {
+            return Err(EstimatorStepError::Stale {
+                frame_step: h.step,
+                state_step: self.state.step,
+            });
+        }
+        let cfg = &self.config;
+        let grid = &cfg.grid;
+        let st = &mut self.state;
+        let mut report = StepReport {
+            step: h.step,
+            steps_elapsed: h.step.saturating_sub(st.step),
+            ..StepReport::default()
+        };
+
+        let t = Instant::now();
+        let radius = predict::motion_radius(report.steps_elapsed, cfg.period_s, cfg.max_speed_mps);
+        st.undetected = predict::grow(&st.undetected, grid, radius);
+        for set in st.targets.values_mut() {
+            *set = predict::grow(set, grid, radius);
+        }
+        report.timings.prediction = t.elapsed();
+
+        let view = FrameView::new(frame, cfg.depth_noise);
+        report.invalid_depth_pixels = view.invalid_depth_pixels();
+
+        let t = Instant::now();
+        let free_ground = measure::free_ground(&view, grid);
+        let hidden = measure::hidden_ground(&view, grid);
+        report.timings.free_ground = t.elapsed();
+
+        let t = Instant::now();
+        let boxes = usable_boxes(frame, &mut report);
+        let measurements: Vec<(u32, Option<CellSet>)> = boxes
+            .iter()
+            .map(|b| {
+                let m = measure::target_measurement(&view, grid, b, cfg.target_radius_m);
+                (b.id, m)
+            })
+            .collect();
+        report.timings.measurement_sets = t.elapsed();
+
+        let t = Instant::now();
+        let frame_obstacle_free = measure::obstacle_free(
+            &view,
+            grid,
+            cfg.safety_distance_m,
+            cfg.obstacle_pixel_stride,
+        );
+        report.timings.obstacle_sets = t.elapsed();
+
+        let t = Instant::now();
+        report.oem_cells_changed = measure::observe_map(&view, &mut st.oem);
+        report.timings.oem = t.elapsed();
+
+        let t = Instant::now();
+        st.obstacle_free.or_assign(&frame_obstacle_free);
+        let mut free = free_ground.clone();
+        free.or_assign(&st.obstacle_free);
+        st.undetected.and_not_assign(&free);
+        let mut measured_ids = Vec::new();
+        for (id, measurement) in measurements {
+            let Some(mut xm) = measurement else {
+                report.boxes_without_pixels += 1;
+                continue;
+            };
+            xm.and_not_assign(&free);
+            let prior = match st.targets.get(&id) {
+                Some(x) => x,
+                None => {
+                    report.newly_identified.push(id);
+                    &st.undetected
+                }
+            };
+            let mut x = prior.clone();
+            x.and_assign(&xm);
+            if x.is_empty() {
+                tracing::error!(
+                    target_id = id,
+                    step = h.step,
+                    "empty target set after correction: keeping the measurement alone"
+                );
+                report.empty_intersections.push(id);
+                x = xm;
+            }
+            st.targets.insert(id, x);
+            measured_ids.push(id);
+        }
+        for (id, set) in st.targets.iter_mut() {
+            if !measured_ids.contains(id) {
+                set.and_not_assign(&free);
+            }
+        }
+        report.measured = measured_ids;
+        st.explored.or_assign(&free_ground);
+        st.hidden_history.record(h.step, &hidden, &free_ground);
+        st.hidden = hidden;
+        st.step = h.step;
+        st.time_s = if h.time_s.is_finite() {
+            h.time_s
+        } else {
+            h.step as Real * cfg.period_s
+        };
+        st.frames += 1;
+        let cam = frame.camera();
+        st.pose = Some(cam.pose);
+
+        report.undetected_area_m2 = st.undetected.area(grid);
+        report.target_areas_m2 = st
+            .targets
+            .iter()
+            .map(|(id, s)| (*id, s.area(grid)))
+            .collect();
+        report.free_ground_area_m2 = free_ground.area(grid);
+        report.obstacle_free_area_m2 = st.obstacle_free.area(grid);
+        report.explored_area_m2 = st.explored.area(grid);
+        report.hidden_area_m2 = st.hidden.area(grid);
+        report.timings.correction = t.elapsed();
+        report.timings.total = started.elapsed();
+        Ok(report)
+    }
+
+    /// Fuses a peer's estimate into the state (see [`fusion`]).
+    pub fn fuse(&mut self, peer: &PeerEstimate) -> FuseReport {
+        self.state.fuse(peer, &self.config)
+    }
+}
+
+/// The boxes a frame's measurements may use: inside the image and with an id no other box
+/// uses (a duplicated id makes every box of that id unusable, the only reading that cannot be
+/// wrong). The others are counted in the report.
+fn usable_boxes(frame: &CvsFrame, report: &mut StepReport) -> Vec<protocol::frame::TargetBox> {
+    let (rows, cols) = (frame.header.rows, frame.header.cols);
+    let boxes = frame.boxes();
+    let mut uses: BTreeMap<u32, u32> = BTreeMap::new();
+    for b in boxes {
+        *uses.entry(b.id).or_default() += 1;
+    }
+    let mut out = Vec::with_capacity(boxes.len());
+    for b in boxes {
+        if b.is_valid(rows, cols) && uses.get(&b.id) == Some(&1) {
+            out.push(*b);
+        } else {
+            report.ignored_boxes += 1;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use protocol::frame::{Label, TargetBox};
+
+    use super::*;
+
+    fn config() -> EstimatorConfig {
+        let mut s = Scenario::default();
+        s.region.half_extent_m = 60.0;
+        EstimatorConfig::from_scenario(&s)
+    }
+
+    /// A small frame looking at flat ground: every pixel ground at its true range.
+    fn ground_frame(step: u64) -> Box<CvsFrame> {
+        let mut f = CvsFrame::new_boxed();
+        let h = &mut f.header;
+        h.step = step;
+        h.time_s = step as f64 * 0.5;
+        h.rows = 24;
+        h.cols = 32;
+        h.camera_aperture = std::f64::consts::FRAC_PI_4;
+        h.camera_tilt = 1.0;
+        h.camera_position = [0.0, -30.0, 40.0];
+        h.camera_yaw = std::f64::consts::FRAC_PI_2;
+        h.depth_noise = [-0.01, 0.01];
+        let cam = f.camera();
+        for r in 0..24 {
+            for c in 0..32 {
+                let i = (r * 32 + c) as usize;
+                f.labels[i] = Label::Ground as u8;
+                f.depth[i] = (40.0 / -cam.centre_ray(r, c).z) as f32;
+            }
+        }
+        f
+    }
+
+    #[test]
+    fn ground_in_view_leaves_the_undetected_set() {
+        let mut e = Estimator::new(config());
+        let full = e.state().undetected.count();
+        let r = e.step(&ground_frame(0)).expect("step");
+        assert!(r.free_ground_area_m2 > 0.0);
+        assert!(e.state().undetected.count() < full);
+        assert_eq!(
+            e.state().explored.count() as f64 * 0.25,
+            r.free_ground_area_m2
+        );
+        // Ten frames later with nothing seen, X̄ grew back by the motion of 10 steps.
+        let mut blind = ground_frame(10);
+        blind.labels[..24 * 32].fill(Label::Unknown as u8);
+        let before = e.state().undetected.count();
+        let r = e.step(&blind).expect("step");
+        assert_eq!(r.steps_elapsed, 10);
+        assert!(e.state().undetected.count() > before);
+    }
+
+    #[test]
+    fn bad_frames_are_refused_and_bad_parts_ignored() {
+        let mut e = Estimator::new(config());
+        let mut f = ground_frame(5);
+        f.header.rows = 0;
+        assert_eq!(e.step(&f), Err(EstimatorStepError::Malformed { step: 5 }));
+        assert_eq!(e.state().frames, 0);
+        e.step(&ground_frame(5)).expect("step");
+        assert_eq!(
+            e.step(&ground_frame(4)),
+            Err(EstimatorStepError::Stale {
+                frame_step: 4,
+                state_step: 5
+            })
+        );
+
+        // Targets appear in a fresh estimator's first frame (a target where ground was just
+        // proven free would be an inconsistent world).
+        let mut e = Estimator::new(config());
+        let mut f = ground_frame(6);
+        f.depth[3] = f32::NAN;
+        f.depth[4] = -1.0;
+        f.depth[5] = f32::INFINITY;
+        for r in 10..14 {
+            for c in 10..14 {
+                f.labels[r * 32 + c] = Label::Target as u8;
+            }
+        }
+        let good = TargetBox {
+            id: 1,
+            r0: 10,
+            c0: 10,
+            r1: 14,
+            c1: 14,
+        };
+        f.boxes[0] = good;
+        f.boxes[1] = TargetBox { id: 2, ..good };
+        f.boxes[2] = TargetBox { id: 2, ..good };
+        f.boxes[3] = TargetBox {
+            id: 3,
+            r1: 99,
+            ..good
+        };
+        f.header.box_count = 4;
+        let r = e.step(&f).expect("step");
+        assert_eq!(r.invalid_depth_pixels, 3);
+        assert_eq!(r.ignored_boxes, 3);
+        assert_eq!(r.newly_identified, vec![1]);
+        assert!(r.empty_intersections.is_empty());
+        assert_eq!(e.state().identified().collect::<Vec<_>>(), vec![1]);
+        let xj = &e.state().targets[&1];
+        assert!(xj.count() > 0);
+        // X_j came out of X̄ and the measurement, so it lies in X̄ (before later dilations).
+        assert_eq!(xj.intersection_count(&e.state().undetected), xj.count());
+    }
+
+    #[test]
+    fn state_survives_a_snapshot() {
+        let cfg = config();
+        let mut e = Estimator::new(cfg.clone());
+        e.step(&ground_frame(0)).expect("step");
+        let bytes = protocol::codec::encode(e.state()).expect("serialise");
+        let back: EstimatorState = protocol::codec::decode(&bytes).expect("deserialise");
+        assert_eq!(&back, e.state());
+        let other = EstimatorConfig {
+            grid: GroundGrid::new(10.0, 0.5),
+            ..cfg
+        };
+        assert_eq!(
+            Estimator::with_state(other, back).err(),
+            Some(EstimatorRestoreError::GridMismatch)
+        );
+    }
+}

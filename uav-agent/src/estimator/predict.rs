@@ -1,0 +1,25 @@
+//! Prediction: every target moves at most `v_max`, so after `dt` it is within `v_max * dt` of
+//! where it could be; outer sets are dilated by that radius (DESIGN.md §3, estimator step 1).
+
+use protocol::grid::GroundGrid;
+use protocol::math::Real;
+use protocol::raster::CellSet;
+
+/// Outer set grown by the motion over `radius_m` metres: every point within `radius_m` of the
+/// set is in the result. A radius past the grid's diagonal gives the whole grid (the dilation
+/// would anyway) without the work; a zero or invalid radius changes nothing.
+pub fn grow(set: &CellSet, grid: &GroundGrid, radius_m: Real) -> CellSet {
+    if radius_m.is_nan() || radius_m <= 0.0 || set.is_empty() {
+        return set.clone();
+    }
+    let diagonal = grid.cell_m * (grid.nx as Real).hypot(grid.ny as Real);
+    if radius_m >= diagonal {
+        return CellSet::full(grid);
+    }
+    set.dilate(grid, radius_m)
+}
+
+/// The radius targets may cover in `steps` frames of `period_s` at `max_speed_mps`.
+pub fn motion_radius(steps: u64, period_s: Real, max_speed_mps: Real) -> Real {
+    steps as Real * period_s * max_speed_mps
+}

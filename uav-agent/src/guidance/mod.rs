@@ -1,0 +1,551 @@
+//! Guidance: the MPC of DESIGN.md §4, one decision per guidance period.
+//!
+//! For every sequence of yaw increments in `U^h`, the UAV's own states are predicted with the
+//! world's dynamics ([`protocol::flight::advance`]) at every CVS step of the horizon; the
+//! predicted sets (the union of `X̄` and every `X_j`, on the coarse planning grid of
+//! [`coarse`]) are dilated by the targets' motion once per guidance period and lose the ground
+//! the UAV will see in that period (its fields of view less the shadows of known buildings,
+//! [`view`]) and the ground seen by the UAVs that already decided this round (the token). The
+//! sequence minimising `J = Φ_X + λ Φ_d + κ Φ_h` wins:
+//! - `Φ_X`: area of the predicted sets at the end of the horizon, m²;
+//! - `Φ_d`: distance from the predicted view centre to the nearest predicted set cell that
+//!   known buildings do not hide from the final pose, m;
+//! - `Φ_h`: area of the predicted sets inside ground occluded in the last periods, m².
+//!
+//! Sequences whose predicted positions leave the RoI are excluded; if every sequence leaves
+//! it, the one that strays least is taken. Ties keep the first sequence in lexicographic
+//! order of the increments, so decisions are deterministic.
+//!
+//! Choices where DESIGN.md and the paper are silent: fields of view are swept at every CVS
+//! step of a period (not only at its end), since the camera sees at every step; `Φ_d` is
+//! measured from the point the optical axis meets the ground, which is what the camera looks
+//! at with a tilted gimbal.
+
+pub mod coarse;
+pub mod ring;
+pub mod view;
+
+use protocol::camera::{CameraModel, CameraPose};
+use protocol::flight::{self, UavState};
+use protocol::grid::{GroundGrid, Rect};
+use protocol::math::{Point2, Point3};
+use protocol::raster::CellSet;
+use protocol::scenario::Scenario;
+use protocol::wire::PlannedView;
+
+pub use coarse::CoarseGrid;
+pub use ring::{TokenRing, Turn};
+pub use view::ObstacleCell;
+
+/// Everything about the MPC that does not change during a run.
+#[derive(Clone, Debug)]
+pub struct GuidanceParams {
+    /// Estimator grid and planning grid.
+    pub grids: CoarseGrid,
+    /// The camera.
+    pub camera: CameraModel,
+    /// The region the UAVs must stay in.
+    pub region: Rect,
+    /// Horizon `h`, guidance periods.
+    pub horizon: u32,
+    /// The yaw increments `U`, radians.
+    pub increments: Vec<f64>,
+    /// Weight of `Φ_d`.
+    pub lambda: f64,
+    /// Weight of `Φ_h`.
+    pub kappa: f64,
+    /// Whether the occupancy map's buildings hide ground in predictions.
+    pub use_map: bool,
+    /// CVS steps per guidance period.
+    pub steps_per_period: u32,
+    /// CVS period, seconds.
+    pub dt: f64,
+    /// UAV ground speed, m/s.
+    pub speed: f64,
+    /// UAV yaw-rate bound, rad/s.
+    pub max_yaw_rate: f64,
+    /// Targets' speed bound, m/s.
+    pub target_max_speed: f64,
+}
+
+impl GuidanceParams {
+    /// The MPC of a scenario.
+    pub fn from_scenario(s: &Scenario) -> Self {
+        let h = s.region.half_extent_m;
+        Self {
+            grids: CoarseGrid::new(s.grid()),
+            camera: s.camera_model(),
+            region: Rect {
+                min: Point2::new(-h, -h),
+                max: Point2::new(h, h),
+            },
+            horizon: s.guidance.horizon,
+            increments: s.guidance.yaw_increments_rad.clone(),
+            lambda: s.guidance.lambda,
+            kappa: s.guidance.kappa,
+            use_map: s.guidance.use_map,
+            steps_per_period: s.steps_per_guidance() as u32,
+            dt: s.timing.cvs_period_s,
+            speed: s.uavs.speed_mps,
+            max_yaw_rate: s.uavs.max_yaw_rate_rps,
+            target_max_speed: s.targets.max_speed_mps,
+        }
+    }
+
+    fn planning_grid(&self) -> &GroundGrid {
+        &self.grids.coarse
+    }
+}
+
+/// What one decision looks at.
+#[derive(Clone, Copy, Debug)]
+pub struct PlanningInput<'a> {
+    /// The deciding UAV.
+    pub uav: u32,
+    /// Its state now (camera optical centre and yaw).
+    pub state: UavState,
+    /// `X̄` and every `X_j`, on the estimator's grid.
+    pub sets: &'a [&'a CellSet],
+    /// Ground occluded in the last periods, on the estimator's grid.
+    pub recently_hidden: &'a CellSet,
+    /// Known buildings (ignored unless `use_map`).
+    pub obstacles: &'a [ObstacleCell],
+    /// Plans of the UAVs that decided before this one in the round.
+    pub others: &'a [PlannedView],
+}
+
+/// The terms of the cost of a sequence.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cost {
+    /// `Φ_X`, m².
+    pub area_m2: f64,
+    /// `Φ_d`, m.
+    pub distance_m: f64,
+    /// `Φ_h`, m².
+    pub hidden_m2: f64,
+    /// `J`.
+    pub total: f64,
+}
+
+/// The outcome of one decision.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decision {
+    /// The chosen increments, one per period of the horizon.
+    pub increments: Vec<f64>,
+    /// The yaw reference to send now: current yaw plus the first increment.
+    pub yaw_ref: f64,
+    /// The chosen sequence's cost.
+    pub cost: Cost,
+    /// The plan to append to the token.
+    pub view: PlannedView,
+    /// Sequences evaluated.
+    pub sequences: usize,
+    /// Sequences excluded for leaving the RoI.
+    pub excluded: usize,
+}
+
+/// A sequence being expanded: its increments so far, the predicted poses and the predicted
+/// planning set after the periods decided so far.
+struct Node {
+    increments: Vec<f64>,
+    state: UavState,
+    poses: Vec<CameraPose>,
+    sets: CellSet,
+    stray_m: f64,
+}
+
+struct Best {
+    key: (bool, f64, f64),
+    cost: Cost,
+    node: Node,
+}
+
+/// Picks the best sequence of yaw increments (DESIGN.md §4).
+pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
+    let grid = *params.planning_grid();
+    let mut sets = CellSet::empty(&grid);
+    for s in input.sets {
+        sets.or_assign(&params.grids.downsample(s));
+    }
+    let hidden = params.grids.downsample(input.recently_hidden);
+    let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
+    let others_seen: Vec<CellSet> = (0..params.horizon)
+        .map(|period| seen_by_others(params, input.others, period, obstacles))
+        .collect();
+
+    let root = Node {
+        increments: Vec::new(),
+        state: input.state,
+        poses: Vec::new(),
+        sets,
+        stray_m: 0.0,
+    };
+    let mut best: Option<Best> = None;
+    let mut sequences = 0usize;
+    let mut excluded = 0usize;
+    expand(
+        params,
+        &root,
+        &others_seen,
+        obstacles,
+        &hidden,
+        &mut best,
+        &mut sequences,
+        &mut excluded,
+    );
+
+    match best {
+        Some(b) => Decision {
+            yaw_ref: input.state.yaw + b.node.increments[0],
+            increments: b.node.increments,
+            cost: b.cost,
+            view: PlannedView {
+                uav: input.uav,
+                poses: b.node.poses,
+            },
+            sequences,
+            excluded,
+        },
+        // Only when U is empty; the scenario refuses that, but stay total.
+        None => Decision {
+            increments: Vec::new(),
+            yaw_ref: input.state.yaw,
+            cost: Cost {
+                area_m2: 0.0,
+                distance_m: 0.0,
+                hidden_m2: 0.0,
+                total: 0.0,
+            },
+            view: PlannedView {
+                uav: input.uav,
+                poses: Vec::new(),
+            },
+            sequences,
+            excluded,
+        },
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn expand(
+    params: &GuidanceParams,
+    node: &Node,
+    others_seen: &[CellSet],
+    obstacles: &[ObstacleCell],
+    hidden: &CellSet,
+    best: &mut Option<Best>,
+    sequences: &mut usize,
+    excluded: &mut usize,
+) {
+    let grid = *params.planning_grid();
+    let period = node.increments.len();
+    if period == params.horizon as usize {
+        *sequences += 1;
+        let inside = node.stray_m <= 0.0;
+        if !inside {
+            *excluded += 1;
+        }
+        let cost = cost(params, node, obstacles, hidden);
+        // Sequences inside the RoI first, then the least stray, then the cost.
+        let key = (!inside, node.stray_m, cost.total);
+        let better = match best {
+            None => true,
+            Some(b) => key.0 < b.key.0 || (key.0 == b.key.0 && (key.1, key.2) < (b.key.1, b.key.2)),
+        };
+        if better {
+            *best = Some(Best {
+                key,
+                cost,
+                node: Node {
+                    increments: node.increments.clone(),
+                    state: node.state,
+                    poses: node.poses.clone(),
+                    sets: node.sets.clone(),
+                    stray_m: node.stray_m,
+                },
+            });
+        }
+        return;
+    }
+    let period_s = params.steps_per_period as f64 * params.dt;
+    let mut grown = node.sets.dilate(&grid, params.target_max_speed * period_s);
+    if let Some(seen) = others_seen.get(period) {
+        grown.and_not_assign(seen);
+    }
+    for &u in &params.increments {
+        let yaw_ref = node.state.yaw + u;
+        let mut state = node.state;
+        let mut poses = node.poses.clone();
+        let mut seen = CellSet::empty(&grid);
+        let mut stray_m = node.stray_m;
+        for _ in 0..params.steps_per_period {
+            state = flight::advance(state, yaw_ref, params.dt, params.speed, params.max_yaw_rate);
+            stray_m = stray_m.max(stray(&params.region, &state.position));
+            let pose = CameraPose {
+                position: state.position,
+                yaw: state.yaw,
+            };
+            view::add_visible_ground(&mut seen, &grid, &params.camera, &pose, obstacles);
+            poses.push(pose);
+        }
+        let mut sets = grown.clone();
+        sets.and_not_assign(&seen);
+        let mut increments = node.increments.clone();
+        increments.push(u);
+        let child = Node {
+            increments,
+            state,
+            poses,
+            sets,
+            stray_m,
+        };
+        expand(
+            params,
+            &child,
+            others_seen,
+            obstacles,
+            hidden,
+            best,
+            sequences,
+            excluded,
+        );
+    }
+}
+
+fn cost(
+    params: &GuidanceParams,
+    node: &Node,
+    obstacles: &[ObstacleCell],
+    hidden: &CellSet,
+) -> Cost {
+    let grid = params.planning_grid();
+    let area_m2 = node.sets.count() as f64 * grid.cell_area();
+    let hidden_m2 = node.sets.intersection_count(hidden) as f64 * grid.cell_area();
+    let distance_m = match node.poses.last() {
+        Some(pose) => nearest_visible_distance(grid, &node.sets, &params.camera, pose, obstacles),
+        None => 0.0,
+    };
+    Cost {
+        area_m2,
+        distance_m,
+        hidden_m2,
+        total: area_m2 + params.lambda * distance_m + params.kappa * hidden_m2,
+    }
+}
+
+/// How far outside the region a position is, metres (0 inside).
+fn stray(region: &Rect, p: &Point3) -> f64 {
+    let dx = (region.min.x - p.x).max(p.x - region.max.x).max(0.0);
+    let dy = (region.min.y - p.y).max(p.y - region.max.y).max(0.0);
+    dx.max(dy)
+}
+
+/// Ground seen in `period` by the UAVs that decided before (from their predicted poses).
+fn seen_by_others(
+    params: &GuidanceParams,
+    others: &[PlannedView],
+    period: u32,
+    obstacles: &[ObstacleCell],
+) -> CellSet {
+    let grid = *params.planning_grid();
+    let mut seen = CellSet::empty(&grid);
+    let per = params.steps_per_period as usize;
+    let range = period as usize * per..(period as usize + 1) * per;
+    for view in others {
+        for pose in view.poses.get(range.clone()).unwrap_or(&[]) {
+            if pose.position.iter().all(|v| v.is_finite()) && pose.yaw.is_finite() {
+                view::add_visible_ground(&mut seen, &grid, &params.camera, pose, obstacles);
+            }
+        }
+    }
+    seen
+}
+
+/// Distance from the view centre of `pose` to the nearest cell of `sets` whose centre the
+/// known buildings do not hide from the camera; 0 for an empty set.
+fn nearest_visible_distance(
+    grid: &GroundGrid,
+    sets: &CellSet,
+    camera: &CameraModel,
+    pose: &CameraPose,
+    obstacles: &[ObstacleCell],
+) -> f64 {
+    if sets.is_empty() {
+        return 0.0;
+    }
+    let centre = view::view_centre(camera, pose);
+    let clamp = |v: f64, n: u32| v.clamp(0.0, n as f64 - 1.0) as i64;
+    let cx = clamp(((centre.x - grid.origin.x) / grid.cell_m).floor(), grid.nx);
+    let cy = clamp(((centre.y - grid.origin.y) / grid.cell_m).floor(), grid.ny);
+    let mut best = f64::INFINITY;
+    let max_ring = grid.nx.max(grid.ny) as i64;
+    for ring in 0..=max_ring {
+        // Every cell of a later ring is at least this far from the centre.
+        if best <= (ring as f64 - 0.75) * grid.cell_m {
+            break;
+        }
+        for (x, y) in ring_cells(cx, cy, ring) {
+            if x < 0 || y < 0 || x >= grid.nx as i64 || y >= grid.ny as i64 {
+                continue;
+            }
+            let cell = (x as u32, y as u32);
+            if !sets.contains(cell) {
+                continue;
+            }
+            let p = grid.cell_centre(cell);
+            let d = (p - centre).norm();
+            if d < best && !view::hidden_by(&pose.position, &p, obstacles) {
+                best = d;
+            }
+        }
+    }
+    if best.is_finite() {
+        best
+    } else {
+        // Every set cell is hidden: as far as anything can be on the grid.
+        (grid.nx.max(grid.ny) as f64) * grid.cell_m * std::f64::consts::SQRT_2
+    }
+}
+
+/// The cells at Chebyshev distance `ring` from `(cx, cy)`.
+fn ring_cells(cx: i64, cy: i64, ring: i64) -> impl Iterator<Item = (i64, i64)> {
+    let side = if ring == 0 { 1 } else { 2 * ring + 1 };
+    (0..side).flat_map(move |i| {
+        let x = cx - ring + i;
+        let top = (x, cy + ring);
+        let bottom = (x, cy - ring);
+        let edge = i == 0 || i == side - 1;
+        let column: Box<dyn Iterator<Item = (i64, i64)>> = if ring == 0 {
+            Box::new(std::iter::once((cx, cy)))
+        } else if edge {
+            Box::new((-ring..=ring).map(move |dy| (x, cy + dy)))
+        } else {
+            Box::new([top, bottom].into_iter())
+        };
+        column
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::raster::Coverage;
+
+    fn scenario() -> Scenario {
+        let mut s = Scenario::default();
+        s.region.half_extent_m = 150.0;
+        s
+    }
+
+    fn blob(params: &GuidanceParams, centre: Point2, radius: f64) -> CellSet {
+        let mut s = CellSet::empty(&params.grids.fine);
+        s.fill_disc(&params.grids.fine, centre, radius, Coverage::Outer);
+        s
+    }
+
+    fn start() -> UavState {
+        UavState {
+            position: Point3::new(0.0, 0.0, 60.0),
+            yaw: 0.0,
+        }
+    }
+
+    fn decide(params: &GuidanceParams, sets: &[&CellSet], obstacles: &[ObstacleCell], others: &[PlannedView]) -> Decision {
+        let hidden = CellSet::empty(&params.grids.fine);
+        plan(
+            params,
+            &PlanningInput {
+                uav: 1,
+                state: start(),
+                sets,
+                recently_hidden: &hidden,
+                obstacles,
+                others,
+            },
+        )
+    }
+
+    #[test]
+    fn turns_toward_the_unexplored_region() {
+        let params = GuidanceParams::from_scenario(&scenario());
+        let north = blob(&params, Point2::new(0.0, 80.0), 20.0);
+        let d = decide(&params, &[&north], &[], &[]);
+        assert!(d.increments[0] > 0.0, "{d:?}");
+        let south = blob(&params, Point2::new(0.0, -80.0), 20.0);
+        let d = decide(&params, &[&south], &[], &[]);
+        assert!(d.increments[0] < 0.0, "{d:?}");
+        assert_eq!(d.sequences, 25);
+        assert_eq!(d.view.poses.len(), 12);
+        assert!((d.yaw_ref - d.increments[0]).abs() < 1e-12);
+    }
+
+    #[test]
+    fn leaves_to_the_uav_ahead_what_it_will_see() {
+        let params = GuidanceParams::from_scenario(&scenario());
+        let north = blob(&params, Point2::new(0.0, 80.0), 20.0);
+        let south = blob(&params, Point2::new(0.0, -80.0), 20.0);
+        // Without a plan ahead, the two blobs tie and the first sequence (turning right)
+        // wins; with the UAV ahead watching the south blob, this one takes the north.
+        let ahead = PlannedView {
+            uav: 0,
+            poses: (0..12)
+                .map(|_| CameraPose {
+                    position: Point3::new(0.0, -20.0, 70.0),
+                    yaw: -std::f64::consts::FRAC_PI_2,
+                })
+                .collect(),
+        };
+        let d = decide(&params, &[&north, &south], &[], &[ahead]);
+        assert!(d.increments[0] > 0.0, "{d:?}");
+    }
+
+    #[test]
+    fn is_not_drawn_to_a_set_hidden_behind_a_known_building() {
+        let params = GuidanceParams::from_scenario(&scenario());
+        let north = blob(&params, Point2::new(0.0, 80.0), 15.0);
+        let south = blob(&params, Point2::new(0.0, -80.0), 15.0);
+        // A wall of tall buildings just south of the north blob hides it from the UAV.
+        let wall: Vec<ObstacleCell> = (-8..8)
+            .map(|i| ObstacleCell {
+                rect: Rect {
+                    min: Point2::new(i as f64 * 5.0, 55.0),
+                    max: Point2::new(i as f64 * 5.0 + 5.0, 60.0),
+                },
+                height_m: 55.0,
+            })
+            .collect();
+        // Make the north blob slightly larger so that without the map it would win.
+        let north_big = blob(&params, Point2::new(0.0, 80.0), 18.0);
+        let d = decide(&params, &[&north_big, &south], &[], &[]);
+        assert!(d.increments[0] > 0.0, "without the map the larger north blob wins: {d:?}");
+        let d = decide(&params, &[&north_big, &south], &wall, &[]);
+        assert!(d.increments[0] < 0.0, "the hidden north blob must not attract: {d:?}");
+        let _ = north;
+    }
+
+    #[test]
+    fn never_plans_out_of_the_region_when_it_can_stay() {
+        let mut s = scenario();
+        s.region.half_extent_m = 150.0;
+        let params = GuidanceParams::from_scenario(&s);
+        // Near the east border heading east: most sequences leave; the chosen one must not.
+        let hidden = CellSet::empty(&params.grids.fine);
+        let everything = CellSet::full(&params.grids.fine);
+        let d = plan(
+            &params,
+            &PlanningInput {
+                uav: 0,
+                state: UavState {
+                    position: Point3::new(125.0, 0.0, 60.0),
+                    yaw: 0.0,
+                },
+                sets: &[&everything],
+                recently_hidden: &hidden,
+                obstacles: &[],
+                others: &[],
+            },
+        );
+        assert!(d.excluded > 0);
+        assert!(d.view.poses.iter().all(|p| p.position.x.abs() <= 150.0 && p.position.y.abs() <= 150.0));
+    }
+}

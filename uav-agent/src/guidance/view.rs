@@ -1,0 +1,154 @@
+//! Predicted fields of view: the ground a camera at a predicted pose will see, minus what the
+//! known buildings of the occupancy map will hide from it.
+
+use protocol::camera::{Camera, CameraModel, CameraPose};
+use protocol::grid::{GroundGrid, Rect};
+use protocol::math::{Point2, Point3, convex_hull};
+use protocol::raster::{CellSet, Coverage};
+
+/// A known obstacle for planning: an OEM cell marked occupied, with its estimated height.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObstacleCell {
+    /// The cell's footprint.
+    pub rect: Rect,
+    /// Estimated height, metres.
+    pub height_m: f64,
+}
+
+/// Ground shadow of an obstacle seen from `eye`: the convex hull of its footprint and of its
+/// top face projected from the eye onto the ground. `None` if the eye is not above the top.
+pub fn shadow(eye: &Point3, obstacle: &ObstacleCell) -> Option<Vec<Point2>> {
+    if eye.z <= obstacle.height_m + 1e-6 {
+        return None;
+    }
+    let scale = eye.z / (eye.z - obstacle.height_m);
+    let corners = obstacle.rect.corners();
+    let mut pts = Vec::with_capacity(8);
+    for c in corners {
+        pts.push(c);
+        pts.push(Point2::new(
+            eye.x + (c.x - eye.x) * scale,
+            eye.y + (c.y - eye.y) * scale,
+        ));
+    }
+    Some(convex_hull(&pts))
+}
+
+fn bbox(points: &[Point2]) -> Rect {
+    let mut r = Rect {
+        min: Point2::new(f64::INFINITY, f64::INFINITY),
+        max: Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
+    };
+    for p in points {
+        r.min.x = r.min.x.min(p.x);
+        r.min.y = r.min.y.min(p.y);
+        r.max.x = r.max.x.max(p.x);
+        r.max.y = r.max.y.max(p.y);
+    }
+    r
+}
+
+fn overlaps(a: &Rect, b: &Rect) -> bool {
+    a.min.x <= b.max.x && b.min.x <= a.max.x && a.min.y <= b.max.y && b.min.y <= a.max.y
+}
+
+/// Adds to `seen` the cells of the field of view of a camera at `pose` (cells whose centre
+/// lies wholly in the footprint: approximate by design, guidance needs no guarantee), less
+/// the shadows of `obstacles`.
+pub fn add_visible_ground(
+    seen: &mut CellSet,
+    grid: &GroundGrid,
+    model: &CameraModel,
+    pose: &CameraPose,
+    obstacles: &[ObstacleCell],
+) {
+    let camera = Camera::new(*model, *pose);
+    let Some(footprint) = camera.image_ground_footprint() else {
+        return;
+    };
+    let mut visible = CellSet::empty(grid);
+    visible.fill_convex_polygon(grid, &footprint, Coverage::Inner);
+    if !obstacles.is_empty() {
+        let fov_box = bbox(&footprint);
+        let mut shadows = CellSet::empty(grid);
+        let mut any = false;
+        for o in obstacles {
+            if let Some(hull) = shadow(&pose.position, o) {
+                if overlaps(&bbox(&hull), &fov_box) {
+                    shadows.fill_convex_polygon(grid, &hull, Coverage::Outer);
+                    any = true;
+                }
+            }
+        }
+        if any {
+            visible.and_not_assign(&shadows);
+        }
+    }
+    seen.or_assign(&visible);
+}
+
+/// Whether a known obstacle blocks the segment from `eye` to the ground point `target`
+/// (slab test of the segment against each obstacle's box `rect x [0, height]`).
+pub fn hidden_by(eye: &Point3, target: &Point2, obstacles: &[ObstacleCell]) -> bool {
+    let d = [target.x - eye.x, target.y - eye.y, -eye.z];
+    let o = [eye.x, eye.y, eye.z];
+    obstacles.iter().any(|ob| {
+        let lo = [ob.rect.min.x, ob.rect.min.y, 0.0];
+        let hi = [ob.rect.max.x, ob.rect.max.y, ob.height_m];
+        let (mut t0, mut t1) = (0.0_f64, 1.0_f64);
+        for a in 0..3 {
+            if d[a].abs() < 1e-12 {
+                if o[a] < lo[a] || o[a] > hi[a] {
+                    return false;
+                }
+            } else {
+                let (mut ta, mut tb) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
+                if ta > tb {
+                    std::mem::swap(&mut ta, &mut tb);
+                }
+                t0 = t0.max(ta);
+                t1 = t1.min(tb);
+                if t0 > t1 {
+                    return false;
+                }
+            }
+        }
+        true
+    })
+}
+
+/// The ground point the camera's optical axis meets, or the camera's ground projection when
+/// the axis does not reach the ground.
+pub fn view_centre(model: &CameraModel, pose: &CameraPose) -> Point2 {
+    let camera = Camera::new(*model, *pose);
+    let axis = camera.ray(model.cols as f64 / 2.0, model.rows as f64 / 2.0);
+    camera
+        .ground_hit(&axis)
+        .unwrap_or(Point2::new(pose.position.x, pose.position.y))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shadow_points_away_from_the_eye() {
+        let o = ObstacleCell {
+            rect: Rect {
+                min: Point2::new(10.0, 0.0),
+                max: Point2::new(15.0, 5.0),
+            },
+            height_m: 20.0,
+        };
+        let eye = Point3::new(0.0, 2.5, 100.0);
+        let s = shadow(&eye, &o).unwrap();
+        let far = s.iter().map(|p| p.x).fold(f64::MIN, f64::max);
+        // The top's far edge at x = 15 projects to 15 * 100 / 80 = 18.75.
+        assert!((far - 18.75).abs() < 1e-9);
+        assert!(shadow(&Point3::new(0.0, 0.0, 10.0), &o).is_none());
+        // Behind the building, seen from the eye: hidden; in front of it: not.
+        assert!(hidden_by(&eye, &Point2::new(17.0, 2.5), &[o]));
+        assert!(!hidden_by(&eye, &Point2::new(5.0, 2.5), &[o]));
+        assert!(!hidden_by(&eye, &Point2::new(17.0, 30.0), &[o]));
+    }
+}

@@ -1,0 +1,191 @@
+//! The guarantee, checked against the real world and renderer in-process: after every step of
+//! every agent (and after fusing the agents' estimates), every target is in `X̄`, every
+//! identified target is in its `X_j`, and no proven-free cell (`P^g`, `S^o`) holds a target.
+
+use protocol::frame::CvsFrame;
+use protocol::grid::GroundGrid;
+use protocol::math::Point2;
+use protocol::scenario::Scenario;
+use protocol::wire::TruthState;
+use uav_agent::estimator::measure::{self, FrameView};
+use uav_agent::estimator::message::{self, EstimateOutbox};
+use uav_agent::estimator::{Estimator, EstimatorConfig, EstimatorState, PeerEstimate};
+use world_server::World;
+
+const RUN_TAG: u64 = 0x5e7f_1ee7;
+
+fn small_scenario(seed: u64) -> Scenario {
+    let mut s = Scenario {
+        seed,
+        ..Scenario::default()
+    };
+    s.region.half_extent_m = 100.0;
+    s.camera.rows = 120;
+    s.camera.cols = 160;
+    s.targets.count = 5;
+    s.uavs.count = 3;
+    s
+}
+
+/// Every check of the guarantee on one state; `context` names the step and agent.
+fn check_state(
+    grid: &GroundGrid,
+    state: &EstimatorState,
+    truth: &TruthState,
+    context: &str,
+) -> usize {
+    let mut checks = 0;
+    for t in truth.targets() {
+        let p = Point2::new(t.ground[0], t.ground[1]);
+        let Some(cell) = grid.cell_of(&p) else {
+            continue;
+        };
+        assert!(
+            state.undetected.contains(cell),
+            "{context}: target {} at {p:?} outside X̄",
+            t.id
+        );
+        assert!(
+            !state.obstacle_free.contains(cell),
+            "{context}: target {} at {p:?} inside S^o",
+            t.id
+        );
+        if let Some(x) = state.targets.get(&t.id) {
+            assert!(
+                x.contains(cell),
+                "{context}: target {} at {p:?} outside X_j",
+                t.id
+            );
+        }
+        checks += 1;
+    }
+    checks
+}
+
+/// Checks that this frame's `P^g` and `S^o` hold no target.
+fn check_frame(config: &EstimatorConfig, frame: &CvsFrame, truth: &TruthState, context: &str) {
+    let view = FrameView::new(frame, config.depth_noise);
+    let grid = &config.grid;
+    let free = measure::free_ground(&view, grid);
+    let so = measure::obstacle_free(&view, grid, config.safety_distance_m, 1);
+    for t in truth.targets() {
+        let p = Point2::new(t.ground[0], t.ground[1]);
+        if let Some(cell) = grid.cell_of(&p) {
+            assert!(!free.contains(cell), "{context}: target {} in P^g", t.id);
+            assert!(!so.contains(cell), "{context}: target {} in S^o", t.id);
+        }
+    }
+}
+
+struct Outcome {
+    checks: usize,
+    identified: usize,
+    explored_m2: f64,
+}
+
+/// Runs every UAV's estimator over `steps` frames with yaws held, checking the guarantee after
+/// each step and, when `fuse`, after fusing every agent's estimate (through encoded messages)
+/// into every other.
+fn run(scenario: &Scenario, steps: u64, fuse: bool) -> Outcome {
+    let mut world = World::new(scenario).expect("world");
+    let config = EstimatorConfig::from_scenario(scenario);
+    let n = world.uav_count();
+    for i in 0..n {
+        let yaw = world.uav_state(i).expect("uav").yaw;
+        world.set_yaw_ref(i, yaw);
+    }
+    let mut estimators: Vec<Estimator> = (0..n).map(|_| Estimator::new(config.clone())).collect();
+    let mut outboxes: Vec<EstimateOutbox> = (0..n)
+        .map(|i| EstimateOutbox::new(i as u32, 1, 10))
+        .collect();
+    let mut frame = CvsFrame::new_boxed();
+    let mut truth = Box::<TruthState>::default();
+    let mut checks = 0;
+    for k in 0..steps {
+        world.truth(RUN_TAG, &mut truth);
+        for (i, est) in estimators.iter_mut().enumerate() {
+            world.render(i, RUN_TAG, &mut frame);
+            let context = format!("seed {} step {k} uav {i}", scenario.seed);
+            let report = est.step(&frame).expect("frame accepted");
+            assert!(
+                report.empty_intersections.is_empty(),
+                "{context}: empty X_j"
+            );
+            check_frame(&config, &frame, &truth, &context);
+            checks += check_state(&config.grid, est.state(), &truth, &context);
+        }
+        if fuse {
+            let peers: Vec<PeerEstimate> = estimators
+                .iter_mut()
+                .zip(&mut outboxes)
+                .map(|(est, outbox)| {
+                    let msg = outbox.compose(est.state_mut());
+                    let bytes = message::to_bytes(&msg).expect("encode");
+                    PeerEstimate::from_bytes(&bytes, &config).expect("decode")
+                })
+                .collect();
+            for (i, est) in estimators.iter_mut().enumerate() {
+                for (j, peer) in peers.iter().enumerate() {
+                    if i != j {
+                        let r = est.fuse(peer);
+                        assert!(r.empty_intersections.is_empty());
+                    }
+                }
+                let context = format!("seed {} step {k} uav {i} fused", scenario.seed);
+                checks += check_state(&config.grid, est.state(), &truth, &context);
+            }
+        }
+        world.advance();
+    }
+    let identified = estimators
+        .iter()
+        .map(|e| e.state().targets.len())
+        .max()
+        .unwrap_or(0);
+    let explored_m2 = estimators
+        .iter()
+        .map(|e| e.state().explored.area(&config.grid))
+        .fold(0.0, f64::max);
+    Outcome {
+        checks,
+        identified,
+        explored_m2,
+    }
+}
+
+#[test]
+fn targets_stay_in_their_sets_over_seeds() {
+    for seed in 1..=3 {
+        let out = run(&small_scenario(seed), 200, false);
+        assert!(out.checks > 0);
+        assert!(out.explored_m2 > 0.0, "seed {seed}: nothing explored");
+        eprintln!(
+            "seed {seed}: {} checks, {} identified",
+            out.checks, out.identified
+        );
+    }
+}
+
+#[test]
+fn targets_stay_in_their_sets_at_max_noise_and_doubt() {
+    let mut s = small_scenario(7);
+    s.camera.depth_noise = [-0.05, 0.05];
+    s.camera.unknown_fraction = 0.2;
+    let out = run(&s, 200, false);
+    assert!(out.checks > 0);
+}
+
+#[test]
+fn fused_estimates_keep_the_guarantee() {
+    for seed in [4, 5] {
+        let out = run(&small_scenario(seed), 200, true);
+        assert!(out.checks > 0);
+        eprintln!("seed {seed} fused: {} identified", out.identified);
+    }
+}
+
+#[test]
+fn default_scenario_keeps_the_guarantee() {
+    let out = run(&Scenario::default(), 40, true);
+    assert!(out.checks > 0);
+}

@@ -1,0 +1,139 @@
+//! `world-server`: publishes the world of one run over iceoryx2 (usually started by `fleet`).
+//!
+//! Exit codes: 0 the run ended (or was stopped by SIGTERM/SIGINT), 1 the run failed, 2 bad
+//! arguments or scenario.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+use clap::{Parser, ValueEnum};
+use protocol::scenario::Scenario;
+use protocol::service::RunId;
+use world_server::World;
+use world_server::server::{self, ServerConfig, StepMode};
+
+/// Publishes every UAV's camera frames and the ground truth of one setfleet run.
+#[derive(Debug, Parser)]
+#[command(name = "world-server", version)]
+struct Args {
+    /// Run id: prefixes every service and shared-memory file of the run.
+    #[arg(long)]
+    run_id: RunId,
+    /// Scenario TOML file (default: the paper's scenario).
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    /// Overrides a scenario key, e.g. `--set targets.count=4` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    overrides: Vec<String>,
+    /// Stepping mode.
+    #[arg(long, value_enum, default_value_t = Mode::Lockstep)]
+    mode: Mode,
+    /// Simulated seconds per wall second in realtime mode.
+    #[arg(long, default_value_t = 1.0)]
+    speedup: f64,
+    /// UAV indices that have an agent, comma-separated (default: every UAV).
+    #[arg(long, value_delimiter = ',')]
+    agents: Option<Vec<u32>>,
+    /// Wait for an observer's hello and acks (lockstep).
+    #[arg(long)]
+    wait_observer: bool,
+    /// Longest wait for the agents' hellos, milliseconds.
+    #[arg(long, default_value_t = 10_000)]
+    start_timeout_ms: u64,
+    /// Longest wait for the acks of one step, milliseconds.
+    #[arg(long, default_value_t = 5_000)]
+    ack_timeout_ms: u64,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Mode {
+    Lockstep,
+    Realtime,
+}
+
+fn main() -> ExitCode {
+    die_with_parent();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    let args = match Args::try_parse() {
+        Ok(args) => args,
+        // clap prints help/version with code 0 and usage errors with code 2.
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(e.exit_code().clamp(0, 255) as u8);
+        }
+    };
+    let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("world-server: bad scenario: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let mode = match args.mode {
+        Mode::Lockstep => StepMode::Lockstep,
+        Mode::Realtime => StepMode::Realtime {
+            speedup: args.speedup,
+        },
+    };
+    let config = ServerConfig {
+        run_id: args.run_id,
+        expected_agents: args
+            .agents
+            .unwrap_or_else(|| (0..scenario.uavs.count).collect()),
+        mode,
+        wait_for_observer: args.wait_observer,
+        start_timeout: Duration::from_millis(args.start_timeout_ms),
+        ack_timeout: Duration::from_millis(args.ack_timeout_ms),
+        scenario,
+    };
+    if let Err(e) = config.validate() {
+        eprintln!("world-server: {e}");
+        return ExitCode::from(2);
+    }
+    let world = match World::new(&config.scenario) {
+        Ok(w) => w,
+        Err(e) => {
+            eprintln!("world-server: bad scenario: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    // SIGTERM/SIGINT are handled by iceoryx2's wait set; nothing else sets this flag.
+    let shutdown = AtomicBool::new(false);
+    match server::run_with_world(config, world, &shutdown) {
+        Ok(report) => {
+            for a in &report.agents {
+                tracing::info!(
+                    uav = a.uav,
+                    acks = a.acks,
+                    misses = a.misses,
+                    rejoins = a.rejoins,
+                    deaths = a.deaths,
+                    "agent"
+                );
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("world-server: run failed: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Asks the kernel to send SIGTERM when the parent (`fleet`, a test) dies, so no world-server
+/// outlives the run that started it.
+fn die_with_parent() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a process attribute; no memory is involved.
+    unsafe {
+        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+    }
+}

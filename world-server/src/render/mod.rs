@@ -1,0 +1,301 @@
+//! Rendering a CVS frame (DESIGN.md §3): depth, labels and target boxes of one camera, with
+//! the paper's assumptions holding by construction.
+//!
+//! 1. Every object's box is projected exactly into the image ([`footprint`]): per row, the
+//!    span of pixels its silhouette touches. Those are the only pixels it can appear in.
+//! 2. A ray is cast through every pixel corner (shared between neighbours) and every pixel
+//!    centre; each ray is tested against the analytic ground `z = 0` and against only the
+//!    objects whose footprint touches the pixels around it.
+//! 3. A pixel is G when its 5 rays hit the ground and no footprint touches it; T (O) when its 5
+//!    rays hit the same target (building) and every other object whose footprint touches it is
+//!    entirely farther than that object's farthest corner (nothing can then stand in front of
+//!    it inside the pixel, and its convex silhouette, containing the 4 corners, covers the
+//!    pixel); U otherwise, and for other UAVs.
+//! 4. Classifier doubt turns a random share of pixels U; depth is the centre ray's range times
+//!    `1 + w`, `w` uniform in the noise bounds, NaN when the centre ray hits nothing.
+//! 5. A target is identified when enough pixels are labelled T with it; its box bounds every
+//!    pixel any of whose rays hit it.
+//!
+//! Rows are rendered in parallel on the current rayon pool; each row draws its noise from its
+//! own seeded generator, so the frame is the same bits on any number of threads.
+
+pub mod boxes;
+pub mod footprint;
+pub mod noise;
+pub mod objects;
+pub mod rays;
+
+use protocol::camera::Camera;
+use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, Label, TargetBox};
+use protocol::math::{Point3, Real, Vector3};
+use rayon::prelude::*;
+
+use boxes::RowTargets;
+use footprint::Footprint;
+use noise::RowNoise;
+use rays::RayGrid;
+pub use objects::{ObjectKind, SceneObject};
+
+/// Code of a ray that hit the ground first.
+const HIT_GROUND: u32 = u32::MAX - 1;
+/// Code of a ray that hit nothing (above the horizon).
+const HIT_NOTHING: u32 = u32::MAX;
+/// Relative slack when comparing an occluder's nearest distance with an object's farthest.
+const DISTANCE_SLACK: Real = 1e-9;
+
+/// Everything about a frame that is not geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameSpec {
+    /// Run tag for the header.
+    pub run_tag: u64,
+    /// Scenario seed (noise).
+    pub seed: u64,
+    /// Step index.
+    pub step: u64,
+    /// Simulated time, seconds.
+    pub time_s: Real,
+    /// UAV index.
+    pub uav: u32,
+    /// Multiplicative depth noise bounds `[w_lo, w_hi]`.
+    pub depth_noise: [Real; 2],
+    /// Share of pixels turned U at random.
+    pub unknown_fraction: Real,
+    /// T pixels needed to identify a target.
+    pub min_pixels: u32,
+}
+
+/// An object the camera may see, with its footprint and distances from the camera.
+struct Visible {
+    object: SceneObject,
+    footprint: Footprint,
+    nearest: Real,
+    farthest: Real,
+}
+
+/// An object touching a row (or, for corner rows, the corners around it): inclusive span.
+#[derive(Clone, Copy)]
+struct Entry {
+    visible: u32,
+    c0: u32,
+    c1: u32,
+}
+
+/// Rays a frame of `rows x cols` casts: every corner and every centre.
+pub fn rays_per_frame(rows: u32, cols: u32) -> u64 {
+    (rows as u64 + 1) * (cols as u64 + 1) + rows as u64 * cols as u64
+}
+
+/// Renders `camera`'s view of the ground and `objects` into `frame`, in place.
+///
+/// The caller guarantees `rows * cols <= FRAME_MAX_PIXELS` (the world checks its scenario);
+/// a larger camera renders an empty frame with `rows = cols = 0`.
+pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame: &mut CvsFrame) {
+    let (rows, cols) = (camera.model.rows, camera.model.cols);
+    let fits = rows as usize * cols as usize <= FRAME_MAX_PIXELS;
+    let (rows, cols) = if fits { (rows, cols) } else { (0, 0) };
+    let n = rows as usize * cols as usize;
+    let origin = camera.origin();
+    let grid = RayGrid::new(camera);
+
+    let visible: Vec<Visible> = objects
+        .iter()
+        .filter_map(|o| {
+            let fp = footprint::footprint(camera, o)?;
+            Some(Visible {
+                object: *o,
+                footprint: fp,
+                nearest: o.nearest_distance(&origin),
+                farthest: o.farthest_distance(&origin),
+            })
+        })
+        .collect();
+
+    let row_entries: Vec<Vec<Entry>> = (0..rows)
+        .map(|r| {
+            visible
+                .iter()
+                .enumerate()
+                .filter_map(|(i, v)| {
+                    let (c0, c1) = v.footprint.span(r)?;
+                    Some(Entry {
+                        visible: i as u32,
+                        c0,
+                        c1,
+                    })
+                })
+                .collect()
+        })
+        .collect();
+
+    // Pass 1: corner rays. Corner (R, C) borders pixels R-1..=R x C-1..=C; an object touching
+    // pixel columns c0..=c1 of those rows can be hit by corners c0..=c1 + 1.
+    let corner_cols = cols as usize + 1;
+    let mut corners = vec![HIT_NOTHING; (rows as usize + 1) * corner_cols];
+    if rows > 0 {
+        corners
+            .par_chunks_mut(corner_cols)
+            .enumerate()
+            .for_each(|(r, out)| {
+                let r = r as u32;
+                let entries = corner_row_entries(&row_entries, r, rows);
+                for (c, code) in out.iter_mut().enumerate() {
+                    let c = c as u32;
+                    let dir = grid.corner_ray(r, c);
+                    let cands = entries.iter().filter(|e| e.c0 <= c && c <= e.c1);
+                    *code = cast(&origin, &dir, cands, &visible).0;
+                }
+            });
+    }
+
+    // Pass 2: centre rays, labels, depth, target hits, row by row.
+    let row_targets: Vec<RowTargets> = frame.depth[..n]
+        .par_chunks_mut(cols.max(1) as usize)
+        .zip(frame.labels[..n].par_chunks_mut(cols.max(1) as usize))
+        .enumerate()
+        .map(|(r, (depth, labels))| {
+            let r = r as u32;
+            let mut noise = RowNoise::new(
+                spec.seed,
+                spec.step,
+                spec.uav,
+                r,
+                spec.unknown_fraction,
+                spec.depth_noise,
+            );
+            let entries = &row_entries[r as usize];
+            let top = &corners[r as usize * corner_cols..(r as usize + 1) * corner_cols];
+            let bottom = &corners[(r as usize + 1) * corner_cols..(r as usize + 2) * corner_cols];
+            let mut targets = RowTargets::default();
+            for c in 0..cols {
+                let ci = c as usize;
+                let touching = || entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
+                let dir = grid.centre_ray(r, c);
+                let (centre, range) = cast(&origin, &dir, touching(), &visible);
+                let codes = [top[ci], top[ci + 1], bottom[ci + 1], bottom[ci], centre];
+                let mut label = classify(&codes, touching(), &visible);
+
+                let px = noise.next_pixel();
+                let doubted = px.doubt && label != Label::Unknown;
+                for (k, &code) in codes.iter().enumerate() {
+                    if code >= HIT_GROUND || codes[..k].contains(&code) {
+                        continue;
+                    }
+                    if let ObjectKind::Target(id) = visible[code as usize].object.kind {
+                        targets.hit(id, c, label == Label::Target && !doubted);
+                    }
+                }
+                if doubted {
+                    label = Label::Unknown;
+                }
+                labels[ci] = label as u8;
+                depth[ci] = if centre == HIT_NOTHING {
+                    f32::NAN
+                } else {
+                    (range * (1.0 + px.w)) as f32
+                };
+            }
+            targets
+        })
+        .collect();
+
+    let found: Vec<TargetBox> = boxes::identified(&row_targets, spec.min_pixels);
+    let h = &mut frame.header;
+    h.run_tag = spec.run_tag;
+    h.step = spec.step;
+    h.time_s = spec.time_s;
+    h.uav = spec.uav;
+    h.rows = rows;
+    h.cols = cols;
+    h.box_count = found.len().min(FRAME_MAX_BOXES) as u32;
+    h.camera_position = [origin.x, origin.y, origin.z];
+    h.camera_yaw = camera.pose.yaw;
+    h.camera_tilt = camera.model.tilt_rad;
+    h.camera_aperture = camera.model.aperture_rad;
+    h.depth_noise = spec.depth_noise;
+    frame.boxes = [TargetBox::default(); FRAME_MAX_BOXES];
+    for (slot, b) in frame.boxes.iter_mut().zip(&found) {
+        *slot = *b;
+    }
+    frame.header.checksum = frame.checksum();
+}
+
+/// The objects to test for corner row `r`: those touching pixel rows `r - 1` or `r`, their
+/// spans merged and widened by one column.
+fn corner_row_entries(row_entries: &[Vec<Entry>], r: u32, rows: u32) -> Vec<Entry> {
+    let above: &[Entry] = if r > 0 {
+        &row_entries[r as usize - 1]
+    } else {
+        &[]
+    };
+    let below: &[Entry] = if r < rows {
+        &row_entries[r as usize]
+    } else {
+        &[]
+    };
+    let mut out: Vec<Entry> = Vec::with_capacity(above.len() + below.len());
+    for e in above.iter().chain(below) {
+        match out.iter_mut().find(|o| o.visible == e.visible) {
+            Some(o) => {
+                o.c0 = o.c0.min(e.c0);
+                o.c1 = o.c1.max(e.c1 + 1);
+            }
+            None => out.push(Entry { c1: e.c1 + 1, ..*e }),
+        }
+    }
+    out
+}
+
+/// First hit of the unit ray `dir` from `origin` among the ground and the candidates:
+/// (code, range). Ties go to the object, the side that labels the pixel U rather than G.
+fn cast<'a>(
+    origin: &Point3,
+    dir: &Vector3,
+    candidates: impl Iterator<Item = &'a Entry>,
+    visible: &[Visible],
+) -> (u32, Real) {
+    let (mut code, mut best) = if dir.z < 0.0 && origin.z > 0.0 {
+        (HIT_GROUND, -origin.z / dir.z)
+    } else {
+        (HIT_NOTHING, Real::INFINITY)
+    };
+    for e in candidates {
+        if let Some(t) = visible[e.visible as usize].object.cast(origin, dir, best)
+            && t <= best
+        {
+            best = t;
+            code = e.visible;
+        }
+    }
+    (code, best)
+}
+
+/// Rule 3: the label of a pixel from its 5 ray codes and the objects touching it.
+fn classify<'a>(
+    codes: &[u32; 5],
+    mut touching: impl Iterator<Item = &'a Entry>,
+    visible: &[Visible],
+) -> Label {
+    let first = codes[0];
+    if codes.iter().any(|&c| c != first) {
+        return Label::Unknown;
+    }
+    if first == HIT_GROUND {
+        return if touching.next().is_none() {
+            Label::Ground
+        } else {
+            Label::Unknown
+        };
+    }
+    if first == HIT_NOTHING {
+        return Label::Unknown;
+    }
+    let hit = &visible[first as usize];
+    let label = match hit.object.kind {
+        ObjectKind::Target(_) => Label::Target,
+        ObjectKind::Obstacle(_) => Label::Obstacle,
+        ObjectKind::Uav(_) => return Label::Unknown,
+    };
+    let limit = hit.farthest * (1.0 + DISTANCE_SLACK) + DISTANCE_SLACK;
+    let clear = touching.all(|e| e.visible == first || visible[e.visible as usize].nearest > limit);
+    if clear { label } else { Label::Unknown }
+}

@@ -1,0 +1,204 @@
+//! Buildings: axis-aligned prisms standing on the ground inside the blocks of the road grid.
+
+use protocol::math::{Point2, Point3, Real};
+use rand::Rng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+
+use super::roads::RoadGrid;
+use crate::world::WorldBuildError;
+
+/// Target size of the lots a block is cut into (one building at most per lot).
+const LOT_SIZE_M: Real = 21.0;
+/// Gap between neighbouring lots of a block.
+const LOT_GAP_M: Real = 3.0;
+/// Smallest side of a lot worth building on.
+const MIN_LOT_SIDE_M: Real = 2.0;
+/// Smallest share of a lot's side a building takes in the first pass.
+const MIN_SIDE_SHARE: Real = 0.45;
+
+/// An axis-aligned box standing on the ground: footprint `[min, max]`, height `height`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Building {
+    /// South-west corner of the footprint.
+    pub min: Point2,
+    /// North-east corner of the footprint.
+    pub max: Point2,
+    /// Height of the roof, metres.
+    pub height: Real,
+}
+
+impl Building {
+    /// Footprint area, m².
+    pub fn area(&self) -> Real {
+        (self.max.x - self.min.x) * (self.max.y - self.min.y)
+    }
+
+    /// Horizontal distance from a ground point to the footprint (0 inside).
+    pub fn footprint_distance(&self, p: &Point2) -> Real {
+        let dx = (self.min.x - p.x).max(p.x - self.max.x).max(0.0);
+        let dy = (self.min.y - p.y).max(p.y - self.max.y).max(0.0);
+        dx.hypot(dy)
+    }
+
+    /// Centre of the box.
+    pub fn centre(&self) -> Point3 {
+        Point3::new(
+            (self.min.x + self.max.x) / 2.0,
+            (self.min.y + self.max.y) / 2.0,
+            self.height / 2.0,
+        )
+    }
+
+    /// Half extents of the box.
+    pub fn half_extents(&self) -> [Real; 3] {
+        [
+            (self.max.x - self.min.x) / 2.0,
+            (self.max.y - self.min.y) / 2.0,
+            self.height / 2.0,
+        ]
+    }
+}
+
+/// A rectangle of a block where one building may stand.
+#[derive(Clone, Copy, Debug)]
+struct Lot {
+    min: Point2,
+    max: Point2,
+}
+
+impl Lot {
+    fn area(&self) -> Real {
+        (self.max.x - self.min.x) * (self.max.y - self.min.y)
+    }
+}
+
+/// Places buildings covering `fraction` of the ground area `ground_area` (to rounding), with
+/// heights uniform in `heights`, every footprint at least the grid's building setback from
+/// every road centreline.
+pub fn generate(
+    grid: &RoadGrid,
+    ground_area: Real,
+    fraction: Real,
+    heights: [Real; 2],
+    rng: &mut ChaCha8Rng,
+) -> Result<Vec<Building>, WorldBuildError> {
+    let wanted = fraction * ground_area;
+    if wanted <= 0.0 {
+        return Ok(Vec::new());
+    }
+    let mut lots = lots(grid);
+    let capacity: Real = lots.iter().map(Lot::area).sum();
+    if wanted > capacity {
+        return Err(WorldBuildError::Placement(format!(
+            "region.building_fraction = {fraction} needs {wanted:.0} m² of buildings but the \
+             blocks hold at most {capacity:.0} m² ({:.3} of the ground)",
+            capacity / ground_area
+        )));
+    }
+    lots.shuffle(rng);
+
+    // First pass: a random building per lot until the area is reached, the last one shrunk
+    // to land on it.
+    let mut placed: Vec<(Building, Lot)> = Vec::new();
+    let mut total = 0.0;
+    for lot in &lots {
+        if total >= wanted {
+            break;
+        }
+        let (lw, lh) = (lot.max.x - lot.min.x, lot.max.y - lot.min.y);
+        let mut w = lw * rng.random_range(MIN_SIDE_SHARE..=1.0);
+        let mut h = lh * rng.random_range(MIN_SIDE_SHARE..=1.0);
+        let rest = wanted - total;
+        if w * h > rest {
+            let k = (rest / (w * h)).sqrt();
+            w *= k;
+            h *= k;
+        }
+        let x0 = lot.min.x + rng.random_range(0.0..=1.0) * (lw - w);
+        let y0 = lot.min.y + rng.random_range(0.0..=1.0) * (lh - h);
+        let height = rng.random_range(heights[0]..=heights[1]);
+        let b = Building {
+            min: Point2::new(x0, y0),
+            max: Point2::new(x0 + w, y0 + h),
+            height,
+        };
+        total += b.area();
+        placed.push((b, *lot));
+    }
+
+    // Second pass, for large fractions: grow buildings toward their whole lot.
+    let mut i = 0;
+    while wanted - total > 1e-6 * wanted && i < placed.len() {
+        let (b, lot) = placed[i];
+        let grown = |t: Real| Building {
+            min: b.min + (lot.min - b.min) * t,
+            max: b.max + (lot.max - b.max) * t,
+            height: b.height,
+        };
+        let full_gain = lot.area() - b.area();
+        let need = wanted - total;
+        let t = if full_gain <= need {
+            1.0
+        } else {
+            // Area grows monotonically with t: bisect for the exact remainder.
+            let (mut lo, mut hi) = (0.0, 1.0);
+            for _ in 0..60 {
+                let mid = (lo + hi) / 2.0;
+                if grown(mid).area() - b.area() < need {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            hi
+        };
+        let g = grown(t);
+        total += g.area() - b.area();
+        placed[i].0 = g;
+        i += 1;
+    }
+    Ok(placed.into_iter().map(|(b, _)| b).collect())
+}
+
+/// Every lot of every block, in a fixed order.
+fn lots(grid: &RoadGrid) -> Vec<Lot> {
+    let setback = grid.profile.building_setback();
+    let mut out = Vec::new();
+    for wx in grid.xs.windows(2) {
+        for wy in grid.ys.windows(2) {
+            let (x0, x1) = (wx[0] + setback, wx[1] - setback);
+            let (y0, y1) = (wy[0] + setback, wy[1] - setback);
+            for (ax0, ax1) in split(x0, x1) {
+                for (ay0, ay1) in split(y0, y1) {
+                    out.push(Lot {
+                        min: Point2::new(ax0, ay0),
+                        max: Point2::new(ax1, ay1),
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Cuts `[a, b]` into lots of about [`LOT_SIZE_M`] separated by [`LOT_GAP_M`].
+fn split(a: Real, b: Real) -> Vec<(Real, Real)> {
+    let len = b - a;
+    if len < MIN_LOT_SIDE_M {
+        return Vec::new();
+    }
+    let n = ((len + LOT_GAP_M) / (LOT_SIZE_M + LOT_GAP_M))
+        .round()
+        .max(1.0) as usize;
+    let side = (len - (n - 1) as Real * LOT_GAP_M) / n as Real;
+    if side < MIN_LOT_SIDE_M {
+        return vec![(a, b)];
+    }
+    (0..n)
+        .map(|i| {
+            let s = a + i as Real * (side + LOT_GAP_M);
+            (s, (s + side).min(b))
+        })
+        .collect()
+}

@@ -1,0 +1,707 @@
+//! The world-server process loop: publishes every UAV's frame and the truth each step, collects
+//! the agents' commands, and advances the [`World`].
+//!
+//! **Lockstep** (deterministic): at step `k` the server renders frame `k` for every live agent
+//! into a loaned sample, sends it and wakes the agent; publishes truth `k` and wakes the
+//! observers; then waits (at most `ack_timeout`) until every live agent has acked `k` (a
+//! [`UavCommand`] with `step == k`) and, if asked, the observer too. An agent that misses the
+//! deadline is reported and skipped (no more frames) until it sends a newer command (it
+//! rejoins). Then yaw references are applied and the world advances.
+//!
+//! **Realtime**: the world advances every `T / speedup` of wall time and applies the commands
+//! that arrived meanwhile; nobody is waited for.
+//!
+//! In both modes the nodes of the run are scanned every step (and during waits), so an agent
+//! killed by SIGKILL is detected at once by iceoryx2's node monitoring, not after a timeout; its
+//! stale resources are removed. Every service is lossy (safe overflow), so the world never
+//! blocks on a dead or stopped subscriber.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use protocol::frame::CvsFrame;
+use protocol::ipc::{self, EventService, Ipc, PubSubService, RunNode, WakeEvent};
+use protocol::scenario::Scenario;
+use protocol::service::RunId;
+use protocol::wire::{HELLO_STEP, MAX_UAVS, ObserverAck, TruthState, UavCommand};
+use serde::Serialize;
+
+use crate::World;
+
+/// How the world steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StepMode {
+    /// Wait for every live agent's ack of each step (deterministic).
+    Lockstep,
+    /// Advance every `T / speedup` of wall time.
+    Realtime {
+        /// Simulated seconds per wall second.
+        speedup: f64,
+    },
+}
+
+/// Everything a world-server run needs.
+#[derive(Clone, Debug)]
+pub struct ServerConfig {
+    /// The run: prefixes every service and file.
+    pub run_id: RunId,
+    /// The scenario.
+    pub scenario: Scenario,
+    /// Lockstep or realtime.
+    pub mode: StepMode,
+    /// UAV indices that have an agent.
+    pub expected_agents: Vec<u32>,
+    /// Whether lockstep waits for an observer's hello and acks.
+    pub wait_for_observer: bool,
+    /// Longest wait for the hellos at start.
+    pub start_timeout: Duration,
+    /// Longest wait for the acks of one step (lockstep).
+    pub ack_timeout: Duration,
+}
+
+/// Why a [`ServerConfig`] was refused.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ServerConfigError {
+    /// An expected agent's index is not a UAV of the scenario.
+    #[error("--agents: UAV {uav} does not exist (the scenario has UAVs 0..{count})")]
+    UnknownAgent {
+        /// The index given.
+        uav: u32,
+        /// UAVs in the scenario.
+        count: u32,
+    },
+    /// The fleet is larger than the wire format allows.
+    #[error("uavs.count: {0} UAVs exceed the largest fleet of {MAX_UAVS}")]
+    TooManyUavs(u32),
+    /// The realtime speedup is not a positive finite number.
+    #[error("--speedup: must be a positive finite number, got {0}")]
+    Speedup(f64),
+}
+
+impl ServerConfig {
+    /// Checks the config against its scenario.
+    pub fn validate(&self) -> Result<(), ServerConfigError> {
+        let count = self.scenario.uavs.count;
+        if count as usize > MAX_UAVS {
+            return Err(ServerConfigError::TooManyUavs(count));
+        }
+        if let Some(&uav) = self.expected_agents.iter().find(|&&u| u >= count) {
+            return Err(ServerConfigError::UnknownAgent { uav, count });
+        }
+        if let StepMode::Realtime { speedup } = self.mode
+            && !(speedup.is_finite() && speedup > 0.0)
+        {
+            return Err(ServerConfigError::Speedup(speedup));
+        }
+        Ok(())
+    }
+}
+
+/// What happened to one agent during a run.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct AgentReport {
+    /// UAV index.
+    pub uav: u32,
+    /// Whether it said hello (at start or later).
+    pub said_hello: bool,
+    /// Steps it acked in time.
+    pub acks: u64,
+    /// Steps it missed (ack timeout in lockstep; no ack before the next step in realtime).
+    pub misses: u64,
+    /// Times it rejoined after being skipped or after dying.
+    pub rejoins: u64,
+    /// Times its process was found dead.
+    pub deaths: u64,
+    /// Commands ignored because they answered an older step.
+    pub stale_commands: u64,
+    /// Commands ignored because they carried another run's tag or another UAV's index.
+    pub foreign_commands: u64,
+    /// Frames that could not be loaned or sent.
+    pub send_failures: u64,
+}
+
+/// The outcome of a run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ServerReport {
+    /// Steps simulated (frames published per live agent).
+    pub steps: u64,
+    /// Wall time of the stepping, seconds.
+    pub wall_s: f64,
+    /// Whether the run was stopped early (shutdown flag, SIGTERM, SIGINT).
+    pub interrupted: bool,
+    /// Per expected agent.
+    pub agents: Vec<AgentReport>,
+    /// Steps the observer acked in time (when waited for).
+    pub observer_acks: u64,
+    /// Steps the observer missed (when waited for).
+    pub observer_misses: u64,
+}
+
+/// Runs the world of `config` until the last step or `shutdown`.
+pub fn run(config: ServerConfig, shutdown: &AtomicBool) -> anyhow::Result<ServerReport> {
+    config.validate()?;
+    let world = World::new(&config.scenario)?;
+    run_with_world(config, world, shutdown)
+}
+
+/// Like [`run`], with a world already built (so a caller can tell a bad scenario from a failed
+/// run).
+pub fn run_with_world(
+    config: ServerConfig,
+    world: World,
+    shutdown: &AtomicBool,
+) -> anyhow::Result<ServerReport> {
+    config.validate()?;
+    let run = config.run_id.clone();
+    if let Ok(dead) = ipc::cleanup_stale(&run)
+        && !dead.is_empty()
+    {
+        tracing::info!(?dead, "removed stale resources of dead nodes");
+    }
+    let node = RunNode::new(
+        &run,
+        RunNode::WORLD,
+        SignalHandlingMode::HandleTerminationRequests,
+    )?;
+    let ports = Ports::open(&node, world.uav_count() as u32)?;
+    let waitset = node.waitset()?;
+    let _guard = waitset
+        .attach_notification(&ports.wake)
+        .context("cannot wait on the world's wake-up event")?;
+    let mut server = Server {
+        run_tag: run.tag(),
+        run,
+        world,
+        ports: &ports,
+        waitset: &waitset,
+        agents: (0..MAX_UAVS as u32)
+            .map(|uav| Link {
+                expected: config.expected_agents.contains(&uav),
+                report: AgentReport {
+                    uav,
+                    ..AgentReport::default()
+                },
+                ..Link::default()
+            })
+            .collect(),
+        observer: ObserverLink {
+            expected: config.wait_for_observer,
+            ..ObserverLink::default()
+        },
+        interrupted: false,
+        shutdown,
+    };
+    let started = Instant::now();
+    server.start(config.start_timeout);
+    let steps = config.scenario.steps();
+    let mut done = 0;
+    if !server.interrupted {
+        done = match config.mode {
+            StepMode::Lockstep => server.lockstep(steps, config.ack_timeout),
+            StepMode::Realtime { speedup } => server.realtime(steps, speedup),
+        };
+    }
+    server.end_of_run();
+    let wall_s = started.elapsed().as_secs_f64();
+    let report = ServerReport {
+        steps: done,
+        wall_s,
+        interrupted: server.interrupted,
+        agents: server
+            .agents
+            .iter()
+            .filter(|a| a.expected || a.report.said_hello)
+            .map(|a| a.report.clone())
+            .collect(),
+        observer_acks: server.observer.acks,
+        observer_misses: server.observer.misses,
+    };
+    tracing::info!(
+        steps = report.steps,
+        wall_s = report.wall_s,
+        interrupted = report.interrupted,
+        "run ended"
+    );
+    Ok(report)
+}
+
+/// The world's ports. Frames and commands exist for every UAV of the scenario.
+struct Ports {
+    cvs: Vec<iceoryx2::port::publisher::Publisher<Ipc, CvsFrame, ()>>,
+    cmd: Vec<iceoryx2::port::subscriber::Subscriber<Ipc, UavCommand, ()>>,
+    agent_wake: Vec<iceoryx2::port::notifier::Notifier<Ipc>>,
+    truth: iceoryx2::port::publisher::Publisher<Ipc, TruthState, ()>,
+    observer_ack: iceoryx2::port::subscriber::Subscriber<Ipc, ObserverAck, ()>,
+    observer_wake: iceoryx2::port::notifier::Notifier<Ipc>,
+    wake: iceoryx2::port::listener::Listener<Ipc>,
+    // Keep the services open for the ports' lifetime.
+    _services: Services,
+}
+
+struct Services {
+    _cvs: Vec<PubSubService<CvsFrame>>,
+    _cmd: Vec<PubSubService<UavCommand>>,
+    _events: Vec<EventService>,
+    _truth: PubSubService<TruthState>,
+    _observer_ack: PubSubService<ObserverAck>,
+}
+
+impl Ports {
+    fn open(node: &RunNode, uavs: u32) -> anyhow::Result<Ports> {
+        let mut services = Services {
+            _cvs: Vec::new(),
+            _cmd: Vec::new(),
+            _events: Vec::new(),
+            _truth: node.open_truth()?,
+            _observer_ack: node.open_observer_ack()?,
+        };
+        let (mut cvs, mut cmd, mut agent_wake) = (Vec::new(), Vec::new(), Vec::new());
+        for uav in 0..uavs {
+            let s = node.open_cvs(uav)?;
+            cvs.push(s.publisher_builder().max_loaned_samples(1).create()?);
+            services._cvs.push(s);
+            let s = node.open_cmd(uav)?;
+            cmd.push(s.subscriber_builder().create()?);
+            services._cmd.push(s);
+            let s = node.open_agent_wake(uav)?;
+            agent_wake.push(s.notifier_builder().create()?);
+            services._events.push(s);
+        }
+        let truth = services._truth.publisher_builder().create()?;
+        let observer_ack = services._observer_ack.subscriber_builder().create()?;
+        let s = node.open_observer_wake()?;
+        let observer_wake = s.notifier_builder().create()?;
+        services._events.push(s);
+        let s = node.open_world_wake()?;
+        let wake = s.listener_builder().create()?;
+        services._events.push(s);
+        Ok(Ports {
+            cvs,
+            cmd,
+            agent_wake,
+            truth,
+            observer_ack,
+            observer_wake,
+            wake,
+            _services: services,
+        })
+    }
+}
+
+/// The world's view of one agent.
+#[derive(Default)]
+struct Link {
+    expected: bool,
+    /// Frames go to it and its ack is awaited.
+    live: bool,
+    /// Newest step it answered (hello excluded).
+    last_step: Option<u64>,
+    report: AgentReport,
+}
+
+#[derive(Default)]
+struct ObserverLink {
+    expected: bool,
+    live: bool,
+    last_step: Option<u64>,
+    acks: u64,
+    misses: u64,
+}
+
+struct Server<'a> {
+    run: RunId,
+    run_tag: u64,
+    world: World,
+    ports: &'a Ports,
+    waitset: &'a WaitSet<Ipc>,
+    agents: Vec<Link>,
+    observer: ObserverLink,
+    interrupted: bool,
+    shutdown: &'a AtomicBool,
+}
+
+/// Longest single wait, so the shutdown flag and dead processes are noticed promptly.
+const WAIT_SLICE: Duration = Duration::from_millis(50);
+
+impl Server<'_> {
+    fn uavs(&self) -> usize {
+        self.world.uav_count()
+    }
+
+    /// Waits for the hellos of every expected agent (and the observer if asked).
+    fn start(&mut self, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        loop {
+            self.drain_commands(None);
+            self.drain_observer(None);
+            let agents_ready = self
+                .agents
+                .iter()
+                .all(|a| !a.expected || a.report.said_hello);
+            let observer_ready = !self.observer.expected || self.observer.live;
+            if agents_ready && observer_ready {
+                return;
+            }
+            if !self.wait_until(deadline) {
+                break;
+            }
+        }
+        if self.interrupted {
+            return;
+        }
+        for a in self
+            .agents
+            .iter()
+            .filter(|a| a.expected && !a.report.said_hello)
+        {
+            tracing::warn!(
+                uav = a.report.uav,
+                "agent never said hello; running without it"
+            );
+        }
+        if self.observer.expected && !self.observer.live {
+            tracing::warn!("observer never said hello; running without waiting for it");
+        }
+    }
+
+    fn lockstep(&mut self, steps: u64, ack_timeout: Duration) -> u64 {
+        for k in 0..steps {
+            if self.stop_requested() {
+                return k;
+            }
+            self.check_liveness();
+            self.drain_commands(None);
+            self.drain_observer(None);
+            self.publish(k);
+            let deadline = Instant::now() + ack_timeout;
+            loop {
+                self.drain_commands(Some(k));
+                self.drain_observer(Some(k));
+                if self.all_acked(k) {
+                    break;
+                }
+                if !self.wait_until(deadline) {
+                    if self.interrupted {
+                        return k;
+                    }
+                    self.report_misses(k);
+                    break;
+                }
+            }
+            self.world.advance();
+        }
+        steps
+    }
+
+    fn realtime(&mut self, steps: u64, speedup: f64) -> u64 {
+        let period = Duration::from_secs_f64(self.world.scenario().timing.cvs_period_s / speedup);
+        let start = Instant::now();
+        for k in 0..steps {
+            if self.stop_requested() {
+                return k;
+            }
+            self.check_liveness();
+            if k > 0 {
+                // A live agent that has not answered the previous frame missed it.
+                for a in self.agents.iter_mut().filter(|a| a.live) {
+                    if a.last_step.is_none_or(|s| s + 1 < k) {
+                        a.report.misses += 1;
+                    }
+                }
+            }
+            self.publish(k);
+            let next = start + period.mul_f64((k + 1) as f64);
+            loop {
+                self.drain_commands(Some(k));
+                self.drain_observer(Some(k));
+                if !self.wait_until(next) {
+                    break;
+                }
+            }
+            if self.interrupted {
+                return k;
+            }
+            self.drain_commands(Some(k));
+            self.world.advance();
+        }
+        steps
+    }
+
+    fn stop_requested(&mut self) -> bool {
+        if self.shutdown.load(Ordering::Relaxed) {
+            self.interrupted = true;
+        }
+        self.interrupted
+    }
+
+    /// Waits for a wake-up until `deadline` (in slices, checking liveness and the shutdown
+    /// flag); false once the deadline passed or the run was interrupted.
+    fn wait_until(&mut self, deadline: Instant) -> bool {
+        if self.stop_requested() {
+            return false;
+        }
+        let now = Instant::now();
+        if now >= deadline {
+            return false;
+        }
+        let slice = (deadline - now).min(WAIT_SLICE);
+        let wake = &self.ports.wake;
+        let mut woken = false;
+        let result = self.waitset.wait_and_process_once_with_timeout(
+            |_| {
+                woken = true;
+                // Empty the listener so the next wait blocks until something new arrives.
+                let _ = wake.try_wait(|_| {});
+                CallbackProgression::Continue
+            },
+            slice,
+        );
+        match result {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                tracing::info!("termination requested");
+                self.interrupted = true;
+                return false;
+            }
+            Ok(_) => {}
+            Err(e) => {
+                tracing::warn!(error = %e, "wait failed");
+                std::thread::sleep(slice.min(Duration::from_millis(5)));
+            }
+        }
+        if !woken {
+            self.check_liveness();
+        }
+        true
+    }
+
+    /// Marks agents whose process died as not live (and cleans their resources).
+    fn check_liveness(&mut self) {
+        let scan = match ipc::scan_nodes(&self.run, true) {
+            Ok(scan) => scan,
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot list the run's nodes");
+                return;
+            }
+        };
+        if !scan.dead.is_empty() {
+            tracing::info!(dead = ?scan.dead, "removed stale resources of dead nodes");
+        }
+        for a in self.agents.iter_mut().filter(|a| a.live) {
+            if !scan.is_alive(&RunNode::agent_name(a.report.uav)) {
+                tracing::warn!(uav = a.report.uav, "agent process died");
+                a.live = false;
+                a.report.deaths += 1;
+            }
+        }
+        if self.observer.live && !scan.is_alive(RunNode::OBSERVER) {
+            tracing::warn!("observer process died");
+            self.observer.live = false;
+        }
+    }
+
+    /// Reads every pending command; `current` is the step being acked (None before the first).
+    fn drain_commands(&mut self, current: Option<u64>) {
+        for uav in 0..self.uavs() {
+            loop {
+                let cmd = match self.ports.cmd[uav].receive() {
+                    Ok(Some(sample)) => *sample.payload(),
+                    Ok(None) => break,
+                    Err(e) => {
+                        tracing::warn!(uav, error = %e, "cannot receive commands");
+                        break;
+                    }
+                };
+                self.handle_command(uav, cmd, current);
+            }
+        }
+    }
+
+    fn handle_command(&mut self, uav: usize, cmd: UavCommand, current: Option<u64>) {
+        let link = &mut self.agents[uav];
+        if cmd.run_tag != self.run_tag || cmd.uav as usize != uav {
+            link.report.foreign_commands += 1;
+            return;
+        }
+        if cmd.step == HELLO_STEP {
+            if !link.report.said_hello {
+                tracing::info!(uav, "agent said hello");
+            } else if !link.live {
+                tracing::info!(uav, "agent rejoined");
+                link.report.rejoins += 1;
+            }
+            link.report.said_hello = true;
+            link.live = true;
+            return;
+        }
+        let newer = link.last_step.is_none_or(|s| cmd.step > s);
+        let answers_sent_frame = current.is_some_and(|k| cmd.step <= k);
+        if !newer || !answers_sent_frame {
+            link.report.stale_commands += 1;
+            return;
+        }
+        if !link.live {
+            tracing::info!(uav, step = cmd.step, "agent rejoined");
+            link.report.rejoins += 1;
+            link.report.said_hello = true;
+            link.live = true;
+        }
+        link.last_step = Some(cmd.step);
+        if current == Some(cmd.step) {
+            link.report.acks += 1;
+        }
+        if cmd.has_yaw_ref != 0 {
+            self.world.set_yaw_ref(uav, cmd.yaw_ref_rad);
+        }
+    }
+
+    fn drain_observer(&mut self, current: Option<u64>) {
+        loop {
+            let ack = match self.ports.observer_ack.receive() {
+                Ok(Some(sample)) => *sample.payload(),
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::warn!(error = %e, "cannot receive observer acks");
+                    break;
+                }
+            };
+            let obs = &mut self.observer;
+            if ack.run_tag != self.run_tag {
+                continue;
+            }
+            if ack.step == HELLO_STEP {
+                obs.live = true;
+                continue;
+            }
+            if obs.last_step.is_none_or(|s| ack.step > s) && current.is_some_and(|k| ack.step <= k)
+            {
+                obs.live = true;
+                obs.last_step = Some(ack.step);
+                if current == Some(ack.step) {
+                    obs.acks += 1;
+                }
+            }
+        }
+    }
+
+    fn all_acked(&self, k: u64) -> bool {
+        let agents = self
+            .agents
+            .iter()
+            .all(|a| !a.live || a.last_step == Some(k));
+        let observer =
+            !self.observer.expected || !self.observer.live || self.observer.last_step == Some(k);
+        agents && observer
+    }
+
+    fn report_misses(&mut self, k: u64) {
+        for a in self
+            .agents
+            .iter_mut()
+            .filter(|a| a.live && a.last_step != Some(k))
+        {
+            tracing::warn!(
+                uav = a.report.uav,
+                step = k,
+                "agent missed the ack deadline; skipped until it answers"
+            );
+            a.report.misses += 1;
+            a.live = false;
+        }
+        let obs = &mut self.observer;
+        if obs.expected && obs.live && obs.last_step != Some(k) {
+            tracing::warn!(step = k, "observer missed the ack deadline");
+            obs.misses += 1;
+            obs.live = false;
+        }
+    }
+
+    /// Renders and sends frame `k` to every live agent, then truth `k`.
+    fn publish(&mut self, k: u64) {
+        debug_assert_eq!(self.world.step(), k);
+        for uav in 0..self.uavs() {
+            if !self.agents[uav].live {
+                continue;
+            }
+            if let Err(e) = self.send_frame(uav) {
+                tracing::warn!(uav, step = k, error = %e, "cannot send frame");
+                self.agents[uav].report.send_failures += 1;
+                continue;
+            }
+            notify(&self.ports.agent_wake[uav], WakeEvent::Frame);
+        }
+        match self.ports.truth.loan_uninit() {
+            Ok(sample) => {
+                let mut sample = sample.write_payload(TruthState::default());
+                let truth = sample.payload_mut();
+                self.world.truth(self.run_tag, truth);
+                let n = truth.uav_count as usize;
+                for (i, u) in truth.uavs.iter_mut().enumerate().take(n) {
+                    u.agent_live = self.agents[i].live as u32;
+                }
+                if let Err(e) = sample.send() {
+                    tracing::warn!(step = k, error = %e, "cannot send truth");
+                }
+            }
+            Err(e) => tracing::warn!(step = k, error = %e, "cannot loan truth"),
+        }
+        notify(&self.ports.observer_wake, WakeEvent::Truth);
+    }
+
+    fn send_frame(&self, uav: usize) -> anyhow::Result<()> {
+        let mut sample = self.ports.cvs[uav].loan_uninit()?;
+        let frame = CvsFrame::init_in_place(sample.payload_mut());
+        self.world.render(uav, self.run_tag, frame);
+        // SAFETY: init_in_place initialised every byte of the payload.
+        let sample = unsafe { sample.assume_init() };
+        sample.send()?;
+        Ok(())
+    }
+
+    fn end_of_run(&self) {
+        for n in &self.ports.agent_wake {
+            notify(n, WakeEvent::EndOfRun);
+        }
+        notify(&self.ports.observer_wake, WakeEvent::EndOfRun);
+    }
+}
+
+/// Wakes listeners; a listener that is gone is not an error of the world's.
+fn notify(notifier: &iceoryx2::port::notifier::Notifier<Ipc>, event: WakeEvent) {
+    if let Err(e) = notifier.notify_with_custom_event_id(event.id()) {
+        tracing::debug!(?event, error = %e, "notify failed");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config() -> ServerConfig {
+        ServerConfig {
+            run_id: RunId::new("server-unit").unwrap(),
+            scenario: Scenario::default(),
+            mode: StepMode::Lockstep,
+            expected_agents: vec![0, 3],
+            wait_for_observer: false,
+            start_timeout: Duration::from_secs(1),
+            ack_timeout: Duration::from_secs(1),
+        }
+    }
+
+    #[test]
+    fn agents_outside_the_fleet_are_refused() {
+        assert_eq!(config().validate(), Ok(()));
+        let mut c = config();
+        c.expected_agents = vec![4];
+        assert_eq!(
+            c.validate(),
+            Err(ServerConfigError::UnknownAgent { uav: 4, count: 4 })
+        );
+        c.expected_agents = vec![];
+        c.mode = StepMode::Realtime { speedup: 0.0 };
+        assert!(matches!(c.validate(), Err(ServerConfigError::Speedup(_))));
+    }
+}

@@ -1,0 +1,319 @@
+//! The cars: placed on lanes, driving at their own cruise speed, turning at random at
+//! intersections, keeping their distances.
+//!
+//! Guarantees, by construction:
+//! - a car's centre is always on a lane centreline, or, during a U-turn, on the straight
+//!   segment across its road joining its two lanes; together with the city's invariant
+//!   ([`crate::scene`]) it stays more than `r_s + r_t` from every building, on the roads, and
+//!   inside the RoI (the ring road runs inside the border);
+//! - a car never travels more than `cruise * dt <= v_max * dt` along its path in a step, so
+//!   its displacement per step never exceeds `v_max * dt`;
+//! - at every step, any two cars' centres are at least [`RoadProfile::car_separation`]
+//!   (`max(r_s, car length) + margin`) apart: cars move one after the other, and a car only
+//!   takes a move (full, or shortened) that keeps that distance to every other car's latest
+//!   position, otherwise it waits. A car blocked for [`DEADLOCK_STEPS`] steps turns around
+//!   onto its road's other lane, which breaks the rare gridlock at an intersection.
+
+use std::collections::VecDeque;
+
+use protocol::math::{Point2, Real};
+use protocol::scenario::Scenario;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::scene::{Axis, Lane, RoadGrid, RoadProfile};
+use crate::world::WorldBuildError;
+
+/// Steps a car waits, blocked, before turning around.
+pub const DEADLOCK_STEPS: u32 = 20;
+/// Random placements tried per car before giving up.
+const PLACEMENT_TRIES: usize = 10_000;
+/// Shares of the full move tried, in order, when the full move comes too close to a car.
+const MOVE_SHARES: [Real; 4] = [1.0, 0.75, 0.5, 0.25];
+/// Tolerance on coordinates along a lane, well below any distance that matters.
+const EPS: Real = 1e-6;
+
+/// A point of a car's planned path, and the lane the car is on once it gets there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Waypoint {
+    point: Point2,
+    lane: Lane,
+}
+
+/// One car.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Car {
+    /// Target id (its index).
+    pub id: u32,
+    /// Ground point under the car's centre.
+    pub position: Point2,
+    /// Heading, radians counter-clockwise from east (the car's long axis points along it).
+    pub heading: Real,
+    /// The speed the car drives at when nothing is in its way, m/s.
+    pub cruise_mps: Real,
+    /// Distance travelled along its path in the last step divided by the step, m/s.
+    pub speed_mps: Real,
+    lane: Lane,
+    path: VecDeque<Waypoint>,
+    stalled_steps: u32,
+}
+
+impl Car {
+    /// The lane the car is on (during a turn, the lane it is leaving).
+    pub fn lane(&self) -> Lane {
+        self.lane
+    }
+
+    /// Where the path ahead ends and on which lane.
+    fn path_end(&self) -> (Point2, Lane) {
+        self.path
+            .back()
+            .map_or((self.position, self.lane), |w| (w.point, w.lane))
+    }
+
+    fn path_length(&self) -> Real {
+        let mut from = self.position;
+        let mut len = 0.0;
+        for w in &self.path {
+            len += (w.point - from).norm();
+            from = w.point;
+        }
+        len
+    }
+
+    /// The car after travelling `dist` along its path (the path must be long enough).
+    fn travelled(&self, dist: Real) -> Car {
+        let mut car = self.clone();
+        let mut left = dist;
+        while left > 0.0 {
+            let Some(w) = car.path.front().copied() else {
+                break;
+            };
+            let seg = w.point - car.position;
+            let len = seg.norm();
+            if len > 0.0 {
+                car.heading = seg.y.atan2(seg.x);
+            }
+            if len <= left {
+                car.position = w.point;
+                car.lane = w.lane;
+                car.path.pop_front();
+                left -= len;
+            } else {
+                car.position += seg * (left / len);
+                left = 0.0;
+            }
+        }
+        car
+    }
+}
+
+/// Every car of the run, and the random source of their decisions.
+#[derive(Clone, Debug)]
+pub struct Traffic {
+    cars: Vec<Car>,
+    rng: ChaCha8Rng,
+    max_speed: Real,
+}
+
+impl Traffic {
+    /// Places `targets.count` cars at random on the lanes, at least the car separation apart,
+    /// each with a cruise speed uniform in `(0.2 v_max, v_max]`.
+    pub fn place(
+        roads: &RoadGrid,
+        scenario: &Scenario,
+        mut rng: ChaCha8Rng,
+    ) -> Result<Traffic, WorldBuildError> {
+        let t = &scenario.targets;
+        let sep = roads.profile.car_separation;
+        let mut cars: Vec<Car> = Vec::with_capacity(t.count as usize);
+        for id in 0..t.count {
+            let mut placed = None;
+            for _ in 0..PLACEMENT_TRIES {
+                let axis = if rng.random_bool(0.5) {
+                    Axis::X
+                } else {
+                    Axis::Y
+                };
+                let road = rng.random_range(0..roads.roads(axis).len());
+                let dir = if rng.random_bool(0.5) { 1 } else { -1 };
+                let lane = Lane { axis, road, dir };
+                let cs = roads.crossings(axis);
+                let (lo, hi) = (cs[0], cs[cs.len() - 1]);
+                let p = roads.point_on_lane(lane, rng.random_range(lo..=hi));
+                if cars.iter().all(|c| (c.position - p).norm() >= sep + EPS) {
+                    let h = lane.heading();
+                    placed = Some(Car {
+                        id,
+                        position: p,
+                        heading: h.y.atan2(h.x),
+                        cruise_mps: t.max_speed_mps * (1.0 - 0.8 * rng.random::<Real>()),
+                        speed_mps: 0.0,
+                        lane,
+                        path: VecDeque::new(),
+                        stalled_steps: 0,
+                    });
+                    break;
+                }
+            }
+            match placed {
+                Some(c) => cars.push(c),
+                None => {
+                    return Err(WorldBuildError::Placement(format!(
+                        "cannot place car {id} of targets.count = {} on the roads at least \
+                         {sep:.2} m from the others",
+                        t.count
+                    )));
+                }
+            }
+        }
+        Ok(Traffic {
+            cars,
+            rng,
+            max_speed: t.max_speed_mps,
+        })
+    }
+
+    /// The cars, by id.
+    pub fn cars(&self) -> &[Car] {
+        &self.cars
+    }
+
+    /// Advances every car by `dt` seconds, in id order.
+    pub fn step(&mut self, roads: &RoadGrid, dt: Real) {
+        let profile = roads.profile;
+        for i in 0..self.cars.len() {
+            let budget = (self.cars[i].cruise_mps.min(self.max_speed) * dt).max(0.0);
+            if self.cars[i].stalled_steps >= DEADLOCK_STEPS {
+                self.turn_around(roads, i);
+            }
+            while self.cars[i].path_length() < budget + EPS {
+                let car = &mut self.cars[i];
+                plan(roads, car, &mut self.rng);
+            }
+            let mut moved = None;
+            for share in MOVE_SHARES {
+                let cand = self.cars[i].travelled(budget * share);
+                if self.keeps_clear(i, &cand.position, &profile) {
+                    moved = Some((cand, budget * share));
+                    break;
+                }
+            }
+            let car = &mut self.cars[i];
+            match moved {
+                Some((c, d)) if d > 0.0 => {
+                    *car = Car {
+                        speed_mps: d / dt,
+                        stalled_steps: 0,
+                        ..c
+                    };
+                }
+                _ => {
+                    car.speed_mps = 0.0;
+                    car.stalled_steps += 1;
+                }
+            }
+        }
+    }
+
+    fn keeps_clear(&self, i: usize, p: &Point2, profile: &RoadProfile) -> bool {
+        self.cars
+            .iter()
+            .enumerate()
+            .all(|(j, c)| j == i || (c.position - p).norm() >= profile.car_separation + EPS)
+    }
+
+    /// Replaces car `i`'s path by a crossing onto its road's other lane, right where it is.
+    fn turn_around(&mut self, roads: &RoadGrid, i: usize) {
+        let car = &mut self.cars[i];
+        let opposite = car.lane.opposite();
+        let s = RoadGrid::along(car.lane.axis, &car.position);
+        tracing::debug!(
+            car = car.id,
+            "car blocked for {} steps turns around",
+            car.stalled_steps
+        );
+        car.path.clear();
+        car.path.push_back(Waypoint {
+            point: roads.point_on_lane(opposite, s),
+            lane: opposite,
+        });
+        car.stalled_steps = 0;
+    }
+}
+
+/// Extends a car's path to the next decision: the next intersection ahead, where it goes
+/// straight, turns left or turns right at random among the roads that continue, or turns
+/// around at a dead end.
+fn plan(roads: &RoadGrid, car: &mut Car, rng: &mut ChaCha8Rng) {
+    let (start, lane) = car.path_end();
+    let off = roads.profile.lane_offset;
+    let s = RoadGrid::along(lane.axis, &start);
+    let cs = roads.crossings(lane.axis);
+    // The next crossing road ahead; crossings within a lane offset are the one being passed.
+    let node = if lane.dir > 0 {
+        cs.iter().position(|&c| c > s + off + EPS)
+    } else {
+        cs.iter().rposition(|&c| c < s - off - EPS)
+    };
+    let Some(m) = node else {
+        push_u_turn(roads, car, lane, s);
+        return;
+    };
+    let mut options: [Option<Waypoint>; 3] = [None; 3];
+    let continues = if lane.dir > 0 {
+        m + 1 < cs.len()
+    } else {
+        m > 0
+    };
+    if continues {
+        options[0] = Some(Waypoint {
+            point: roads.point_on_lane(lane, cs[m]),
+            lane,
+        });
+    }
+    let here = lane.road;
+    let along_new = roads.crossings(lane.axis.other()).len();
+    for (k, dir) in [(1, 1i8), (2, -1i8)] {
+        let ok = if dir > 0 {
+            here + 1 < along_new
+        } else {
+            here > 0
+        };
+        if ok {
+            let new = Lane {
+                axis: lane.axis.other(),
+                road: m,
+                dir,
+            };
+            let l_new = roads.lane_line(new);
+            let l_cur = roads.lane_line(lane);
+            let point = match lane.axis {
+                Axis::X => Point2::new(l_new, l_cur),
+                Axis::Y => Point2::new(l_cur, l_new),
+            };
+            options[k] = Some(Waypoint { point, lane: new });
+        }
+    }
+    let count = options.iter().flatten().count();
+    if count == 0 {
+        car.path.push_back(Waypoint {
+            point: roads.point_on_lane(lane, cs[m]),
+            lane,
+        });
+        push_u_turn(roads, car, lane, cs[m]);
+        return;
+    }
+    let pick = rng.random_range(0..count);
+    if let Some(w) = options.iter().flatten().nth(pick) {
+        car.path.push_back(*w);
+    }
+}
+
+fn push_u_turn(roads: &RoadGrid, car: &mut Car, lane: Lane, s: Real) {
+    let opposite = lane.opposite();
+    car.path.push_back(Waypoint {
+        point: roads.point_on_lane(opposite, s),
+        lane: opposite,
+    });
+}
