@@ -131,7 +131,7 @@ impl GroundGrid {
     }
 
     fn touching(origin: Real, d: Real, n: u32, lo: Real, hi: Real) -> Option<(u32, u32)> {
-        if !(lo <= hi) {
+        if lo.is_nan() || hi.is_nan() || lo > hi {
             return None;
         }
         // A cell [k d, (k+1) d] touches [lo, hi] when k d <= hi and (k+1) d >= lo.

@@ -162,6 +162,8 @@ pub struct WireHeader {
     pub len: u32,
     /// Step the payload belongs to.
     pub step: u64,
+    /// Wall-clock send time, nanoseconds since the Unix epoch (for latency measurements).
+    pub sent_unix_ns: u64,
 }
 
 /// One target's set in an estimate.
@@ -184,6 +186,23 @@ pub struct OemCellUpdate {
     pub status: u8,
     /// Height of the obstacle, metres (0 for ground).
     pub height_m: f32,
+}
+
+/// An agent's running counters, carried by every estimate.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AgentStats {
+    /// Frames folded into the estimator.
+    pub frames: u64,
+    /// Frames refused (malformed, other run).
+    pub frames_refused: u64,
+    /// Peer estimates fused.
+    pub estimates_received: u64,
+    /// Peer messages dropped (bad header, malformed, other run or version).
+    pub messages_dropped: u64,
+    /// Guidance decisions taken.
+    pub decisions: u64,
+    /// Decisions taken after waiting out a silent token holder.
+    pub token_timeouts: u64,
 }
 
 /// Agent -> peers and observers: the agent's sets after correction at a step.
@@ -211,6 +230,10 @@ pub struct EstimateMsg {
     pub explored: EncodedSet,
     /// Ground hidden in this frame, `H^CVS`.
     pub hidden: EncodedSet,
+    /// `H̄`: ground hidden at some earlier frame and not proven free since (for the OA metric).
+    pub unseen: EncodedSet,
+    /// The sender's counters, so observers see them even if the agent is killed.
+    pub stats: AgentStats,
     /// OEM cells changed since the last message, or the whole known map when `oem_full`.
     pub oem: Vec<OemCellUpdate>,
     /// Whether `oem` holds every known cell rather than a delta.

@@ -16,7 +16,7 @@
 #![warn(missing_docs)]
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
@@ -218,11 +218,6 @@ pub fn run_to_end(cmd: &mut Command) -> Output {
     guard
         .wait_timeout(EXIT_TIMEOUT)
         .unwrap_or_else(|| panic!("{cmd:?} did not end within {EXIT_TIMEOUT:?}"))
-}
-
-/// The exit code of a finished process (`None` if a signal ended it).
-pub fn exit_code(status: &ExitStatus) -> Option<i32> {
-    status.code()
 }
 
 /// A small, fast scenario: few UAVs and cars, a small camera, a short run.

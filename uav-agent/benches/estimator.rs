@@ -11,20 +11,20 @@ use divan::counter::BytesCount;
 use protocol::frame::CvsFrame;
 use protocol::scenario::Scenario;
 use uav_agent::estimator::message::{self, EstimateOutbox};
-use uav_agent::estimator::{Estimator, EstimatorConfig, PeerEstimate};
+use uav_agent::estimator::{Estimator, EstimatorConfig, PeerEstimate, StepTimings};
 use world_server::World;
 
 /// Steps run before measuring, so the sets look like a run's rather than a fresh start's.
 const WARMUP_STEPS: u64 = 100;
 
 struct Fixture {
-    /// UAV 0's estimator after the warm-up, fused with its peers.
+    /// The measured UAV's estimator after the warm-up, fused with its peers.
     estimator: Estimator,
     /// A peer's estimate at the same step.
     peer: PeerEstimate,
-    /// UAV 0's next frame.
+    /// Its next frame.
     frame: Box<CvsFrame>,
-    /// The encoded estimate message of UAV 0 after the warm-up (a delta, not a full map).
+    /// The encoded estimate message of that UAV after the warm-up (a delta, not a full map).
     message: Vec<u8>,
 }
 
@@ -79,19 +79,58 @@ fn fixture() -> &'static Fixture {
             sizes[sizes.len() * 99 / 100],
             sizes[sizes.len() - 1]
         );
-        world.render(0, 1, &mut frame);
-        let estimator = estimators[0].clone();
-        let mut probe = estimator.clone();
-        let report = probe.step(&frame).expect("frame");
-        eprintln!("one step's breakdown: {:#?}", report.timings);
-        let peer = estimators[1].state().to_peer(1);
+        // Measure the UAV that sees the most targets, so every phase has work.
+        let chosen = (0..n)
+            .max_by_key(|&i| {
+                world.render(i, 1, &mut frame);
+                (frame.header.box_count, std::cmp::Reverse(i))
+            })
+            .unwrap_or(0);
+        world.render(chosen, 1, &mut frame);
+        eprintln!(
+            "measured UAV {chosen}: {} target boxes",
+            frame.header.box_count
+        );
+        let estimator = estimators[chosen].clone();
+        print_phase_medians(&estimator, &frame);
+        let other = (chosen + 1) % n;
+        let peer = estimators[other].state().to_peer(other as u32);
         Fixture {
             estimator,
             peer,
             frame,
-            message: last.swap_remove(0),
+            message: last.swap_remove(chosen),
         }
     })
+}
+
+/// Reads one phase's time out of a step's timings.
+type Phase = fn(&StepTimings) -> Duration;
+
+/// Medians of the phases of a step over repeated runs on the same frame, from the
+/// [`uav_agent::estimator::StepReport`] timings.
+fn print_phase_medians(estimator: &Estimator, frame: &CvsFrame) {
+    let runs: Vec<StepTimings> = (0..41)
+        .filter_map(|_| estimator.clone().step(frame).ok().map(|r| r.timings))
+        .collect();
+    let median = |f: Phase| {
+        let mut v: Vec<Duration> = runs.iter().map(f).collect();
+        v.sort_unstable();
+        v.get(v.len() / 2).copied().unwrap_or_default()
+    };
+    eprintln!("step phases, median of {} runs:", runs.len());
+    let phases: [(&str, Phase); 7] = [
+        ("prediction", |t| t.prediction),
+        ("free ground + hidden", |t| t.free_ground),
+        ("measurement sets", |t| t.measurement_sets),
+        ("obstacle sets", |t| t.obstacle_sets),
+        ("oem", |t| t.oem),
+        ("correction", |t| t.correction),
+        ("total", |t| t.total),
+    ];
+    for (name, f) in phases {
+        eprintln!("  {name:<22} {:>9.3} ms", median(f).as_secs_f64() * 1e3);
+    }
 }
 
 fn main() {
@@ -106,26 +145,6 @@ fn step(bencher: Bencher) {
     bencher
         .with_inputs(|| f.estimator.clone())
         .bench_local_values(|mut e| e.step(&f.frame).map(|r| r.timings.total));
-}
-
-/// Phases of a step, timed inside the step (median of the samples is what divan reports).
-#[divan::bench(args = ["prediction", "free_ground", "measurement_sets", "obstacle_sets", "oem", "correction"], sample_count = 30, sample_size = 1)]
-fn phase(bencher: Bencher, phase: &str) {
-    let f = fixture();
-    bencher
-        .with_inputs(|| f.estimator.clone())
-        .bench_local_values(|mut e| {
-            let t = e.step(&f.frame).map(|r| r.timings).unwrap_or_default();
-            let d: Duration = match phase {
-                "prediction" => t.prediction,
-                "free_ground" => t.free_ground,
-                "measurement_sets" => t.measurement_sets,
-                "obstacle_sets" => t.obstacle_sets,
-                "oem" => t.oem,
-                _ => t.correction,
-            };
-            d
-        });
 }
 
 /// Fusing one peer's estimate of the same step.

@@ -73,6 +73,22 @@ fn check_frame(config: &EstimatorConfig, frame: &CvsFrame, truth: &TruthState, c
         if let Some(cell) = grid.cell_of(&p) {
             assert!(!free.contains(cell), "{context}: target {} in P^g", t.id);
             assert!(!so.contains(cell), "{context}: target {} in S^o", t.id);
+            // Every identified target is in its own measurement set X^m_j.
+            let (rows, cols) = (frame.header.rows, frame.header.cols);
+            for b in frame
+                .boxes()
+                .iter()
+                .filter(|b| b.id == t.id && b.is_valid(rows, cols))
+            {
+                let xm = measure::target_measurement(&view, grid, b, config.target_radius_m);
+                if let Some(xm) = xm {
+                    assert!(
+                        xm.contains(cell),
+                        "{context}: target {} outside X^m_j",
+                        t.id
+                    );
+                }
+            }
         }
     }
 }

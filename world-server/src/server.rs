@@ -692,6 +692,41 @@ mod tests {
     }
 
     #[test]
+    fn an_agent_that_never_says_hello_is_reported_and_the_run_still_ends() {
+        let mut c = config();
+        c.run_id = RunId::new(&format!("server-unit-{}", std::process::id())).unwrap();
+        c.scenario.duration_s = 1.0;
+        c.scenario.region.half_extent_m = 100.0;
+        c.scenario.targets.count = 2;
+        c.scenario.uavs.count = 2;
+        c.scenario.camera.rows = 12;
+        c.scenario.camera.cols = 16;
+        c.expected_agents = vec![1];
+        c.start_timeout = Duration::from_millis(100);
+        let report = run(c.clone(), &AtomicBool::new(false)).unwrap();
+        assert_eq!(report.steps, 2);
+        assert!(!report.interrupted);
+        assert_eq!(report.agents.len(), 1);
+        assert_eq!(report.agents[0].uav, 1);
+        assert!(!report.agents[0].said_hello);
+        assert_eq!(report.agents[0].acks, 0);
+        let _ = ipc::remove_run_files(&c.run_id);
+    }
+
+    #[test]
+    fn a_raised_shutdown_flag_stops_the_run_before_stepping() {
+        let mut c = config();
+        c.run_id = RunId::new(&format!("server-stop-{}", std::process::id())).unwrap();
+        c.scenario.region.half_extent_m = 100.0;
+        c.scenario.camera.rows = 12;
+        c.scenario.camera.cols = 16;
+        let report = run(c.clone(), &AtomicBool::new(true)).unwrap();
+        assert!(report.interrupted);
+        assert_eq!(report.steps, 0);
+        let _ = ipc::remove_run_files(&c.run_id);
+    }
+
+    #[test]
     fn agents_outside_the_fleet_are_refused() {
         assert_eq!(config().validate(), Ok(()));
         let mut c = config();

@@ -7,7 +7,7 @@ use parry3d_f64::query::{Ray, RayCast};
 use protocol::camera::{Camera, range_interval};
 use protocol::flight::UavState;
 use protocol::frame::{CvsFrame, Label};
-use protocol::math::{Point3, Real, Vector3};
+use protocol::math::{Point2, Point3, Real, Vector3};
 use protocol::scenario::Scenario;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -195,14 +195,23 @@ fn frames_honour_the_assumptions_on_random_scenes_and_poses() {
             // their own course.
             let cars = world.targets();
             let car = &cars[rng.random_range(0..cars.len())];
-            let alt = rng.random_range(15.0..120.0);
-            let yaw: Real = rng.random_range(-PI..PI);
-            let back = alt / s.camera.tilt_rad.tan() * rng.random_range(0.7..1.3);
-            let pos = Point3::new(
-                car.position.x - back * yaw.cos(),
-                car.position.y - back * yaw.sin(),
-                alt,
-            );
+            // A viewpoint outside every building (a UAV never flies inside one).
+            let (pos, yaw) = loop {
+                let alt = rng.random_range(15.0..120.0);
+                let yaw: Real = rng.random_range(-PI..PI);
+                let back = alt / s.camera.tilt_rad.tan() * rng.random_range(0.7..1.3);
+                let pos = Point3::new(
+                    car.position.x - back * yaw.cos(),
+                    car.position.y - back * yaw.sin(),
+                    alt,
+                );
+                let inside = world.scene().buildings.iter().any(|b| {
+                    b.height + 1.0 > alt && b.footprint_distance(&Point2::new(pos.x, pos.y)) < 1.0
+                });
+                if !inside {
+                    break (pos, yaw);
+                }
+            };
             world.set_uav_state(0, UavState { position: pos, yaw });
             for uav in [0, 1 + step % 3] {
                 world.render(uav, 9, &mut frame);

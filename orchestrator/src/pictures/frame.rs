@@ -49,9 +49,11 @@ pub fn draw_labels(frame: &CvsFrame, path: &Path) -> anyhow::Result<()> {
             [(x0, y0), (x1, y1)],
             YELLOW.stroke_width(2),
         ))?;
+        // The id goes above the box, or below it when the box touches the top edge.
+        let text_y = if y0 >= 16 { y0 - 16 } else { y1 + 2 };
         root.draw(&Text::new(
             format!("{}", b.id),
-            (x0 + 2, (y0 - 15).max(0)),
+            (x0 + 2, text_y),
             font.clone(),
         ))?;
     }

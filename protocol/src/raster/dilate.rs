@@ -65,10 +65,8 @@ impl CellSet {
                 if let Some(up) = y.checked_add(k).filter(|&t| t < u64::from(self.ny)) {
                     or_into(out.row_mut(up as u32), stage);
                 }
-                if k > 0 {
-                    if let Some(down) = y.checked_sub(k) {
-                        or_into(out.row_mut(down as u32), stage);
-                    }
+                if let Some(down) = y.checked_sub(k).filter(|_| k > 0) {
+                    or_into(out.row_mut(down as u32), stage);
                 }
             }
         }

@@ -63,7 +63,7 @@ impl CellSet {
     }
 
     fn fill_disc_inner(&mut self, grid: &GroundGrid, c: Point2, r: Real, eps: Real) {
-        if !(r > 0.0) {
+        if r.is_nan() || r <= 0.0 {
             return;
         }
         let Some((r0, r1)) = grid.rows_touching(c.y - r, c.y + r) else {

@@ -139,19 +139,21 @@ impl CellSet {
             for h in &planes {
                 let y = if h.ex >= 0.0 { y_lo } else { y_hi };
                 let g = h.ex * (y - h.p.y) - h.slack;
-                if h.ey > 0.0 {
-                    hi = hi.min(h.p.x + g / h.ey);
-                } else if h.ey < 0.0 {
-                    lo = lo.max(h.p.x + g / h.ey);
-                } else if !(g >= 0.0) {
+                let bound = h.p.x + g / h.ey;
+                // A NaN (overflow on absurd coordinates) must close the row, not be skipped
+                // by `min`/`max`, or the constraint would silently vanish.
+                if g.is_nan() || (h.ey != 0.0 && bound.is_nan()) || (h.ey == 0.0 && g < 0.0) {
                     open = false;
                     break;
                 }
-            }
-            if open {
-                if let Some((c0, c1)) = columns_inside(grid, lo, hi) {
-                    self.fill_row_span(iy, c0, c1);
+                if h.ey > 0.0 {
+                    hi = hi.min(bound);
+                } else if h.ey < 0.0 {
+                    lo = lo.max(bound);
                 }
+            }
+            if let Some((c0, c1)) = columns_inside(grid, lo, hi).filter(|_| open) {
+                self.fill_row_span(iy, c0, c1);
             }
         }
     }
@@ -197,7 +199,7 @@ fn clipped_x_extent(a: Point2, b: Point2, lo: Real, hi: Real) -> Option<(Real, R
 
 /// The columns whose closed extent lies inside `[lo, hi]`, clamped to the grid.
 pub(super) fn columns_inside(grid: &GroundGrid, lo: Real, hi: Real) -> Option<(u32, u32)> {
-    if !(lo <= hi) || grid.nx == 0 {
+    if lo.is_nan() || hi.is_nan() || lo > hi || grid.nx == 0 {
         return None;
     }
     let (o, d) = (grid.origin.x, grid.cell_m);

@@ -134,6 +134,7 @@ impl Links {
             sender,
             len: u32::try_from(bytes.len())?,
             step,
+            sent_unix_ns: unix_now_ns(),
         };
         sample.write_from_slice(bytes).send()?;
         for peer in &self.peer_wakes {
@@ -144,6 +145,14 @@ impl Links {
         }
         Ok(())
     }
+}
+
+/// Wall-clock time, nanoseconds since the Unix epoch (0 if the clock is before it).
+pub fn unix_now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
 }
 
 /// Notifies, logging (not failing) when nobody listens or the event cannot be sent: a wake-up

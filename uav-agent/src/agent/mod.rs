@@ -32,7 +32,7 @@ use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, NodeScanError, RunNode, WakeEvent, scan_nodes};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
-use protocol::wire::{GuidanceToken, HELLO_STEP, UavCommand, WireKind};
+use protocol::wire::{AgentStats, GuidanceToken, HELLO_STEP, UavCommand, WireKind};
 use serde::Serialize;
 
 use crate::estimator::{Estimator, EstimatorConfig, PeerEstimate, message};
@@ -191,11 +191,7 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentRe
 
 /// A number that differs at each start of an agent process.
 fn incarnation() -> u64 {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or(0);
-    nanos ^ ((std::process::id() as u64) << 32)
+    links::unix_now_ns() ^ ((std::process::id() as u64) << 32)
 }
 
 #[derive(Default)]
@@ -365,7 +361,15 @@ impl Agent<'_> {
     }
 
     fn publish_estimate(&mut self, k: u64) -> anyhow::Result<()> {
-        let msg = self.outbox.compose(self.estimator.state_mut());
+        let mut msg = self.outbox.compose(self.estimator.state_mut());
+        msg.stats = AgentStats {
+            frames: self.report.frames,
+            frames_refused: self.report.frames_refused,
+            estimates_received: self.report.estimates_received,
+            messages_dropped: self.report.dropped.values().sum(),
+            decisions: self.report.decisions,
+            token_timeouts: self.report.token_timeouts,
+        };
         let bytes = message::to_bytes(&msg)?;
         self.links
             .send_wire(WireKind::Estimate, self.run_tag, self.config.uav, k, &bytes)?;

@@ -179,7 +179,7 @@ impl GroundProjector {
     }
 
     /// Image point of camera-frame coordinates, `None` when not in front.
-    fn to_image(&self, pc: &Vector3) -> Option<(Real, Real)> {
+    fn image_point(&self, pc: &Vector3) -> Option<(Real, Real)> {
         (pc.z > 1e-9).then(|| {
             (
                 self.cx + self.f * pc.x / pc.z,
@@ -241,7 +241,7 @@ pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
         let y = grid.origin.y + iy as Real * grid.cell_m;
         buf.extend((0..width).map(|k| {
             let x = grid.origin.x + (ix0 as usize + k) as Real * grid.cell_m;
-            p.to_image(&p.camera_coords(x, y))
+            p.image_point(&p.camera_coords(x, y))
         }));
     };
     let (mut south, mut north) = (Vec::with_capacity(width), Vec::with_capacity(width));
@@ -300,7 +300,7 @@ pub fn hidden_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
         let y = grid.origin.y + (iy as Real + 0.5) * grid.cell_m;
         for ix in ix0..=ix1 {
             let x = grid.origin.x + (ix as Real + 0.5) * grid.cell_m;
-            if let Some((u, v)) = p.to_image(&p.camera_coords(x, y))
+            if let Some((u, v)) = p.image_point(&p.camera_coords(x, y))
                 && u >= 0.0
                 && v >= 0.0
                 && u < view.cols as Real
@@ -427,7 +427,7 @@ pub fn observe_map(view: &FrameView<'_>, map: &mut OccupancyMap) -> usize {
     for iy in iy0..=iy1 {
         for ix in ix0..=ix1 {
             let centre = grid.cell_centre((ix, iy));
-            if let Some((u, v)) = pr.to_image(&pr.camera_coords(centre.x, centre.y))
+            if let Some((u, v)) = pr.image_point(&pr.camera_coords(centre.x, centre.y))
                 && u >= 0.0
                 && v >= 0.0
                 && u < view.cols as Real
@@ -498,7 +498,7 @@ mod tests {
         let p = GroundProjector::new(&cam);
         for &(x, y) in &[(10.0, 20.0), (-3.0, 55.0), (30.0, 5.0)] {
             let a = cam.project(&Point3::new(x, y, 0.0));
-            let b = p.to_image(&p.camera_coords(x, y));
+            let b = p.image_point(&p.camera_coords(x, y));
             match (a, b) {
                 (Some(a), Some(b)) => assert!((a.0 - b.0).abs() < 1e-9 && (a.1 - b.1).abs() < 1e-9),
                 (None, None) => {}
@@ -617,7 +617,7 @@ mod tests {
                     for &t in &[lo, hi] {
                         let p = cam.origin() + cam.ray(c as Real + du, r as Real + dv) * t;
                         for k in 0..12 {
-                            let a = k as Real * 0.5236;
+                            let a = k as Real * std::f64::consts::FRAC_PI_6;
                             let q = Point2::new(p.x + radius * a.cos(), p.y + radius * a.sin());
                             assert!(xm.contains(grid.cell_of(&q).unwrap()));
                         }

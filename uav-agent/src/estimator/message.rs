@@ -55,7 +55,7 @@ impl EstimateOutbox {
 
     /// The message for the current state. Drains the map's pending changes into it.
     pub fn compose(&mut self, state: &mut EstimatorState) -> EstimateMsg {
-        let full = self.full_requested || self.seq % self.full_every == 0;
+        let full = self.full_requested || self.seq.is_multiple_of(self.full_every);
         self.full_requested = false;
         let oem = if full {
             state.oem.take_full()
@@ -84,6 +84,8 @@ impl EstimateOutbox {
             obstacle_free: state.obstacle_free.encode(),
             explored: state.explored.encode(),
             hidden: state.hidden.encode(),
+            unseen: state.hidden_history.unseen().encode(),
+            stats: protocol::wire::AgentStats::default(),
             oem,
             oem_full: full,
         };

@@ -38,13 +38,6 @@ impl RowTargets {
             }),
         }
     }
-
-    /// Withdraws a T label counted for `id` (the classifier doubted the pixel).
-    pub fn unlabel(&mut self, id: u32) {
-        if let Some(t) = self.0.iter_mut().find(|t| t.id == id) {
-            t.labelled = t.labelled.saturating_sub(1);
-        }
-    }
 }
 
 /// The boxes of the targets with at least `min_pixels` T pixels, by increasing id, at most

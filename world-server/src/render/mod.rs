@@ -12,7 +12,7 @@
 //!    it inside the pixel, and its convex silhouette, containing the 4 corners, covers the
 //!    pixel); U otherwise, and for other UAVs.
 //! 4. Classifier doubt turns a random share of pixels U; depth is the centre ray's range times
-//!    `1 + w`, `w` uniform in the noise bounds, NaN when the centre ray hits nothing.
+//!    `1 + w`, `w` uniform in the noise bounds, NaN (and the pixel U) when the centre ray hits nothing or starts inside a box.
 //! 5. A target is identified when enough pixels are labelled T with it; its box bounds every
 //!    pixel any of whose rays hit it.
 //!
@@ -33,8 +33,8 @@ use rayon::prelude::*;
 use boxes::RowTargets;
 use footprint::Footprint;
 use noise::RowNoise;
-use rays::RayGrid;
 pub use objects::{ObjectKind, SceneObject};
+use rays::RayGrid;
 
 /// Code of a ray that hit the ground first.
 const HIT_GROUND: u32 = u32::MAX - 1;
@@ -175,7 +175,10 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
                 let mut label = classify(&codes, touching(), &visible);
 
                 let px = noise.next_pixel();
-                let doubted = px.doubt && label != Label::Unknown;
+                // A zero range means the camera is inside a box (a UAV flown into a building
+                // by an explicit altitude): nothing can be measured there.
+                let measured = centre != HIT_NOTHING && range > 0.0;
+                let doubted = (px.doubt || !measured) && label != Label::Unknown;
                 for (k, &code) in codes.iter().enumerate() {
                     if code >= HIT_GROUND || codes[..k].contains(&code) {
                         continue;
@@ -188,10 +191,10 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
                     label = Label::Unknown;
                 }
                 labels[ci] = label as u8;
-                depth[ci] = if centre == HIT_NOTHING {
-                    f32::NAN
-                } else {
+                depth[ci] = if measured {
                     (range * (1.0 + px.w)) as f32
+                } else {
+                    f32::NAN
                 };
             }
             targets

@@ -37,7 +37,7 @@ impl Axis {
 }
 
 /// One direction of travel on one road. Traffic keeps right: the lane's centreline is
-/// offset from the road's centreline by [`RoadGrid::lane_offset`] to the right of the heading.
+/// offset from the road's centreline by [`RoadProfile::lane_offset`] to the right of the heading.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Lane {
     /// Which way the road runs.
@@ -124,7 +124,7 @@ pub struct RoadGrid {
 
 impl RoadGrid {
     /// Lays out the grid over `[-half_extent, half_extent]^2`: the ring road sits inside the
-    /// border, the inner roads are spaced about [`TYPICAL_ROAD_SPACING_M`] apart with a random
+    /// border, the inner roads are spaced about 58 m apart (blocks of about 50 m) with a random
     /// jitter.
     pub fn generate(
         half_extent: Real,
