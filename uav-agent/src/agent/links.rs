@@ -6,13 +6,18 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use protocol::frame::CvsFrame;
-use protocol::ipc::{EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, WirePublisher};
+use protocol::ipc::{
+    EventService, Ipc, PubSubService, RunNode, WakeEvent, WirePublisher, WireService,
+};
 use protocol::wire::{PROTOCOL_VERSION, UavCommand, WireHeader, WireKind};
 
 /// Initial sample size of estimate messages; samples grow when a message is larger.
 const ESTIMATE_INITIAL_BYTES: usize = 64 * 1024;
 /// Initial sample size of tokens.
 const TOKEN_INITIAL_BYTES: usize = 4 * 1024;
+
+/// A subscriber to variable-size messages (estimates, tokens).
+pub type WireSubscriber = Subscriber<Ipc, [u8], WireHeader>;
 
 /// Keeps the services open for as long as the ports live.
 struct Services {
@@ -32,11 +37,11 @@ pub struct Links {
     /// This agent's estimates.
     pub estimate_out: WirePublisher,
     /// The peers' estimates, with the sending UAV of each service.
-    pub estimates_in: Vec<(u32, Subscriber<Ipc, [u8], WireHeader>)>,
+    pub estimates_in: Vec<(u32, WireSubscriber)>,
     /// Tokens to the ring.
     pub token_out: WirePublisher,
     /// Tokens from the ring.
-    pub token_in: Subscriber<Ipc, [u8], WireHeader>,
+    pub token_in: WireSubscriber,
     /// This agent's wake-up events.
     pub wake: Listener<Ipc>,
     /// Wakes the world-server.
@@ -72,7 +77,8 @@ impl Links {
             }
             estimates.push(service);
         }
-        let estimate_out = estimate_out.ok_or_else(|| anyhow::anyhow!("UAV {uav} is outside a fleet of {fleet}"))?;
+        let estimate_out = estimate_out
+            .ok_or_else(|| anyhow::anyhow!("UAV {uav} is outside a fleet of {fleet}"))?;
         let guidance = node.open_guidance()?;
         let token_out = RunNode::wire_publisher(&guidance, TOKEN_INITIAL_BYTES)?;
         let token_in = guidance.subscriber_builder().create()?;

@@ -163,7 +163,11 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentRe
     let incarnation = incarnation();
     let mut agent = Agent {
         run_tag: config.run_id.tag(),
-        outbox: message::EstimateOutbox::new(config.uav, incarnation, estimator_config.oem_full_every),
+        outbox: message::EstimateOutbox::new(
+            config.uav,
+            incarnation,
+            estimator_config.oem_full_every,
+        ),
         estimator: Estimator::new(estimator_config),
         guidance: GuidanceParams::from_scenario(&config.scenario),
         ring: TokenRing::new(config.uav),
@@ -231,8 +235,7 @@ impl Agent<'_> {
         let mut last_hello: Option<Instant> = None;
         let mut first_frame = false;
         loop {
-            if !first_frame
-                && last_hello.is_none_or(|t| t.elapsed() >= self.config.hello_interval)
+            if !first_frame && last_hello.is_none_or(|t| t.elapsed() >= self.config.hello_interval)
             {
                 self.links.send_command(UavCommand {
                     run_tag: self.run_tag,
@@ -326,7 +329,11 @@ impl Agent<'_> {
 
     fn drop_message(&mut self, reason: DropReason, what: &str, detail: &str) {
         tracing::warn!(?reason, what, detail, "message dropped");
-        *self.report.dropped.entry(format!("{what}:{reason:?}")).or_default() += 1;
+        *self
+            .report
+            .dropped
+            .entry(format!("{what}:{reason:?}"))
+            .or_default() += 1;
     }
 
     fn on_frame(&mut self, frame: &CvsFrame) -> anyhow::Result<()> {
@@ -342,7 +349,7 @@ impl Agent<'_> {
                 self.report.frames += 1;
                 self.publish_estimate(k)?;
                 self.gather(k);
-                if k % self.guidance.steps_per_period as u64 == 0 {
+                if k.is_multiple_of(self.guidance.steps_per_period as u64) {
                     yaw_ref = self.decide(k)?;
                 }
             }
@@ -384,10 +391,12 @@ impl Agent<'_> {
         loop {
             self.drain_estimates();
             self.fuse_pending(k);
-            let missing = self
-                .live
-                .iter()
-                .any(|j| self.peers.get(j).and_then(|p| p.fused_step).is_none_or(|s| s < k));
+            let missing = self.live.iter().any(|j| {
+                self.peers
+                    .get(j)
+                    .and_then(|p| p.fused_step)
+                    .is_none_or(|s| s < k)
+            });
             if !missing || self.stopping() || self.end_of_run {
                 return;
             }
@@ -497,9 +506,13 @@ impl Agent<'_> {
                 }
             };
             let header = *sample.user_header();
-            if let Err(reason) =
-                check_header(&header, sample.payload().len(), WireKind::Token, self.run_tag, None)
-            {
+            if let Err(reason) = check_header(
+                &header,
+                sample.payload().len(),
+                WireKind::Token,
+                self.run_tag,
+                None,
+            ) {
                 drop(sample);
                 self.drop_message(reason, "token", &format!("from UAV {}", header.sender));
                 continue;
@@ -558,8 +571,9 @@ impl Agent<'_> {
         let Some(pose) = state.pose else {
             anyhow::bail!("no pose to plan from at step {k}");
         };
-        let sets: Vec<&protocol::raster::CellSet> =
-            std::iter::once(&state.undetected).chain(state.targets.values()).collect();
+        let sets: Vec<&protocol::raster::CellSet> = std::iter::once(&state.undetected)
+            .chain(state.targets.values())
+            .collect();
         let hidden = state.hidden_history.recently_hidden();
         let oem_grid = *state.oem.grid();
         let obstacles: Vec<ObstacleCell> = state

@@ -146,6 +146,7 @@ pub struct Decision {
 
 /// A sequence being expanded: its increments so far, the predicted poses and the predicted
 /// planning set after the periods decided so far.
+#[derive(Clone)]
 struct Node {
     increments: Vec<f64>,
     state: UavState,
@@ -154,10 +155,17 @@ struct Node {
     stray_m: f64,
 }
 
-struct Best {
-    key: (bool, f64, f64),
-    cost: Cost,
-    node: Node,
+/// The exhaustive search over `U^h`, sharing the work of common prefixes.
+struct Search<'a> {
+    params: &'a GuidanceParams,
+    /// Ground the UAVs ahead in the token will see, per period.
+    others_seen: Vec<CellSet>,
+    obstacles: &'a [ObstacleCell],
+    hidden: CellSet,
+    /// The best leaf so far, keyed by (distance strayed out of the RoI, cost).
+    best: Option<((f64, f64), Cost, Node)>,
+    sequences: usize,
+    excluded: usize,
 }
 
 /// Picks the best sequence of yaw increments (DESIGN.md §4).
@@ -167,148 +175,109 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     for s in input.sets {
         sets.or_assign(&params.grids.downsample(s));
     }
-    let hidden = params.grids.downsample(input.recently_hidden);
     let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
-    let others_seen: Vec<CellSet> = (0..params.horizon)
-        .map(|period| seen_by_others(params, input.others, period, obstacles))
-        .collect();
-
-    let root = Node {
+    let mut search = Search {
+        params,
+        others_seen: (0..params.horizon)
+            .map(|period| seen_by_others(params, input.others, period, obstacles))
+            .collect(),
+        obstacles,
+        hidden: params.grids.downsample(input.recently_hidden),
+        best: None,
+        sequences: 0,
+        excluded: 0,
+    };
+    search.expand(&Node {
         increments: Vec::new(),
         state: input.state,
         poses: Vec::new(),
         sets,
         stray_m: 0.0,
-    };
-    let mut best: Option<Best> = None;
-    let mut sequences = 0usize;
-    let mut excluded = 0usize;
-    expand(
-        params,
-        &root,
-        &others_seen,
-        obstacles,
-        &hidden,
-        &mut best,
-        &mut sequences,
-        &mut excluded,
-    );
-
-    match best {
-        Some(b) => Decision {
-            yaw_ref: input.state.yaw + b.node.increments[0],
-            increments: b.node.increments,
-            cost: b.cost,
-            view: PlannedView {
-                uav: input.uav,
-                poses: b.node.poses,
-            },
-            sequences,
-            excluded,
-        },
+    });
+    let (increments, cost, poses) = match search.best {
+        Some((_, cost, node)) => (node.increments, cost, node.poses),
         // Only when U is empty; the scenario refuses that, but stay total.
-        None => Decision {
-            increments: Vec::new(),
-            yaw_ref: input.state.yaw,
-            cost: Cost {
+        None => (
+            Vec::new(),
+            Cost {
                 area_m2: 0.0,
                 distance_m: 0.0,
                 hidden_m2: 0.0,
                 total: 0.0,
             },
-            view: PlannedView {
-                uav: input.uav,
-                poses: Vec::new(),
-            },
-            sequences,
-            excluded,
+            Vec::new(),
+        ),
+    };
+    Decision {
+        yaw_ref: input.state.yaw + increments.first().copied().unwrap_or(0.0),
+        increments,
+        cost,
+        view: PlannedView {
+            uav: input.uav,
+            poses,
         },
+        sequences: search.sequences,
+        excluded: search.excluded,
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn expand(
-    params: &GuidanceParams,
-    node: &Node,
-    others_seen: &[CellSet],
-    obstacles: &[ObstacleCell],
-    hidden: &CellSet,
-    best: &mut Option<Best>,
-    sequences: &mut usize,
-    excluded: &mut usize,
-) {
-    let grid = *params.planning_grid();
-    let period = node.increments.len();
-    if period == params.horizon as usize {
-        *sequences += 1;
-        let inside = node.stray_m <= 0.0;
-        if !inside {
-            *excluded += 1;
+impl Search<'_> {
+    fn expand(&mut self, node: &Node) {
+        let params = self.params;
+        let grid = *params.planning_grid();
+        let period = node.increments.len();
+        if period == params.horizon as usize {
+            self.leaf(node);
+            return;
         }
-        let cost = cost(params, node, obstacles, hidden);
-        // Sequences inside the RoI first, then the least stray, then the cost.
-        let key = (!inside, node.stray_m, cost.total);
-        let better = match best {
-            None => true,
-            Some(b) => key.0 < b.key.0 || (key.0 == b.key.0 && (key.1, key.2) < (b.key.1, b.key.2)),
-        };
-        if better {
-            *best = Some(Best {
-                key,
-                cost,
-                node: Node {
-                    increments: node.increments.clone(),
-                    state: node.state,
-                    poses: node.poses.clone(),
-                    sets: node.sets.clone(),
-                    stray_m: node.stray_m,
-                },
+        let period_s = params.steps_per_period as f64 * params.dt;
+        let mut grown = node.sets.dilate(&grid, params.target_max_speed * period_s);
+        if let Some(seen) = self.others_seen.get(period) {
+            grown.and_not_assign(seen);
+        }
+        for &u in &params.increments {
+            let yaw_ref = node.state.yaw + u;
+            let mut state = node.state;
+            let mut poses = node.poses.clone();
+            let mut seen = CellSet::empty(&grid);
+            let mut stray_m = node.stray_m;
+            for _ in 0..params.steps_per_period {
+                state =
+                    flight::advance(state, yaw_ref, params.dt, params.speed, params.max_yaw_rate);
+                stray_m = stray_m.max(stray(&params.region, &state.position));
+                let pose = CameraPose {
+                    position: state.position,
+                    yaw: state.yaw,
+                };
+                view::add_visible_ground(&mut seen, &grid, &params.camera, &pose, self.obstacles);
+                poses.push(pose);
+            }
+            let mut sets = grown.clone();
+            sets.and_not_assign(&seen);
+            let mut increments = node.increments.clone();
+            increments.push(u);
+            self.expand(&Node {
+                increments,
+                state,
+                poses,
+                sets,
+                stray_m,
             });
         }
-        return;
     }
-    let period_s = params.steps_per_period as f64 * params.dt;
-    let mut grown = node.sets.dilate(&grid, params.target_max_speed * period_s);
-    if let Some(seen) = others_seen.get(period) {
-        grown.and_not_assign(seen);
-    }
-    for &u in &params.increments {
-        let yaw_ref = node.state.yaw + u;
-        let mut state = node.state;
-        let mut poses = node.poses.clone();
-        let mut seen = CellSet::empty(&grid);
-        let mut stray_m = node.stray_m;
-        for _ in 0..params.steps_per_period {
-            state = flight::advance(state, yaw_ref, params.dt, params.speed, params.max_yaw_rate);
-            stray_m = stray_m.max(stray(&params.region, &state.position));
-            let pose = CameraPose {
-                position: state.position,
-                yaw: state.yaw,
-            };
-            view::add_visible_ground(&mut seen, &grid, &params.camera, &pose, obstacles);
-            poses.push(pose);
+
+    fn leaf(&mut self, node: &Node) {
+        self.sequences += 1;
+        if node.stray_m > 0.0 {
+            self.excluded += 1;
         }
-        let mut sets = grown.clone();
-        sets.and_not_assign(&seen);
-        let mut increments = node.increments.clone();
-        increments.push(u);
-        let child = Node {
-            increments,
-            state,
-            poses,
-            sets,
-            stray_m,
-        };
-        expand(
-            params,
-            &child,
-            others_seen,
-            obstacles,
-            hidden,
-            best,
-            sequences,
-            excluded,
-        );
+        let cost = cost(self.params, node, self.obstacles, &self.hidden);
+        // Inside the RoI (stray 0) first, then the least stray, then the cost; the strict
+        // comparison keeps the first of equals.
+        let key = (node.stray_m, cost.total);
+        if self.best.as_ref().is_none_or(|(best, _, _)| key < *best) {
+            self.best = Some((key, cost, node.clone()));
+        }
     }
 }
 
@@ -450,7 +419,12 @@ mod tests {
         }
     }
 
-    fn decide(params: &GuidanceParams, sets: &[&CellSet], obstacles: &[ObstacleCell], others: &[PlannedView]) -> Decision {
+    fn decide(
+        params: &GuidanceParams,
+        sets: &[&CellSet],
+        obstacles: &[ObstacleCell],
+        others: &[PlannedView],
+    ) -> Decision {
         let hidden = CellSet::empty(&params.grids.fine);
         plan(
             params,
@@ -517,9 +491,15 @@ mod tests {
         // Make the north blob slightly larger so that without the map it would win.
         let north_big = blob(&params, Point2::new(0.0, 80.0), 18.0);
         let d = decide(&params, &[&north_big, &south], &[], &[]);
-        assert!(d.increments[0] > 0.0, "without the map the larger north blob wins: {d:?}");
+        assert!(
+            d.increments[0] > 0.0,
+            "without the map the larger north blob wins: {d:?}"
+        );
         let d = decide(&params, &[&north_big, &south], &wall, &[]);
-        assert!(d.increments[0] < 0.0, "the hidden north blob must not attract: {d:?}");
+        assert!(
+            d.increments[0] < 0.0,
+            "the hidden north blob must not attract: {d:?}"
+        );
         let _ = north;
     }
 
@@ -546,6 +526,11 @@ mod tests {
             },
         );
         assert!(d.excluded > 0);
-        assert!(d.view.poses.iter().all(|p| p.position.x.abs() <= 150.0 && p.position.y.abs() <= 150.0));
+        assert!(
+            d.view
+                .poses
+                .iter()
+                .all(|p| p.position.x.abs() <= 150.0 && p.position.y.abs() <= 150.0)
+        );
     }
 }

@@ -73,11 +73,11 @@ pub fn add_visible_ground(
         let mut shadows = CellSet::empty(grid);
         let mut any = false;
         for o in obstacles {
-            if let Some(hull) = shadow(&pose.position, o) {
-                if overlaps(&bbox(&hull), &fov_box) {
-                    shadows.fill_convex_polygon(grid, &hull, Coverage::Outer);
-                    any = true;
-                }
+            if let Some(hull) = shadow(&pose.position, o)
+                && overlaps(&bbox(&hull), &fov_box)
+            {
+                shadows.fill_convex_polygon(grid, &hull, Coverage::Outer);
+                any = true;
             }
         }
         if any {
