@@ -265,6 +265,14 @@ impl CellSet {
         self.words.iter().map(|w| w.count_ones() as u64).sum()
     }
 
+    /// A 64-bit fingerprint of the set's cells (FNV-1a over the words), to compare sets held
+    /// by different processes without shipping them.
+    pub fn digest(&self) -> u64 {
+        self.words.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &w| {
+            (h ^ w).wrapping_mul(0x100_0000_01b3)
+        })
+    }
+
     /// Area of the set, m² (an upper bound of the true set's area for outer sets).
     pub fn area(&self, grid: &GroundGrid) -> Real {
         self.count() as Real * grid.cell_area()

@@ -1,6 +1,7 @@
 //! setfleet's integration tests: one test binary, one module per topic. They spawn the real
 //! binaries (built on demand by the harness in `tests/src/lib.rs`).
 
+mod agents;
 mod cli;
 mod frames;
 mod render;

@@ -57,6 +57,9 @@ pub struct AgentConfig {
     pub world_timeout: Duration,
     /// Interval of hellos until the first frame arrives.
     pub hello_interval: Duration,
+    /// Fault-injection hook: how long the agent sits on the token before planning, so tests
+    /// can kill a holder mid-turn (0 in normal runs).
+    pub hold_token: Duration,
 }
 
 impl AgentConfig {
@@ -70,6 +73,7 @@ impl AgentConfig {
             token_wait: Duration::from_secs(3),
             world_timeout: Duration::from_secs(10),
             hello_interval: Duration::from_millis(200),
+            hold_token: Duration::ZERO,
         }
     }
 }
@@ -128,6 +132,13 @@ pub struct AgentReport {
     pub token_timeouts: u64,
     /// Steps whose peers' estimates did not all arrive in time.
     pub peer_timeouts: u64,
+    /// Cells of `X̄` after the last fusion.
+    pub final_undetected_cells: u64,
+    /// Fingerprint of `X̄` after the last fusion ([`protocol::raster::CellSet::digest`]):
+    /// agents that fused the same estimates hold the same set.
+    pub final_undetected_digest: u64,
+    /// Step of the last frame.
+    pub final_step: u64,
     /// How the loop ended.
     pub end: Option<EndReason>,
 }
@@ -186,7 +197,13 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentRe
     agent.refresh_live();
     tracing::info!(uav = config.uav, run = %config.run_id, incarnation, "agent started");
     let result = agent.main_loop();
-    let report = agent.report;
+    let state = agent.estimator.state();
+    let report = AgentReport {
+        final_undetected_cells: state.undetected.count(),
+        final_undetected_digest: state.undetected.digest(),
+        final_step: state.step,
+        ..agent.report
+    };
     result.map(|end| AgentReport {
         end: Some(end),
         ..report
@@ -539,6 +556,10 @@ impl Agent<'_> {
             match self.ring.turn(round, &live, waited_out) {
                 Turn::Done => return Ok(None),
                 Turn::Decide { others } => {
+                    if !self.config.hold_token.is_zero() {
+                        tracing::info!(round, hold = ?self.config.hold_token, "holding the token");
+                        std::thread::sleep(self.config.hold_token);
+                    }
                     if waited_out {
                         self.report.token_timeouts += 1;
                         tracing::warn!(round, "token holder silent: deciding without it");

@@ -12,6 +12,10 @@ use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use uav_agent::agent::{self, AgentConfig, AgentStartError};
 
+/// Environment variable (milliseconds) that makes the agent sit on the guidance token before
+/// planning: a test hook to kill a holder mid-turn.
+const HOLD_TOKEN_ENV: &str = "SETFLEET_TEST_HOLD_TOKEN_MS";
+
 /// Runs one UAV's estimator, guidance and peer exchange in a setfleet run.
 #[derive(Debug, Parser)]
 #[command(name = "uav-agent", version)]
@@ -66,6 +70,13 @@ fn main() -> ExitCode {
     config.peer_wait = std::time::Duration::from_millis(args.peer_wait_ms);
     config.token_wait = std::time::Duration::from_millis(args.token_wait_ms);
     config.world_timeout = std::time::Duration::from_millis(args.world_timeout_ms);
+    // Fault-injection hook for tests (inherited through `fleet run`): sit on the token.
+    if let Some(ms) = std::env::var(HOLD_TOKEN_ENV)
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+    {
+        config.hold_token = std::time::Duration::from_millis(ms);
+    }
     let shutdown = AtomicBool::new(false);
     match agent::run(config, &shutdown) {
         Ok(report) => {

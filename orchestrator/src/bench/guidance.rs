@@ -1,0 +1,199 @@
+//! `fleet bench guidance`: the time of one MPC decision ([`uav_agent::guidance::plan`]) on
+//! realistic inputs.
+//!
+//! Method: the fleet runs in-process ([`FleetSim`]) so the sets and each UAV's map are a run's.
+//! At every guidance step after the warm-up, each UAV's decision is timed as the agent takes it
+//! (the same inputs as `uav_agent::agent`: its pose, `X̄` and every `X_j`, the recently hidden
+//! ground, the obstacle cells of its map) with 0, 1, 2 and 3 other UAVs' plans in the token
+//! (the round's real plans of the other UAVs), `repeats` times each.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use protocol::scenario::Scenario;
+use protocol::wire::PlannedView;
+use uav_agent::guidance;
+
+use super::estimator::{FleetSim, PlanningState};
+use super::{BenchCase, BenchReport, Metrics, Stats};
+use crate::cli::{ScenarioArgs, UsageError};
+
+/// Most plans of other UAVs put in the token.
+const MAX_OTHERS: usize = 3;
+
+/// `fleet bench guidance`.
+#[derive(Debug, Args)]
+pub struct BenchGuidanceArgs {
+    /// The scenario (default: the paper's).
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// Steps simulated.
+    #[arg(long, default_value_t = 120)]
+    pub steps: u64,
+    /// Steps simulated before decisions are timed (so the sets and the maps are real).
+    #[arg(long, default_value_t = 60)]
+    pub warm_up: u64,
+    /// Timed decisions per UAV, guidance step and number of plans in the token.
+    #[arg(long, default_value_t = 3)]
+    pub repeats: u32,
+    /// JSON report file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// A validated `fleet bench guidance`.
+#[derive(Debug, Clone)]
+pub struct BenchGuidanceConfig {
+    /// The scenario.
+    pub scenario: Scenario,
+    /// Steps simulated.
+    pub steps: u64,
+    /// Steps before timing.
+    pub warm_up: u64,
+    /// Repeats per decision.
+    pub repeats: u32,
+    /// JSON report file.
+    pub out: Option<PathBuf>,
+}
+
+impl BenchGuidanceArgs {
+    /// Checks the counts.
+    pub fn validate(&self) -> Result<BenchGuidanceConfig, UsageError> {
+        let scenario = self.scenario.load()?;
+        if self.warm_up >= self.steps || self.steps > 100_000 {
+            return Err(UsageError(format!(
+                "--steps {} --warm-up {}: need warm-up < steps <= 100000",
+                self.steps, self.warm_up
+            )));
+        }
+        if !(1..=1000).contains(&self.repeats) {
+            return Err(UsageError(format!(
+                "--repeats {} is out of range; accepted: 1 to 1000",
+                self.repeats
+            )));
+        }
+        Ok(BenchGuidanceConfig {
+            scenario,
+            steps: self.steps,
+            warm_up: self.warm_up,
+            repeats: self.repeats,
+            out: self.out.clone(),
+        })
+    }
+}
+
+/// The plans of the token for `uav` with `count` of the other UAVs' plans of the round.
+fn token_for(uav: usize, round: &[PlannedView], count: usize) -> Vec<PlannedView> {
+    round
+        .iter()
+        .filter(|p| p.uav as usize != uav)
+        .take(count)
+        .cloned()
+        .collect()
+}
+
+/// Runs the fleet and times the decisions.
+pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
+    let mut report = BenchReport::new("guidance");
+    let mut sim = FleetSim::new(&config.scenario)?;
+    let mut by_others: Vec<Vec<f64>> = vec![Vec::new(); MAX_OTHERS + 1];
+    let mut obstacle_cells = Vec::new();
+    let mut sequences = 0;
+    let mut rounds = 0u64;
+    let period = u64::from(sim.guidance().steps_per_period.max(1));
+    for _ in 0..config.steps {
+        // Time the decisions where the agents take them: after the frame of a guidance step
+        // has been folded in and the peers' estimates fused.
+        let step = sim.step()?.step;
+        if step >= config.warm_up && step.is_multiple_of(period) {
+            rounds += 1;
+            let round: Vec<PlannedView> = sim.plan_round(&[])?.into_iter().map(|(_, v)| v).collect();
+            for (i, estimator) in sim.estimators().iter().enumerate() {
+                let state = PlanningState::of(estimator)?;
+                obstacle_cells.push(state.obstacle_count() as f64);
+                for (count, times) in by_others.iter_mut().enumerate() {
+                    let others = token_for(i, &round, count);
+                    let input = state.input(i as u32, &others);
+                    for _ in 0..config.repeats {
+                        let start = Instant::now();
+                        let decision = guidance::plan(sim.guidance(), &input);
+                        times.push(start.elapsed().as_secs_f64() * 1e3);
+                        sequences = decision.sequences;
+                    }
+                }
+            }
+        }
+    }
+    let all: Vec<f64> = by_others.iter().flatten().copied().collect();
+    let overall = Stats::from_samples(&all).ok_or_else(|| {
+        anyhow::anyhow!(
+            "no decision was timed: no guidance step in steps {}..{}",
+            config.warm_up,
+            config.steps
+        )
+    })?;
+    for (count, times) in by_others.iter().enumerate() {
+        if let Some(s) = Stats::from_samples(times) {
+            report
+                .cases
+                .push(decision_case(&format!("others={count}"), count, &s));
+        }
+    }
+    report.cases.push(decision_case("all", MAX_OTHERS, &overall));
+    let sum = &mut report.summary;
+    sum.insert("decision_ms_median".into(), overall.median.into());
+    sum.insert("decision_ms_p99".into(), overall.p99.into());
+    sum.insert("decisions".into(), overall.n.into());
+    sum.insert("rounds".into(), rounds.into());
+    sum.insert("sequences_per_decision".into(), sequences.into());
+    if let Some(s) = Stats::from_samples(&obstacle_cells) {
+        sum.insert("obstacle_cells_median".into(), s.median.into());
+    }
+    sum.insert("goal_decision_ms_median".into(), 20.0.into());
+    Ok(report)
+}
+
+fn decision_case(name: &str, others: usize, s: &Stats) -> BenchCase {
+    let mut metrics = Metrics::default();
+    metrics.push("median_ms", s.median);
+    metrics.push("p10_ms", s.p10);
+    metrics.push("p90_ms", s.p90);
+    metrics.push("p99_ms", s.p99);
+    metrics.push("max_ms", s.max);
+    metrics.push("n", s.n as f64);
+    let mut params = BTreeMap::new();
+    params.insert("others_max".to_owned(), others.into());
+    BenchCase {
+        name: name.to_owned(),
+        params,
+        metrics,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::camera::CameraPose;
+    use protocol::math::Point3;
+
+    fn view(uav: u32) -> PlannedView {
+        PlannedView {
+            uav,
+            poses: vec![CameraPose {
+                position: Point3::new(0.0, 0.0, 50.0),
+                yaw: 0.0,
+            }],
+        }
+    }
+
+    #[test]
+    fn the_token_never_holds_the_planning_uavs_own_plan() {
+        let round: Vec<PlannedView> = (0..4).map(view).collect();
+        let t = token_for(1, &round, 3);
+        assert_eq!(t.iter().map(|p| p.uav).collect::<Vec<_>>(), vec![0, 2, 3]);
+        assert_eq!(token_for(0, &round, 1).len(), 1);
+        assert!(token_for(2, &round, 0).is_empty());
+    }
+}

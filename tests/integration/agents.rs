@@ -1,0 +1,254 @@
+//! A world-server and real agent processes, without the orchestrator: the estimator exchange,
+//! identity checks, bad peer messages and a lost world.
+
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+use iceoryx2::prelude::SignalHandlingMode;
+use protocol::ipc::{RunNode, WakeEvent, WirePublisher, scan_nodes};
+use protocol::wire::{PROTOCOL_VERSION, WireHeader, WireKind};
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary};
+
+/// A small scenario with a camera large enough to see and identify cars.
+fn scenario(duration_s: f64, uavs: u32) -> String {
+    format!(
+        "seed = 3\nduration_s = {duration_s}\n\n[region]\nhalf_extent_m = 100.0\n\n\
+         [targets]\ncount = 4\n\n[uavs]\ncount = {uavs}\n\n[camera]\nrows = 120\ncols = 160\n"
+    )
+}
+
+fn world(t: &TestRun, scenario: &std::path::Path, agents: &str) -> ChildGuard {
+    ChildGuard::spawn(
+        Command::new(binary("world-server"))
+            .arg("--run-id")
+            .arg(t.run.as_str())
+            .arg("--scenario")
+            .arg(scenario)
+            .args(["--agents", agents, "--start-timeout-ms", "60000"])
+            .args(["--ack-timeout-ms", "30000"]),
+    )
+}
+
+fn agent(t: &TestRun, scenario: &std::path::Path, id: u32, extra: &[&str]) -> ChildGuard {
+    ChildGuard::spawn(
+        Command::new(binary("uav-agent"))
+            .arg("--run-id")
+            .arg(t.run.as_str())
+            .arg("--scenario")
+            .arg(scenario)
+            .arg("--id")
+            .arg(id.to_string())
+            .args(extra),
+    )
+}
+
+fn finish(mut child: ChildGuard, what: &str) -> Output {
+    child
+        .wait_timeout(EXIT_TIMEOUT)
+        .unwrap_or_else(|| panic!("{what} did not end within {EXIT_TIMEOUT:?}"))
+}
+
+fn report(out: &Output) -> serde_json::Value {
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text.lines().last().unwrap_or_default();
+    serde_json::from_str(line).unwrap_or_else(|e| {
+        panic!(
+            "no JSON report ({e}) in {text:?}; stderr: {}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })
+}
+
+fn wait_until(what: &str, timeout: Duration, mut done: impl FnMut() -> bool) {
+    let deadline = Instant::now() + timeout;
+    while !done() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn agent_alive(t: &TestRun, id: u32) -> bool {
+    scan_nodes(&t.run, false).is_ok_and(|s| s.is_alive(&RunNode::agent_name(id)))
+}
+
+#[test]
+fn two_agents_shrink_their_sets_and_agree_after_fusion() {
+    let t = TestRun::new("two-agents");
+    let file = t.write("scenario.toml", &scenario(30.0, 2));
+    let w = world(&t, &file, "0,1");
+    let a0 = agent(&t, &file, 0, &[]);
+    let a1 = agent(&t, &file, 1, &[]);
+    let (r0, r1) = (finish(a0, "agent 0"), finish(a1, "agent 1"));
+    let wo = finish(w, "world-server");
+    assert!(
+        wo.status.success(),
+        "world: {}",
+        String::from_utf8_lossy(&wo.stderr)
+    );
+    let (r0, r1) = (report(&r0), report(&r1));
+    let cells = 400 * 400; // 200 m at 0.5 m
+    for r in [&r0, &r1] {
+        assert_eq!(r["frames"], 60, "{r}");
+        assert_eq!(r["estimates_received"], 60, "{r}");
+        assert_eq!(r["end"], "EndOfRun");
+        assert_eq!(r["final_step"], 59);
+        let left = r["final_undetected_cells"].as_u64().unwrap();
+        assert!(left < cells, "X̄ did not shrink: {left} of {cells}");
+        assert!(r["decisions"].as_u64().unwrap() >= 10, "{r}");
+    }
+    assert_eq!(r0["final_undetected_digest"], r1["final_undetected_digest"]);
+    assert_eq!(r0["final_undetected_cells"], r1["final_undetected_cells"]);
+}
+
+#[test]
+fn an_agent_outside_the_fleet_is_refused() {
+    let t = TestRun::new("outside");
+    let file = t.write("scenario.toml", &scenario(5.0, 2));
+    let out = finish(agent(&t, &file, 5, &[]), "agent 5");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("outside the fleet") && err.contains("2 UAVs"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_second_agent_with_a_live_id_is_refused() {
+    let t = TestRun::new("duplicate");
+    let file = t.write("scenario.toml", &scenario(20.0, 1));
+    let w = world(&t, &file, "0");
+    let first = agent(&t, &file, 0, &[]);
+    wait_until("agent 0 to be live", Duration::from_secs(30), || {
+        agent_alive(&t, 0)
+    });
+    let out = finish(agent(&t, &file, 0, &[]), "second agent 0");
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("already live"), "{err}");
+    // The first one is untouched and completes the run.
+    let r = report(&finish(first, "agent 0"));
+    assert_eq!(r["frames"], 40, "{r}");
+    assert!(finish(w, "world-server").status.success());
+}
+
+/// Publishes one message on a wire service with the given header fields.
+fn publish(publisher: &WirePublisher, header: WireHeader, bytes: &[u8]) {
+    let mut sample = publisher.loan_slice_uninit(bytes.len()).unwrap();
+    *sample.user_header_mut() = header;
+    sample.write_from_slice(bytes).send().unwrap();
+}
+
+#[test]
+fn bad_peer_messages_are_counted_and_dropped() {
+    let t = TestRun::new("bad-peer");
+    // Two UAVs in the scenario, but only agent 0 runs: the test speaks on UAV 1's services
+    // from a node that is not an agent, so agent 0 never waits for it.
+    let file = t.write("scenario.toml", &scenario(20.0, 2));
+    let w = world(&t, &file, "0");
+    let a0 = agent(&t, &file, 0, &[]);
+    wait_until("agent 0 to be live", Duration::from_secs(30), || {
+        agent_alive(&t, 0)
+    });
+    let node = RunNode::new(&t.run, "intruder", SignalHandlingMode::Disabled).unwrap();
+    let estimates = node.open_estimate(1).unwrap();
+    let est = RunNode::wire_publisher(&estimates, 1024).unwrap();
+    let guidance = node.open_guidance().unwrap();
+    let tok = RunNode::wire_publisher(&guidance, 1024).unwrap();
+    let wake = node
+        .open_agent_wake(0)
+        .unwrap()
+        .notifier_builder()
+        .create()
+        .unwrap();
+    let good = |kind: WireKind, len: usize| WireHeader {
+        version: PROTOCOL_VERSION,
+        kind: kind as u32,
+        run_tag: t.run.tag(),
+        sender: 1,
+        len: len as u32,
+        step: 3,
+        sent_unix_ns: 0,
+    };
+    let garbage: Vec<u8> = (0..200u32).map(|i| (i * 37 % 251) as u8).collect();
+    for _ in 0..10 {
+        // Corrupted / truncated payloads with a valid header.
+        publish(&est, good(WireKind::Estimate, garbage.len()), &garbage);
+        publish(&est, good(WireKind::Estimate, 3), &garbage[..3]);
+        // Another protocol version, another run, a header lying about the length or sender.
+        publish(
+            &est,
+            WireHeader {
+                version: 99,
+                ..good(WireKind::Estimate, 8)
+            },
+            &garbage[..8],
+        );
+        publish(
+            &est,
+            WireHeader {
+                run_tag: 1,
+                ..good(WireKind::Estimate, 8)
+            },
+            &garbage[..8],
+        );
+        publish(&est, good(WireKind::Estimate, 100), &garbage[..8]);
+        publish(
+            &est,
+            WireHeader {
+                sender: 0,
+                ..good(WireKind::Estimate, 8)
+            },
+            &garbage[..8],
+        );
+        // A corrupted token.
+        publish(&tok, good(WireKind::Token, 50), &garbage[..50]);
+        let _ = wake.notify_with_custom_event_id(WakeEvent::Estimate.id());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let r = report(&finish(a0, "agent 0"));
+    assert!(finish(w, "world-server").status.success());
+    assert_eq!(r["frames"], 40, "the agent went on: {r}");
+    let dropped = &r["dropped"];
+    for key in [
+        "estimate:Malformed",
+        "estimate:Version",
+        "estimate:OtherRun",
+        "estimate:Length",
+        "estimate:Sender",
+        "token:Malformed",
+    ] {
+        assert!(
+            dropped[key].as_u64().unwrap_or(0) >= 1,
+            "{key} not counted: {dropped}"
+        );
+    }
+}
+
+#[test]
+fn agents_exit_with_a_clear_message_when_the_world_is_killed() {
+    let t = TestRun::new("world-killed");
+    let file = t.write("scenario.toml", &scenario(300.0, 2));
+    let w = world(&t, &file, "0,1");
+    let timeout = ["--world-timeout-ms", "1500"];
+    let a0 = agent(&t, &file, 0, &timeout);
+    let a1 = agent(&t, &file, 1, &timeout);
+    wait_until("both agents", Duration::from_secs(30), || {
+        agent_alive(&t, 0) && agent_alive(&t, 1)
+    });
+    std::thread::sleep(Duration::from_secs(2));
+    w.signal(libc::SIGKILL);
+    for (a, name) in [(a0, "agent 0"), (a1, "agent 1")] {
+        let out = finish(a, name);
+        assert_eq!(out.status.code(), Some(1), "{name}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("world-server") && err.contains("gone"),
+            "{name}: {err}"
+        );
+    }
+    drop(w);
+    // The dead world's resources are cleaned by whoever scans next; nothing stays alive.
+    let scan = scan_nodes(&t.run, true).unwrap();
+    assert!(scan.alive.is_empty(), "{scan:?}");
+}
