@@ -134,9 +134,9 @@ fn a_second_agent_with_a_live_id_is_refused() {
 
 /// Publishes one message on a wire service with the given header fields.
 fn publish(publisher: &WirePublisher, header: WireHeader, bytes: &[u8]) {
-    let mut sample = publisher.loan_slice_uninit(bytes.len()).unwrap();
+    let mut sample = publisher.loan_slice_uninit(bytes.len()).expect("loan a sample");
     *sample.user_header_mut() = header;
-    sample.write_from_slice(bytes).send().unwrap();
+    sample.write_from_slice(bytes).send().expect("send");
 }
 
 #[test]
