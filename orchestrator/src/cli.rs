@@ -18,10 +18,17 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum FleetCommand {
+    /// Run the fleet once: world-server and agents as processes; results into `--out`.
+    Run(crate::run::config::RunArgs),
+    /// Run every variant on seeds 1..=N and write the paper's Table I layout.
+    Sweep(crate::sweep::SweepArgs),
     /// Render one UAV's camera frame at a given time as pictures.
     Render(RenderArgs),
     /// Measure a part of the system and write a JSON report.
     Bench(BenchArgs),
+    /// One process of `fleet bench ipc` (started by it).
+    #[command(hide = true)]
+    BenchChild(crate::bench::ipc::BenchChildArgs),
 }
 
 /// Where the scenario comes from: a file and `KEY=VALUE` overrides.
@@ -73,6 +80,12 @@ pub struct BenchArgs {
 pub enum BenchKind {
     /// CVS frame rendering (ray casts), per thread count.
     Render(BenchRenderArgs),
+    /// Moving frames, estimates and the token between processes (iceoryx2 vs a Unix socket).
+    Ipc(crate::bench::ipc::BenchIpcArgs),
+    /// One estimator step per frame, its phases, message sizes and fusion.
+    Estimator(crate::bench::estimator::BenchEstimatorArgs),
+    /// One MPC guidance decision.
+    Guidance(crate::bench::guidance::BenchGuidanceArgs),
 }
 
 /// `fleet bench render`.

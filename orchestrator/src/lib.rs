@@ -5,6 +5,9 @@
 //!
 //! - [`cli`]: raw clap arguments and their validation into configs (errors name the flag or
 //!   the scenario key and the accepted range: exit code 2).
+//! - [`run`]: `fleet run`, one run of the fleet as processes; [`observe`] measures it and
+//!   [`results`] writes what it produced.
+//! - [`sweep`]: `fleet sweep`, every variant on several seeds, the paper's Table I.
 //! - [`render_cmd`]: `fleet render`, one frame as pictures.
 //! - [`bench`]: `fleet bench`, whole-system measurements as [`bench::BenchReport`]s.
 //! - [`pictures`]: plotters drawings with the bundled font.
@@ -24,8 +27,12 @@
 
 pub mod bench;
 pub mod cli;
+pub mod observe;
 pub mod pictures;
 pub mod render_cmd;
+pub mod results;
+pub mod run;
+pub mod sweep;
 
 use cli::{BenchKind, Cli, FleetCommand, UsageError};
 
@@ -58,13 +65,34 @@ pub fn run(cli: Cli) -> Outcome {
         return Outcome::Failed;
     }
     let result = match cli.command {
+        FleetCommand::Run(args) => match args.validate() {
+            Ok(config) => return finish(run::run(&config)),
+            Err(e) => return bad_input(e),
+        },
+        FleetCommand::Sweep(args) => match args.validate() {
+            Ok(config) => return finish(sweep::run(&config)),
+            Err(e) => return bad_input(e),
+        },
         FleetCommand::Render(args) => match args.validate() {
             Ok(config) => render_cmd::run(&config),
             Err(e) => return bad_input(e),
         },
+        FleetCommand::BenchChild(args) => bench::ipc::roles::run(&args),
         FleetCommand::Bench(args) => match args.kind {
             BenchKind::Render(args) => match args.validate() {
                 Ok(config) => bench_render(&config),
+                Err(e) => return bad_input(e),
+            },
+            BenchKind::Ipc(args) => match args.validate() {
+                Ok(c) => bench::ipc::run(&c).and_then(|r| r.publish(c.out.as_deref())),
+                Err(e) => return bad_input(e),
+            },
+            BenchKind::Estimator(args) => match args.validate() {
+                Ok(c) => bench::estimator::run(&c).and_then(|r| r.publish(c.out.as_deref())),
+                Err(e) => return bad_input(e),
+            },
+            BenchKind::Guidance(args) => match args.validate() {
+                Ok(c) => bench::guidance::run(&c).and_then(|r| r.publish(c.out.as_deref())),
                 Err(e) => return bad_input(e),
             },
         },
@@ -76,6 +104,14 @@ pub fn run(cli: Cli) -> Outcome {
             Outcome::Failed
         }
     }
+}
+
+/// The outcome of a command that decides its own exit code.
+fn finish(result: anyhow::Result<Outcome>) -> Outcome {
+    result.unwrap_or_else(|e| {
+        eprintln!("fleet: {e:#}");
+        Outcome::Failed
+    })
 }
 
 fn bad_input(e: UsageError) -> Outcome {

@@ -2,12 +2,12 @@
 //! identity checks, bad peer messages and a lost world.
 
 use std::process::{Command, Output};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use iceoryx2::prelude::SignalHandlingMode;
 use protocol::ipc::{RunNode, WakeEvent, WirePublisher, scan_nodes};
 use protocol::wire::{PROTOCOL_VERSION, WireHeader, WireKind};
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary};
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, wait_until};
 
 /// A small scenario with a camera large enough to see and identify cars.
 fn scenario(duration_s: f64, uavs: u32) -> String {
@@ -57,14 +57,6 @@ fn report(out: &Output) -> serde_json::Value {
             String::from_utf8_lossy(&out.stderr)
         )
     })
-}
-
-fn wait_until(what: &str, timeout: Duration, mut done: impl FnMut() -> bool) {
-    let deadline = Instant::now() + timeout;
-    while !done() {
-        assert!(Instant::now() < deadline, "timed out waiting for {what}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 fn agent_alive(t: &TestRun, id: u32) -> bool {
@@ -134,7 +126,9 @@ fn a_second_agent_with_a_live_id_is_refused() {
 
 /// Publishes one message on a wire service with the given header fields.
 fn publish(publisher: &WirePublisher, header: WireHeader, bytes: &[u8]) {
-    let mut sample = publisher.loan_slice_uninit(bytes.len()).expect("loan a sample");
+    let mut sample = publisher
+        .loan_slice_uninit(bytes.len())
+        .expect("loan a sample");
     *sample.user_header_mut() = header;
     sample.write_from_slice(bytes).send().expect("send");
 }
@@ -251,4 +245,77 @@ fn agents_exit_with_a_clear_message_when_the_world_is_killed() {
     // The dead world's resources are cleaned by whoever scans next; nothing stays alive.
     let scan = scan_nodes(&t.run, true).unwrap();
     assert!(scan.alive.is_empty(), "{scan:?}");
+}
+
+#[test]
+fn a_killed_token_holder_is_skipped_and_the_survivors_process_every_step() {
+    let t = TestRun::new("kill-holder");
+    let file = t.write("scenario.toml", &scenario(30.0, 3));
+    let w = world(&t, &file, "0,1,2");
+    let a0 = agent(&t, &file, 0, &[]);
+    // Agent 1 sits on the token for a long time at every turn: it holds it when killed.
+    let mut cmd = Command::new(binary("uav-agent"));
+    cmd.arg("--run-id")
+        .arg(t.run.as_str())
+        .arg("--scenario")
+        .arg(&file)
+        .args(["--id", "1"])
+        .env("SETFLEET_TEST_HOLD_TOKEN_MS", "60000");
+    let a1 = ChildGuard::spawn(&mut cmd);
+    let a2 = agent(&t, &file, 2, &[]);
+    wait_until("agent 1 to hold the token", Duration::from_secs(60), || {
+        std::fs::read_dir("/proc").is_ok() && agent_alive(&t, 1) && agent_alive(&t, 2)
+    });
+    // Round 0 starts at the first frame: agent 0 decides, then agent 1 takes the token and
+    // sits on it. Give it time to get there, then kill it mid-turn.
+    std::thread::sleep(Duration::from_secs(3));
+    a1.signal(libc::SIGKILL);
+    let (r0, r2) = (
+        report(&finish(a0, "agent 0")),
+        report(&finish(a2, "agent 2")),
+    );
+    assert!(finish(w, "world-server").status.success());
+    drop(a1);
+    let rounds = 60 / 6;
+    for r in [&r0, &r2] {
+        assert_eq!(r["frames"], 60, "a survivor missed steps: {r}");
+        assert_eq!(r["decisions"], rounds, "a survivor missed a round: {r}");
+    }
+    // Agent 2 took over from the dead holder at once, without waiting out a timeout.
+    assert_eq!(r2["token_timeouts"], 0, "{r2}");
+}
+
+#[test]
+fn a_restarted_agent_rebuilds_its_sets_from_its_peers() {
+    let t = TestRun::new("restart");
+    let file = t.write("scenario.toml", &scenario(120.0, 2));
+    let w = world(&t, &file, "0,1");
+    let a0 = agent(&t, &file, 0, &[]);
+    let a1 = agent(&t, &file, 1, &[]);
+    wait_until("both agents", Duration::from_secs(30), || {
+        agent_alive(&t, 0) && agent_alive(&t, 1)
+    });
+    std::thread::sleep(Duration::from_millis(1500));
+    a1.signal(libc::SIGKILL);
+    drop(a1);
+    std::thread::sleep(Duration::from_millis(500));
+    let again = agent(&t, &file, 1, &[]);
+    let (r0, r1) = (
+        report(&finish(a0, "agent 0")),
+        report(&finish(again, "agent 1")),
+    );
+    assert!(finish(w, "world-server").status.success());
+    let steps = 240;
+    assert_eq!(r0["frames"], steps, "the survivor missed steps: {r0}");
+    let rejoined = r1["frames"].as_u64().unwrap();
+    assert!(
+        rejoined > 0 && rejoined < steps,
+        "restarted agent frames: {r1}"
+    );
+    assert_eq!(r1["end"], "EndOfRun");
+    // After fusing its peer's estimates the newcomer holds the same X̄ as the survivor.
+    assert_eq!(
+        r0["final_undetected_digest"], r1["final_undetected_digest"],
+        "{r0} {r1}"
+    );
 }

@@ -2,6 +2,8 @@
 //! binaries (built on demand by the harness in `tests/src/lib.rs`).
 
 mod agents;
+mod bench;
 mod cli;
 mod frames;
 mod render;
+mod run;

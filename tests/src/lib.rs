@@ -227,3 +227,29 @@ pub fn small_scenario_toml(duration_s: f64) -> String {
          [targets]\ncount = 3\n\n[uavs]\ncount = 2\n\n[camera]\nrows = 36\ncols = 48\n"
     )
 }
+
+/// Processes whose command line mentions `needle` (e.g. a run id): (pid, command line).
+pub fn processes_mentioning(needle: &str) -> Vec<(u32, String)> {
+    let own = std::process::id();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .filter_map(|e| {
+            let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+            let raw = std::fs::read(e.path().join("cmdline")).ok()?;
+            let cmdline = String::from_utf8_lossy(&raw).replace('\0', " ");
+            (pid != own && cmdline.contains(needle)).then(|| (pid, cmdline.trim().to_owned()))
+        })
+        .collect()
+}
+
+/// Waits until `done` holds, polling every 20 ms; panics with `what` after `timeout`.
+pub fn wait_until(what: &str, timeout: Duration, mut done: impl FnMut() -> bool) {
+    let deadline = Instant::now() + timeout;
+    while !done() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}

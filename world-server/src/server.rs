@@ -299,6 +299,9 @@ struct Link {
     live: bool,
     /// Newest step it answered (hello excluded).
     last_step: Option<u64>,
+    /// Newest step whose frame it was sent: only that frame's ack is awaited, so an agent
+    /// that (re)joins while a step is out is awaited from the next one.
+    sent: Option<u64>,
     report: AgentReport,
 }
 
@@ -407,7 +410,7 @@ impl Server<'_> {
             if k > 0 {
                 // A live agent that has not answered the previous frame missed it.
                 for a in self.agents.iter_mut().filter(|a| a.live) {
-                    if a.last_step.is_none_or(|s| s + 1 < k) {
+                    if a.sent == Some(k - 1) && a.last_step != Some(k - 1) {
                         a.report.misses += 1;
                     }
                 }
@@ -590,7 +593,7 @@ impl Server<'_> {
         let agents = self
             .agents
             .iter()
-            .all(|a| !a.live || a.last_step == Some(k));
+            .all(|a| !a.live || a.sent != Some(k) || a.last_step == Some(k));
         let observer =
             !self.observer.expected || !self.observer.live || self.observer.last_step == Some(k);
         agents && observer
@@ -600,7 +603,7 @@ impl Server<'_> {
         for a in self
             .agents
             .iter_mut()
-            .filter(|a| a.live && a.last_step != Some(k))
+            .filter(|a| a.live && a.sent == Some(k) && a.last_step != Some(k))
         {
             tracing::warn!(
                 uav = a.report.uav,
@@ -630,6 +633,7 @@ impl Server<'_> {
                 self.agents[uav].report.send_failures += 1;
                 continue;
             }
+            self.agents[uav].sent = Some(k);
             notify(&self.ports.agent_wake[uav], WakeEvent::Frame);
         }
         match self.ports.truth.loan_uninit() {

@@ -149,11 +149,6 @@ impl FleetSim {
         &self.last_messages
     }
 
-    /// The current step.
-    pub fn step_index(&self) -> u64 {
-        self.world.step()
-    }
-
     /// Whether the current step starts a guidance period.
     pub fn is_guidance_step(&self) -> bool {
         self.world
@@ -325,7 +320,8 @@ pub fn run(config: &BenchEstimatorConfig) -> anyhow::Result<BenchReport> {
         ("prediction", |t| t.prediction),
         ("correction", |t| t.correction),
     ];
-    let all = |f: &dyn Fn(&StepSample) -> Vec<f64>| -> Vec<f64> { samples.iter().flat_map(f).collect() };
+    let all =
+        |f: &dyn Fn(&StepSample) -> Vec<f64>| -> Vec<f64> { samples.iter().flat_map(f).collect() };
     let step = stats_of(
         "step",
         &all(&|s| s.step_time.iter().map(|d| ms(*d)).collect()),
@@ -333,7 +329,10 @@ pub fn run(config: &BenchEstimatorConfig) -> anyhow::Result<BenchReport> {
     report.cases.push(timing_case("step", "ms", &step));
     let mut phase_medians = serde_json::Map::new();
     for (name, f) in phases {
-        let s = stats_of(name, &all(&|s| s.timings.iter().map(|t| ms(f(t))).collect()))?;
+        let s = stats_of(
+            name,
+            &all(&|s| s.timings.iter().map(|t| ms(f(t))).collect()),
+        )?;
         phase_medians.insert(format!("{name}_ms_median"), s.median.into());
         report.cases.push(timing_case(name, "ms", &s));
     }

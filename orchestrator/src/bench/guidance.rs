@@ -109,7 +109,8 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
         let step = sim.step()?.step;
         if step >= config.warm_up && step.is_multiple_of(period) {
             rounds += 1;
-            let round: Vec<PlannedView> = sim.plan_round(&[])?.into_iter().map(|(_, v)| v).collect();
+            let round: Vec<PlannedView> =
+                sim.plan_round(&[])?.into_iter().map(|(_, v)| v).collect();
             for (i, estimator) in sim.estimators().iter().enumerate() {
                 let state = PlanningState::of(estimator)?;
                 obstacle_cells.push(state.obstacle_count() as f64);
@@ -141,7 +142,9 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
                 .push(decision_case(&format!("others={count}"), count, &s));
         }
     }
-    report.cases.push(decision_case("all", MAX_OTHERS, &overall));
+    report
+        .cases
+        .push(decision_case("all", MAX_OTHERS, &overall));
     let sum = &mut report.summary;
     sum.insert("decision_ms_median".into(), overall.median.into());
     sum.insert("decision_ms_p99".into(), overall.p99.into());

@@ -1,9 +1,12 @@
 //! `fleet bench`: whole-system measurements, each written as a [`BenchReport`] (JSON) and
-//! printed as a table. The report type is shared by every kind (`render` now; `ipc`,
-//! `estimator`, `guidance` later): a headline `summary` (the keys DESIGN.md names, flattened at
+//! printed as a table. The report type is shared by every kind (`render`, `ipc`,
+//! `estimator`, `guidance`): a headline `summary` (the keys DESIGN.md names, flattened at
 //! the top level of the JSON), one [`BenchCase`] per configuration measured, the machine, the
 //! command line and the date.
 
+pub mod estimator;
+pub mod guidance;
+pub mod ipc;
 pub mod render;
 
 use std::collections::BTreeMap;
@@ -178,13 +181,20 @@ impl BenchReport {
         };
         let names: Vec<&str> = first.metrics.0.iter().map(|(n, _)| n.as_str()).collect();
         let width = names.iter().map(|n| n.len()).max().unwrap_or(8).max(12);
-        write!(out, "{:<12}", "case")?;
+        let case_width = self
+            .cases
+            .iter()
+            .map(|c| c.name.len())
+            .max()
+            .unwrap_or(4)
+            .max(12);
+        write!(out, "{:<case_width$}", "case")?;
         for n in &names {
             write!(out, " {n:>width$}")?;
         }
         writeln!(out)?;
         for case in &self.cases {
-            write!(out, "{:<12}", case.name)?;
+            write!(out, "{:<case_width$}", case.name)?;
             for n in &names {
                 match case.metrics.get(n) {
                     Some(v) => write!(out, " {:>width$}", format_value(v))?,
@@ -195,6 +205,16 @@ impl BenchReport {
         }
         for (k, v) in &self.summary {
             writeln!(out, "{k}: {v}")?;
+        }
+        Ok(())
+    }
+
+    /// Prints the table to stdout and, with `out`, writes the JSON there.
+    pub fn publish(&self, out: Option<&Path>) -> anyhow::Result<()> {
+        self.print_table(&mut std::io::stdout().lock())?;
+        if let Some(path) = out {
+            self.write_json(path)?;
+            println!("report written to {}", path.display());
         }
         Ok(())
     }

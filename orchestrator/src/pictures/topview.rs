@@ -12,7 +12,7 @@ use super::{FONT, palette};
 const SIDE_PX: u32 = 900;
 
 /// Grey of a building: the taller, the darker.
-fn building_shade(height: f64, lo: f64, hi: f64) -> RGBColor {
+pub(crate) fn building_shade(height: f64, lo: f64, hi: f64) -> RGBColor {
     let t = if hi > lo {
         ((height - lo) / (hi - lo)).clamp(0.0, 1.0)
     } else {

@@ -1,0 +1,678 @@
+//! The observer: a dedicated thread with its own iceoryx2 node ([`RunNode::OBSERVER`]) that
+//! reads the truth, every agent's estimates and the guidance token, computes the metrics of
+//! each step ([`metrics`]), checks the guarantee, and acknowledges each step to a lockstep
+//! world that waits for it (`world-server --wait-observer`).
+//!
+//! iceoryx2 ports are not `Send`, so everything lives on this thread; the tokio side gets one
+//! [`ObserverEvent::Step`] per step over a channel and the [`ObserverReport`] when the thread
+//! ends (at the world's end of run, or when told to stop).
+//!
+//! Per truth step `k`: wait (bounded) until every agent the world sent frame `k` to has
+//! published its estimate of `k` (agents publish before they ack, so it is normally there
+//! already; an agent whose node died is not waited for), fuse and measure, check each
+//! agent's own estimate against the truth, let the orchestrator apply the faults due at that
+//! time ([`ObserverEvent::FaultsDue`]), then ack `k`: in lockstep a killed agent is gone
+//! before frame `k + 1`, so fault runs are reproducible too.
+//!
+//! Signals are left to the tokio side ([`SignalHandlingMode::Disabled`]).
+
+pub mod metrics;
+pub mod tally;
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSet};
+use protocol::frame::CvsFrame;
+use protocol::ipc::{
+    EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, scan_nodes,
+};
+use protocol::scenario::Scenario;
+use protocol::service::RunId;
+use protocol::wire::{
+    HELLO_STEP, ObserverAck, PROTOCOL_VERSION, TargetTruth, TruthState, UavCommand, WireHeader,
+    WireKind,
+};
+use tokio::sync::mpsc::UnboundedSender;
+use uav_agent::estimator::EstimatorConfig;
+use uav_agent::occupancy::OccupancyMap;
+
+use metrics::{FusedSets, ObservedEstimate, SetMetrics, violations};
+use tally::{AgentTally, Comms, ServiceKind};
+
+/// What the observer needs to know about the run.
+#[derive(Clone, Debug)]
+pub struct ObserverConfig {
+    /// The run.
+    pub run: RunId,
+    /// The run's scenario (the grids, the fleet).
+    pub scenario: Scenario,
+    /// Longest wait for the agents' estimates of a step.
+    pub estimate_wait: Duration,
+    /// Simulated times at which faults are due, ascending.
+    pub fault_times: Vec<f64>,
+    /// Longest wait for the orchestrator to apply due faults.
+    pub fault_wait: Duration,
+}
+
+/// The metrics of one step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepMetrics {
+    /// Step.
+    pub step: u64,
+    /// Simulated time, seconds.
+    pub time_s: f64,
+    /// Agents the world sent this step's frame to.
+    pub live_agents: u32,
+    /// Estimates of this step the metrics were computed from.
+    pub estimates: u32,
+    /// The set metrics, `None` when no estimate of the step arrived.
+    pub sets: Option<SetMetrics>,
+    /// Truth-outside-set events this step.
+    pub violations: u32,
+}
+
+/// What the observer tells the tokio side.
+#[derive(Debug)]
+pub enum ObserverEvent {
+    /// A step was measured and acknowledged.
+    Step(StepMetrics),
+    /// Faults are due at `time_s` (step `step`): apply them, then send on `done`. The observer
+    /// acknowledges the step only then (or after its bounded wait).
+    FaultsDue {
+        /// The step.
+        step: u64,
+        /// Its simulated time.
+        time_s: f64,
+        /// Signalled once the faults are applied.
+        done: std::sync::mpsc::Sender<()>,
+    },
+}
+
+/// How the observer's loop ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ObserverEnd {
+    /// The world announced the end of the run and every truth received was processed.
+    EndOfRun,
+    /// The orchestrator stopped it.
+    Stopped,
+}
+
+/// The fleet's final knowledge, for the pictures.
+#[derive(Clone, Debug)]
+pub struct FinalState {
+    /// Step.
+    pub step: u64,
+    /// Simulated time, seconds.
+    pub time_s: f64,
+    /// The fused sets of the step.
+    pub sets: FusedSets,
+    /// The targets' truth at that step.
+    pub targets: Vec<TargetTruth>,
+}
+
+/// Everything the observer gathered, returned when its thread ends.
+#[derive(Clone, Debug)]
+pub struct ObserverReport {
+    /// Truth steps processed.
+    pub steps: u64,
+    /// How it ended.
+    pub end: ObserverEnd,
+    /// Per agent.
+    pub agents: BTreeMap<u32, AgentTally>,
+    /// Traffic per service kind.
+    pub comms: Comms,
+    /// Messages the observer could not use, by reason.
+    pub dropped: BTreeMap<String, u64>,
+    /// The last measured step's fused sets.
+    pub final_state: Option<FinalState>,
+    /// The fleet's map: every map update of every estimate merged.
+    pub oem: OccupancyMap,
+    /// Each UAV's ground track (x, y) per step.
+    pub tracks: Vec<Vec<[f64; 2]>>,
+    /// Wall time from the first truth to the last step's ack.
+    pub stepping: Option<Duration>,
+}
+
+/// Starts the observer thread. Events go to `events`; it ends at the world's end of run or
+/// once `stop` is raised (checked every few tens of milliseconds).
+pub fn spawn(
+    config: ObserverConfig,
+    stop: Arc<AtomicBool>,
+    events: UnboundedSender<ObserverEvent>,
+) -> std::io::Result<JoinHandle<anyhow::Result<ObserverReport>>> {
+    std::thread::Builder::new()
+        .name("observer".into())
+        .spawn(move || observe(&config, &stop, &events))
+}
+
+/// Longest single wait, so the stop flag is noticed promptly.
+const WAIT_SLICE: Duration = Duration::from_millis(20);
+/// Interval of hellos until the first truth arrives.
+const HELLO_INTERVAL: Duration = Duration::from_millis(200);
+/// Interval of node scans while waiting for estimates.
+const SCAN_INTERVAL: Duration = Duration::from_millis(100);
+/// Steps of estimates kept per agent ahead of the truth being processed.
+const MAX_STORED_STEPS: usize = 64;
+
+struct Ports {
+    truth: Subscriber<Ipc, TruthState, ()>,
+    estimates: Vec<(u32, Subscriber<Ipc, [u8], WireHeader>)>,
+    tokens: Subscriber<Ipc, [u8], WireHeader>,
+    ack: Publisher<Ipc, ObserverAck, ()>,
+    world_wake: Notifier<Ipc>,
+    wake: Listener<Ipc>,
+    _services: (
+        PubSubService<TruthState>,
+        Vec<WireService>,
+        WireService,
+        PubSubService<ObserverAck>,
+        Vec<EventService>,
+    ),
+}
+
+impl Ports {
+    fn open(node: &RunNode, uavs: u32) -> anyhow::Result<Ports> {
+        let truth_service = node.open_truth()?;
+        let truth = truth_service.subscriber_builder().create()?;
+        let mut estimate_services = Vec::new();
+        let mut estimates = Vec::new();
+        for uav in 0..uavs {
+            let s = node.open_estimate(uav)?;
+            estimates.push((uav, s.subscriber_builder().create()?));
+            estimate_services.push(s);
+        }
+        let guidance = node.open_guidance()?;
+        let tokens = guidance.subscriber_builder().create()?;
+        let ack_service = node.open_observer_ack()?;
+        let ack = ack_service.publisher_builder().create()?;
+        let world = node.open_world_wake()?;
+        let world_wake = world.notifier_builder().create()?;
+        let own = node.open_observer_wake()?;
+        let wake = own.listener_builder().create()?;
+        Ok(Ports {
+            truth,
+            estimates,
+            tokens,
+            ack,
+            world_wake,
+            wake,
+            _services: (
+                truth_service,
+                estimate_services,
+                guidance,
+                ack_service,
+                vec![world, own],
+            ),
+        })
+    }
+}
+
+fn observe(
+    config: &ObserverConfig,
+    stop: &AtomicBool,
+    events: &UnboundedSender<ObserverEvent>,
+) -> anyhow::Result<ObserverReport> {
+    let uavs = config.scenario.uavs.count;
+    let node = RunNode::new(&config.run, RunNode::OBSERVER, SignalHandlingMode::Disabled)
+        .context("cannot create the observer's iceoryx2 node")?;
+    let ports = Ports::open(&node, uavs).context("cannot open the observer's ports")?;
+    let waitset = node.waitset()?;
+    let _guard = waitset
+        .attach_notification(&ports.wake)
+        .context("cannot wait on the observer's wake-up event")?;
+    let estimator = EstimatorConfig::from_scenario(&config.scenario);
+    let mut observer = Observer {
+        config,
+        run_tag: config.run.tag(),
+        ports: &ports,
+        waitset: &waitset,
+        stop,
+        events,
+        report: ObserverReport {
+            steps: 0,
+            end: ObserverEnd::Stopped,
+            agents: BTreeMap::new(),
+            comms: Comms::default(),
+            dropped: BTreeMap::new(),
+            final_state: None,
+            oem: OccupancyMap::new(estimator.oem_grid),
+            tracks: vec![Vec::new(); uavs as usize],
+            stepping: None,
+        },
+        estimator,
+        truths: VecDeque::new(),
+        store: BTreeMap::new(),
+        next_fault: 0,
+        end_of_run: false,
+        first_truth: None,
+    };
+    observer.main_loop()?;
+    Ok(observer.report)
+}
+
+struct Observer<'a> {
+    config: &'a ObserverConfig,
+    run_tag: u64,
+    ports: &'a Ports,
+    waitset: &'a WaitSet<Ipc>,
+    stop: &'a AtomicBool,
+    events: &'a UnboundedSender<ObserverEvent>,
+    estimator: EstimatorConfig,
+    report: ObserverReport,
+    truths: VecDeque<TruthState>,
+    /// Decoded estimates per agent, by step, not yet measured.
+    store: BTreeMap<u32, BTreeMap<u64, ObservedEstimate>>,
+    next_fault: usize,
+    end_of_run: bool,
+    first_truth: Option<Instant>,
+}
+
+impl Observer<'_> {
+    fn stopping(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    fn main_loop(&mut self) -> anyhow::Result<()> {
+        let mut last_hello: Option<Instant> = None;
+        loop {
+            if self.stopping() {
+                self.report.end = ObserverEnd::Stopped;
+                return Ok(());
+            }
+            if self.first_truth.is_none()
+                && last_hello.is_none_or(|t| t.elapsed() >= HELLO_INTERVAL)
+            {
+                self.send_ack(HELLO_STEP)?;
+                last_hello = Some(Instant::now());
+            }
+            self.drain();
+            if let Some(truth) = self.truths.pop_front() {
+                self.process(&truth)?;
+                continue;
+            }
+            if self.end_of_run {
+                self.report.end = ObserverEnd::EndOfRun;
+                return Ok(());
+            }
+            self.wait(WAIT_SLICE);
+        }
+    }
+
+    /// Waits for a wake-up at most `timeout`; notes the end of the run.
+    fn wait(&mut self, timeout: Duration) {
+        let wake = &self.ports.wake;
+        let mut end = false;
+        let result = self.waitset.wait_and_process_once_with_timeout(
+            |_| {
+                let _ = wake.try_wait(|activation| {
+                    if WakeEvent::from_id(activation.id) == Some(WakeEvent::EndOfRun) {
+                        end = true;
+                    }
+                });
+                CallbackProgression::Continue
+            },
+            timeout,
+        );
+        self.end_of_run |= end;
+        if let Err(e) = result {
+            tracing::warn!(error = ?e, "observer wait failed");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    fn send_ack(&self, step: u64) -> anyhow::Result<()> {
+        self.ports
+            .ack
+            .send_copy(ObserverAck {
+                run_tag: self.run_tag,
+                step,
+            })
+            .context("cannot send the observer's ack")?;
+        if let Err(e) = self
+            .ports
+            .world_wake
+            .notify_with_custom_event_id(WakeEvent::ObserverAck.id())
+        {
+            tracing::debug!(error = ?e, "cannot wake the world");
+        }
+        Ok(())
+    }
+
+    /// Reads everything pending: truths into the queue, estimates decoded into the store,
+    /// tokens counted.
+    fn drain(&mut self) {
+        loop {
+            match self.ports.truth.receive() {
+                Ok(Some(sample)) => {
+                    let truth = *sample.payload();
+                    drop(sample);
+                    if truth.run_tag == self.run_tag {
+                        self.first_truth.get_or_insert_with(Instant::now);
+                        self.report.comms.count(
+                            ServiceKind::Truth,
+                            1,
+                            std::mem::size_of::<TruthState>() as u64,
+                        );
+                        self.truths.push_back(truth);
+                    } else {
+                        self.drop_message("truth:other-run");
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::warn!(error = ?e, "cannot receive truth");
+                    break;
+                }
+            }
+        }
+        for idx in 0..self.ports.estimates.len() {
+            self.drain_estimates(idx);
+        }
+        self.drain_tokens();
+    }
+
+    fn drop_message(&mut self, reason: &str) {
+        *self.report.dropped.entry(reason.to_owned()).or_default() += 1;
+    }
+
+    fn drain_estimates(&mut self, idx: usize) {
+        let (sender, sub) = &self.ports.estimates[idx];
+        let sender = *sender;
+        loop {
+            let sample = match sub.receive() {
+                Ok(Some(s)) => s,
+                Ok(None) => return,
+                Err(e) => {
+                    tracing::warn!(error = ?e, uav = sender, "cannot receive estimates");
+                    return;
+                }
+            };
+            let header = *sample.user_header();
+            let len = sample.payload().len();
+            self.report.comms.count_timed(
+                ServiceKind::Estimates,
+                (len + std::mem::size_of::<WireHeader>()) as u64,
+                header.sent_unix_ns,
+                unix_now_ns(),
+            );
+            if let Err(reason) =
+                check_header(&header, len, WireKind::Estimate, self.run_tag, sender)
+            {
+                drop(sample);
+                self.drop_estimate(sender, &format!("estimate:{reason}"));
+                continue;
+            }
+            let decoded = ObservedEstimate::decode(sample.payload(), &self.estimator);
+            drop(sample);
+            match decoded {
+                Ok((e, _)) if e.uav != sender => {
+                    self.drop_estimate(sender, "estimate:sender");
+                    tracing::warn!(
+                        uav = sender,
+                        claims = e.uav,
+                        "estimate of another UAV dropped"
+                    );
+                }
+                Ok((e, map)) => {
+                    self.report.oem.merge(&map);
+                    self.report.agents.entry(sender).or_default().observe(&e);
+                    let steps = self.store.entry(sender).or_default();
+                    steps.insert(e.step, e);
+                    while steps.len() > MAX_STORED_STEPS {
+                        steps.pop_first();
+                    }
+                }
+                Err(err) => {
+                    tracing::warn!(uav = sender, error = %err, "undecodable estimate dropped");
+                    self.drop_estimate(sender, "estimate:malformed");
+                }
+            }
+        }
+    }
+
+    fn drop_estimate(&mut self, uav: u32, reason: &str) {
+        self.report.agents.entry(uav).or_default().estimates_dropped += 1;
+        self.drop_message(reason);
+    }
+
+    fn drain_tokens(&mut self) {
+        loop {
+            let sample = match self.ports.tokens.receive() {
+                Ok(Some(s)) => s,
+                Ok(None) => return,
+                Err(e) => {
+                    tracing::warn!(error = ?e, "cannot receive tokens");
+                    return;
+                }
+            };
+            let header = *sample.user_header();
+            let len = sample.payload().len();
+            drop(sample);
+            if header.run_tag != self.run_tag || header.version != PROTOCOL_VERSION {
+                self.drop_message("token:foreign");
+                continue;
+            }
+            self.report.comms.count_timed(
+                ServiceKind::Tokens,
+                (len + std::mem::size_of::<WireHeader>()) as u64,
+                header.sent_unix_ns,
+                unix_now_ns(),
+            );
+        }
+    }
+
+    /// Measures one truth step, applies due faults and acks it.
+    fn process(&mut self, truth: &TruthState) -> anyhow::Result<()> {
+        let k = truth.step;
+        let mut awaited: Vec<u32> = truth
+            .uavs()
+            .iter()
+            .filter(|u| u.agent_live != 0)
+            .map(|u| u.id)
+            .collect();
+        let live_agents = awaited.len() as u32;
+        let deadline = Instant::now() + self.config.estimate_wait;
+        let mut last_scan = Instant::now();
+        loop {
+            self.drain();
+            awaited.retain(|uav| !self.store.get(uav).is_some_and(|s| s.contains_key(&k)));
+            if awaited.is_empty() || self.stopping() {
+                break;
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                tracing::warn!(step = k, missing = ?awaited, "estimates did not arrive in time");
+                break;
+            }
+            if now.duration_since(last_scan) >= SCAN_INTERVAL {
+                last_scan = now;
+                if let Ok(scan) = scan_nodes(&self.config.run, false) {
+                    awaited.retain(|&uav| scan.is_alive(&RunNode::agent_name(uav)));
+                }
+            }
+            self.wait(WAIT_SLICE.min(deadline - now));
+        }
+        if self.stopping() {
+            return Ok(());
+        }
+        let step = self.measure(truth, live_agents);
+        self.apply_faults(truth);
+        self.send_ack(k)?;
+        self.report.steps += 1;
+        if let Some(t) = self.first_truth {
+            self.report.stepping = Some(t.elapsed());
+        }
+        // The receiver is gone only when the tokio side gave up on the run.
+        let _ = self.events.send(ObserverEvent::Step(step));
+        Ok(())
+    }
+
+    fn measure(&mut self, truth: &TruthState, live_agents: u32) -> StepMetrics {
+        let k = truth.step;
+        let grid = self.estimator.grid;
+        let estimates: Vec<ObservedEstimate> = self
+            .store
+            .values_mut()
+            .filter_map(|steps| {
+                let e = steps.remove(&k);
+                // Older steps will never be measured now.
+                steps.retain(|&s, _| s > k);
+                e
+            })
+            .collect();
+        let mut violation_count = 0;
+        for e in &estimates {
+            for v in violations(e, truth.targets(), &grid) {
+                violation_count += 1;
+                tracing::error!(
+                    step = k,
+                    agent = v.uav,
+                    target = v.target,
+                    set = v.set.name(),
+                    distance_m = v.distance_m,
+                    "guarantee violated: target outside its set"
+                );
+            }
+        }
+        let fused = FusedSets::fuse(&estimates);
+        let sets = fused
+            .as_ref()
+            .map(|f| SetMetrics::measure(f, truth.targets(), &grid));
+        if let Some(fused) = fused {
+            self.report.final_state = Some(FinalState {
+                step: k,
+                time_s: truth.time_s,
+                sets: fused,
+                targets: truth.targets().to_vec(),
+            });
+        }
+        for u in truth.uavs() {
+            if let Some(track) = self.report.tracks.get_mut(u.id as usize) {
+                track.push([u.position[0], u.position[1]]);
+            }
+        }
+        self.report.comms.count(
+            ServiceKind::Frames,
+            u64::from(live_agents),
+            u64::from(live_agents) * std::mem::size_of::<CvsFrame>() as u64,
+        );
+        self.report.comms.count(
+            ServiceKind::Commands,
+            u64::from(live_agents),
+            u64::from(live_agents) * std::mem::size_of::<UavCommand>() as u64,
+        );
+        StepMetrics {
+            step: k,
+            time_s: truth.time_s,
+            live_agents,
+            estimates: estimates.len() as u32,
+            sets,
+            violations: violation_count,
+        }
+    }
+
+    /// Lets the orchestrator apply the faults due by this step's time before the step is
+    /// acked.
+    fn apply_faults(&mut self, truth: &TruthState) {
+        let times = &self.config.fault_times;
+        let mut due = false;
+        // A tiny slack so that a time written as a multiple of T is reached at that step.
+        while self.next_fault < times.len() && times[self.next_fault] <= truth.time_s + 1e-9 {
+            self.next_fault += 1;
+            due = true;
+        }
+        if !due {
+            return;
+        }
+        let (done, applied) = std::sync::mpsc::channel();
+        let event = ObserverEvent::FaultsDue {
+            step: truth.step,
+            time_s: truth.time_s,
+            done,
+        };
+        if self.events.send(event).is_err() {
+            return;
+        }
+        let deadline = Instant::now() + self.config.fault_wait;
+        while !self.stopping() && Instant::now() < deadline {
+            match applied.recv_timeout(WAIT_SLICE) {
+                Ok(()) | Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return,
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            }
+        }
+        tracing::warn!(step = truth.step, "faults were not applied in time");
+    }
+}
+
+/// Checks a received header against what the service carries; the reason when it does not.
+fn check_header(
+    header: &WireHeader,
+    payload_len: usize,
+    kind: WireKind,
+    run_tag: u64,
+    sender: u32,
+) -> Result<(), &'static str> {
+    if header.version != PROTOCOL_VERSION {
+        Err("version")
+    } else if header.run_tag != run_tag {
+        Err("other-run")
+    } else if header.kind != kind as u32 {
+        Err("kind")
+    } else if header.sender != sender {
+        Err("sender")
+    } else if header.len as usize != payload_len {
+        Err("length")
+    } else {
+        Ok(())
+    }
+}
+
+/// Wall-clock time, nanoseconds since the Unix epoch (the clock of `WireHeader::sent_unix_ns`).
+fn unix_now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn headers_are_checked_field_by_field() {
+        let h = WireHeader {
+            version: PROTOCOL_VERSION,
+            kind: WireKind::Estimate as u32,
+            run_tag: 5,
+            sender: 2,
+            len: 10,
+            step: 0,
+            sent_unix_ns: 0,
+        };
+        assert_eq!(check_header(&h, 10, WireKind::Estimate, 5, 2), Ok(()));
+        assert_eq!(check_header(&h, 9, WireKind::Estimate, 5, 2), Err("length"));
+        assert_eq!(check_header(&h, 10, WireKind::Token, 5, 2), Err("kind"));
+        assert_eq!(
+            check_header(&h, 10, WireKind::Estimate, 6, 2),
+            Err("other-run")
+        );
+        assert_eq!(
+            check_header(&h, 10, WireKind::Estimate, 5, 1),
+            Err("sender")
+        );
+        let old = WireHeader { version: 0, ..h };
+        assert_eq!(
+            check_header(&old, 10, WireKind::Estimate, 5, 2),
+            Err("version")
+        );
+    }
+}

@@ -1,0 +1,218 @@
+//! What the observer counts over a run: messages and bytes per service kind with their
+//! latencies, and each agent's counters across its incarnations.
+
+use std::collections::BTreeMap;
+
+use protocol::wire::AgentStats;
+
+use super::metrics::ObservedEstimate;
+
+/// The kinds of service the observer accounts for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum ServiceKind {
+    /// CVS frames, world -> agent (counted from the truth: one per live agent and step).
+    Frames,
+    /// Commands and acks, agent -> world (one per live agent and step).
+    Commands,
+    /// Estimates, agent -> peers and observers (as received by the observer).
+    Estimates,
+    /// The guidance token (as received by the observer).
+    Tokens,
+    /// Truth, world -> observer.
+    Truth,
+}
+
+impl ServiceKind {
+    /// The kind's key in `summary.json`.
+    pub fn key(self) -> &'static str {
+        match self {
+            ServiceKind::Frames => "frames",
+            ServiceKind::Commands => "commands",
+            ServiceKind::Estimates => "estimates",
+            ServiceKind::Tokens => "tokens",
+            ServiceKind::Truth => "truth",
+        }
+    }
+}
+
+/// Traffic of one service kind.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ServiceTally {
+    /// Messages.
+    pub messages: u64,
+    /// Bytes: payload plus user header.
+    pub bytes: u64,
+    /// Send-to-receipt latencies, milliseconds (kinds that carry a send time only).
+    pub latencies_ms: Vec<f64>,
+}
+
+/// Traffic per service kind.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Comms {
+    /// By kind.
+    pub by_kind: BTreeMap<ServiceKind, ServiceTally>,
+}
+
+impl Comms {
+    /// Counts `messages` messages of `bytes` bytes in all.
+    pub fn count(&mut self, kind: ServiceKind, messages: u64, bytes: u64) {
+        let t = self.by_kind.entry(kind).or_default();
+        t.messages += messages;
+        t.bytes += bytes;
+    }
+
+    /// Counts one message with its send time (ns since the Unix epoch) against `now_ns`.
+    pub fn count_timed(&mut self, kind: ServiceKind, bytes: u64, sent_ns: u64, now_ns: u64) {
+        self.count(kind, 1, bytes);
+        if sent_ns > 0 {
+            let ms = now_ns.saturating_sub(sent_ns) as f64 / 1e6;
+            self.by_kind.entry(kind).or_default().latencies_ms.push(ms);
+        }
+    }
+}
+
+/// One incarnation of an agent as seen through its estimates.
+#[derive(Clone, Debug, PartialEq)]
+struct Incarnation {
+    id: u64,
+    first_step: u64,
+    last_seq: u64,
+    stats: AgentStats,
+}
+
+/// One agent's counters over the run, summed over its incarnations (a restart resets the
+/// agent's own counters; the latest estimate of each incarnation carries its totals).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AgentTally {
+    /// Estimates the observer decoded.
+    pub estimates_seen: u64,
+    /// Messages on the agent's estimate service the observer could not use.
+    pub estimates_dropped: u64,
+    /// Step of the latest estimate seen.
+    pub last_step: Option<u64>,
+    incarnations: Vec<Incarnation>,
+}
+
+impl AgentTally {
+    /// Folds in a decoded estimate.
+    pub fn observe(&mut self, e: &ObservedEstimate) {
+        self.estimates_seen += 1;
+        self.last_step = Some(self.last_step.map_or(e.step, |s| s.max(e.step)));
+        match self.incarnations.iter_mut().find(|i| i.id == e.incarnation) {
+            Some(i) if e.seq >= i.last_seq => {
+                i.last_seq = e.seq;
+                i.stats = e.stats;
+            }
+            Some(_) => {}
+            None => self.incarnations.push(Incarnation {
+                id: e.incarnation,
+                first_step: e.step,
+                last_seq: e.seq,
+                stats: e.stats,
+            }),
+        }
+    }
+
+    fn sum(&self, f: impl Fn(&Incarnation) -> u64) -> u64 {
+        self.incarnations.iter().map(f).sum()
+    }
+
+    /// Frames folded in (steps processed), as of each incarnation's latest estimate.
+    pub fn steps_processed(&self) -> u64 {
+        self.sum(|i| i.stats.frames)
+    }
+
+    /// Estimates sent (each incarnation's latest message counter, plus one).
+    pub fn estimates_sent(&self) -> u64 {
+        self.sum(|i| i.last_seq + 1)
+    }
+
+    /// Peer estimates fused, as of each incarnation's latest estimate.
+    pub fn estimates_received(&self) -> u64 {
+        self.sum(|i| i.stats.estimates_received)
+    }
+
+    /// Peer messages the agent dropped.
+    pub fn messages_dropped(&self) -> u64 {
+        self.sum(|i| i.stats.messages_dropped)
+    }
+
+    /// Guidance decisions taken.
+    pub fn decisions(&self) -> u64 {
+        self.sum(|i| i.stats.decisions)
+    }
+
+    /// Decisions taken after waiting out a silent token holder.
+    pub fn token_timeouts(&self) -> u64 {
+        self.sum(|i| i.stats.token_timeouts)
+    }
+
+    /// Incarnations seen (1 + restarts that published).
+    pub fn incarnations(&self) -> usize {
+        self.incarnations.len()
+    }
+
+    /// First step of each incarnation, in the order they appeared.
+    pub fn incarnation_starts(&self) -> Vec<u64> {
+        self.incarnations.iter().map(|i| i.first_step).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use protocol::grid::GroundGrid;
+    use protocol::raster::CellSet;
+
+    use super::*;
+
+    fn estimate(incarnation: u64, seq: u64, frames: u64) -> ObservedEstimate {
+        let g = GroundGrid::new(2.0, 1.0);
+        ObservedEstimate {
+            uav: 0,
+            step: seq,
+            incarnation,
+            seq,
+            undetected: CellSet::full(&g),
+            targets: BTreeMap::new(),
+            obstacle_free: CellSet::empty(&g),
+            explored: CellSet::empty(&g),
+            unseen: CellSet::empty(&g),
+            stats: AgentStats {
+                frames,
+                estimates_received: 2 * frames,
+                ..AgentStats::default()
+            },
+        }
+    }
+
+    #[test]
+    fn counters_add_up_over_incarnations_and_ignore_late_messages() {
+        let mut t = AgentTally::default();
+        t.observe(&estimate(7, 0, 1));
+        t.observe(&estimate(7, 4, 5));
+        t.observe(&estimate(7, 3, 4)); // late: older than what was seen
+        t.observe(&estimate(9, 0, 1)); // restarted
+        t.observe(&estimate(9, 1, 2));
+        assert_eq!(t.estimates_seen, 5);
+        assert_eq!(t.steps_processed(), 7);
+        assert_eq!(t.estimates_sent(), 7);
+        assert_eq!(t.estimates_received(), 14);
+        assert_eq!(t.incarnations(), 2);
+        assert_eq!(t.incarnation_starts(), vec![0, 0]);
+        assert_eq!(t.last_step, Some(4));
+    }
+
+    #[test]
+    fn latencies_are_kept_only_for_stamped_messages() {
+        let mut c = Comms::default();
+        c.count_timed(ServiceKind::Estimates, 100, 1_000_000, 3_000_000);
+        c.count_timed(ServiceKind::Estimates, 50, 0, 3_000_000);
+        c.count(ServiceKind::Frames, 4, 400);
+        let e = &c.by_kind[&ServiceKind::Estimates];
+        assert_eq!(
+            (e.messages, e.bytes, e.latencies_ms.clone()),
+            (2, 150, vec![2.0])
+        );
+        assert_eq!(c.by_kind[&ServiceKind::Frames].messages, 4);
+    }
+}

@@ -1,0 +1,334 @@
+//! `fleet run`'s command line: raw clap arguments, and their validation into a [`RunConfig`]
+//! whose errors name the flag or scenario key and the accepted range (exit code 2).
+
+use std::fmt;
+use std::path::PathBuf;
+use std::str::FromStr;
+
+use clap::{Args, ValueEnum};
+use protocol::scenario::Scenario;
+use protocol::service::RunId;
+use world_server::server::StepMode;
+
+use crate::cli::{ScenarioArgs, UsageError};
+
+/// `fleet run`.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// The scenario.
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// Overrides the scenario's `seed`.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Overrides the scenario's `duration_s`, seconds of simulated time.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Overrides the scenario's `uavs.count`.
+    #[arg(long)]
+    pub uavs: Option<u32>,
+    /// How the world steps: lockstep (deterministic) or realtime.
+    #[arg(long, value_enum, default_value_t = ModeArg::Lockstep)]
+    pub mode: ModeArg,
+    /// Simulated seconds per wall second in realtime mode.
+    #[arg(long, default_value_t = 1.0)]
+    pub speedup: f64,
+    /// A fault to inject: `kill:UAV@SECONDS` or `restart:UAV@SECONDS` (repeatable).
+    #[arg(long = "fault", value_name = "KIND:UAV@SECONDS")]
+    pub faults: Vec<Fault>,
+    /// Output directory (default: `runs/<UTC timestamp>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Exit with code 1 when a guarantee violation was seen.
+    #[arg(long)]
+    pub strict: bool,
+    /// Run id, prefix of every service and shared-memory file (default: generated). For
+    /// tests and debugging.
+    #[arg(long, hide = true)]
+    pub run_id: Option<RunId>,
+}
+
+/// `--mode`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    /// The world waits for every live agent and the observer at each step.
+    Lockstep,
+    /// The world advances every `T / speedup` of wall time.
+    Realtime,
+}
+
+/// What a fault does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FaultKind {
+    /// SIGKILL the agent's process.
+    Kill,
+    /// Start the agent again (same id).
+    Restart,
+}
+
+/// A fault to inject: `kind` on UAV `uav` once simulated time reaches `at_s`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fault {
+    /// What to do.
+    pub kind: FaultKind,
+    /// The UAV.
+    pub uav: u32,
+    /// Simulated time, seconds.
+    pub at_s: f64,
+}
+
+/// Why a `--fault` value could not be read.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("{0:?}: expected kill:UAV@SECONDS or restart:UAV@SECONDS, e.g. kill:1@30")]
+pub struct FaultParseError(String);
+
+impl FromStr for Fault {
+    type Err = FaultParseError;
+
+    fn from_str(text: &str) -> Result<Fault, FaultParseError> {
+        let bad = || FaultParseError(text.to_owned());
+        let (kind, rest) = text.split_once(':').ok_or_else(bad)?;
+        let kind = match kind.trim() {
+            "kill" => FaultKind::Kill,
+            "restart" => FaultKind::Restart,
+            _ => return Err(bad()),
+        };
+        let (uav, at) = rest.split_once('@').ok_or_else(bad)?;
+        let uav = uav.trim().parse().map_err(|_| bad())?;
+        let at_s: f64 = at.trim().parse().map_err(|_| bad())?;
+        if !at_s.is_finite() {
+            return Err(bad());
+        }
+        Ok(Fault { kind, uav, at_s })
+    }
+}
+
+impl fmt::Display for Fault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let kind = match self.kind {
+            FaultKind::Kill => "kill",
+            FaultKind::Restart => "restart",
+        };
+        write!(f, "{kind}:{}@{}", self.uav, self.at_s)
+    }
+}
+
+/// A validated `fleet run`.
+#[derive(Clone, Debug)]
+pub struct RunConfig {
+    /// The resolved scenario (file, `--set`, then `--seed/--duration/--uavs`).
+    pub scenario: Scenario,
+    /// How the world steps.
+    pub mode: StepMode,
+    /// Faults in the order they apply (by time; a kill before a restart at the same time).
+    pub faults: Vec<Fault>,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Exit 1 on a violation.
+    pub strict: bool,
+    /// The run id (generated when not given).
+    pub run_id: RunId,
+    /// Whether to draw a progress bar (else a log line every ~10 %).
+    pub progress_bar: bool,
+}
+
+impl RunArgs {
+    /// Loads the scenario, applies the overrides and checks the faults against the fleet and
+    /// the run's duration.
+    pub fn validate(&self) -> Result<RunConfig, UsageError> {
+        let mut overrides = self.scenario.overrides.clone();
+        // The dedicated flags are overrides like any other, so the scenario's checks name
+        // the key and its range.
+        if let Some(seed) = self.seed {
+            overrides.push(format!("seed={seed}"));
+        }
+        if let Some(d) = self.duration {
+            overrides.push(format!("duration_s={d:?}"));
+        }
+        if let Some(n) = self.uavs {
+            overrides.push(format!("uavs.count={n}"));
+        }
+        let scenario = Scenario::load(self.scenario.scenario.as_deref(), &overrides)
+            .map_err(|e| UsageError(format!("bad scenario: {e}")))?;
+        let mode = match self.mode {
+            ModeArg::Lockstep => StepMode::Lockstep,
+            ModeArg::Realtime => {
+                if !(self.speedup.is_finite() && self.speedup > 0.0) {
+                    return Err(UsageError(format!(
+                        "--speedup {}: must be a positive finite number",
+                        self.speedup
+                    )));
+                }
+                StepMode::Realtime {
+                    speedup: self.speedup,
+                }
+            }
+        };
+        let faults = check_faults(&self.faults, &scenario)?;
+        Ok(RunConfig {
+            scenario,
+            mode,
+            faults,
+            out: self.out.clone().unwrap_or_else(default_out_dir),
+            strict: self.strict,
+            run_id: self.run_id.clone().unwrap_or_else(|| new_run_id(0)),
+            progress_bar: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+        })
+    }
+}
+
+/// Checks every fault against the fleet and the run, and that a restart follows a kill of
+/// the same UAV; returns them in the order they apply.
+pub fn check_faults(faults: &[Fault], scenario: &Scenario) -> Result<Vec<Fault>, UsageError> {
+    let count = scenario.uavs.count;
+    let duration = scenario.duration_s;
+    for f in faults {
+        if f.uav >= count {
+            return Err(UsageError(format!(
+                "--fault {f}: UAV {} is outside the fleet (UAVs 0..={})",
+                f.uav,
+                count.saturating_sub(1)
+            )));
+        }
+        if !(f.at_s >= 0.0 && f.at_s < duration) {
+            return Err(UsageError(format!(
+                "--fault {f}: time {} s is outside the run (0 <= time < duration_s = {duration})",
+                f.at_s
+            )));
+        }
+    }
+    let mut ordered = faults.to_vec();
+    ordered.sort_by(|a, b| a.at_s.total_cmp(&b.at_s).then(a.kind.cmp(&b.kind)));
+    let mut alive = vec![true; count as usize];
+    for f in &ordered {
+        let slot = &mut alive[f.uav as usize];
+        match (f.kind, *slot) {
+            (FaultKind::Kill, true) => *slot = false,
+            (FaultKind::Restart, false) => *slot = true,
+            (FaultKind::Kill, false) => {
+                return Err(UsageError(format!(
+                    "--fault {f}: UAV {} is already killed then; restart it first",
+                    f.uav
+                )));
+            }
+            (FaultKind::Restart, true) => {
+                return Err(UsageError(format!(
+                    "--fault {f}: UAV {} is running then; a restart must follow a kill",
+                    f.uav
+                )));
+            }
+        }
+    }
+    Ok(ordered)
+}
+
+/// `runs/<UTC timestamp>`, e.g. `runs/20250101T120000Z`.
+pub fn default_out_dir() -> PathBuf {
+    let stamp: String = crate::bench::utc_now_rfc3339()
+        .chars()
+        .filter(|c| !matches!(c, '-' | ':'))
+        .collect();
+    PathBuf::from("runs").join(stamp)
+}
+
+/// A short run id unique on this machine: `r`, the Unix time in seconds, the process id and
+/// a sequence number (a sweep starts several runs in one process).
+pub fn new_run_id(sequence: u32) -> RunId {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let id = format!("r{secs}-{}-{sequence}", std::process::id());
+    // Digits, 'r' and '-' within 40 characters always make a valid id.
+    RunId::new(&id).unwrap_or_else(|e| unreachable!("generated run id {id:?} is invalid: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scenario() -> Scenario {
+        let mut s = Scenario::default();
+        s.duration_s = 60.0;
+        s.uavs.count = 2;
+        s
+    }
+
+    #[test]
+    fn faults_parse_and_print_back() {
+        let f: Fault = "kill:1@30".parse().unwrap();
+        assert_eq!(
+            f,
+            Fault {
+                kind: FaultKind::Kill,
+                uav: 1,
+                at_s: 30.0
+            }
+        );
+        assert_eq!(f.to_string(), "kill:1@30");
+        assert_eq!("restart:0@2.5".parse::<Fault>().unwrap().at_s, 2.5);
+        for bad in [
+            "kill",
+            "kill:1",
+            "stop:1@3",
+            "kill:x@3",
+            "kill:1@nan",
+            "kill:-1@3",
+        ] {
+            assert!(bad.parse::<Fault>().is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn faults_are_checked_against_the_fleet_the_run_and_each_other() {
+        let s = scenario();
+        let f = |t: &str| t.parse::<Fault>().unwrap();
+        let e = check_faults(&[f("kill:2@10")], &s).unwrap_err();
+        assert!(e.0.contains("UAV 2 is outside the fleet"), "{e}");
+        let e = check_faults(&[f("kill:1@60")], &s).unwrap_err();
+        assert!(e.0.contains("outside the run"), "{e}");
+        let e = check_faults(&[f("restart:1@10")], &s).unwrap_err();
+        assert!(e.0.contains("must follow a kill"), "{e}");
+        let ok = check_faults(&[f("restart:1@20"), f("kill:1@20"), f("kill:0@5")], &s).unwrap();
+        assert_eq!(ok, vec![f("kill:0@5"), f("kill:1@20"), f("restart:1@20")]);
+    }
+
+    #[test]
+    fn dedicated_flags_override_the_scenario_and_are_range_checked() {
+        let args = |extra: &[&str]| {
+            use clap::Parser;
+            #[derive(Parser)]
+            struct Wrap {
+                #[command(flatten)]
+                run: RunArgs,
+            }
+            let mut argv = vec!["fleet"];
+            argv.extend_from_slice(extra);
+            Wrap::try_parse_from(argv).unwrap().run
+        };
+        let c = args(&["--seed", "9", "--duration", "12", "--uavs", "3"])
+            .validate()
+            .unwrap();
+        assert_eq!(
+            (
+                c.scenario.seed,
+                c.scenario.duration_s,
+                c.scenario.uavs.count
+            ),
+            (9, 12.0, 3)
+        );
+        assert_eq!(c.mode, StepMode::Lockstep);
+        let e = args(&["--uavs", "0"]).validate().unwrap_err();
+        assert!(e.0.contains("uavs.count"), "{e}");
+        let e = args(&["--uavs", "2", "--fault", "kill:3@1"])
+            .validate()
+            .unwrap_err();
+        assert!(e.0.contains("--fault kill:3@1"), "{e}");
+    }
+
+    #[test]
+    fn generated_run_ids_are_valid_and_distinct() {
+        assert_ne!(new_run_id(0), new_run_id(1));
+        assert!(new_run_id(u32::MAX).as_str().len() <= RunId::MAX_LEN);
+    }
+}

@@ -1,0 +1,379 @@
+//! `fleet run`: one run of the fleet as separate processes.
+//!
+//! [`execute`] is the whole run on a tokio runtime: it cleans what killed runs left, writes
+//! the resolved scenario into the output directory (every child reads that file), starts the
+//! observer thread ([`crate::observe`]), the world-server and one `uav-agent` per UAV
+//! ([`children`]), then reacts to what happens until the world ends the run:
+//!
+//! - each measured step moves the progress display ([`progress`]);
+//! - faults due at a step ([`faults`]) are applied before the observer acknowledges that step,
+//!   so a fault run is as reproducible as any lockstep run;
+//! - an agent that exits on its own is noted (the world and its peers go on without it);
+//! - the world-server exiting early fails the run; Ctrl-C or SIGTERM interrupts it.
+//!
+//! Whatever the ending, every child is stopped (SIGTERM, then SIGKILL after a bounded
+//! grace), the run's iceoryx2 files are removed, and the [`RunRecord`] holds what was
+//! measured. [`run`] is the command: it executes, then writes `summary.json`,
+//! `timeseries.csv` and the pictures, and prints the summary table.
+
+pub mod children;
+pub mod config;
+pub mod faults;
+pub mod progress;
+pub mod stale;
+
+use std::process::ExitStatus;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use protocol::ipc::{cleanup_stale, remove_run_files, run_files};
+use tokio::signal::unix::{SignalKind, signal};
+use tokio::sync::mpsc;
+
+use crate::Outcome;
+use crate::observe::{self, ObserverConfig, ObserverEvent, ObserverReport, StepMetrics};
+use crate::results::summary::Summary;
+use crate::results::{curves, maps, timeseries};
+use children::{Binaries, Children, stop_world};
+use config::{FaultKind, RunConfig};
+use faults::FaultPlan;
+use progress::Progress;
+
+/// Longest wait for the agents' estimates of a step before the observer measures without
+/// the missing ones (an agent killed mid-step is noticed sooner by the node scan).
+const ESTIMATE_WAIT: Duration = Duration::from_secs(5);
+/// Longest wait for a fault to be applied before the observer acknowledges its step.
+const FAULT_WAIT: Duration = Duration::from_secs(10);
+/// How long the observer may go on after the world exited (it drains the last steps).
+const OBSERVER_DRAIN: Duration = Duration::from_secs(5);
+/// How long the children get to exit on their own at the end, and after SIGTERM.
+const EXIT_GRACE: Duration = Duration::from_secs(10);
+/// Interval of the housekeeping tick (agent exits, deadlines).
+const TICK: Duration = Duration::from_millis(100);
+
+/// Everything one run produced, for the results.
+pub struct RunRecord {
+    /// The run's configuration.
+    pub config: RunConfig,
+    /// The metrics of every measured step, in order.
+    pub series: Vec<StepMetrics>,
+    /// What the observer gathered (`None` if its thread failed).
+    pub observer: Option<ObserverReport>,
+    /// The faults and what became of them.
+    pub faults: FaultPlan,
+    /// Wall time of the whole run, seconds.
+    pub wall_s: f64,
+    /// Whether a signal interrupted the run.
+    pub interrupted: bool,
+    /// Why the run failed, if it did (a process could not start, the world died, ...).
+    pub failure: Option<String>,
+    /// Start of the run, UTC.
+    pub started_utc: String,
+    /// The run's iceoryx2 files still present after cleanup (0 unless something is wrong).
+    pub leftover_files: usize,
+}
+
+impl RunRecord {
+    /// Guarantee violations over the run.
+    pub fn violations(&self) -> u64 {
+        self.series.iter().map(|m| u64::from(m.violations)).sum()
+    }
+}
+
+/// `fleet run`: executes the run, writes its results into `config.out` and prints the
+/// summary table.
+pub fn run(config: &RunConfig) -> anyhow::Result<Outcome> {
+    let record = runtime()?.block_on(execute(config, ""))?;
+    let summary = write_results(&record)?;
+    let mut out = std::io::stdout().lock();
+    summary.print_table(&mut out)?;
+    use std::io::Write as _;
+    writeln!(out, "\nresults in {}", config.out.display())?;
+    Ok(outcome(&record))
+}
+
+/// The runtime of `fleet run` and `fleet sweep`: one thread is plenty (the work is in the
+/// children and the observer thread).
+pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the tokio runtime")
+}
+
+/// The exit code a run deserves: failed if it did not complete, or if it saw a violation
+/// under `--strict`.
+pub fn outcome(record: &RunRecord) -> Outcome {
+    if let Some(why) = &record.failure {
+        eprintln!("fleet: the run failed: {why}");
+        return Outcome::Failed;
+    }
+    if record.interrupted {
+        eprintln!("fleet: the run was interrupted");
+        return Outcome::Failed;
+    }
+    let violations = record.violations();
+    if violations > 0 {
+        eprintln!("fleet: {violations} guarantee violation(s): see the logs and summary.json");
+        if record.config.strict {
+            return Outcome::Failed;
+        }
+    }
+    Outcome::Success
+}
+
+/// Writes `summary.json`, `timeseries.csv`, `metrics.png`, `map.png` and `sets.png` into the
+/// run's output directory; returns the summary.
+pub fn write_results(record: &RunRecord) -> anyhow::Result<Summary> {
+    let out = &record.config.out;
+    let scenario = &record.config.scenario;
+    let summary = Summary::build(record);
+    summary.write_json(&out.join("summary.json"))?;
+    timeseries::write(&record.series, &out.join("timeseries.csv"))?;
+    let title = format!(
+        "seed {}, {} UAVs, {} targets",
+        scenario.seed, scenario.uavs.count, scenario.targets.count
+    );
+    curves::draw_run(&record.series, &title, &out.join("metrics.png"))?;
+    if let Some(observer) = &record.observer {
+        maps::draw_map(&observer.oem, scenario, &out.join("map.png"))?;
+        if let Some(state) = &observer.final_state {
+            maps::draw_sets(state, &observer.tracks, scenario, &out.join("sets.png"))?;
+        }
+    }
+    Ok(summary)
+}
+
+/// How the event loop ended.
+enum Ending {
+    /// The observer finished (end of run, or stopped after the world left).
+    ObserverDone,
+    /// SIGINT or SIGTERM.
+    Signal(&'static str),
+}
+
+/// Runs the fleet once; `label` prefixes the progress lines (a sweep's variant and seed).
+pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecord> {
+    let started = Instant::now();
+    let started_utc = crate::bench::utc_now_rfc3339();
+    let run = &config.run_id;
+    let out = &config.out;
+    let logs = out.join("logs");
+    std::fs::create_dir_all(&logs)
+        .with_context(|| format!("cannot create the output directory {}", logs.display()))?;
+    let scenario_file = out.join("scenario.toml");
+    std::fs::write(&scenario_file, config.scenario.to_toml_string())
+        .with_context(|| format!("cannot write {}", scenario_file.display()))?;
+    let (stale_runs, stale_files) = stale::remove_stale_runs(run);
+    if stale_runs > 0 {
+        tracing::info!(
+            runs = stale_runs,
+            files = stale_files,
+            "cleaned killed runs' files"
+        );
+    }
+    let binaries = Binaries::locate()?;
+    // Signals are taken before any child starts, so an early Ctrl-C still cleans up.
+    let mut sigint = signal(SignalKind::interrupt()).context("cannot handle SIGINT")?;
+    let mut sigterm = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
+
+    let mut plan = FaultPlan::new(&config.faults);
+    let stop = Arc::new(AtomicBool::new(false));
+    let (events_tx, mut events) = mpsc::unbounded_channel();
+    let observer = observe::spawn(
+        ObserverConfig {
+            run: run.clone(),
+            scenario: config.scenario.clone(),
+            estimate_wait: ESTIMATE_WAIT,
+            fault_times: plan.times(),
+            fault_wait: FAULT_WAIT,
+        },
+        stop.clone(),
+        events_tx,
+    )
+    .context("cannot start the observer thread")?;
+
+    let mut children = Children::new(
+        run.clone(),
+        binaries,
+        scenario_file,
+        logs.clone(),
+        config.mode,
+    );
+    let mut world = children.spawn_world()?;
+    let mut failure = None;
+    for uav in 0..config.scenario.uavs.count {
+        if let Err(e) = children.spawn_agent(uav) {
+            failure = Some(format!("{e:#}"));
+            break;
+        }
+    }
+    let total = (config.scenario.duration_s / config.scenario.timing.cvs_period_s).round() as u64;
+    let mut progress = Progress::new(total, config.progress_bar, label);
+    let mut series = Vec::with_capacity(total as usize + 1);
+    let mut world_exit: Option<(ExitStatus, Instant)> = None;
+    let mut tick = tokio::time::interval(TICK);
+    let mut ending = Ending::ObserverDone;
+    if failure.is_some() {
+        stop.store(true, Ordering::Relaxed);
+    }
+
+    loop {
+        tokio::select! {
+            event = events.recv() => match event {
+                Some(ObserverEvent::Step(m)) => {
+                    progress.step(&m);
+                    series.push(m);
+                }
+                Some(ObserverEvent::FaultsDue { step, time_s, done }) => {
+                    for (index, kind, uav) in plan.due(time_s) {
+                        let effective = apply_fault(&mut children, run, kind, uav).await;
+                        plan.applied(index, step, time_s, effective);
+                        let verb = match kind {
+                            FaultKind::Kill => "killed",
+                            FaultKind::Restart => "restarted",
+                        };
+                        progress.note(&format!("t={time_s:.1}s: agent {uav} {verb}"));
+                    }
+                    // The observer may have given up waiting; then nobody listens.
+                    let _ = done.send(());
+                }
+                None => break,
+            },
+            status = world.wait(), if world_exit.is_none() => {
+                let status = status.context("cannot wait for the world-server")?;
+                if !status.success() {
+                    failure.get_or_insert_with(|| format!(
+                        "the world-server exited with {status}; see {}",
+                        logs.join("world.log").display()
+                    ));
+                }
+                world_exit = Some((status, Instant::now()));
+            }
+            _ = sigint.recv() => { ending = Ending::Signal("SIGINT"); break; }
+            _ = sigterm.recv() => { ending = Ending::Signal("SIGTERM"); break; }
+            _ = tick.tick() => {
+                for exit in children.reap_agents() {
+                    progress.note(&format!("agent {} exited with {}", exit.uav, exit.status));
+                    tracing::warn!(uav = exit.uav, status = %exit.status, "agent exited");
+                }
+                if let Some((_, at)) = world_exit
+                    && at.elapsed() > OBSERVER_DRAIN
+                {
+                    stop.store(true, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+    progress.finish();
+    let interrupted = matches!(ending, Ending::Signal(_));
+    if let Ending::Signal(name) = ending {
+        eprintln!("fleet: {name} received: stopping the run");
+    }
+    // Stopping: the observer first (it must not wait on anyone), then the children.
+    stop.store(true, Ordering::Relaxed);
+    let observer = join_observer(observer).await;
+    let observer = match observer {
+        Ok(report) => Some(report),
+        Err(e) => {
+            failure.get_or_insert_with(|| format!("the observer failed: {e:#}"));
+            None
+        }
+    };
+    if interrupted {
+        children.terminate_agents();
+    }
+    if world_exit.is_none() {
+        let grace = if interrupted || failure.is_some() {
+            Duration::ZERO
+        } else {
+            EXIT_GRACE
+        };
+        match tokio::time::timeout(grace, world.wait()).await {
+            Ok(Ok(status)) if !status.success() && !interrupted => {
+                failure.get_or_insert_with(|| format!("the world-server exited with {status}"));
+            }
+            Ok(_) => {}
+            Err(_) => {
+                stop_world(&mut world, EXIT_GRACE).await;
+            }
+        }
+    }
+    children.wait_agents(EXIT_GRACE).await;
+    children.terminate_agents();
+    children.wait_agents(EXIT_GRACE).await;
+    children.kill_agents().await;
+    let leftover_files = clean_run_files(run);
+    if let Some(report) = &observer
+        && report.end != observe::ObserverEnd::EndOfRun
+        && !interrupted
+    {
+        failure.get_or_insert_with(|| "the run ended before the world announced its end".into());
+    }
+    Ok(RunRecord {
+        config: config.clone(),
+        series,
+        observer,
+        faults: plan,
+        wall_s: started.elapsed().as_secs_f64(),
+        interrupted,
+        failure,
+        started_utc,
+        leftover_files,
+    })
+}
+
+/// Applies one fault; whether it took effect.
+async fn apply_fault(
+    children: &mut Children,
+    run: &protocol::service::RunId,
+    kind: FaultKind,
+    uav: u32,
+) -> bool {
+    match kind {
+        FaultKind::Kill => {
+            let killed = children.kill_agent(uav).await;
+            // The dead node's resources go at once, not at the next scan of a peer.
+            if let Err(e) = cleanup_stale(run) {
+                tracing::debug!(error = %e, "cannot clean the killed agent's resources");
+            }
+            killed
+        }
+        FaultKind::Restart => match children.spawn_agent(uav) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::error!(uav, error = %format!("{e:#}"), "cannot restart the agent");
+                false
+            }
+        },
+    }
+}
+
+/// Joins the observer thread without blocking the runtime.
+async fn join_observer(
+    handle: std::thread::JoinHandle<anyhow::Result<ObserverReport>>,
+) -> anyhow::Result<ObserverReport> {
+    tokio::task::spawn_blocking(move || handle.join())
+        .await
+        .context("cannot join the observer thread")?
+        .map_err(|_| anyhow::anyhow!("the observer thread panicked"))?
+}
+
+/// Removes the run's iceoryx2 files once every process of it is gone; returns how many
+/// remain (0 unless the removal failed).
+fn clean_run_files(run: &protocol::service::RunId) -> usize {
+    if let Err(e) = cleanup_stale(run) {
+        tracing::debug!(error = %e, "cannot scan the run's nodes");
+    }
+    if let Err(e) = remove_run_files(run) {
+        tracing::warn!(error = %e, "cannot remove the run's iceoryx2 files");
+    }
+    run_files(run).map_or(0, |files| {
+        for f in &files {
+            tracing::warn!(file = %f.display(), "iceoryx2 file left behind");
+        }
+        files.len()
+    })
+}

@@ -1,0 +1,433 @@
+//! `fleet sweep`: every variant on seeds 1..=N, one full run each (as separate processes,
+//! like `fleet run`), then the paper's Table I layout: one row per final metric, one column
+//! per variant, mean ± sample standard deviation over the seeds.
+//!
+//! Writes into `--out`: each run's results under `<variant>/seed-<n>/`, `table.json`,
+//! `table.md` and `metrics.png` (UA and OA over time per variant, mean ± 1 sd).
+//!
+//! The variants (DESIGN.md §7): `paper` (the MPC with the map and `kappa = 1`), `kappa0`
+//! (occluded ground not rewarded, `kappa = 0`) and `nomap` (the MPC without the map, the
+//! paper's reference [3]: no occlusion by buildings predicted and `kappa = 0`).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::{Args, ValueEnum};
+use serde::Serialize;
+
+use crate::Outcome;
+use crate::cli::{ScenarioArgs, UsageError};
+use crate::observe::StepMetrics;
+use crate::results::curves::{draw_sweep, mean_sd};
+use crate::results::summary::Summary;
+use crate::run::config::{RunConfig, new_run_id};
+use crate::run::{execute, outcome, runtime, write_results};
+use world_server::server::StepMode;
+
+/// A guidance variant compared by the sweep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Variant {
+    /// The paper's MPC: map and occluded ground (`kappa = 1`).
+    Paper,
+    /// The map, but occluded ground not rewarded (`kappa = 0`).
+    Kappa0,
+    /// No map in the MPC (reference [3] of the paper).
+    Nomap,
+}
+
+impl Variant {
+    /// The variant's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Variant::Paper => "paper",
+            Variant::Kappa0 => "kappa0",
+            Variant::Nomap => "nomap",
+        }
+    }
+
+    /// The scenario overrides that make the variant.
+    pub fn overrides(self) -> &'static [&'static str] {
+        match self {
+            Variant::Paper => &["guidance.kappa=1", "guidance.use_map=true"],
+            Variant::Kappa0 => &["guidance.kappa=0", "guidance.use_map=true"],
+            Variant::Nomap => &["guidance.kappa=0", "guidance.use_map=false"],
+        }
+    }
+}
+
+/// `fleet sweep`.
+#[derive(Debug, Clone, Args)]
+pub struct SweepArgs {
+    /// The scenario (its seed is replaced by 1..=N).
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// Number of seeds: runs use seeds 1..=N.
+    #[arg(long)]
+    pub seeds: u32,
+    /// Variants to run, comma-separated, in the table's column order.
+    #[arg(long, value_enum, value_delimiter = ',',
+          default_values_t = vec![Variant::Nomap, Variant::Kappa0, Variant::Paper])]
+    pub variants: Vec<Variant>,
+    /// Overrides the scenario's `duration_s`, seconds of simulated time.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Output directory (default: `runs/sweep-<UTC timestamp>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// A validated `fleet sweep`: one run configuration per (variant, seed).
+#[derive(Debug, Clone)]
+pub struct SweepConfig {
+    /// Runs in order: variant-major.
+    pub runs: Vec<(Variant, u64, RunConfig)>,
+    /// Variants in column order.
+    pub variants: Vec<Variant>,
+    /// Output directory.
+    pub out: PathBuf,
+}
+
+impl SweepArgs {
+    /// Checks the counts and every variant's scenario.
+    pub fn validate(&self) -> Result<SweepConfig, UsageError> {
+        if self.seeds == 0 || self.seeds > 1000 {
+            return Err(UsageError(format!(
+                "--seeds {}: must be 1 to 1000",
+                self.seeds
+            )));
+        }
+        let mut variants = self.variants.clone();
+        variants.dedup();
+        if variants.is_empty() {
+            return Err(UsageError("--variants: name at least one variant".into()));
+        }
+        let out = self.out.clone().unwrap_or_else(|| {
+            let stamp = crate::run::config::default_out_dir();
+            let name = stamp.file_name().map(|n| n.to_string_lossy().into_owned());
+            PathBuf::from("runs").join(format!("sweep-{}", name.unwrap_or_default()))
+        });
+        let progress_bar = std::io::IsTerminal::is_terminal(&std::io::stderr());
+        let mut runs = Vec::new();
+        for &variant in &variants {
+            for seed in 1..=u64::from(self.seeds) {
+                let mut overrides = self.scenario.overrides.clone();
+                overrides.extend(variant.overrides().iter().map(|s| (*s).to_owned()));
+                overrides.push(format!("seed={seed}"));
+                if let Some(d) = self.duration {
+                    overrides.push(format!("duration_s={d:?}"));
+                }
+                let scenario = ScenarioArgs {
+                    scenario: self.scenario.scenario.clone(),
+                    overrides,
+                }
+                .load()?;
+                let sequence = runs.len() as u32;
+                runs.push((
+                    variant,
+                    seed,
+                    RunConfig {
+                        scenario,
+                        mode: StepMode::Lockstep,
+                        faults: Vec::new(),
+                        out: out.join(variant.name()).join(format!("seed-{seed}")),
+                        strict: false,
+                        run_id: new_run_id(sequence),
+                        progress_bar,
+                    },
+                ));
+            }
+        }
+        Ok(SweepConfig {
+            runs,
+            variants,
+            out,
+        })
+    }
+}
+
+/// One metric of the table: mean, standard deviation and the values per seed.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Cell {
+    /// Mean over the runs that have the metric.
+    pub mean: Option<f64>,
+    /// Sample standard deviation.
+    pub sd: Option<f64>,
+    /// The value of each run, by seed (`null` where the run has none).
+    pub values: Vec<Option<f64>>,
+}
+
+impl Cell {
+    fn of(values: Vec<Option<f64>>) -> Cell {
+        let present: Vec<f64> = values.iter().flatten().copied().collect();
+        let stats = mean_sd(&present);
+        Cell {
+            mean: stats.map(|s| s.0),
+            sd: stats.map(|s| s.1),
+            values,
+        }
+    }
+}
+
+/// The metrics of the table, in row order: (key, label in `table.md`, scale to display).
+const ROWS: [(&str, &str, f64); 9] = [
+    ("ua_final", "UA, undetected-set area (%)", 100.0),
+    ("oa_final", "OA, undetected and occluded (%)", 100.0),
+    ("explored_final", "explored (%)", 100.0),
+    ("target_set_area_mean", "target-set area, mean (%)", 100.0),
+    ("loc_error_mean_m", "localisation error, mean (m)", 1.0),
+    ("identified_final", "identified targets (final)", 1.0),
+    ("violations", "guarantee violations", 1.0),
+    ("time_all_identified_s", "all identified at (s)", 1.0),
+    ("real_time_factor", "real-time factor", 1.0),
+];
+
+fn metric(s: &Summary, key: &str) -> Option<f64> {
+    match key {
+        "ua_final" => s.ua_final,
+        "oa_final" => s.oa_final,
+        "explored_final" => s.explored_final,
+        "target_set_area_mean" => s.target_set_area_mean,
+        "loc_error_mean_m" => s.loc_error_mean_m,
+        "identified_final" => Some(f64::from(s.identified_final)),
+        "violations" => Some(s.violations as f64),
+        "time_all_identified_s" => s.time_all_identified_s,
+        "real_time_factor" => Some(s.real_time_factor),
+        _ => None,
+    }
+}
+
+/// `table.json`: per variant, per metric, the statistics over seeds.
+#[derive(Clone, Debug, Serialize)]
+pub struct Table {
+    /// Seeds run per variant.
+    pub seeds: Vec<u64>,
+    /// Variants in column order.
+    pub variants: Vec<Variant>,
+    /// `metrics[variant][key]`.
+    pub metrics: BTreeMap<&'static str, BTreeMap<&'static str, Cell>>,
+    /// Runs that failed or were interrupted, as `variant/seed-n`.
+    pub failed_runs: Vec<String>,
+}
+
+impl Table {
+    /// Builds the table from each variant's run summaries (seed order).
+    pub fn build(
+        seeds: Vec<u64>,
+        results: &[(Variant, Vec<Summary>)],
+        failed: Vec<String>,
+    ) -> Table {
+        let metrics = results
+            .iter()
+            .map(|(variant, summaries)| {
+                let cells = ROWS
+                    .iter()
+                    .map(|&(key, _, _)| {
+                        (
+                            key,
+                            Cell::of(summaries.iter().map(|s| metric(s, key)).collect()),
+                        )
+                    })
+                    .collect();
+                (variant.name(), cells)
+            })
+            .collect();
+        Table {
+            seeds,
+            variants: results.iter().map(|(v, _)| *v).collect(),
+            metrics,
+            failed_runs: failed,
+        }
+    }
+
+    /// The paper's Table I layout in Markdown: metrics as rows, variants as columns.
+    pub fn to_markdown(&self) -> String {
+        let mut md = String::new();
+        let _ = writeln!(
+            md,
+            "Final metrics, mean ± standard deviation over {} seeds ({}).\n",
+            self.seeds.len(),
+            seed_range(&self.seeds)
+        );
+        let names: Vec<&str> = self.variants.iter().map(|v| v.name()).collect();
+        let _ = writeln!(md, "| metric | {} |", names.join(" | "));
+        let _ = writeln!(md, "|---|{}", "---:|".repeat(names.len()));
+        for (key, label, scale) in ROWS {
+            let cells: Vec<String> = names
+                .iter()
+                .map(|v| {
+                    self.metrics
+                        .get(v)
+                        .and_then(|m| m.get(key))
+                        .map_or_else(|| "-".into(), |c| format_cell(c, scale))
+                })
+                .collect();
+            let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
+        }
+        if !self.failed_runs.is_empty() {
+            let _ = writeln!(
+                md,
+                "\nRuns that did not complete: {}",
+                self.failed_runs.join(", ")
+            );
+        }
+        md
+    }
+}
+
+fn seed_range(seeds: &[u64]) -> String {
+    match (seeds.first(), seeds.last()) {
+        (Some(a), Some(b)) if a != b => format!("seeds {a}..={b}"),
+        (Some(a), _) => format!("seed {a}"),
+        _ => "no seed".into(),
+    }
+}
+
+fn format_cell(cell: &Cell, scale: f64) -> String {
+    match (cell.mean, cell.sd) {
+        (Some(m), Some(sd)) => {
+            let digits = if scale == 100.0 || m.abs() < 10.0 {
+                2
+            } else {
+                1
+            };
+            format!("{:.digits$} ± {:.digits$}", m * scale, sd * scale)
+        }
+        _ => "-".into(),
+    }
+}
+
+/// `fleet sweep`: runs everything, writes the table and the band plot, prints the table.
+pub fn run(config: &SweepConfig) -> anyhow::Result<Outcome> {
+    std::fs::create_dir_all(&config.out)
+        .with_context(|| format!("cannot create {}", config.out.display()))?;
+    let runtime = runtime()?;
+    let mut results: Vec<(Variant, Vec<Summary>)> =
+        config.variants.iter().map(|&v| (v, Vec::new())).collect();
+    let mut series: Vec<(String, Vec<Vec<StepMetrics>>)> = config
+        .variants
+        .iter()
+        .map(|v| (v.name().to_owned(), Vec::new()))
+        .collect();
+    let mut failed = Vec::new();
+    let mut seeds = Vec::new();
+    let mut code = Outcome::Success;
+    for (i, (variant, seed, run)) in config.runs.iter().enumerate() {
+        let label = format!(
+            "{}/{} {} seed {seed}",
+            i + 1,
+            config.runs.len(),
+            variant.name()
+        );
+        let record = runtime.block_on(execute(run, &label))?;
+        let summary = write_results(&record)?;
+        eprintln!(
+            "[{label}] UA {} OA {} violations {} ({:.0} s wall)",
+            percent(summary.ua_final),
+            percent(summary.oa_final),
+            summary.violations,
+            summary.wall_s
+        );
+        if !seeds.contains(seed) {
+            seeds.push(*seed);
+        }
+        let column = config
+            .variants
+            .iter()
+            .position(|v| v == variant)
+            .unwrap_or(0);
+        if outcome(&record) != Outcome::Success {
+            failed.push(format!("{}/seed-{seed}", variant.name()));
+            code = Outcome::Failed;
+        }
+        results[column].1.push(summary);
+        series[column].1.push(record.series);
+        if record.interrupted {
+            break;
+        }
+    }
+    let table = Table::build(seeds, &results, failed);
+    let json = serde_json::to_string_pretty(&table)? + "\n";
+    std::fs::write(config.out.join("table.json"), json).context("cannot write table.json")?;
+    let md = table.to_markdown();
+    std::fs::write(config.out.join("table.md"), &md).context("cannot write table.md")?;
+    draw_sweep(&series, &config.out.join("metrics.png"))?;
+    println!("{md}\nresults in {}", config.out.display());
+    Ok(code)
+}
+
+fn percent(v: Option<f64>) -> String {
+    v.map_or_else(|| "-".into(), |v| format!("{:.1} %", v * 100.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn summary(ua: f64, oa: Option<f64>) -> Summary {
+        Summary {
+            ua_final: Some(ua),
+            oa_final: oa,
+            ..Summary::default()
+        }
+    }
+
+    #[test]
+    fn the_table_has_mean_and_sd_per_variant_and_metric() {
+        let results = vec![
+            (
+                Variant::Nomap,
+                vec![summary(0.30, Some(0.2)), summary(0.20, None)],
+            ),
+            (Variant::Paper, vec![summary(0.10, Some(0.1))]),
+        ];
+        let table = Table::build(vec![1, 2], &results, vec![]);
+        let ua = &table.metrics["nomap"]["ua_final"];
+        assert!((ua.mean.unwrap() - 0.25).abs() < 1e-12);
+        assert!((ua.sd.unwrap() - 0.005_f64.sqrt()).abs() < 1e-12);
+        let oa = &table.metrics["nomap"]["oa_final"];
+        assert_eq!(oa.values, vec![Some(0.2), None]);
+        assert_eq!(oa.sd, Some(0.0));
+        let md = table.to_markdown();
+        assert!(md.contains("| metric | nomap | paper |"), "{md}");
+        assert!(
+            md.contains("| UA, undetected-set area (%) | 25.00 ± 7.07 | 10.00 ± 0.00 |"),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn variants_are_parsed_and_checked() {
+        #[derive(Parser)]
+        struct Wrap {
+            #[command(flatten)]
+            sweep: SweepArgs,
+        }
+        let w = Wrap::try_parse_from([
+            "x",
+            "--seeds",
+            "2",
+            "--variants",
+            "paper,nomap",
+            "--out",
+            "o",
+        ])
+        .unwrap();
+        let c = w.sweep.validate().unwrap();
+        assert_eq!(c.runs.len(), 4);
+        assert_eq!(c.runs[2].0, Variant::Nomap);
+        assert_eq!(c.runs[2].2.scenario.seed, 1);
+        assert!(!c.runs[2].2.scenario.guidance.use_map);
+        assert_eq!(c.runs[0].2.scenario.guidance.kappa, 1.0);
+        assert_eq!(c.runs[3].2.out, PathBuf::from("o/nomap/seed-2"));
+        let ids: std::collections::BTreeSet<_> =
+            c.runs.iter().map(|r| r.2.run_id.to_string()).collect();
+        assert_eq!(ids.len(), 4, "every run has its own id");
+        let w = Wrap::try_parse_from(["x", "--seeds", "0"]).unwrap();
+        assert!(w.sweep.validate().unwrap_err().0.contains("--seeds"));
+        assert!(Wrap::try_parse_from(["x", "--seeds", "1", "--variants", "best"]).is_err());
+    }
+}
