@@ -111,6 +111,8 @@ pub type PubSubService<T> = publish_subscribe::PortFactory<Ipc, T, ()>;
 pub type WireService = publish_subscribe::PortFactory<Ipc, [u8], WireHeader>;
 /// A publisher of variable-size messages.
 pub type WirePublisher = Publisher<Ipc, [u8], WireHeader>;
+/// A subscriber to variable-size messages (estimates, tokens).
+pub type WireSubscriber = iceoryx2::port::subscriber::Subscriber<Ipc, [u8], WireHeader>;
 /// An event service (wake-ups).
 pub type EventService = event::PortFactory<Ipc>;
 

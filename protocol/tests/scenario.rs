@@ -71,9 +71,9 @@ struct TempFile(PathBuf);
 impl TempFile {
     fn new(name: &str, text: &str) -> Self {
         let dir = std::env::temp_dir().join(format!("setfleet-scenario-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::create_dir_all(&dir).expect("create the temp dir");
         let path = dir.join(name);
-        std::fs::write(&path, text).unwrap();
+        std::fs::write(&path, text).expect("write the temp file");
         Self(path)
     }
 

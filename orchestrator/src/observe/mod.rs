@@ -9,10 +9,11 @@
 //!
 //! Per truth step `k`: wait (bounded) until every agent the world sent frame `k` to has
 //! published its estimate of `k` (agents publish before they ack, so it is normally there
-//! already; an agent whose node died is not waited for), fuse and measure, check each
-//! agent's own estimate against the truth, let the orchestrator apply the faults due at that
-//! time ([`ObserverEvent::FaultsDue`]), then ack `k`: in lockstep a killed agent is gone
-//! before frame `k + 1`, so fault runs are reproducible too.
+//! already; an agent whose node died is not waited for), let the orchestrator apply the
+//! faults due at that time ([`ObserverEvent::FaultsDue`]), ack `k`, then fuse and measure,
+//! and check each agent's own estimate against the truth while the world renders the next
+//! step. In lockstep a killed agent is gone before frame `k + 1`, so fault runs are
+//! reproducible too.
 //!
 //! Signals are left to the tokio side ([`SignalHandlingMode::Disabled`]).
 
@@ -33,7 +34,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSet};
 use protocol::frame::CvsFrame;
 use protocol::ipc::{
-    EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, scan_nodes,
+    EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, WireSubscriber, scan_nodes,
 };
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
@@ -165,18 +166,21 @@ const MAX_STORED_STEPS: usize = 64;
 
 struct Ports {
     truth: Subscriber<Ipc, TruthState, ()>,
-    estimates: Vec<(u32, Subscriber<Ipc, [u8], WireHeader>)>,
-    tokens: Subscriber<Ipc, [u8], WireHeader>,
+    estimates: Vec<(u32, WireSubscriber)>,
+    tokens: WireSubscriber,
     ack: Publisher<Ipc, ObserverAck, ()>,
     world_wake: Notifier<Ipc>,
     wake: Listener<Ipc>,
-    _services: (
-        PubSubService<TruthState>,
-        Vec<WireService>,
-        WireService,
-        PubSubService<ObserverAck>,
-        Vec<EventService>,
-    ),
+    _services: Services,
+}
+
+/// The services the ports belong to, kept open as long as the ports.
+struct Services {
+    _truth: PubSubService<TruthState>,
+    _estimates: Vec<WireService>,
+    _guidance: WireService,
+    _ack: PubSubService<ObserverAck>,
+    _events: Vec<EventService>,
 }
 
 impl Ports {
@@ -205,13 +209,13 @@ impl Ports {
             ack,
             world_wake,
             wake,
-            _services: (
-                truth_service,
-                estimate_services,
-                guidance,
-                ack_service,
-                vec![world, own],
-            ),
+            _services: Services {
+                _truth: truth_service,
+                _estimates: estimate_services,
+                _guidance: guidance,
+                _ack: ack_service,
+                _events: vec![world, own],
+            },
         })
     }
 }
@@ -504,9 +508,11 @@ impl Observer<'_> {
         if self.stopping() {
             return Ok(());
         }
-        let step = self.measure(truth, live_agents);
+        // Faults first (a killed agent is gone before frame k + 1), then the ack, so the world
+        // renders the next step while this one is measured.
         self.apply_faults(truth);
         self.send_ack(k)?;
+        let step = self.measure(truth, live_agents);
         self.report.steps += 1;
         if let Some(t) = self.first_truth {
             self.report.stepping = Some(t.elapsed());

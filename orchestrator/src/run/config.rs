@@ -248,10 +248,7 @@ mod tests {
     use super::*;
 
     fn scenario() -> Scenario {
-        let mut s = Scenario::default();
-        s.duration_s = 60.0;
-        s.uavs.count = 2;
-        s
+        Scenario::load(None, &["duration_s=60".into(), "uavs.count=2".into()]).unwrap()
     }
 
     #[test]

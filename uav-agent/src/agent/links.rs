@@ -8,6 +8,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{
     EventService, Ipc, PubSubService, RunNode, WakeEvent, WirePublisher, WireService,
+    WireSubscriber,
 };
 use protocol::wire::{PROTOCOL_VERSION, UavCommand, WireHeader, WireKind};
 
@@ -15,9 +16,6 @@ use protocol::wire::{PROTOCOL_VERSION, UavCommand, WireHeader, WireKind};
 const ESTIMATE_INITIAL_BYTES: usize = 64 * 1024;
 /// Initial sample size of tokens.
 const TOKEN_INITIAL_BYTES: usize = 4 * 1024;
-
-/// A subscriber to variable-size messages (estimates, tokens).
-pub type WireSubscriber = Subscriber<Ipc, [u8], WireHeader>;
 
 /// Keeps the services open for as long as the ports live.
 struct Services {

@@ -18,20 +18,39 @@ pub struct ObstacleCell {
 /// Ground shadow of an obstacle seen from `eye`: the convex hull of its footprint and of its
 /// top face projected from the eye onto the ground. `None` if the eye is not above the top.
 pub fn shadow(eye: &Point3, obstacle: &ObstacleCell) -> Option<Vec<Point2>> {
-    if eye.z <= obstacle.height_m + 1e-6 {
-        return None;
-    }
-    let scale = eye.z / (eye.z - obstacle.height_m);
+    let scale = shadow_scale(eye, obstacle)?;
     let corners = obstacle.rect.corners();
     let mut pts = Vec::with_capacity(8);
     for c in corners {
         pts.push(c);
-        pts.push(Point2::new(
-            eye.x + (c.x - eye.x) * scale,
-            eye.y + (c.y - eye.y) * scale,
-        ));
+        pts.push(project(eye, &c, scale));
     }
     Some(convex_hull(&pts))
+}
+
+/// The factor that projects the obstacle's top from `eye` onto the ground, if the eye is above
+/// the top.
+fn shadow_scale(eye: &Point3, obstacle: &ObstacleCell) -> Option<f64> {
+    (eye.z > obstacle.height_m + 1e-6).then(|| eye.z / (eye.z - obstacle.height_m))
+}
+
+fn project(eye: &Point3, p: &Point2, scale: f64) -> Point2 {
+    Point2::new(eye.x + (p.x - eye.x) * scale, eye.y + (p.y - eye.y) * scale)
+}
+
+/// The bounding box of [`shadow`] without building the hull: the footprint and the projected
+/// top are both axis-aligned rectangles (the projection scales about the eye by a positive
+/// factor), so the hull's box is the union of the two.
+fn shadow_bounds(eye: &Point3, obstacle: &ObstacleCell) -> Option<Rect> {
+    let scale = shadow_scale(eye, obstacle)?;
+    let (lo, hi) = (
+        project(eye, &obstacle.rect.min, scale),
+        project(eye, &obstacle.rect.max, scale),
+    );
+    Some(Rect {
+        min: Point2::new(obstacle.rect.min.x.min(lo.x), obstacle.rect.min.y.min(lo.y)),
+        max: Point2::new(obstacle.rect.max.x.max(hi.x), obstacle.rect.max.y.max(hi.y)),
+    })
 }
 
 fn bbox(points: &[Point2]) -> Rect {
@@ -73,8 +92,9 @@ pub fn add_visible_ground(
         let mut shadows = CellSet::empty(grid);
         let mut any = false;
         for o in obstacles {
-            if let Some(hull) = shadow(&pose.position, o)
-                && overlaps(&bbox(&hull), &fov_box)
+            // The box first: most shadows lie far from the field of view.
+            if shadow_bounds(&pose.position, o).is_some_and(|b| overlaps(&b, &fov_box))
+                && let Some(hull) = shadow(&pose.position, o)
             {
                 shadows.fill_convex_polygon(grid, &hull, Coverage::Outer);
                 any = true;
@@ -146,6 +166,17 @@ mod tests {
         // The top's far edge at x = 15 projects to 15 * 100 / 80 = 18.75.
         assert!((far - 18.75).abs() < 1e-9);
         assert!(shadow(&Point3::new(0.0, 0.0, 10.0), &o).is_none());
+        // The cheap box is the hull's box, to rounding.
+        let b = shadow_bounds(&eye, &o).unwrap();
+        let h = bbox(&s);
+        for (x, y) in [
+            (b.min.x, h.min.x),
+            (b.min.y, h.min.y),
+            (b.max.x, h.max.x),
+            (b.max.y, h.max.y),
+        ] {
+            assert!((x - y).abs() < 1e-9, "{b:?} {h:?}");
+        }
         // Behind the building, seen from the eye: hidden; in front of it: not.
         assert!(hidden_by(&eye, &Point2::new(17.0, 2.5), &[o]));
         assert!(!hidden_by(&eye, &Point2::new(5.0, 2.5), &[o]));
