@@ -183,6 +183,7 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentRe
         guidance: GuidanceParams::from_scenario(&config.scenario),
         ring: TokenRing::new(config.uav),
         peers: BTreeMap::new(),
+        full_map_from: None,
         live: BTreeSet::new(),
         world_live: true,
         links: &links,
@@ -231,6 +232,8 @@ struct Agent<'a> {
     waitset: &'a WaitSet<Ipc>,
     estimator: Estimator,
     outbox: message::EstimateOutbox,
+    /// The step from which the next estimate carries the whole map (a peer (re)joined).
+    full_map_from: Option<u64>,
     guidance: GuidanceParams,
     ring: TokenRing,
     peers: BTreeMap<u32, PeerInfo>,
@@ -385,6 +388,10 @@ impl Agent<'_> {
     }
 
     fn publish_estimate(&mut self, k: u64) -> anyhow::Result<()> {
+        if self.full_map_from.is_some_and(|from| k >= from) {
+            self.outbox.request_full();
+            self.full_map_from = None;
+        }
         let mut msg = self.outbox.compose(self.estimator.state_mut());
         msg.stats = AgentStats {
             frames: self.report.frames,
@@ -476,8 +483,11 @@ impl Agent<'_> {
             if info.incarnation.is_some() {
                 tracing::info!(peer = p.uav, "peer restarted: sending it the whole map");
             }
-            // A newcomer or a restarted peer needs the whole map to rebuild its own.
-            self.outbox.request_full();
+            // A newcomer or a restarted peer needs the whole map to rebuild its own. It goes
+            // with the estimate of the step after the peer's, whenever this message arrived:
+            // in lockstep that keeps the traffic, like everything else, reproducible.
+            let from = p.step + 1;
+            self.full_map_from = Some(self.full_map_from.map_or(from, |f| f.min(from)));
             info.incarnation = Some(p.incarnation);
             info.fused_step = None;
         }
