@@ -5,11 +5,11 @@
 //!
 //! - [`cli`]: raw clap arguments and their validation into configs (errors name the flag or
 //!   the scenario key and the accepted range: exit code 2).
-//! - [`run`]: `fleet run`, one run of the fleet as processes; [`observe`] measures it and
+//! - [`run`](mod@run): `fleet run`, one run of the fleet as processes; [`observe`] measures it and
 //!   [`results`] writes what it produced.
 //! - [`sweep`]: `fleet sweep`, every variant on several seeds, the paper's Table I.
 //! - [`render_cmd`]: `fleet render`, one frame as pictures.
-//! - [`bench`]: `fleet bench`, whole-system measurements as [`bench::BenchReport`]s.
+//! - [`bench`](mod@bench): `fleet bench`, whole-system measurements as [`bench::BenchReport`]s.
 //! - [`pictures`]: plotters drawings with the bundled font.
 //!
 //! The library uses `anyhow` for a command's failures (exit code 1): it is the body of the

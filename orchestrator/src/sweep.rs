@@ -7,7 +7,7 @@
 //!
 //! The variants (DESIGN.md §7): `paper` (the MPC with the map and `kappa = 1`), `kappa0`
 //! (occluded ground not rewarded, `kappa = 0`) and `nomap` (the MPC without the map, the
-//! paper's reference [3]: no occlusion by buildings predicted and `kappa = 0`).
+//! paper's reference \[3\]: no occlusion by buildings predicted and `kappa = 0`).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -34,7 +34,7 @@ pub enum Variant {
     Paper,
     /// The map, but occluded ground not rewarded (`kappa = 0`).
     Kappa0,
-    /// No map in the MPC (reference [3] of the paper).
+    /// No map in the MPC (reference \[3\] of the paper).
     Nomap,
 }
 

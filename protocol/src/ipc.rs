@@ -17,8 +17,9 @@
 //!   [`MAX_OBSERVERS`] observers and [`RESTART_OVERLAP`] restarted agents whose dead predecessor
 //!   was not cleaned up yet.
 //! - **Waiting.** Ports of `ipc::Service` are not `Send`; a process waits on its wake-up
-//!   [`Listener`] with a [`WaitSet`] built by [`RunNode::waitset`]. Senders notify with a
-//!   [`WakeEvent`] id so a woken process knows what to look at.
+//!   [`Listener`](iceoryx2::port::listener::Listener) with a [`WaitSet`] built by
+//!   [`RunNode::waitset`]. Senders notify with a [`WakeEvent`] id so a woken process knows
+//!   what to look at.
 //! - **Signals.** The world-server and agents use
 //!   [`SignalHandlingMode::HandleTerminationRequests`]: SIGTERM and SIGINT end their wait loop
 //!   cleanly (after the first wait; before it, the default action applies). Test harnesses and
