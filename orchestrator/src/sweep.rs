@@ -104,11 +104,10 @@ impl SweepArgs {
         if variants.is_empty() {
             return Err(UsageError("--variants: name at least one variant".into()));
         }
-        let out = self.out.clone().unwrap_or_else(|| {
-            let stamp = crate::run::config::default_out_dir();
-            let name = stamp.file_name().map(|n| n.to_string_lossy().into_owned());
-            PathBuf::from("runs").join(format!("sweep-{}", name.unwrap_or_default()))
-        });
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| crate::run::config::default_out_dir("sweep-"));
         let progress_bar = std::io::IsTerminal::is_terminal(&std::io::stderr());
         let mut runs = Vec::new();
         for &variant in &variants {
@@ -171,33 +170,72 @@ impl Cell {
     }
 }
 
-/// The metrics of the table, in row order: (key, label in `table.md`, scale to display).
-const ROWS: [(&str, &str, f64); 9] = [
-    ("ua_final", "UA, undetected-set area (%)", 100.0),
-    ("oa_final", "OA, undetected and occluded (%)", 100.0),
-    ("explored_final", "explored (%)", 100.0),
-    ("target_set_area_mean", "target-set area, mean (%)", 100.0),
-    ("loc_error_mean_m", "localisation error, mean (m)", 1.0),
-    ("identified_final", "identified targets (final)", 1.0),
-    ("violations", "guarantee violations", 1.0),
-    ("time_all_identified_s", "all identified at (s)", 1.0),
-    ("real_time_factor", "real-time factor", 1.0),
-];
-
-fn metric(s: &Summary, key: &str) -> Option<f64> {
-    match key {
-        "ua_final" => s.ua_final,
-        "oa_final" => s.oa_final,
-        "explored_final" => s.explored_final,
-        "target_set_area_mean" => s.target_set_area_mean,
-        "loc_error_mean_m" => s.loc_error_mean_m,
-        "identified_final" => Some(f64::from(s.identified_final)),
-        "violations" => Some(s.violations as f64),
-        "time_all_identified_s" => s.time_all_identified_s,
-        "real_time_factor" => Some(s.real_time_factor),
-        _ => None,
-    }
+/// One row of the table: the `table.json` key, the label in `table.md`, the factor to
+/// display it with, and where it comes from in a run's summary.
+struct Row {
+    key: &'static str,
+    label: &'static str,
+    scale: f64,
+    value: fn(&Summary) -> Option<f64>,
 }
+
+/// The metrics of the table, in row order.
+const ROWS: [Row; 9] = [
+    Row {
+        key: "ua_final",
+        label: "UA, undetected-set area (%)",
+        scale: 100.0,
+        value: |s| s.ua_final,
+    },
+    Row {
+        key: "oa_final",
+        label: "OA, undetected and occluded (%)",
+        scale: 100.0,
+        value: |s| s.oa_final,
+    },
+    Row {
+        key: "explored_final",
+        label: "explored (%)",
+        scale: 100.0,
+        value: |s| s.explored_final,
+    },
+    Row {
+        key: "target_set_area_mean",
+        label: "target-set area, mean (%)",
+        scale: 100.0,
+        value: |s| s.target_set_area_mean,
+    },
+    Row {
+        key: "loc_error_mean_m",
+        label: "localisation error, mean (m)",
+        scale: 1.0,
+        value: |s| s.loc_error_mean_m,
+    },
+    Row {
+        key: "identified_final",
+        label: "identified targets (final)",
+        scale: 1.0,
+        value: |s| Some(f64::from(s.identified_final)),
+    },
+    Row {
+        key: "violations",
+        label: "guarantee violations",
+        scale: 1.0,
+        value: |s| Some(s.violations as f64),
+    },
+    Row {
+        key: "time_all_identified_s",
+        label: "all identified at (s)",
+        scale: 1.0,
+        value: |s| s.time_all_identified_s,
+    },
+    Row {
+        key: "real_time_factor",
+        label: "real-time factor",
+        scale: 1.0,
+        value: |s| Some(s.real_time_factor),
+    },
+];
 
 /// `table.json`: per variant, per metric, the statistics over seeds.
 #[derive(Clone, Debug, Serialize)]
@@ -224,12 +262,7 @@ impl Table {
             .map(|(variant, summaries)| {
                 let cells = ROWS
                     .iter()
-                    .map(|&(key, _, _)| {
-                        (
-                            key,
-                            Cell::of(summaries.iter().map(|s| metric(s, key)).collect()),
-                        )
-                    })
+                    .map(|row| (row.key, Cell::of(summaries.iter().map(row.value).collect())))
                     .collect();
                 (variant.name(), cells)
             })
@@ -254,17 +287,17 @@ impl Table {
         let names: Vec<&str> = self.variants.iter().map(|v| v.name()).collect();
         let _ = writeln!(md, "| metric | {} |", names.join(" | "));
         let _ = writeln!(md, "|---|{}", "---:|".repeat(names.len()));
-        for (key, label, scale) in ROWS {
+        for row in &ROWS {
             let cells: Vec<String> = names
                 .iter()
                 .map(|v| {
                     self.metrics
                         .get(v)
-                        .and_then(|m| m.get(key))
-                        .map_or_else(|| "-".into(), |c| format_cell(c, scale))
+                        .and_then(|m| m.get(row.key))
+                        .map_or_else(|| "-".into(), |c| format_cell(c, row.scale))
                 })
                 .collect();
-            let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
+            let _ = writeln!(md, "| {} | {} |", row.label, cells.join(" | "));
         }
         if !self.failed_runs.is_empty() {
             let _ = writeln!(

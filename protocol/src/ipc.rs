@@ -62,8 +62,8 @@
 //!
 //! ```no_run
 //! use std::time::Duration;
-//! use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode};
-//! use protocol::ipc::{RunNode, WakeEvent};
+//! use iceoryx2::prelude::SignalHandlingMode;
+//! use protocol::ipc::RunNode;
 //! use protocol::service::RunId;
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let run = RunId::new("demo")?;
@@ -72,13 +72,10 @@
 //! let listener = node.open_agent_wake(0)?.listener_builder().create()?;
 //! let waitset = node.waitset()?;
 //! let _guard = waitset.attach_notification(&listener)?;
-//! waitset.wait_and_process_once_with_timeout(
-//!     |_| {
-//!         let _ = listener.try_wait(|e| println!("woken by {:?}", WakeEvent::from_id(e.id)));
-//!         CallbackProgression::Continue
-//!     },
-//!     Duration::from_secs(1),
-//! )?;
+//! let wake = protocol::ipc::wait_for_wake(&waitset, &listener, Duration::from_secs(1))?;
+//! if wake.end_of_run {
+//!     println!("the run ended");
+//! }
 //! while let Some(frame) = frames.receive()? {
 //!     println!("frame {}", frame.payload().header.step);
 //! }
@@ -87,6 +84,7 @@
 //! ```
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use iceoryx2::node::{NodeCreationFailure, NodeListFailure, NodeView};
 use iceoryx2::port::listener::ListenerCreateError;
@@ -97,7 +95,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
-use iceoryx2::waitset::WaitSetCreateError;
+use iceoryx2::waitset::{WaitSetCreateError, WaitSetRunError, WaitSetRunResult};
 
 use crate::frame::CvsFrame;
 use crate::service::{self, RunId};
@@ -469,6 +467,46 @@ impl NodeScan {
     pub fn is_alive(&self, name: &str) -> bool {
         self.alive.iter().any(|n| n == name)
     }
+}
+
+/// What one [`wait_for_wake`] saw.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Wake {
+    /// At least one notification arrived.
+    pub woken: bool,
+    /// One of them was [`WakeEvent::EndOfRun`].
+    pub end_of_run: bool,
+    /// The wait set reported SIGINT or SIGTERM (only under
+    /// [`SignalHandlingMode::HandleTerminationRequests`]).
+    pub interrupted: bool,
+}
+
+/// Waits at most `timeout` for a notification on `listener` (attached to `waitset`), and
+/// drains every pending one so that the next wait blocks until something new arrives. The
+/// waiting loop of every setfleet process.
+pub fn wait_for_wake(
+    waitset: &WaitSet<Ipc>,
+    listener: &iceoryx2::port::listener::Listener<Ipc>,
+    timeout: Duration,
+) -> Result<Wake, WaitSetRunError> {
+    let mut wake = Wake::default();
+    let result = waitset.wait_and_process_once_with_timeout(
+        |_| {
+            wake.woken = true;
+            let _ = listener.try_wait(|activation| {
+                if WakeEvent::from_id(activation.id) == Some(WakeEvent::EndOfRun) {
+                    wake.end_of_run = true;
+                }
+            });
+            CallbackProgression::Continue
+        },
+        timeout,
+    )?;
+    wake.interrupted = matches!(
+        result,
+        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
+    );
+    Ok(wake)
 }
 
 /// Lists the nodes of `run`; with `cleanup`, removes the resources of dead ones (a SIGKILLed

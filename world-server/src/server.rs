@@ -21,7 +21,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{self, EventService, Ipc, PubSubService, RunNode, WakeEvent};
 use protocol::scenario::Scenario;
@@ -451,29 +450,19 @@ impl Server<'_> {
             return false;
         }
         let slice = (deadline - now).min(WAIT_SLICE);
-        let wake = &self.ports.wake;
-        let mut woken = false;
-        let result = self.waitset.wait_and_process_once_with_timeout(
-            |_| {
-                woken = true;
-                // Empty the listener so the next wait blocks until something new arrives.
-                let _ = wake.try_wait(|_| {});
-                CallbackProgression::Continue
-            },
-            slice,
-        );
-        match result {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+        let woken = match ipc::wait_for_wake(self.waitset, &self.ports.wake, slice) {
+            Ok(wake) if wake.interrupted => {
                 tracing::info!("termination requested");
                 self.interrupted = true;
                 return false;
             }
-            Ok(_) => {}
+            Ok(wake) => wake.woken,
             Err(e) => {
                 tracing::warn!(error = %e, "wait failed");
                 std::thread::sleep(slice.min(Duration::from_millis(5)));
+                false
             }
-        }
+        };
         if !woken {
             self.check_liveness();
         }

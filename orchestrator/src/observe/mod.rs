@@ -31,10 +31,11 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSet};
+use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
 use protocol::frame::CvsFrame;
 use protocol::ipc::{
     EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, WireSubscriber, scan_nodes,
+    wait_for_wake,
 };
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
@@ -313,23 +314,12 @@ impl Observer<'_> {
 
     /// Waits for a wake-up at most `timeout`; notes the end of the run.
     fn wait(&mut self, timeout: Duration) {
-        let wake = &self.ports.wake;
-        let mut end = false;
-        let result = self.waitset.wait_and_process_once_with_timeout(
-            |_| {
-                let _ = wake.try_wait(|activation| {
-                    if WakeEvent::from_id(activation.id) == Some(WakeEvent::EndOfRun) {
-                        end = true;
-                    }
-                });
-                CallbackProgression::Continue
-            },
-            timeout,
-        );
-        self.end_of_run |= end;
-        if let Err(e) = result {
-            tracing::warn!(error = ?e, "observer wait failed");
-            std::thread::sleep(Duration::from_millis(5));
+        match wait_for_wake(self.waitset, &self.ports.wake, timeout) {
+            Ok(wake) => self.end_of_run |= wake.end_of_run,
+            Err(e) => {
+                tracing::warn!(error = ?e, "observer wait failed");
+                std::thread::sleep(Duration::from_millis(5));
+            }
         }
     }
 

@@ -147,12 +147,7 @@ fn paint_map(
     }
     raster.blit(root, pixels)?;
     draw_axes(&mut chart)?;
-    chart.draw_series(buildings.iter().map(|b| {
-        Rectangle::new(
-            [(b.min.x, b.min.y), (b.max.x, b.max.y)],
-            OUTLINE.stroke_width(1),
-        )
-    }))?;
+    draw_outlines(&mut chart, buildings)?;
     draw_frame(&mut chart, h)?;
 
     let (bar_area, keys_area) = legend.split_vertically(PANEL.1 * 11 / 20);
@@ -273,12 +268,7 @@ fn paint_sets(
     }
     raster.blit(root, pixels)?;
     draw_axes(&mut chart)?;
-    chart.draw_series(buildings.iter().map(|b| {
-        Rectangle::new(
-            [(b.min.x, b.min.y), (b.max.x, b.max.y)],
-            OUTLINE.stroke_width(1),
-        )
-    }))?;
+    draw_outlines(&mut chart, buildings)?;
 
     let label = |text: String, at: (i32, i32), pos: Pos| {
         let style = (FONT, 14).into_font().color(&BLACK).pos(pos);
@@ -526,6 +516,17 @@ fn draw_axes(chart: &mut Chart<'_, '_>) -> anyhow::Result<()> {
 }
 
 /// A thin frame around the plotting area, over the bitmap's edge.
+/// The true buildings' footprints as thin outlines.
+fn draw_outlines(chart: &mut Chart<'_, '_>, buildings: &[Building]) -> anyhow::Result<()> {
+    chart.draw_series(buildings.iter().map(|b| {
+        Rectangle::new(
+            [(b.min.x, b.min.y), (b.max.x, b.max.y)],
+            OUTLINE.stroke_width(1),
+        )
+    }))?;
+    Ok(())
+}
+
 fn draw_frame(chart: &mut Chart<'_, '_>, half: f64) -> anyhow::Result<()> {
     chart.draw_series(std::iter::once(Rectangle::new(
         [(-half, -half), (half, half)],

@@ -218,7 +218,7 @@ impl Summary {
             },
             steps,
             interrupted: record.interrupted || record.failure.is_some(),
-            violations: series.iter().map(|m| u64::from(m.violations)).sum(),
+            violations: record.violations(),
             explored_final: last.map(|s| s.explored),
             ua_final: last.map(|s| s.ua),
             oa_final: last.map(|s| s.oa),

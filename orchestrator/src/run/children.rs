@@ -189,12 +189,6 @@ impl Children {
         exits
     }
 
-    /// Whether no agent is running any more.
-    pub fn agents_done(&mut self) -> bool {
-        self.reap_agents();
-        self.agents.is_empty()
-    }
-
     /// Waits at most `timeout` for every agent to exit; returns their exits.
     pub async fn wait_agents(&mut self, timeout: Duration) -> Vec<AgentExit> {
         let deadline = tokio::time::Instant::now() + timeout;

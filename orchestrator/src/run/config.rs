@@ -170,7 +170,7 @@ impl RunArgs {
             scenario,
             mode,
             faults,
-            out: self.out.clone().unwrap_or_else(default_out_dir),
+            out: self.out.clone().unwrap_or_else(|| default_out_dir("")),
             strict: self.strict,
             run_id: self.run_id.clone().unwrap_or_else(|| new_run_id(0)),
             progress_bar: std::io::IsTerminal::is_terminal(&std::io::stderr()),
@@ -223,13 +223,14 @@ pub fn check_faults(faults: &[Fault], scenario: &Scenario) -> Result<Vec<Fault>,
     Ok(ordered)
 }
 
-/// `runs/<UTC timestamp>`, e.g. `runs/20250101T120000Z`.
-pub fn default_out_dir() -> PathBuf {
+/// `runs/<prefix><UTC timestamp>`, e.g. `runs/20250101T120000Z` or
+/// `runs/sweep-20250101T120000Z`.
+pub fn default_out_dir(prefix: &str) -> PathBuf {
     let stamp: String = crate::bench::utc_now_rfc3339()
         .chars()
         .filter(|c| !matches!(c, '-' | ':'))
         .collect();
-    PathBuf::from("runs").join(stamp)
+    PathBuf::from("runs").join(format!("{prefix}{stamp}"))
 }
 
 /// A short run id unique on this machine: `r`, the Unix time in seconds, the process id and

@@ -278,7 +278,12 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     let observer = match observer {
         Ok(report) => Some(report),
         Err(e) => {
-            failure.get_or_insert_with(|| format!("the observer failed: {e:#}"));
+            failure.get_or_insert_with(|| {
+                format!(
+                    "the observer failed: {e:#}; see the logs in {}",
+                    logs.display()
+                )
+            });
             None
         }
     };
@@ -310,7 +315,12 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         && report.end != observe::ObserverEnd::EndOfRun
         && !interrupted
     {
-        failure.get_or_insert_with(|| "the run ended before the world announced its end".into());
+        failure.get_or_insert_with(|| {
+            format!(
+                "the run ended before the world announced its end; see the logs in {}",
+                logs.display()
+            )
+        });
     }
     Ok(RunRecord {
         config: config.clone(),

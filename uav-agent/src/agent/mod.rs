@@ -24,12 +24,11 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSet};
-use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
 use protocol::codec;
 use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
-use protocol::ipc::{Ipc, NodeScanError, RunNode, WakeEvent, scan_nodes};
+use protocol::ipc::{Ipc, NodeScanError, RunNode, scan_nodes, wait_for_wake};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::wire::{AgentStats, GuidanceToken, HELLO_STEP, UavCommand, WireKind};
@@ -299,27 +298,11 @@ impl Agent<'_> {
         if timeout.is_zero() {
             return;
         }
-        let wake = &self.links.wake;
-        let mut end = false;
-        let result = self.waitset.wait_and_process_once_with_timeout(
-            |_| {
-                let _ = wake.try_wait(|activation| {
-                    if WakeEvent::from_id(activation.id) == Some(WakeEvent::EndOfRun) {
-                        end = true;
-                    }
-                });
-                CallbackProgression::Continue
-            },
-            timeout,
-        );
-        if end {
-            self.end_of_run = true;
-        }
-        match result {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
-                self.interrupted = true;
+        match wait_for_wake(self.waitset, &self.links.wake, timeout) {
+            Ok(wake) => {
+                self.end_of_run |= wake.end_of_run;
+                self.interrupted |= wake.interrupted;
             }
-            Ok(_) => {}
             Err(e) => {
                 tracing::warn!(error = ?e, "wait failed");
                 std::thread::sleep(Duration::from_millis(5));

@@ -27,7 +27,7 @@ use uav_agent::guidance::ring::ROUND_COMPLETE;
 use uav_agent::guidance::{TokenRing, Turn};
 
 use super::children::{GO, READY, RESULT};
-use super::socket::{self, SocketFrame, SocketFrameRef};
+use super::socket::{self, SocketFrame};
 use super::{
     Ack, BenchServices, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame,
     monotonic_ns,
@@ -372,7 +372,7 @@ impl FrameLink for SocketFrameLink {
     fn send(&mut self, seq: u64, phase: u32) -> anyhow::Result<()> {
         fill_frame(&mut self.frame, seq);
         let sent = monotonic_ns();
-        let bytes = codec::encode(&SocketFrameRef::of(&self.frame, seq, phase, sent))?;
+        let bytes = codec::encode(&SocketFrame::of(&self.frame, seq, phase, sent))?;
         socket::write_message(&mut self.stream, &bytes).context("cannot send a frame")?;
         Ok(())
     }
@@ -434,7 +434,7 @@ fn socket_subscriber(args: &BenchChildArgs) -> anyhow::Result<ChildReport> {
     for _ in 0..2 * args.iterations {
         socket::read_message(&mut stream, &mut buf, codec::MAX_MESSAGE_BYTES)
             .context("no frame")?;
-        let msg: SocketFrame = codec::decode(&buf)?;
+        let msg: SocketFrame<'static> = codec::decode(&buf)?;
         let received = monotonic_ns();
         if msg.phase == PHASE_LATENCY {
             report

@@ -2,6 +2,7 @@
 //! bincode messages ([`protocol::codec`]), each preceded by its length as a little-endian
 //! `u32`, and fixed 16-byte acks in the other direction.
 
+use std::borrow::Cow;
 use std::io::{self, Read, Write};
 
 use protocol::frame::CvsFrame;
@@ -56,9 +57,10 @@ pub fn read_ack(r: &mut impl Read) -> io::Result<(u64, bool)> {
 }
 
 /// A frame as the baseline sends it: the header fields a receiver needs and the pixels,
-/// borrowed from the rendered frame (no copy before encoding).
-#[derive(Serialize)]
-pub struct SocketFrameRef<'a> {
+/// borrowed from the rendered frame when sending (no copy before encoding), owned when
+/// received.
+#[derive(Serialize, Deserialize)]
+pub struct SocketFrame<'a> {
     /// Sequence number.
     pub seq: u64,
     /// Benchmark phase.
@@ -76,12 +78,12 @@ pub struct SocketFrameRef<'a> {
     /// Checksum of depth and labels.
     pub checksum: u64,
     /// Depth of the pixels in use.
-    pub depth: &'a [f32],
+    pub depth: Cow<'a, [f32]>,
     /// Labels of the pixels in use.
-    pub labels: &'a [u8],
+    pub labels: Cow<'a, [u8]>,
 }
 
-impl<'a> SocketFrameRef<'a> {
+impl<'a> SocketFrame<'a> {
     /// The message for `frame`.
     pub fn of(frame: &'a CvsFrame, seq: u64, phase: u32, sent_mono_ns: u64) -> Self {
         let n = frame.pixel_count();
@@ -94,38 +96,11 @@ impl<'a> SocketFrameRef<'a> {
             rows: frame.header.rows,
             cols: frame.header.cols,
             checksum: frame.header.checksum,
-            depth: &frame.depth[..n],
-            labels: &frame.labels[..n],
+            depth: Cow::Borrowed(&frame.depth[..n]),
+            labels: Cow::Borrowed(&frame.labels[..n]),
         }
     }
-}
 
-/// A received [`SocketFrameRef`].
-#[derive(Deserialize)]
-pub struct SocketFrame {
-    /// Sequence number.
-    pub seq: u64,
-    /// Benchmark phase.
-    pub phase: u32,
-    /// `CLOCK_MONOTONIC` at the send start, ns.
-    pub sent_mono_ns: u64,
-    /// Step.
-    pub step: u64,
-    /// Simulated time.
-    pub time_s: f64,
-    /// Image rows.
-    pub rows: u32,
-    /// Image columns.
-    pub cols: u32,
-    /// Checksum of depth and labels.
-    pub checksum: u64,
-    /// Depth of the pixels in use.
-    pub depth: Vec<f32>,
-    /// Labels of the pixels in use.
-    pub labels: Vec<u8>,
-}
-
-impl SocketFrame {
     /// Copies the message into `frame`; false if it does not fit or its checksum fails.
     pub fn restore_and_check(&self, frame: &mut CvsFrame) -> bool {
         let n = self.rows as usize * self.cols as usize;
@@ -179,14 +154,14 @@ mod tests {
     fn a_frame_survives_the_baseline_encoding() {
         let mut frame = CvsFrame::new_boxed();
         fill_frame(&mut frame, 3);
-        let bytes = protocol::codec::encode(&SocketFrameRef::of(&frame, 3, 1, 99)).unwrap();
-        let back: SocketFrame = protocol::codec::decode(&bytes).unwrap();
+        let bytes = protocol::codec::encode(&SocketFrame::of(&frame, 3, 1, 99)).unwrap();
+        let back: SocketFrame<'static> = protocol::codec::decode(&bytes).unwrap();
         assert_eq!((back.seq, back.phase, back.sent_mono_ns), (3, 1, 99));
         let mut copy = CvsFrame::new_boxed();
         assert!(back.restore_and_check(&mut copy));
         assert_eq!(copy.checksum(), frame.header.checksum);
-        let mut bad: SocketFrame = protocol::codec::decode(&bytes).unwrap();
-        bad.labels[10] ^= 1;
+        let mut bad: SocketFrame<'static> = protocol::codec::decode(&bytes).unwrap();
+        bad.labels.to_mut()[10] ^= 1;
         assert!(!bad.restore_and_check(&mut copy));
     }
 }
