@@ -7,10 +7,14 @@
 //!   set touches); a set *proven free* is rasterised [`Coverage::Inner`] (only cells wholly
 //!   inside);
 //! - `outer \ inner`, `outer ∩ outer` and `outer ∪ outer` are outer;
-//! - [`CellSet::dilate`] contains every point within the radius of the set.
+//! - [`CellSet::dilate`] contains every point within the radius of the set;
+//! - a [`ReachSet`] is an outer set that grows by the targets' motion without rounding it out
+//!   to whole cells at every step ([`reach`] argues its guarantee), using the exact gaps
+//!   between cell squares of [`distance`].
 //!
 //! The operations live one per file: `polygon` and `disc` rasterise shapes, `dilate` grows a
-//! set, `extent` measures and crops it, `encode` turns it into an [`EncodedSet`] and back.
+//! set, `extent` measures and crops it, `encode` turns it into an [`EncodedSet`] and back,
+//! `distance` measures gaps between cells and `reach` keeps sets that grow exactly.
 //!
 //! ```
 //! use protocol::grid::GroundGrid;
@@ -28,9 +32,11 @@
 
 mod dilate;
 mod disc;
+pub mod distance;
 mod encode;
 mod extent;
 mod polygon;
+pub mod reach;
 
 use serde::{Deserialize, Serialize};
 
@@ -38,6 +44,7 @@ use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
 
 pub use polygon::polygon_is_finite;
+pub use reach::{REACH_UNIT_M, ReachSet};
 
 /// How a continuous shape is turned into cells.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

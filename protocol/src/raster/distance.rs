@@ -1,0 +1,217 @@
+//! Exact distances between cells: how far the closed square of each cell of a window lies from
+//! the closed squares of a set of cells.
+//!
+//! Two closed cell squares `dx` columns and `dy` rows apart are
+//! `cell_m * hypot(max(|dx| - 1, 0), max(|dy| - 1, 0))` apart. For integers,
+//! `max(|t| - 1, 0)² = min over s in {-1, 0, 1} of (t - s)²`, so that distance is the Euclidean
+//! distance between cell *centres* to the set grown by its 8 neighbours. The transform is
+//! therefore an exact squared Euclidean distance transform (Felzenszwalb and Huttenlocher's
+//! lower envelope of parabolas, one pass per column then one per row) of the 3x3-grown set,
+//! in integer arithmetic: no rounding can make a distance longer than it is.
+
+use super::CellBox;
+
+/// Squared distance, in cells², of a cell no seed reaches.
+pub const UNREACHED: u64 = u64::MAX;
+
+/// For every cell of `window`, the squared distance in cell units between its closed square
+/// and the closed square of the nearest cell for which `seed(ix, iy)` holds, among the
+/// window's cells; [`UNREACHED`] when the window has no seed. Row-major over the window.
+pub fn square_gap_field(window: &CellBox, seed: impl Fn(u32, u32) -> bool) -> Vec<u64> {
+    let w = (window.x1 - window.x0 + 1) as usize;
+    let h = (window.y1 - window.y0 + 1) as usize;
+    // The seeds grown by their 8 neighbours, inside the window.
+    let mut rows_grown = vec![false; w * h];
+    for y in 0..h {
+        let row = &mut rows_grown[y * w..(y + 1) * w];
+        for x in 0..w {
+            if seed(window.x0 + x as u32, window.y0 + y as u32) {
+                row[x.saturating_sub(1)..(x + 2).min(w)].fill(true);
+            }
+        }
+    }
+    let mut grown = vec![false; w * h];
+    for y in 0..h {
+        for dy in y.saturating_sub(1)..(y + 2).min(h) {
+            let (src, dst) = (dy * w, y * w);
+            for x in 0..w {
+                grown[dst + x] |= rows_grown[src + x];
+            }
+        }
+    }
+    drop(rows_grown);
+
+    // Vertical distance to the nearest grown seed in the same column, in cells.
+    let far = u64::MAX / 4;
+    let mut vertical = vec![far; w * h];
+    let mut last = vec![far; w];
+    for y in 0..h {
+        for x in 0..w {
+            last[x] = if grown[y * w + x] {
+                0
+            } else {
+                last[x].saturating_add(1)
+            };
+            vertical[y * w + x] = last[x];
+        }
+    }
+    last.fill(far);
+    for y in (0..h).rev() {
+        for x in 0..w {
+            last[x] = if grown[y * w + x] {
+                0
+            } else {
+                last[x].saturating_add(1).min(vertical[y * w + x])
+            };
+            vertical[y * w + x] = last[x];
+        }
+    }
+
+    // Along each row, the lower envelope of the parabolas (x - x')² + vertical(x')².
+    let mut out = vec![UNREACHED; w * h];
+    let mut envelope = Envelope::with_capacity(w);
+    for y in 0..h {
+        let f: Vec<Option<u64>> = vertical[y * w..(y + 1) * w]
+            .iter()
+            .map(|&v| (v < far).then(|| v * v))
+            .collect();
+        envelope.lower(&f, &mut out[y * w..(y + 1) * w]);
+    }
+    out
+}
+
+/// Scratch space of the one-dimensional transform.
+struct Envelope {
+    /// Apexes of the parabolas of the envelope.
+    apex: Vec<usize>,
+    /// Where each parabola starts to be the lowest, as the fraction `num / den` (`den > 0`).
+    from: Vec<(i128, i128)>,
+}
+
+impl Envelope {
+    fn with_capacity(n: usize) -> Self {
+        Self {
+            apex: Vec::with_capacity(n),
+            from: Vec::with_capacity(n + 1),
+        }
+    }
+
+    /// `out[x] = min over x' with f[x'] = Some(v) of (x - x')² + v`; [`UNREACHED`] when `f`
+    /// has no value.
+    fn lower(&mut self, f: &[Option<u64>], out: &mut [u64]) {
+        self.apex.clear();
+        self.from.clear();
+        let value = |q: usize| f[q].map_or(0, |v| v as i128);
+        for (q, fq) in f.iter().enumerate() {
+            if fq.is_none() {
+                continue;
+            }
+            // Where the parabola at q undercuts the one at p: s = (f(q) + q² - f(p) - p²) /
+            // (2 (q - p)), kept as an exact fraction.
+            let meets = |p: usize| {
+                let (qi, pi) = (q as i128, p as i128);
+                (value(q) + qi * qi - value(p) - pi * pi, 2 * (qi - pi))
+            };
+            loop {
+                let Some(&p) = self.apex.last() else { break };
+                let s = meets(p);
+                let start = *self.from.last().unwrap_or(&(i128::MIN, 1));
+                // s <= start, both with positive denominators.
+                if self.apex.len() > 1 && s.0 * start.1 <= start.0 * s.1 {
+                    self.apex.pop();
+                    self.from.pop();
+                } else {
+                    break;
+                }
+            }
+            let start = match self.apex.last() {
+                Some(&p) => meets(p),
+                None => (i128::MIN, 1),
+            };
+            self.apex.push(q);
+            self.from.push(start);
+        }
+        if self.apex.is_empty() {
+            out.fill(UNREACHED);
+            return;
+        }
+        let mut k = 0;
+        for (x, o) in out.iter_mut().enumerate() {
+            // Move to the last parabola that starts at or before x.
+            while k + 1 < self.apex.len() && self.from[k + 1].0 <= x as i128 * self.from[k + 1].1 {
+                k += 1;
+            }
+            let p = self.apex[k];
+            let d = x.abs_diff(p) as u64;
+            *o = d * d + f[p].unwrap_or(0);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    /// The definition: the least squared gap between closed squares over every seed.
+    fn brute(window: &CellBox, seeds: &[(u32, u32)]) -> Vec<u64> {
+        let mut out = Vec::new();
+        for y in window.y0..=window.y1 {
+            for x in window.x0..=window.x1 {
+                let best = seeds
+                    .iter()
+                    .map(|&(sx, sy)| {
+                        let gx = u64::from(x.abs_diff(sx).saturating_sub(1));
+                        let gy = u64::from(y.abs_diff(sy).saturating_sub(1));
+                        gx * gx + gy * gy
+                    })
+                    .min()
+                    .unwrap_or(UNREACHED);
+                out.push(best);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn gaps_between_squares() {
+        let window = CellBox {
+            x0: 10,
+            y0: 20,
+            x1: 19,
+            y1: 27,
+        };
+        let f = square_gap_field(&window, |x, y| (x, y) == (12, 21));
+        let at = |x: u32, y: u32| f[((y - 20) * 10 + (x - 10)) as usize];
+        assert_eq!(at(12, 21), 0);
+        assert_eq!(at(13, 22), 0, "touching diagonally");
+        assert_eq!(at(14, 21), 1, "one cell between");
+        assert_eq!(at(15, 23), 2 * 2 + 1);
+        assert_eq!(f, brute(&window, &[(12, 21)]));
+        assert!(
+            square_gap_field(&window, |_, _| false)
+                .iter()
+                .all(|&v| v == UNREACHED)
+        );
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(96))]
+
+        #[test]
+        fn matches_the_definition(
+            x0 in 0u32..50, y0 in 0u32..50, w in 1u32..40, h in 1u32..40,
+            seeds in proptest::collection::vec((0u32..40, 0u32..40), 0..12),
+        ) {
+            let window = CellBox { x0, y0, x1: x0 + w - 1, y1: y0 + h - 1 };
+            let seeds: Vec<(u32, u32)> = seeds
+                .into_iter()
+                .filter(|&(x, y)| x < w && y < h)
+                .map(|(x, y)| (x0 + x, y0 + y))
+                .collect();
+            let f = square_gap_field(&window, |x, y| seeds.contains(&(x, y)));
+            prop_assert_eq!(f, brute(&window, &seeds));
+        }
+    }
+}

@@ -1,0 +1,368 @@
+//! Outer sets that carry their sub-cell growth: a [`ReachSet`] is a [`CellSet`] plus, for
+//! every cell, a lower bound of how far the set's targets still are from it.
+//!
+//! # Why
+//! Dilating a bit raster by `R = v_max T` at every step rounds the growth out to whole cells,
+//! so with 0.5 m cells and `R = 1 m` a set left unobserved grows 1.5 m per step. A
+//! [`ReachSet`] grows by `R` per step, exactly, however many steps pass: `n` steps without
+//! observation grow it by `n R` plus one cell diagonal (the rasterisation).
+//!
+//! # What is stored
+//! Time enters through a *motion clock* `b = v_max t` in metres: how far any target can have
+//! travelled since time 0. Each cell `c` holds a *reach* `τ(c)`, an integer in units of
+//! [`REACH_UNIT_M`], and the invariants are, for every target `p(t)` the set must hold:
+//!
+//! - **(I1)** `dist(p(t), square(c)) ≥ τ(c) · REACH_UNIT_M − b(t)` for every cell;
+//! - **(I2)** a cell outside the set's cells has `p(t)` outside its closed square.
+//!
+//! (I1) is invariant in time: the target moves at most `b(t') − b(t)` between `t` and `t'`,
+//! so the distance shrinks at most as fast as the right-hand side. That is why prediction
+//! stores nothing: [`ReachSet::advance`] only re-reads which cells the clock reached, the
+//! cells with `τ(c) · unit ≤ b`, and any other cell is at a positive distance by (I1).
+//!
+//! The corrections raise `τ`. When the target is known to lie in an outer raster `M` (every
+//! cell whose closed square holds it is in `M`; ground proven free is the complement of an
+//! outer raster), a cell outside `M` is at least the gap between its square and the nearest
+//! square of `M` away from it ([`super::distance`], exact in integer arithmetic), so
+//! `τ(c) ← max(τ(c), ⌊(gap + b) / unit⌋)` keeps (I1), and removing the cell keeps (I2). The
+//! floor and a `1e-6`-unit margin make every rounding err low, the safe way.
+//!
+//! Fusion with another estimate of the same target intersects the cells (both hold the target)
+//! and would take the larger reach (both bounds hold); the fleet exchanges cells only, so a
+//! peer's set enters as an outer raster through [`ReachSet::intersect`].
+//!
+//! ```
+//! use protocol::grid::GroundGrid;
+//! use protocol::raster::{CellBox, CellSet, ReachSet};
+//!
+//! let grid = GroundGrid::new(10.0, 0.5); // 40 x 40 cells
+//! let mut set = ReachSet::full(&grid);
+//! // Everything but the cell (20, 20) is proven free at the clock 0.
+//! let mut free = CellSet::full(&grid);
+//! free.set((20, 20), false);
+//! set.clear(&grid, &free, &CellBox { x0: 0, y0: 0, x1: 39, y1: 39 });
+//! assert_eq!(set.cells().count(), 1);
+//! // One step of 1 m later the set holds the cells whose squares are within 1 m of its
+//! // square: 3 more on each side along the axes, with rounded corners.
+//! set.advance(1.0);
+//! assert!(set.cells().contains((23, 20)) && !set.cells().contains((24, 20)));
+//! assert!(set.cells().contains((22, 22)) && !set.cells().contains((23, 22)));
+//! // Whole-cell dilation of the cell by 1 m gives the same cells; the difference is that
+//! // the set remembers that (23, 20) is reached only just now, so it grows exactly next time.
+//! set.advance(2.0);
+//! assert!(set.cells().contains((25, 20)) && !set.cells().contains((26, 20)));
+//! let twice = CellSet::from_cells(&grid, [(20, 20)]).dilate(&grid, 1.0).dilate(&grid, 1.0);
+//! assert!(twice.contains((26, 20)) && twice.count() > set.cells().count());
+//! ```
+
+use super::distance::{UNREACHED, square_gap_field};
+use super::{CellBox, CellSet};
+use crate::grid::{CellIndex, GroundGrid};
+use crate::math::Real;
+
+/// The unit of reach, metres: `1/256` m, far below any cell and any step's motion.
+pub const REACH_UNIT_M: Real = 1.0 / 256.0;
+
+/// Rounding margin of the conversions to reach units, in units.
+const UNIT_MARGIN: Real = 1e-6;
+
+/// An outer set on the [`GroundGrid`] that grows by the targets' motion without rounding it
+/// out at every step (see the module docs for the invariants).
+#[derive(Clone, Debug)]
+pub struct ReachSet {
+    cells: CellSet,
+    /// `τ` per cell, row-major.
+    reach: Vec<u32>,
+    /// Per word of `cells`: a lower bound of `τ` over the word's cells outside the set
+    /// (`u32::MAX` when it has none), so that [`ReachSet::advance`] visits only the words the
+    /// clock can change.
+    pending: Vec<u32>,
+    /// The motion clock `b` of the last [`ReachSet::advance`], metres.
+    clock_m: Real,
+}
+
+/// Equal cells, reach and clock (the pending bounds are a cache).
+impl PartialEq for ReachSet {
+    fn eq(&self, other: &Self) -> bool {
+        self.cells == other.cells && self.reach == other.reach && self.clock_m == other.clock_m
+    }
+}
+
+/// Reach units of the clock: the largest reach a cell can have and still be reached.
+fn reached_units(clock_m: Real) -> u32 {
+    (clock_m / REACH_UNIT_M + UNIT_MARGIN)
+        .floor()
+        .clamp(0.0, Real::from(u32::MAX)) as u32
+}
+
+/// The largest reach that is at most `metres` (a lower bound, saturating at `u32::MAX - 1`).
+fn units_below(metres: Real) -> u32 {
+    if metres.is_nan() {
+        return 0;
+    }
+    (metres / REACH_UNIT_M - UNIT_MARGIN)
+        .floor()
+        .clamp(0.0, Real::from(u32::MAX - 1)) as u32
+}
+
+impl ReachSet {
+    /// Every cell of `grid`, nothing known, clock 0.
+    pub fn full(grid: &GroundGrid) -> Self {
+        let cells = CellSet::full(grid);
+        Self {
+            reach: vec![0; grid.cell_count()],
+            pending: vec![u32::MAX; cells.words_per_row() * grid.ny as usize],
+            cells,
+            clock_m: 0.0,
+        }
+    }
+
+    /// A set of `cells` at clock 0 whose reach is unknown (0): its other cells join it at the
+    /// first advance.
+    pub fn with_cells(cells: CellSet) -> Self {
+        let n = cells.nx() as usize * cells.ny() as usize;
+        let mut set = Self {
+            pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
+            reach: vec![0; n],
+            cells,
+            clock_m: 0.0,
+        };
+        set.rebuild_pending();
+        set
+    }
+
+    /// The cells the set holds now.
+    pub fn cells(&self) -> &CellSet {
+        &self.cells
+    }
+
+    /// Whether cell `c` is in the set.
+    pub fn contains(&self, c: CellIndex) -> bool {
+        self.cells.contains(c)
+    }
+
+    /// The motion clock of the last advance, metres.
+    pub fn clock_m(&self) -> Real {
+        self.clock_m
+    }
+
+    /// A lower bound of the distance, metres, between cell `c`'s square and every target the
+    /// set holds, at the current clock (0 for cells the targets may reach; `None` outside the
+    /// grid).
+    pub fn clearance_m(&self, (ix, iy): CellIndex) -> Option<Real> {
+        if ix >= self.cells.nx() || iy >= self.cells.ny() {
+            return None;
+        }
+        let tau = self.reach[self.index(ix, iy)];
+        Some((Real::from(tau) * REACH_UNIT_M - self.clock_m).max(0.0))
+    }
+
+    fn index(&self, ix: u32, iy: u32) -> usize {
+        iy as usize * self.cells.nx() as usize + ix as usize
+    }
+
+    /// Moves the clock to `clock_m` (`v_max` times the time since the clock's origin): every
+    /// cell the targets may have reached by then joins the set. A clock earlier than the
+    /// current one, or not a number, changes nothing.
+    pub fn advance(&mut self, clock_m: Real) {
+        if clock_m.is_nan() || clock_m <= self.clock_m {
+            return;
+        }
+        self.clock_m = clock_m;
+        let reached = reached_units(clock_m);
+        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        for iy in 0..self.cells.ny() {
+            for w in 0..wpr {
+                let slot = iy as usize * wpr + w;
+                if self.pending[slot] > reached {
+                    continue;
+                }
+                let x0 = w * 64;
+                let x1 = (x0 + 64).min(nx);
+                let base = iy as usize * nx;
+                let mut bits = 0u64;
+                let mut next = u32::MAX;
+                for (b, &tau) in self.reach[base + x0..base + x1].iter().enumerate() {
+                    if tau <= reached {
+                        bits |= 1 << b;
+                    } else {
+                        next = next.min(tau);
+                    }
+                }
+                self.cells.row_mut(iy)[w] |= bits;
+                self.pending[slot] = next;
+            }
+        }
+    }
+
+    /// `cells ← cells ∩ outer`, for an outer raster of the set's targets (a peer's set, a
+    /// conservative dilation of an earlier set). The reach is unchanged.
+    pub fn intersect(&mut self, outer: &CellSet) {
+        debug_assert!(self.cells.same_shape(outer));
+        self.remove_where(|cells, iy, w| cells.row(iy)[w] & !outer.row(iy)[w]);
+    }
+
+    /// Removes ground proven free (`free`, an inner raster) without raising the reach: the
+    /// cells leave the set until the clock moves on.
+    pub fn remove(&mut self, free: &CellSet) {
+        debug_assert!(self.cells.same_shape(free));
+        self.remove_where(|cells, iy, w| cells.row(iy)[w] & free.row(iy)[w]);
+    }
+
+    /// `cells ← cells ∪ extra`, forgetting what the reach knew of the added cells (their
+    /// reach drops to 0, so they stay until proven free): the safe fallback when two
+    /// estimates of one target disagree.
+    pub fn join(&mut self, extra: &CellSet) {
+        debug_assert!(self.cells.same_shape(extra));
+        let nx = self.cells.nx() as usize;
+        for (ix, iy) in extra.iter() {
+            if !self.cells.contains((ix, iy)) {
+                self.reach[iy as usize * nx + ix as usize] = 0;
+            }
+        }
+        self.cells.or_assign(extra);
+    }
+
+    /// Removes ground proven free at the current clock (`free`, an inner raster: no target in
+    /// the closed square of any of its cells) and raises the reach of the free cells inside
+    /// `window` to their gap from the nearest cell that is not free. Free cells outside
+    /// `window` only leave the set; the cells around the window count as not free, which only
+    /// lowers the bounds.
+    pub fn clear(&mut self, grid: &GroundGrid, free: &CellSet, window: &CellBox) {
+        debug_assert!(self.cells.same_shape(free));
+        if let Some(w) = clamp_box(window, 2, &self.cells) {
+            // A side of the window inside the grid stands for every cell beyond it: counting
+            // it as not free keeps each gap at most the true one.
+            let (nx, ny) = (self.cells.nx(), self.cells.ny());
+            let edge = |ix: u32, iy: u32| {
+                (ix == w.x0 && w.x0 > 0)
+                    || (ix == w.x1 && w.x1 + 1 < nx)
+                    || (iy == w.y0 && w.y0 > 0)
+                    || (iy == w.y1 && w.y1 + 1 < ny)
+            };
+            self.raise_outside(grid, &w, |ix, iy| edge(ix, iy) || !free.contains((ix, iy)));
+        }
+        self.remove(free);
+    }
+
+    /// Restricts the set to an outer raster `outer` of its targets at the current clock (a
+    /// measurement) and raises the reach of the cells within `margin` cells of `outer`'s
+    /// bounding box to their gap from `outer`. Cells farther away only leave the set; a later
+    /// [`ReachSet::intersect`] with a dilation of the set keeps them out.
+    pub fn restrict(&mut self, grid: &GroundGrid, outer: &CellSet, margin: u32) {
+        debug_assert!(self.cells.same_shape(outer));
+        if let Some(window) = outer
+            .bounding_box()
+            .and_then(|b| clamp_box(&b, margin, &self.cells))
+        {
+            self.raise_outside(grid, &window, |ix, iy| outer.contains((ix, iy)));
+        }
+        self.intersect(outer);
+    }
+
+    /// Raises `τ` of every cell of `window` outside the outer raster `inside` to the gap
+    /// between its square and the nearest square of `inside` within the window (the caller
+    /// makes sure no cell of `inside` outside the window is nearer).
+    fn raise_outside(
+        &mut self,
+        grid: &GroundGrid,
+        window: &CellBox,
+        inside: impl Fn(u32, u32) -> bool,
+    ) {
+        let gaps = square_gap_field(window, &inside);
+        let nx = self.cells.nx() as usize;
+        let w = (window.x1 - window.x0 + 1) as usize;
+        for (k, &gap2) in gaps.iter().enumerate() {
+            let ix = window.x0 + (k % w) as u32;
+            let iy = window.y0 + (k / w) as u32;
+            if inside(ix, iy) {
+                continue;
+            }
+            let tau = if gap2 == UNREACHED {
+                u32::MAX - 1
+            } else {
+                units_below(grid.cell_m * (gap2 as Real).sqrt() + self.clock_m)
+            };
+            let slot = &mut self.reach[iy as usize * nx + ix as usize];
+            *slot = (*slot).max(tau);
+        }
+    }
+
+    /// Removes the bits `remove(cells, row, word)` of every word and notes their reach.
+    fn remove_where(&mut self, remove: impl Fn(&CellSet, u32, usize) -> u64) {
+        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        for iy in 0..self.cells.ny() {
+            for w in 0..wpr {
+                let mut gone = remove(&self.cells, iy, w);
+                if gone == 0 {
+                    continue;
+                }
+                self.cells.row_mut(iy)[w] &= !gone;
+                let slot = iy as usize * wpr + w;
+                let base = iy as usize * nx + w * 64;
+                while gone != 0 {
+                    let b = gone.trailing_zeros() as usize;
+                    gone &= gone - 1;
+                    self.pending[slot] = self.pending[slot].min(self.reach[base + b]);
+                }
+            }
+        }
+    }
+
+    /// The set as parts for snapshots ([`ReachSet::from_parts`]): its cells, the least reach
+    /// and every cell's reach above it, row-major.
+    pub fn to_parts(&self) -> (CellSet, u32, Vec<u32>) {
+        let base = self.reach.iter().copied().min().unwrap_or(0);
+        let relative = self.reach.iter().map(|&t| t - base).collect();
+        (self.cells.clone(), base, relative)
+    }
+
+    /// Rebuilds a set from [`ReachSet::to_parts`] with the clock at `clock_m`; `None` when the
+    /// lengths do not match the cells' grid.
+    pub fn from_parts(cells: CellSet, base: u32, relative: &[u32], clock_m: Real) -> Option<Self> {
+        if relative.len() != cells.nx() as usize * cells.ny() as usize {
+            return None;
+        }
+        let reach: Vec<u32> = relative.iter().map(|&d| d.saturating_add(base)).collect();
+        let mut set = Self {
+            pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
+            cells,
+            reach,
+            clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
+        };
+        set.rebuild_pending();
+        Some(set)
+    }
+
+    /// Recomputes every word's pending reach exactly.
+    fn rebuild_pending(&mut self) {
+        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        for iy in 0..self.cells.ny() {
+            for w in 0..wpr {
+                let word = self.cells.row(iy)[w];
+                let base = iy as usize * nx + w * 64;
+                let len = 64.min(nx - w * 64);
+                self.pending[iy as usize * wpr + w] = (0..len)
+                    .filter(|b| word >> b & 1 == 0)
+                    .map(|b| self.reach[base + b])
+                    .min()
+                    .unwrap_or(u32::MAX);
+            }
+        }
+    }
+}
+
+/// `bbox` grown by `margin` cells on every side and clamped to the set's grid; `None` for an
+/// inverted box or an empty grid.
+fn clamp_box(bbox: &CellBox, margin: u32, cells: &CellSet) -> Option<CellBox> {
+    if bbox.x0 > bbox.x1 || bbox.y0 > bbox.y1 || cells.nx() == 0 || cells.ny() == 0 {
+        return None;
+    }
+    let b = CellBox {
+        x0: bbox.x0.saturating_sub(margin),
+        y0: bbox.y0.saturating_sub(margin),
+        x1: bbox.x1.saturating_add(margin).min(cells.nx() - 1),
+        y1: bbox.y1.saturating_add(margin).min(cells.ny() - 1),
+    };
+    (b.x0 <= b.x1 && b.y0 <= b.y1).then_some(b)
+}

@@ -1,0 +1,250 @@
+//! The guarantee and the growth of [`ReachSet`], checked against continuous geometry.
+//!
+//! The reference is the exact set of possible target positions, sampled: 3 x 3 points per
+//! cell, strictly inside it. Prediction keeps every sample within the step's motion of a
+//! possible sample, a proven-free cell removes the samples in its square, a measurement keeps
+//! the samples in its cells. Every sample the reference holds is a position some target can
+//! really be at, so a sample outside the set's cells is a broken guarantee.
+
+use proptest::prelude::*;
+use protocol::grid::{CellIndex, GroundGrid};
+use protocol::math::Point2;
+use protocol::raster::{CellBox, CellSet, REACH_UNIT_M, ReachSet};
+
+const SAMPLES: u32 = 3;
+
+fn grid() -> GroundGrid {
+    GroundGrid::new(6.0, 0.5) // 24 x 24 cells
+}
+
+/// Sample points, row-major, with the cell holding each.
+fn samples(g: &GroundGrid) -> Vec<(Point2, CellIndex)> {
+    let mut out = Vec::new();
+    for iy in 0..g.ny {
+        for ix in 0..g.nx {
+            let r = g.cell_rect((ix, iy));
+            for sy in 0..SAMPLES {
+                for sx in 0..SAMPLES {
+                    let fx = (f64::from(sx) + 0.5) / f64::from(SAMPLES);
+                    let fy = (f64::from(sy) + 0.5) / f64::from(SAMPLES);
+                    let p = Point2::new(
+                        r.min.x + fx * (r.max.x - r.min.x),
+                        r.min.y + fy * (r.max.y - r.min.y),
+                    );
+                    out.push((p, (ix, iy)));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// One event of the random histories.
+#[derive(Clone, Debug)]
+enum Event {
+    /// The targets move at most this far.
+    Move(f64),
+    /// A rectangle of cells is proven free.
+    Free(CellBox),
+    /// The target is measured inside a rectangle of cells.
+    Measure(CellBox),
+}
+
+fn cell_box(n: u32) -> impl Strategy<Value = CellBox> {
+    (0..n, 0..n, 1u32..12, 1u32..12).prop_map(move |(x0, y0, w, h)| CellBox {
+        x0,
+        y0,
+        x1: (x0 + w - 1).min(n - 1),
+        y1: (y0 + h - 1).min(n - 1),
+    })
+}
+
+fn event(n: u32) -> impl Strategy<Value = Event> {
+    prop_oneof![
+        4 => (0.1f64..1.6).prop_map(Event::Move),
+        4 => cell_box(n).prop_map(Event::Free),
+        1 => cell_box(n).prop_map(move |b| {
+            // Measurements are larger: a few metres around the target.
+            Event::Measure(CellBox { x1: (b.x1 + 6).min(n - 1), y1: (b.y1 + 6).min(n - 1), ..b })
+        }),
+    ]
+}
+
+fn box_set(g: &GroundGrid, b: &CellBox) -> CellSet {
+    let mut s = CellSet::empty(g);
+    for iy in b.y0..=b.y1 {
+        s.fill_row_span(iy, b.x0, b.x1);
+    }
+    s
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// No position a target can really be at is ever outside the set, through any history of
+    /// motion, proven-free ground and measurements; and the set is never larger than the
+    /// whole-cell dilation it replaces.
+    #[test]
+    fn the_set_holds_every_possible_position(events in proptest::collection::vec(event(24), 1..24)) {
+        let g = grid();
+        let pts = samples(&g);
+        let mut possible = vec![true; pts.len()];
+        let mut set = ReachSet::full(&g);
+        let mut dilated = CellSet::full(&g);
+        let mut clock = 0.0;
+        for e in &events {
+            match e {
+                Event::Move(r) => {
+                    let before = possible.clone();
+                    let held: Vec<Point2> = pts
+                        .iter()
+                        .zip(&before)
+                        .filter(|(_, k)| **k)
+                        .map(|((p, _), _)| *p)
+                        .collect();
+                    for ((p, _), k) in pts.iter().zip(possible.iter_mut()) {
+                        *k = held.iter().any(|q| (p - q).norm() <= *r);
+                    }
+                    clock += r;
+                    let previous = set.cells().dilate(&g, *r);
+                    set.advance(clock);
+                    set.intersect(&previous);
+                    dilated = dilated.dilate(&g, *r);
+                }
+                Event::Free(b) => {
+                    let free = box_set(&g, b);
+                    for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
+                        *k &= !free.contains(*c);
+                    }
+                    set.clear(&g, &free, b);
+                    dilated.and_not_assign(&free);
+                }
+                Event::Measure(b) => {
+                    let m = box_set(&g, b);
+                    for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
+                        *k &= m.contains(*c);
+                    }
+                    set.restrict(&g, &m, 8);
+                    dilated.and_assign(&m);
+                }
+            }
+            for ((p, c), k) in pts.iter().zip(&possible) {
+                prop_assert!(
+                    !*k || set.contains(*c),
+                    "possible position {:?} outside the set (cell {:?}) after {:?}", p, c, e
+                );
+            }
+            prop_assert!(set.cells().is_subset_of(&dilated));
+        }
+    }
+
+    /// A pocket left unobserved for `n` steps of `R` grows to exactly the cells whose squares
+    /// lie within `n R` of its squares: at most `n R` plus one cell diagonal from it.
+    #[test]
+    fn a_pocket_grows_by_the_motion_and_one_diagonal(
+        pocket in proptest::collection::vec((20u32..40, 20u32..40), 1..6),
+        steps in 1u32..12,
+        r in 0.2f64..1.5,
+    ) {
+        let g = GroundGrid::new(15.0, 0.5); // 60 x 60 cells
+        let mut free = CellSet::full(&g);
+        for &c in &pocket {
+            free.set(c, false);
+        }
+        let mut set = ReachSet::full(&g);
+        let all = CellBox { x0: 0, y0: 0, x1: g.nx - 1, y1: g.ny - 1 };
+        set.clear(&g, &free, &all);
+        let pocket_set = CellSet::from_cells(&g, pocket.iter().copied());
+        prop_assert_eq!(set.cells(), &pocket_set);
+        for k in 1..=steps {
+            set.advance(f64::from(k) * r);
+        }
+        let reach = f64::from(steps) * r;
+        let diagonal = g.cell_m * std::f64::consts::SQRT_2;
+        for iy in 0..g.ny {
+            for ix in 0..g.nx {
+                let gap = pocket
+                    .iter()
+                    .map(|&(px, py)| {
+                        let gx = f64::from(ix.abs_diff(px).saturating_sub(1));
+                        let gy = f64::from(iy.abs_diff(py).saturating_sub(1));
+                        g.cell_m * gx.hypot(gy)
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                // Exactly the squares within the motion, up to one reach unit that the rounding
+                // may add and 1e-6 m of arithmetic.
+                if gap <= reach - 1e-6 {
+                    prop_assert!(set.contains((ix, iy)), "cell {:?} gap {} reach {}", (ix, iy), gap, reach);
+                }
+                if gap > reach + REACH_UNIT_M + 1e-6 {
+                    prop_assert!(!set.contains((ix, iy)), "cell {:?} gap {} reach {}", (ix, iy), gap, reach);
+                }
+                // Hence every point of the set within n R plus a diagonal of the pocket.
+                if set.contains((ix, iy)) {
+                    prop_assert!(gap + diagonal <= reach + diagonal + REACH_UNIT_M + 1e-6);
+                }
+            }
+        }
+        // The whole-cell dilation it replaces grows faster.
+        let mut old = pocket_set.clone();
+        for _ in 0..steps {
+            old = old.dilate(&g, r);
+        }
+        prop_assert!(set.cells().is_subset_of(&old));
+    }
+}
+
+#[test]
+fn a_lone_cell_grows_one_metre_per_step_not_one_and_a_half() {
+    // 0.5 m cells, 1 m per step: after 10 steps the pocket's squares reach 10 m, 20 cells;
+    // rounding out at every step would reach 30 cells.
+    let g = GroundGrid::new(25.0, 0.5); // 100 x 100 cells
+    let mut free = CellSet::full(&g);
+    free.set((50, 50), false);
+    let mut set = ReachSet::full(&g);
+    set.clear(
+        &g,
+        &free,
+        &CellBox {
+            x0: 0,
+            y0: 0,
+            x1: 99,
+            y1: 99,
+        },
+    );
+    let mut old = CellSet::from_cells(&g, [(50, 50)]);
+    for k in 1..=10 {
+        set.advance(f64::from(k));
+        old = old.dilate(&g, 1.0);
+    }
+    let row: Vec<u32> = (0..100).filter(|&x| set.contains((x, 50))).collect();
+    assert_eq!(row.first(), Some(&29));
+    assert_eq!(row.last(), Some(&71));
+    let old_row: Vec<u32> = (0..100).filter(|&x| old.contains((x, 50))).collect();
+    assert_eq!(old_row.first(), Some(&20));
+    assert!(set.cells().count() * 2 < old.count());
+}
+
+#[test]
+fn reach_survives_its_parts() {
+    let g = grid();
+    let mut set = ReachSet::full(&g);
+    let b = CellBox {
+        x0: 3,
+        y0: 4,
+        x1: 15,
+        y1: 12,
+    };
+    set.clear(&g, &box_set(&g, &b), &b);
+    set.advance(0.7);
+    let (cells, base, relative) = set.to_parts();
+    let back = ReachSet::from_parts(cells, base, &relative, set.clock_m()).expect("parts fit");
+    assert_eq!(back.cells(), set.cells());
+    let (mut a, mut b2) = (set.clone(), back);
+    for k in 1..6 {
+        a.advance(0.7 + f64::from(k) * 0.4);
+        b2.advance(0.7 + f64::from(k) * 0.4);
+        assert_eq!(a.cells(), b2.cells());
+    }
+    assert!(ReachSet::from_parts(CellSet::empty(&g), 0, &[1, 2, 3], 0.0).is_none());
+}
