@@ -240,8 +240,8 @@ impl<'a> PlanningState<'a> {
                 position: pose.position,
                 yaw: pose.yaw,
             },
-            sets: std::iter::once(&st.undetected)
-                .chain(st.targets.values())
+            sets: std::iter::once(st.undetected.cells())
+                .chain(st.targets.values().map(|s| s.cells()))
                 .collect(),
             hidden: st.hidden_history.recently_hidden(),
             obstacles: st

@@ -199,8 +199,8 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentRe
     let result = agent.main_loop();
     let state = agent.estimator.state();
     let report = AgentReport {
-        final_undetected_cells: state.undetected.count(),
-        final_undetected_digest: state.undetected.digest(),
+        final_undetected_cells: state.undetected.cells().count(),
+        final_undetected_digest: state.undetected.cells().digest(),
         final_step: state.step,
         ..agent.report
     };
@@ -585,8 +585,8 @@ impl Agent<'_> {
         let Some(pose) = state.pose else {
             anyhow::bail!("no pose to plan from at step {k}");
         };
-        let sets: Vec<&protocol::raster::CellSet> = std::iter::once(&state.undetected)
-            .chain(state.targets.values())
+        let sets: Vec<&protocol::raster::CellSet> = std::iter::once(state.undetected.cells())
+            .chain(state.targets.values().map(|s| s.cells()))
             .collect();
         let hidden = state.hidden_history.recently_hidden();
         let oem_grid = *state.oem.grid();

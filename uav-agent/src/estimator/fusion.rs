@@ -16,7 +16,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use protocol::camera::CameraPose;
 use protocol::grid::GroundGrid;
-use protocol::raster::CellSet;
+use protocol::raster::{CellSet, ReachSet};
 
 use super::predict;
 use super::{EstimatorConfig, EstimatorState};
@@ -67,19 +67,57 @@ pub struct FuseReport {
     pub grid_mismatch: bool,
 }
 
+/// A set the fusion law meets and joins with a peer's raster: a plain [`CellSet`] (an
+/// estimate) or a [`ReachSet`] (an agent's own state, whose reach the meet keeps).
+pub trait FusedSet: Clone {
+    /// The cells of the set.
+    fn cells(&self) -> &CellSet;
+    /// `self ← self ∩ other`.
+    fn meet(&mut self, other: &CellSet);
+    /// `self ← self ∪ other`.
+    fn join(&mut self, other: &CellSet);
+}
+
+impl FusedSet for CellSet {
+    fn cells(&self) -> &CellSet {
+        self
+    }
+    fn meet(&mut self, other: &CellSet) {
+        self.and_assign(other);
+    }
+    fn join(&mut self, other: &CellSet) {
+        self.or_assign(other);
+    }
+}
+
+impl FusedSet for ReachSet {
+    fn cells(&self) -> &CellSet {
+        ReachSet::cells(self)
+    }
+    fn meet(&mut self, other: &CellSet) {
+        self.intersect(other);
+    }
+    fn join(&mut self, other: &CellSet) {
+        ReachSet::join(self, other);
+    }
+}
+
 /// Mutable views of the fused parts, so one function serves states and peer estimates.
-struct Lattice<'a> {
+struct Lattice<'a, S: FusedSet> {
     step: u64,
-    undetected: &'a mut CellSet,
-    targets: &'a mut BTreeMap<u32, CellSet>,
+    undetected: &'a mut S,
+    targets: &'a mut BTreeMap<u32, S>,
     obstacle_free: &'a mut CellSet,
     explored: &'a mut CellSet,
     hidden: &'a mut CellSet,
     oem: &'a mut OccupancyMap,
 }
 
-fn fuse_into(
-    dst: Lattice<'_>,
+/// The fusion law: every set of `dst` meets the matching set of `src` (its `X̄` for an id it
+/// has not identified), proven facts are joined. In place: a target's set is only copied when
+/// `dst` learns its id.
+fn fuse_into<S: FusedSet>(
+    dst: Lattice<'_, S>,
     src: &PeerEstimate,
     grid: &GroundGrid,
     radius_per_step: f64,
@@ -96,7 +134,7 @@ fn fuse_into(
     ]
     .into_iter()
     .chain(src.targets.values())
-    .all(|s| s.same_shape(dst.undetected));
+    .all(|s| s.same_shape(dst.undetected.cells()));
     if !shapes_ok {
         report.grid_mismatch = true;
         return report;
@@ -110,17 +148,20 @@ fn fuse_into(
         .chain(src.targets.keys())
         .copied()
         .collect();
-    let mut fused = BTreeMap::new();
     for id in ids {
-        let mine = dst.targets.get(&id).unwrap_or(dst.undetected);
         let theirs = src.targets.get(&id).map(widen);
         let theirs = theirs.as_ref().unwrap_or(&src_undetected);
-        if !dst.targets.contains_key(&id) {
-            report.new_targets.push(id);
-        }
-        let mut meet = mine.clone();
-        meet.and_assign(theirs);
-        if meet.is_empty() && !(mine.is_empty() && theirs.is_empty()) {
+        let mine = match dst.targets.entry(id) {
+            std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::btree_map::Entry::Vacant(e) => {
+                report.new_targets.push(id);
+                e.insert(dst.undetected.clone())
+            }
+        };
+        let both_empty = mine.cells().is_empty() && theirs.is_empty();
+        if both_empty || mine.cells().intersects(theirs) {
+            mine.meet(theirs);
+        } else {
             tracing::error!(
                 target_id = id,
                 step = dst.step,
@@ -129,13 +170,10 @@ fn fuse_into(
                 "fused target set is empty: keeping the union"
             );
             report.empty_intersections.push(id);
-            meet = mine.clone();
-            meet.or_assign(theirs);
+            mine.join(theirs);
         }
-        fused.insert(id, meet);
     }
-    *dst.targets = fused;
-    dst.undetected.and_assign(&src_undetected);
+    dst.undetected.meet(&src_undetected);
     dst.obstacle_free.or_assign(&src.obstacle_free);
     dst.explored.or_assign(&src.explored);
     dst.hidden.or_assign(&src.hidden);
@@ -176,8 +214,12 @@ impl EstimatorState {
             seq: 0,
             incarnation: 0,
             pose: self.pose,
-            undetected: self.undetected.clone(),
-            targets: self.targets.clone(),
+            undetected: self.undetected.cells().clone(),
+            targets: self
+                .targets
+                .iter()
+                .map(|(id, s)| (*id, s.cells().clone()))
+                .collect(),
             obstacle_free: self.obstacle_free.clone(),
             explored: self.explored.clone(),
             hidden: self.hidden.clone(),
@@ -381,8 +423,12 @@ pub(crate) mod tests {
             .expect("tree")
             .current();
         let mut state = EstimatorState::new(&cfg);
-        state.undetected = a.undetected.clone();
-        state.targets = a.targets.clone();
+        state.undetected = ReachSet::with_cells(a.undetected.clone());
+        state.targets = a
+            .targets
+            .iter()
+            .map(|(k, v)| (*k, ReachSet::with_cells(v.clone())))
+            .collect();
         state.obstacle_free = a.obstacle_free.clone();
         state.explored = a.explored.clone();
         state.hidden = a.hidden.clone();
@@ -400,6 +446,6 @@ pub(crate) mod tests {
         other.undetected = CellSet::empty(&GroundGrid::new(4.0, 0.5));
         let r = state.fuse(&other, &cfg);
         assert!(r.grid_mismatch);
-        assert_eq!(state.undetected, CellSet::full(&cfg.grid));
+        assert_eq!(state.undetected.cells(), &CellSet::full(&cfg.grid));
     }
 }

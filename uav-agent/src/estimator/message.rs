@@ -72,13 +72,13 @@ impl EstimateOutbox {
                 position: Point3::origin(),
                 yaw: 0.0,
             }),
-            undetected: state.undetected.encode(),
+            undetected: state.undetected.cells().encode(),
             targets: state
                 .targets
                 .iter()
                 .map(|(&id, set)| TargetSetMsg {
                     id,
-                    set: set.encode(),
+                    set: set.cells().encode(),
                 })
                 .collect(),
             obstacle_free: state.obstacle_free.encode(),
@@ -197,7 +197,7 @@ impl PeerEstimate {
 mod tests {
     use proptest::prelude::*;
     use proptest::strategy::ValueTree;
-    use protocol::raster::EncodedSet;
+    use protocol::raster::{EncodedSet, ReachSet};
     use protocol::wire::OemCellUpdate;
 
     use super::*;
@@ -208,8 +208,12 @@ mod tests {
         let mut s = EstimatorState::new(&cfg);
         s.step = p.step;
         s.time_s = p.time_s;
-        s.undetected = p.undetected.clone();
-        s.targets = p.targets.clone();
+        s.undetected = ReachSet::with_cells(p.undetected.clone());
+        s.targets = p
+            .targets
+            .iter()
+            .map(|(id, set)| (*id, ReachSet::with_cells(set.clone())))
+            .collect();
         s.obstacle_free = p.obstacle_free.clone();
         s.explored = p.explored.clone();
         s.hidden = p.hidden.clone();

@@ -3,14 +3,21 @@
 //! An [`Estimator`] pairs an [`EstimatorConfig`] with an explicit [`EstimatorState`]; one call
 //! to [`Estimator::step`] folds one CVS frame into the state and returns a [`StepReport`]:
 //!
-//! 1. predict: `X̄ <- dilate(X̄, v_max dt)` and the same for every `X_j`, `dt` the time since
-//!    the last frame (skipped frames are covered);
+//! 1. predict: `X̄` and every `X_j` grow by `v_max dt`, `dt` the time since the last frame
+//!    (skipped frames are covered);
 //! 2. correct: `free = P^g ∪ S^o` (this frame's proven-free ground and every obstacle
 //!    neighbourhood seen so far); `X̄ <- X̄ \ free`; a target `j` with a box gets
 //!    `X_j <- (X_j, or X̄ if new) ∩ X^m_j \ free`; other targets `X_j <- X_j \ free`.
 //!
 //! Every set that must contain targets is outer and every set removed from them is inner
 //! ([`measure`] documents why each frame-derived set is), so no target ever leaves its set.
+//!
+//! `X̄` and every `X_j` are [`ReachSet`]s: besides their cells they keep, per cell, a lower
+//! bound of how far their targets are, so they grow by exactly `v_max dt` per step instead of
+//! rounding the growth out to whole cells at every step ([`protocol::raster::reach`] argues
+//! the guarantee). Removing proven-free ground raises those bounds to the exact gap between
+//! each freed cell and the nearest cell that is not free, over the frame's window; a
+//! measurement raises them around the measured target ([`TARGET_REACH_MARGIN_M`]).
 //! Fusion with peers is in [`fusion`], messages in [`message`].
 
 pub mod fusion;
@@ -27,7 +34,7 @@ use protocol::camera::CameraPose;
 use protocol::frame::CvsFrame;
 use protocol::grid::GroundGrid;
 use protocol::math::Real;
-use protocol::raster::CellSet;
+use protocol::raster::{CellBox, CellSet, ReachSet};
 use protocol::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 
@@ -37,7 +44,12 @@ pub use message::{EstimateOutbox, EstimateReadError};
 
 use crate::occupancy::OccupancyMap;
 use measure::FrameView;
-use snapshot::{cell_set, cell_set_map};
+use snapshot::{cell_set, reach_set, reach_set_map};
+
+/// How far around a measured target, metres, the reach of its set is raised to the exact gap
+/// from the measurement: a set left unobserved grows exactly up to this radius, and by the
+/// whole-cell dilation beyond it.
+pub const TARGET_REACH_MARGIN_M: Real = 40.0;
 
 /// Everything the estimator needs from the scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -97,11 +109,11 @@ pub struct EstimatorState {
     /// Camera pose of the last frame.
     pub pose: Option<CameraPose>,
     /// `X̄`, outer: where targets not yet identified can be (it holds every target).
-    #[serde(with = "cell_set")]
-    pub undetected: CellSet,
+    #[serde(with = "reach_set")]
+    pub undetected: ReachSet,
     /// `X_j`, outer, per identified target id.
-    #[serde(with = "cell_set_map")]
-    pub targets: BTreeMap<u32, CellSet>,
+    #[serde(with = "reach_set_map")]
+    pub targets: BTreeMap<u32, ReachSet>,
     /// `S^o`, inner, accumulated: ground within `r_s` of an obstacle, never a target's.
     #[serde(with = "cell_set")]
     pub obstacle_free: CellSet,
@@ -126,7 +138,7 @@ impl EstimatorState {
             time_s: 0.0,
             frames: 0,
             pose: None,
-            undetected: CellSet::full(g),
+            undetected: ReachSet::full(g),
             targets: BTreeMap::new(),
             obstacle_free: CellSet::empty(g),
             explored: CellSet::empty(g),
@@ -149,13 +161,13 @@ impl EstimatorState {
     pub fn fits(&self, config: &EstimatorConfig) -> bool {
         let probe = CellSet::empty(&config.grid);
         [
-            &self.undetected,
+            self.undetected.cells(),
             &self.obstacle_free,
             &self.explored,
             &self.hidden,
         ]
         .into_iter()
-        .chain(self.targets.values())
+        .chain(self.targets.values().map(ReachSet::cells))
         .all(|s| s.same_shape(&probe))
             && self.hidden_history.unseen().same_shape(&probe)
             && *self.oem.grid() == config.oem_grid
@@ -315,9 +327,10 @@ impl Estimator {
 
         let t = Instant::now();
         let radius = predict::motion_radius(report.steps_elapsed, cfg.period_s, cfg.max_speed_mps);
-        st.undetected = predict::grow(&st.undetected, grid, radius);
+        let clock = predict::motion_radius(h.step, cfg.period_s, cfg.max_speed_mps);
+        predict::advance(&mut st.undetected, grid, clock, radius);
         for set in st.targets.values_mut() {
-            *set = predict::grow(set, grid, radius);
+            predict::advance(set, grid, clock, radius);
         }
         report.timings.prediction = t.elapsed();
 
@@ -357,7 +370,9 @@ impl Estimator {
         st.obstacle_free.or_assign(&frame_obstacle_free);
         let mut free = free_ground.clone();
         free.or_assign(&st.obstacle_free);
-        st.undetected.and_not_assign(&free);
+        let window = free_ground.bounding_box();
+        clear(&mut st.undetected, grid, &free, window.as_ref());
+        let margin = (TARGET_REACH_MARGIN_M / grid.cell_m).ceil() as u32;
         let mut measured_ids = Vec::new();
         for (id, measurement) in measurements {
             let Some(mut xm) = measurement else {
@@ -365,30 +380,36 @@ impl Estimator {
                 continue;
             };
             xm.and_not_assign(&free);
-            let prior = match st.targets.get(&id) {
+            let mut x = match st.targets.remove(&id) {
                 Some(x) => x,
                 None => {
                     report.newly_identified.push(id);
-                    &st.undetected
+                    st.undetected.clone()
                 }
             };
-            let mut x = prior.clone();
-            x.and_assign(&xm);
-            if x.is_empty() {
+            if x.cells().intersects(&xm) {
+                x.restrict(grid, &xm, margin);
+            } else {
                 tracing::error!(
                     target_id = id,
                     step = h.step,
                     "empty target set after correction: keeping the measurement alone"
                 );
                 report.empty_intersections.push(id);
-                x = xm;
+                x = ReachSet::full(grid);
+                x.advance(clock);
+                x.restrict(grid, &xm, margin);
             }
             st.targets.insert(id, x);
             measured_ids.push(id);
         }
         for (id, set) in st.targets.iter_mut() {
             if !measured_ids.contains(id) {
-                set.and_not_assign(&free);
+                let near = set.cells().bounding_box().and_then(|b| {
+                    let w = window?;
+                    intersect_boxes(&grow_box(&b, margin), &w)
+                });
+                clear(set, grid, &free, near.as_ref());
             }
         }
         report.measured = measured_ids;
@@ -405,11 +426,11 @@ impl Estimator {
         let cam = frame.camera();
         st.pose = Some(cam.pose);
 
-        report.undetected_area_m2 = st.undetected.area(grid);
+        report.undetected_area_m2 = st.undetected.cells().area(grid);
         report.target_areas_m2 = st
             .targets
             .iter()
-            .map(|(id, s)| (*id, s.area(grid)))
+            .map(|(id, s)| (*id, s.cells().area(grid)))
             .collect();
         report.free_ground_area_m2 = free_ground.area(grid);
         report.obstacle_free_area_m2 = st.obstacle_free.area(grid);
@@ -424,6 +445,36 @@ impl Estimator {
     pub fn fuse(&mut self, peer: &PeerEstimate) -> FuseReport {
         self.state.fuse(peer, &self.config)
     }
+}
+
+/// Removes `free` from `set`, raising the reach over `window` (the part of the frame's free
+/// ground that matters to the set), or only removing it when there is no such window.
+fn clear(set: &mut ReachSet, grid: &GroundGrid, free: &CellSet, window: Option<&CellBox>) {
+    match window {
+        Some(w) => set.clear(grid, free, w),
+        None => set.remove(free),
+    }
+}
+
+/// `b` grown by `margin` cells on every side (not clamped: [`ReachSet::clear`] clamps).
+fn grow_box(b: &CellBox, margin: u32) -> CellBox {
+    CellBox {
+        x0: b.x0.saturating_sub(margin),
+        y0: b.y0.saturating_sub(margin),
+        x1: b.x1.saturating_add(margin),
+        y1: b.y1.saturating_add(margin),
+    }
+}
+
+/// The common part of two boxes, `None` when they do not overlap.
+fn intersect_boxes(a: &CellBox, b: &CellBox) -> Option<CellBox> {
+    let c = CellBox {
+        x0: a.x0.max(b.x0),
+        y0: a.y0.max(b.y0),
+        x1: a.x1.min(b.x1),
+        y1: a.y1.min(b.y1),
+    };
+    (c.x0 <= c.x1 && c.y0 <= c.y1).then_some(c)
 }
 
 /// The boxes a frame's measurements may use: inside the image and with an id no other box
@@ -486,10 +537,10 @@ mod tests {
     #[test]
     fn ground_in_view_leaves_the_undetected_set() {
         let mut e = Estimator::new(config());
-        let full = e.state().undetected.count();
+        let full = e.state().undetected.cells().count();
         let r = e.step(&ground_frame(0)).expect("step");
         assert!(r.free_ground_area_m2 > 0.0);
-        assert!(e.state().undetected.count() < full);
+        assert!(e.state().undetected.cells().count() < full);
         assert_eq!(
             e.state().explored.count() as f64 * 0.25,
             r.free_ground_area_m2
@@ -497,10 +548,59 @@ mod tests {
         // Ten frames later with nothing seen, X̄ grew back by the motion of 10 steps.
         let mut blind = ground_frame(10);
         blind.labels[..24 * 32].fill(Label::Unknown as u8);
-        let before = e.state().undetected.count();
+        let before = e.state().undetected.cells().count();
         let r = e.step(&blind).expect("step");
         assert_eq!(r.steps_elapsed, 10);
-        assert!(e.state().undetected.count() > before);
+        assert!(e.state().undetected.cells().count() > before);
+    }
+
+    #[test]
+    fn unobserved_ground_regrows_by_the_motion_not_by_whole_cells() {
+        let cfg = config();
+        let grid = cfg.grid;
+        let mut e = Estimator::new(cfg.clone());
+        e.step(&ground_frame(0)).expect("step");
+        let after_view = e.state().undetected.cells().clone();
+        // Ten blind steps of 1 m each: X̄ may have grown back 10 m into the freed ground
+        // (plus one reach unit of rounding), no more; 10 whole-cell dilations reach 15 m.
+        let mut blind = ground_frame(10);
+        blind.labels[..24 * 32].fill(Label::Unknown as u8);
+        e.step(&blind).expect("step");
+        let grown = e.state().undetected.cells();
+        let reach = 10.0 * cfg.period_s * cfg.max_speed_mps;
+        let kept: Vec<(u32, u32)> = after_view.iter().collect();
+        let gap_to_kept = |(x, y): (u32, u32)| {
+            kept.iter()
+                .map(|&(kx, ky)| {
+                    let gx = f64::from(x.abs_diff(kx).saturating_sub(1));
+                    let gy = f64::from(y.abs_diff(ky).saturating_sub(1));
+                    grid.cell_m * gx.hypot(gy)
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        let freed: Vec<(u32, u32)> = CellSet::full(&grid)
+            .iter()
+            .filter(|&c| !after_view.contains(c))
+            .collect();
+        assert!(!freed.is_empty());
+        let mut regrown = 0;
+        for &c in &freed {
+            let gap = gap_to_kept(c);
+            if grown.contains(c) {
+                regrown += 1;
+                assert!(
+                    gap <= reach + protocol::raster::REACH_UNIT_M + 1e-9,
+                    "{c:?}"
+                );
+            } else {
+                assert!(gap > reach - 1e-9, "{c:?} should be reachable");
+            }
+        }
+        let mut old = after_view.clone();
+        for _ in 0..10 {
+            old = old.dilate(&grid, cfg.period_s * cfg.max_speed_mps);
+        }
+        assert!(regrown > 0 && grown.count() < old.count());
     }
 
     #[test]
@@ -553,10 +653,13 @@ mod tests {
         assert_eq!(r.newly_identified, vec![1]);
         assert!(r.empty_intersections.is_empty());
         assert_eq!(e.state().identified().collect::<Vec<_>>(), vec![1]);
-        let xj = &e.state().targets[&1];
+        let xj = e.state().targets[&1].cells();
         assert!(xj.count() > 0);
         // X_j came out of X̄ and the measurement, so it lies in X̄ (before later dilations).
-        assert_eq!(xj.intersection_count(&e.state().undetected), xj.count());
+        assert_eq!(
+            xj.intersection_count(e.state().undetected.cells()),
+            xj.count()
+        );
     }
 
     #[test]

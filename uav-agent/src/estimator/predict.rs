@@ -1,9 +1,23 @@
 //! Prediction: every target moves at most `v_max`, so after `dt` it is within `v_max * dt` of
-//! where it could be; outer sets are dilated by that radius (DESIGN.md §3, estimator step 1).
+//! where it could be (DESIGN.md §3, estimator step 1).
+//!
+//! The estimator's own sets are [`ReachSet`]s, which grow by exactly that motion
+//! ([`advance`]); sets received from peers are plain rasters, dilated whole-cell by [`grow`].
 
 use protocol::grid::GroundGrid;
 use protocol::math::Real;
-use protocol::raster::CellSet;
+use protocol::raster::{CellSet, ReachSet};
+
+/// Moves `set` to the motion clock `clock_m` (`v_max` times the time of the frame) and keeps
+/// it inside the whole-cell dilation of its previous cells by `radius_m`, the motion since
+/// then. Both hold the targets, so their intersection does: the reach brings the exact growth
+/// of what this UAV observed, the dilation keeps what fusion with peers removed from growing
+/// back faster than the targets can move.
+pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: Real) {
+    let bound = grow(set.cells(), grid, radius_m);
+    set.advance(clock_m);
+    set.intersect(&bound);
+}
 
 /// Outer set grown by the motion over `radius_m` metres: every point within `radius_m` of the
 /// set is in the result. A radius past the grid's diagonal gives the whole grid (the dilation

@@ -1,12 +1,14 @@
-//! Serde adapters that store a [`CellSet`] as its compact [`EncodedSet`], so an
-//! [`super::EstimatorState`] serialises to a snapshot of a few tens of kilobytes and a corrupt
-//! snapshot is refused with an error instead of a malformed set.
+//! Serde adapters that store a [`CellSet`] as its compact [`EncodedSet`] and a [`ReachSet`]
+//! as its cells plus its reach, row-wise differences run-length coded (the reach is a
+//! distance field, mostly constant or linear along a row), so an [`super::EstimatorState`]
+//! serialises to a compact snapshot and a corrupt snapshot is refused with an error instead
+//! of a malformed set.
 
 use std::collections::BTreeMap;
 
 use protocol::grid::GroundGrid;
 use protocol::math::Point2;
-use protocol::raster::{CellSet, EncodedSet};
+use protocol::raster::{CellSet, EncodedSet, ReachSet};
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
@@ -58,6 +60,100 @@ pub(crate) mod cell_set_map {
         encoded
             .into_iter()
             .map(|(k, e)| decode_self_sized(&e).map(|s| (k, s)))
+            .collect::<Result<_, _>>()
+            .map_err(D::Error::custom)
+    }
+}
+
+/// A [`ReachSet`] as stored: cells, clock, base and the reach above the base as runs of equal
+/// row-major differences `(difference, run length)`.
+#[derive(Serialize, Deserialize)]
+struct StoredReach {
+    cells: EncodedSet,
+    clock_m: f64,
+    base: u32,
+    runs: Vec<(i64, u32)>,
+}
+
+fn store_reach(set: &ReachSet) -> StoredReach {
+    let (cells, base, relative) = set.to_parts();
+    let mut runs: Vec<(i64, u32)> = Vec::new();
+    let mut previous = 0i64;
+    for &v in &relative {
+        let diff = i64::from(v) - previous;
+        previous = i64::from(v);
+        match runs.last_mut() {
+            Some((d, n)) if *d == diff && *n < u32::MAX => *n += 1,
+            _ => runs.push((diff, 1)),
+        }
+    }
+    StoredReach {
+        cells: cells.encode(),
+        clock_m: set.clock_m(),
+        base,
+        runs,
+    }
+}
+
+fn load_reach(stored: &StoredReach) -> Result<ReachSet, String> {
+    let cells = decode_self_sized(&stored.cells)?;
+    let expected = stored.cells.nx as usize * stored.cells.ny as usize;
+    let total: u64 = stored.runs.iter().map(|&(_, n)| u64::from(n)).sum();
+    if total != expected as u64 {
+        return Err(format!(
+            "reach runs cover {total} cells, the grid has {expected}"
+        ));
+    }
+    let mut relative = Vec::with_capacity(expected);
+    let mut value = 0i64;
+    for &(diff, n) in &stored.runs {
+        for _ in 0..n {
+            value = value
+                .checked_add(diff)
+                .filter(|v| (0..=i64::from(u32::MAX)).contains(v))
+                .ok_or("reach out of range")?;
+            relative.push(value as u32);
+        }
+    }
+    ReachSet::from_parts(cells, stored.base, &relative, stored.clock_m)
+        .ok_or_else(|| "reach does not fit its cells".to_owned())
+}
+
+/// `#[serde(with = "reach_set")]` for a [`ReachSet`] field.
+pub(crate) mod reach_set {
+    use super::*;
+
+    pub(crate) fn serialize<S: Serializer>(set: &ReachSet, s: S) -> Result<S::Ok, S::Error> {
+        store_reach(set).serialize(s)
+    }
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<ReachSet, D::Error> {
+        load_reach(&StoredReach::deserialize(d)?).map_err(D::Error::custom)
+    }
+}
+
+/// `#[serde(with = "reach_set_map")]` for a `BTreeMap<K, ReachSet>` field.
+pub(crate) mod reach_set_map {
+    use super::*;
+
+    pub(crate) fn serialize<K, S>(map: &BTreeMap<K, ReachSet>, s: S) -> Result<S::Ok, S::Error>
+    where
+        K: Serialize + Ord,
+        S: Serializer,
+    {
+        let stored: Vec<(&K, StoredReach)> = map.iter().map(|(k, v)| (k, store_reach(v))).collect();
+        stored.serialize(s)
+    }
+
+    pub(crate) fn deserialize<'de, K, D>(d: D) -> Result<BTreeMap<K, ReachSet>, D::Error>
+    where
+        K: Deserialize<'de> + Ord,
+        D: Deserializer<'de>,
+    {
+        let stored = Vec::<(K, StoredReach)>::deserialize(d)?;
+        stored
+            .into_iter()
+            .map(|(k, s)| load_reach(&s).map(|r| (k, r)))
             .collect::<Result<_, _>>()
             .map_err(D::Error::custom)
     }
