@@ -15,19 +15,24 @@ use super::CellBox;
 pub const UNREACHED: u64 = u64::MAX;
 
 /// For every cell of `window`, the squared distance in cell units between its closed square
-/// and the closed square of the nearest cell for which `seed(ix, iy)` holds, among the
-/// window's cells; [`UNREACHED`] when the window has no seed. Row-major over the window.
-pub fn square_gap_field(window: &CellBox, seed: impl Fn(u32, u32) -> bool) -> Vec<u64> {
+/// and the closed square of the nearest seed cell of the window; [`UNREACHED`] when the window
+/// has no seed. `seeds` and the result are row-major over the window.
+///
+/// # Panics
+/// When `seeds` does not hold one flag per cell of the window (a caller's bug).
+pub fn square_gap_field(window: &CellBox, seeds: &[bool]) -> Vec<u64> {
     let w = (window.x1 - window.x0 + 1) as usize;
     let h = (window.y1 - window.y0 + 1) as usize;
+    assert_eq!(seeds.len(), w * h, "one seed flag per cell of the window");
     // The seeds grown by their 8 neighbours, inside the window.
     let mut rows_grown = vec![false; w * h];
     for y in 0..h {
-        let row = &mut rows_grown[y * w..(y + 1) * w];
+        let (src, row) = (
+            &seeds[y * w..(y + 1) * w],
+            &mut rows_grown[y * w..(y + 1) * w],
+        );
         for x in 0..w {
-            if seed(window.x0 + x as u32, window.y0 + y as u32) {
-                row[x.saturating_sub(1)..(x + 2).min(w)].fill(true);
-            }
+            row[x] = src[x.saturating_sub(1)..(x + 2).min(w)].iter().any(|&b| b);
         }
     }
     let mut grown = vec![false; w * h];
@@ -71,11 +76,11 @@ pub fn square_gap_field(window: &CellBox, seed: impl Fn(u32, u32) -> bool) -> Ve
     let mut out = vec![UNREACHED; w * h];
     let mut envelope = Envelope::with_capacity(w);
     for y in 0..h {
-        let f: Vec<Option<u64>> = vertical[y * w..(y + 1) * w]
-            .iter()
-            .map(|&v| (v < far).then(|| v * v))
-            .collect();
-        envelope.lower(&f, &mut out[y * w..(y + 1) * w]);
+        envelope.lower(
+            &vertical[y * w..(y + 1) * w],
+            far,
+            &mut out[y * w..(y + 1) * w],
+        );
     }
     out
 }
@@ -85,7 +90,7 @@ struct Envelope {
     /// Apexes of the parabolas of the envelope.
     apex: Vec<usize>,
     /// Where each parabola starts to be the lowest, as the fraction `num / den` (`den > 0`).
-    from: Vec<(i128, i128)>,
+    from: Vec<(i64, i64)>,
 }
 
 impl Envelope {
@@ -96,38 +101,36 @@ impl Envelope {
         }
     }
 
-    /// `out[x] = min over x' with f[x'] = Some(v) of (x - x')² + v`; [`UNREACHED`] when `f`
-    /// has no value.
-    fn lower(&mut self, f: &[Option<u64>], out: &mut [u64]) {
+    /// `out[x] = min over x' with g[x'] < far of (x - x')² + g[x']²`; [`UNREACHED`] when every
+    /// `g` is `far`. Windows are at most a few thousand cells wide, so every product below
+    /// stays far inside `i64`.
+    fn lower(&mut self, g: &[u64], far: u64, out: &mut [u64]) {
         self.apex.clear();
         self.from.clear();
-        let value = |q: usize| f[q].map_or(0, |v| v as i128);
-        for (q, fq) in f.iter().enumerate() {
-            if fq.is_none() {
+        let value = |q: usize| (g[q] * g[q]) as i64;
+        for q in 0..g.len() {
+            if g[q] >= far {
                 continue;
             }
             // Where the parabola at q undercuts the one at p: s = (f(q) + q² - f(p) - p²) /
             // (2 (q - p)), kept as an exact fraction.
             let meets = |p: usize| {
-                let (qi, pi) = (q as i128, p as i128);
+                let (qi, pi) = (q as i64, p as i64);
                 (value(q) + qi * qi - value(p) - pi * pi, 2 * (qi - pi))
             };
-            loop {
-                let Some(&p) = self.apex.last() else { break };
-                let s = meets(p);
-                let start = *self.from.last().unwrap_or(&(i128::MIN, 1));
+            while self.apex.len() > 1 {
+                let s = meets(self.apex[self.apex.len() - 1]);
+                let start = self.from[self.from.len() - 1];
                 // s <= start, both with positive denominators.
-                if self.apex.len() > 1 && s.0 * start.1 <= start.0 * s.1 {
+                if s.0 * start.1 <= start.0 * s.1 {
                     self.apex.pop();
                     self.from.pop();
                 } else {
                     break;
                 }
             }
-            let start = match self.apex.last() {
-                Some(&p) => meets(p),
-                None => (i128::MIN, 1),
-            };
+            // The first parabola starts at minus infinity; its fraction is never read.
+            let start = self.apex.last().map_or((0, 1), |&p| meets(p));
             self.apex.push(q);
             self.from.push(start);
         }
@@ -138,12 +141,12 @@ impl Envelope {
         let mut k = 0;
         for (x, o) in out.iter_mut().enumerate() {
             // Move to the last parabola that starts at or before x.
-            while k + 1 < self.apex.len() && self.from[k + 1].0 <= x as i128 * self.from[k + 1].1 {
+            while k + 1 < self.apex.len() && self.from[k + 1].0 <= x as i64 * self.from[k + 1].1 {
                 k += 1;
             }
             let p = self.apex[k];
             let d = x.abs_diff(p) as u64;
-            *o = d * d + f[p].unwrap_or(0);
+            *o = d * d + g[p] * g[p];
         }
     }
 }
@@ -153,6 +156,16 @@ mod tests {
     use proptest::prelude::*;
 
     use super::*;
+
+    fn mask(window: &CellBox, seeds: &[(u32, u32)]) -> Vec<bool> {
+        let mut out = Vec::new();
+        for y in window.y0..=window.y1 {
+            for x in window.x0..=window.x1 {
+                out.push(seeds.contains(&(x, y)));
+            }
+        }
+        out
+    }
 
     /// The definition: the least squared gap between closed squares over every seed.
     fn brute(window: &CellBox, seeds: &[(u32, u32)]) -> Vec<u64> {
@@ -182,7 +195,7 @@ mod tests {
             x1: 19,
             y1: 27,
         };
-        let f = square_gap_field(&window, |x, y| (x, y) == (12, 21));
+        let f = square_gap_field(&window, &mask(&window, &[(12, 21)]));
         let at = |x: u32, y: u32| f[((y - 20) * 10 + (x - 10)) as usize];
         assert_eq!(at(12, 21), 0);
         assert_eq!(at(13, 22), 0, "touching diagonally");
@@ -210,7 +223,7 @@ mod tests {
                 .filter(|&(x, y)| x < w && y < h)
                 .map(|(x, y)| (x0 + x, y0 + y))
                 .collect();
-            let f = square_gap_field(&window, |x, y| seeds.contains(&(x, y)));
+            let f = square_gap_field(&window, &mask(&window, &seeds));
             prop_assert_eq!(f, brute(&window, &seeds));
         }
     }

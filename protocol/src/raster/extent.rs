@@ -39,6 +39,27 @@ impl CellSet {
         }
     }
 
+    /// One flag per cell of `window`, row-major: whether the cell is in the set; cells of the
+    /// window outside the grid read `outside`.
+    pub fn window_flags(&self, window: &CellBox, outside: bool) -> Vec<bool> {
+        let mut out = Vec::with_capacity(window.cell_count() as usize);
+        for iy in window.y0..=window.y1 {
+            if iy >= self.ny {
+                out.extend((window.x0..=window.x1).map(|_| outside));
+                continue;
+            }
+            let row = self.row(iy);
+            out.extend((window.x0..=window.x1).map(|ix| {
+                if ix >= self.nx {
+                    outside
+                } else {
+                    row[ix as usize / 64] >> (ix % 64) & 1 == 1
+                }
+            }));
+        }
+        out
+    }
+
     /// Number of cells of the set inside `bbox` (clamped to the grid).
     pub fn count_in_box(&self, bbox: &CellBox) -> u64 {
         if bbox.x0 > bbox.x1 || bbox.y0 > bbox.y1 || bbox.y0 >= self.ny {

@@ -95,16 +95,6 @@ fn reached_units(clock_m: Real) -> u32 {
         .clamp(0.0, Real::from(u32::MAX)) as u32
 }
 
-/// The largest reach that is at most `metres` (a lower bound, saturating at `u32::MAX - 1`).
-fn units_below(metres: Real) -> u32 {
-    if metres.is_nan() {
-        return 0;
-    }
-    (metres / REACH_UNIT_M - UNIT_MARGIN)
-        .floor()
-        .clamp(0.0, Real::from(u32::MAX - 1)) as u32
-}
-
 impl ReachSet {
     /// Every cell of `grid`, nothing known, clock 0.
     pub fn full(grid: &GroundGrid) -> Self {
@@ -234,76 +224,107 @@ impl ReachSet {
             // A side of the window inside the grid stands for every cell beyond it: counting
             // it as not free keeps each gap at most the true one.
             let (nx, ny) = (self.cells.nx(), self.cells.ny());
-            let edge = |ix: u32, iy: u32| {
-                (ix == w.x0 && w.x0 > 0)
-                    || (ix == w.x1 && w.x1 + 1 < nx)
-                    || (iy == w.y0 && w.y0 > 0)
-                    || (iy == w.y1 && w.y1 + 1 < ny)
-            };
-            self.raise_outside(grid, &w, |ix, iy| edge(ix, iy) || !free.contains((ix, iy)));
+            let mut seeds = free.window_flags(&w, false);
+            let width = (w.x1 - w.x0 + 1) as usize;
+            let height = seeds.len() / width;
+            for (k, seed) in seeds.iter_mut().enumerate() {
+                let (x, y) = (k % width, k / width);
+                *seed = !*seed
+                    || (x == 0 && w.x0 > 0)
+                    || (x + 1 == width && w.x1 + 1 < nx)
+                    || (y == 0 && w.y0 > 0)
+                    || (y + 1 == height && w.y1 + 1 < ny);
+            }
+            self.raise_outside(grid, &w, &seeds);
         }
         self.remove(free);
     }
 
     /// Restricts the set to an outer raster `outer` of its targets at the current clock (a
     /// measurement) and raises the reach of the cells within `margin` cells of `outer`'s
-    /// bounding box to their gap from `outer`. Cells farther away only leave the set; a later
-    /// [`ReachSet::intersect`] with a dilation of the set keeps them out.
+    /// bounding box to their exact gap from `outer`. When the set reached beyond that window,
+    /// the reach of every other cell is raised to its gap from the bounding box
+    /// ([`ReachSet::bound_by_box`]).
     pub fn restrict(&mut self, grid: &GroundGrid, outer: &CellSet, margin: u32) {
         debug_assert!(self.cells.same_shape(outer));
-        if let Some(window) = outer
+        let Some(window) = outer
             .bounding_box()
             .and_then(|b| clamp_box(&b, margin, &self.cells))
-        {
-            self.raise_outside(grid, &window, |ix, iy| outer.contains((ix, iy)));
-        }
+        else {
+            self.intersect(outer);
+            return;
+        };
+        let was_wider = self
+            .cells
+            .bounding_box()
+            .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
+        self.raise_outside(grid, &window, &outer.window_flags(&window, false));
         self.intersect(outer);
+        if was_wider {
+            self.bound_by_box(grid);
+        }
+    }
+
+    /// Raises the reach of every cell to the gap between its square and the bounding box of
+    /// the set's cells (which hold the targets, so they are no nearer): the far field of a
+    /// small set, so that it regrows as a rounded box rather than all at once.
+    pub fn bound_by_box(&mut self, grid: &GroundGrid) {
+        let Some(b) = self.cells.bounding_box() else {
+            return;
+        };
+        let nx = self.cells.nx() as usize;
+        let unit = grid.cell_m / REACH_UNIT_M;
+        let clock = self.clock_m / REACH_UNIT_M;
+        // f32 keeps the loop vectorised; its rounding (below 1e-6 relative) and the float to
+        // integer truncation are covered by taking two units off.
+        let cap = (u32::MAX - 1) as f32;
+        for iy in 0..self.cells.ny() {
+            let gy = gap_cells(iy, b.y0, b.y1);
+            let gy2 = (gy * gy) as f32;
+            let row = &mut self.reach[iy as usize * nx..(iy as usize + 1) * nx];
+            for (ix, tau) in row.iter_mut().enumerate() {
+                let gx = gap_cells(ix as u32, b.x0, b.x1) as f32;
+                let units = (gx * gx + gy2).sqrt() * unit as f32 + clock as f32;
+                let bound = (units * (1.0 - 1e-6) - 2.0).clamp(0.0, cap) as u32;
+                *tau = (*tau).max(bound);
+            }
+        }
     }
 
     /// Raises `τ` of every cell of `window` outside the outer raster `inside` to the gap
     /// between its square and the nearest square of `inside` within the window (the caller
     /// makes sure no cell of `inside` outside the window is nearer).
-    fn raise_outside(
-        &mut self,
-        grid: &GroundGrid,
-        window: &CellBox,
-        inside: impl Fn(u32, u32) -> bool,
-    ) {
-        let gaps = square_gap_field(window, &inside);
+    fn raise_outside(&mut self, grid: &GroundGrid, window: &CellBox, inside: &[bool]) {
+        let gaps = square_gap_field(window, inside);
         let nx = self.cells.nx() as usize;
         let w = (window.x1 - window.x0 + 1) as usize;
-        for (k, &gap2) in gaps.iter().enumerate() {
-            let ix = window.x0 + (k % w) as u32;
-            let iy = window.y0 + (k / w) as u32;
-            if inside(ix, iy) {
+        let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
+        for (k, (&gap2, &seed)) in gaps.iter().zip(inside).enumerate() {
+            if seed {
                 continue;
             }
             let tau = if gap2 == UNREACHED {
                 u32::MAX - 1
             } else {
-                units_below(grid.cell_m * (gap2 as Real).sqrt() + self.clock_m)
+                // Truncation is the floor here (non-negative); `as` saturates.
+                ((gap2 as Real).sqrt() * unit + clock - UNIT_MARGIN).max(0.0) as u32
             };
-            let slot = &mut self.reach[iy as usize * nx + ix as usize];
-            *slot = (*slot).max(tau);
+            let (ix, iy) = (window.x0 as usize + k % w, window.y0 as usize + k / w);
+            let slot = &mut self.reach[iy * nx + ix];
+            *slot = (*slot).max(tau.min(u32::MAX - 1));
         }
     }
 
-    /// Removes the bits `remove(cells, row, word)` of every word and notes their reach.
+    /// Removes the bits `remove(cells, row, word)` of every word; their pending bound drops
+    /// to 0 (always a lower bound), so the next advance settles those words.
     fn remove_where(&mut self, remove: impl Fn(&CellSet, u32, usize) -> u64) {
-        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        let wpr = self.cells.words_per_row();
         for iy in 0..self.cells.ny() {
             for w in 0..wpr {
-                let mut gone = remove(&self.cells, iy, w);
-                if gone == 0 {
-                    continue;
-                }
-                self.cells.row_mut(iy)[w] &= !gone;
-                let slot = iy as usize * wpr + w;
-                let base = iy as usize * nx + w * 64;
-                while gone != 0 {
-                    let b = gone.trailing_zeros() as usize;
-                    gone &= gone - 1;
-                    self.pending[slot] = self.pending[slot].min(self.reach[base + b]);
+                let gone = remove(&self.cells, iy, w);
+                if gone != 0 {
+                    self.cells.row_mut(iy)[w] &= !gone;
+                    self.pending[iy as usize * wpr + w] = 0;
                 }
             }
         }
@@ -349,6 +370,15 @@ impl ReachSet {
                     .unwrap_or(u32::MAX);
             }
         }
+    }
+}
+
+/// Whole cells strictly between index `i` and the span `lo..=hi` (0 inside or next to it).
+fn gap_cells(i: u32, lo: u32, hi: u32) -> u32 {
+    if i < lo {
+        lo - i - 1
+    } else {
+        i.saturating_sub(hi).saturating_sub(1)
     }
 }
 

@@ -202,6 +202,13 @@ impl EstimatorState {
         if !report.grid_mismatch {
             self.hidden_history.add_hidden(step, &peer.hidden);
         }
+        // A target learned from a peer starts from this side's X̄, whose reach knows nothing
+        // near the target: bound it by its (small) set's box.
+        for id in &report.new_targets {
+            if let Some(set) = self.targets.get_mut(id) {
+                set.bound_by_box(&config.grid);
+            }
+        }
         report
     }
 

@@ -404,13 +404,17 @@ impl Estimator {
             measured_ids.push(id);
         }
         for (id, set) in st.targets.iter_mut() {
-            if !measured_ids.contains(id) {
-                let near = set.cells().bounding_box().and_then(|b| {
-                    let w = window?;
-                    intersect_boxes(&grow_box(&b, margin), &w)
-                });
-                clear(set, grid, &free, near.as_ref());
+            if measured_ids.contains(id) {
+                continue;
             }
+            // Free ground the set does not touch tells it nothing it needs now.
+            let near = set
+                .cells()
+                .intersects(&free_ground)
+                .then(|| set.cells().bounding_box())
+                .flatten()
+                .and_then(|b| intersect_boxes(&grow_box(&b, margin), window.as_ref()?));
+            clear(set, grid, &free, near.as_ref());
         }
         report.measured = measured_ids;
         st.explored.or_assign(&free_ground);
