@@ -180,7 +180,7 @@ struct Row {
 }
 
 /// The metrics of the table, in row order.
-const ROWS: [Row; 9] = [
+const ROWS: [Row; 11] = [
     Row {
         key: "ua_final",
         label: "UA, undetected-set area (%)",
@@ -192,6 +192,18 @@ const ROWS: [Row; 9] = [
         label: "OA, undetected and occluded (%)",
         scale: 100.0,
         value: |s| s.oa_final,
+    },
+    Row {
+        key: "ua_final_worst",
+        label: "UA, worst agent (%)",
+        scale: 100.0,
+        value: |s| s.ua_final_worst,
+    },
+    Row {
+        key: "oa_final_worst",
+        label: "OA, worst agent (%)",
+        scale: 100.0,
+        value: |s| s.oa_final_worst,
     },
     Row {
         key: "explored_final",
@@ -215,7 +227,7 @@ const ROWS: [Row; 9] = [
         key: "identified_final",
         label: "identified targets (final)",
         scale: 1.0,
-        value: |s| Some(f64::from(s.identified_final)),
+        value: |s| Some(s.identified_final),
     },
     Row {
         key: "violations",
@@ -280,7 +292,8 @@ impl Table {
         let mut md = String::new();
         let _ = writeln!(
             md,
-            "Final metrics, mean ± standard deviation over {} seeds ({}).\n",
+            "Final metrics, mean ± standard deviation over {} seeds ({}); the set metrics \
+             are each agent's own, averaged over agents unless marked worst agent.\n",
             self.seeds.len(),
             seed_range(&self.seeds)
         );

@@ -75,7 +75,7 @@ fn a_small_fleet_runs_end_to_end_as_processes() {
         assert!(a["decisions"].as_u64().expect("decisions") > 0, "{a}");
     }
     assert!(
-        s["identified_final"].as_u64().expect("identified") >= 1,
+        s["identified_final"].as_f64().expect("identified") >= 1.0,
         "{s}"
     );
     let csv = std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("timeseries");

@@ -2,10 +2,28 @@
 //! agents' published estimates and the ground truth (so they are unit-tested without
 //! processes).
 //!
-//! The fleet's knowledge at a step is the fusion of what its agents published for that step:
-//! `X̄` and `H̄` are intersected (each is an outer set, so is their meet), the explored ground
-//! and `S^o` are unioned (each is proven), and `X_j` is intersected over the agents that
-//! identified `j`. Every area is a fraction of the grid's area (the region of interest).
+//! **Per agent.** The paper defines every set metric for one UAV on its own fused sets. For each
+//! agent `i` that published an estimate of step `k`, [`FusedSets::of_agent`] rebuilds what `i`
+//! holds after its step-`k` fusion: its own estimate fused with the same-step estimates of the
+//! peers it fuses, in the order it fuses them (ascending UAV id), with the agents' own law
+//! ([`PeerEstimate::fuse`]) and, with a finite `comms.range_m`, only the peers in range by the
+//! agents' own rule ([`in_comms_range`]). [`SetMetrics::measure`] then gives UA, OA, explored,
+//! target-set area, localisation error and identified count of those sets, and
+//! [`AgentSpread::over`] their mean over agents and their worst agent.
+//!
+//! `H̄` is not part of a [`PeerEstimate`]: an agent publishes its own `H̄` (`msg.unseen`, as it
+//! stood before the step's fusion), and fusing a peer adds that peer's `H^CVS` of the step to
+//! it (`EstimatorState::fuse` calls `HiddenHistory::add_hidden`, a union; nothing is removed
+//! until the agent's own next frame proves ground free). So agent `i`'s fused `H̄` is its
+//! published `H̄` joined with the `H^CVS` of every peer it fused, which is what is computed.
+//!
+//! What is not reproduced: a peer estimate that reached the agent after its bounded wait is
+//! fused by the agent later, dilated; here only the estimates of the same step are fused (in
+//! lockstep every live peer's estimate of the step is fused at that step).
+//!
+//! **Fleet-wide**, where a per-agent reading would say less: the guarantee is checked on each
+//! published estimate ([`violations`]), and [`identified_ids`] counts the targets identified by
+//! any agent. Every area is a fraction of the grid's area (the region of interest).
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -13,29 +31,17 @@ use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
 use protocol::raster::{CellSet, SetDecodeError};
 use protocol::wire::{AgentStats, TargetTruth};
+use uav_agent::agent::in_comms_range;
 use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate, message};
 use uav_agent::occupancy::OccupancyMap;
 
 /// What the observer keeps of one agent's estimate of one step.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ObservedEstimate {
-    /// Sender.
-    pub uav: u32,
-    /// Step of the sets.
-    pub step: u64,
-    /// Sender's incarnation (changes when it restarts).
-    pub incarnation: u64,
-    /// Sender's message counter in this incarnation.
-    pub seq: u64,
-    /// `X̄`.
-    pub undetected: CellSet,
-    /// `X_j` per identified id.
-    pub targets: BTreeMap<u32, CellSet>,
-    /// `S^o`.
-    pub obstacle_free: CellSet,
-    /// Ground proven free at some frame.
-    pub explored: CellSet,
-    /// `H̄`: ground hidden earlier and not seen since.
+    /// The estimate as a peer receives it, its map cells left out (the observer merges them
+    /// into its own map once; fusing them again per agent would only cost).
+    pub estimate: PeerEstimate,
+    /// `H̄`: ground hidden earlier and not seen since, as the sender held it before fusing.
     pub unseen: CellSet,
     /// The sender's counters.
     pub stats: AgentStats,
@@ -59,89 +65,120 @@ impl ObservedEstimate {
         config: &EstimatorConfig,
     ) -> Result<(ObservedEstimate, OccupancyMap), EstimateObserveError> {
         let msg = message::from_bytes(bytes).map_err(EstimateReadError::from)?;
-        let peer = PeerEstimate::from_msg(&msg, config)?;
+        let mut estimate = PeerEstimate::from_msg(&msg, config)?;
         let unseen = CellSet::decode(&config.grid, &msg.unseen)?;
+        let oem = std::mem::replace(&mut estimate.oem, OccupancyMap::new(config.oem_grid));
         let observed = ObservedEstimate {
-            uav: peer.uav,
-            step: peer.step,
-            incarnation: peer.incarnation,
-            seq: peer.seq,
-            undetected: peer.undetected,
-            targets: peer.targets,
-            obstacle_free: peer.obstacle_free,
-            explored: peer.explored,
+            estimate,
             unseen,
             stats: msg.stats,
         };
-        Ok((observed, peer.oem))
+        Ok((observed, oem))
+    }
+
+    /// Sender.
+    pub fn uav(&self) -> u32 {
+        self.estimate.uav
+    }
+
+    /// Step of the sets.
+    pub fn step(&self) -> u64 {
+        self.estimate.step
     }
 }
 
-/// The fleet's fused sets at one step.
+/// One agent's sets after its fusion of one step.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FusedSets {
-    /// `∩ X̄`.
+    /// `X̄`.
     pub undetected: CellSet,
-    /// `∩ X_j` over the agents that identified `j`.
+    /// `X_j` per identified id.
     pub targets: BTreeMap<u32, CellSet>,
-    /// `∪ S^o`.
+    /// `S^o`.
     pub obstacle_free: CellSet,
-    /// `∪ explored`.
+    /// Explored ground.
     pub explored: CellSet,
-    /// `∩ H̄`.
+    /// `H̄`.
     pub unseen: CellSet,
 }
 
 impl FusedSets {
-    /// Fuses the estimates of one step; `None` when there is none.
-    pub fn fuse<'a>(estimates: impl IntoIterator<Item = &'a ObservedEstimate>) -> Option<Self> {
-        let mut it = estimates.into_iter();
-        let first = it.next()?;
-        let mut fused = FusedSets {
-            undetected: first.undetected.clone(),
-            targets: first.targets.clone(),
-            obstacle_free: first.obstacle_free.clone(),
-            explored: first.explored.clone(),
-            unseen: first.unseen.clone(),
-        };
-        for e in it {
-            fused.undetected.and_assign(&e.undetected);
-            for (id, set) in &e.targets {
-                match fused.targets.get_mut(id) {
-                    Some(mine) => mine.and_assign(set),
-                    None => {
-                        fused.targets.insert(*id, set.clone());
-                    }
-                }
+    /// What agent `own.uav()` holds once it has fused `peers` (in the given order) into its
+    /// own estimate, by the agents' law ([`PeerEstimate::fuse`]; `H̄` as the module docs say).
+    pub fn fuse<'a>(
+        own: &ObservedEstimate,
+        peers: impl IntoIterator<Item = &'a ObservedEstimate>,
+        config: &EstimatorConfig,
+    ) -> FusedSets {
+        let mut fused = own.estimate.clone();
+        let mut unseen = own.unseen.clone();
+        for peer in peers {
+            if !fused.fuse(&peer.estimate, config).grid_mismatch {
+                unseen.or_assign(&peer.estimate.hidden);
             }
-            fused.obstacle_free.or_assign(&e.obstacle_free);
-            fused.explored.or_assign(&e.explored);
-            fused.unseen.and_assign(&e.unseen);
         }
-        Some(fused)
+        FusedSets {
+            undetected: fused.undetected,
+            targets: fused.targets,
+            obstacle_free: fused.obstacle_free,
+            explored: fused.explored,
+            unseen,
+        }
+    }
+
+    /// Agent `own.uav()`'s sets after its fusion of its step, among `all` the estimates of
+    /// that step (see [`fused_peers`]).
+    pub fn of_agent(
+        own: &ObservedEstimate,
+        all: &[ObservedEstimate],
+        config: &EstimatorConfig,
+        range_m: f64,
+    ) -> FusedSets {
+        FusedSets::fuse(own, fused_peers(own, all, range_m), config)
     }
 }
 
-/// The set metrics of one step (fractions of the grid's area, distances in metres).
+/// The estimates among `all` that agent `own.uav()` fuses at its step, in its order: the
+/// other agents' estimates of the same step whose sender is within `range_m`
+/// ([`in_comms_range`]), by ascending UAV id (as the agent keeps its peers).
+pub fn fused_peers<'a>(
+    own: &'a ObservedEstimate,
+    all: &'a [ObservedEstimate],
+    range_m: f64,
+) -> impl Iterator<Item = &'a ObservedEstimate> + 'a {
+    let mut peers: Vec<&ObservedEstimate> = all
+        .iter()
+        .filter(move |p| {
+            p.uav() != own.uav()
+                && p.step() == own.step()
+                && in_comms_range(range_m, own.estimate.pose, p.estimate.pose)
+        })
+        .collect();
+    peers.sort_by_key(|p| p.uav());
+    peers.into_iter()
+}
+
+/// The set metrics of one agent at one step (fractions of the grid's area, distances in
+/// metres), or an aggregate of several agents' ([`AgentSpread`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SetMetrics {
-    /// `|∪ explored|`.
+    /// `|explored|`.
     pub explored: f64,
-    /// `|∩ X̄|` (UA).
+    /// `|X̄|` (UA).
     pub ua: f64,
-    /// `|∩ X̄ ∩ ∩ H̄|` (OA).
+    /// `|X̄ ∩ H̄|` (OA).
     pub oa: f64,
-    /// Mean over identified ids of `|∩ X_j|`; `None` when nothing is identified.
+    /// Mean over identified ids of `|X_j|`; `None` when nothing is identified.
     pub target_set_area: Option<f64>,
     /// Mean over identified ids (present in the truth) of the distance between the target
-    /// and the barycentre of `∩ X_j`; `None` when there is none.
+    /// and the barycentre of `X_j`; `None` when there is none.
     pub loc_error_m: Option<f64>,
-    /// `|∪ identified lists|`.
-    pub identified: u32,
+    /// Identified ids (a count for one agent, a mean over agents in an aggregate).
+    pub identified: f64,
 }
 
 impl SetMetrics {
-    /// Measures the fused sets against the truth.
+    /// Measures one agent's fused sets against the truth.
     pub fn measure(fused: &FusedSets, truth: &[TargetTruth], grid: &GroundGrid) -> SetMetrics {
         let cells = grid.cell_count().max(1) as f64;
         let frac = |n: u64| n as f64 / cells;
@@ -161,8 +198,61 @@ impl SetMetrics {
             oa: frac(undetected.intersection_count(&fused.unseen)),
             target_set_area: mean(&areas),
             loc_error_m: mean(&errors),
-            identified: fused.targets.len() as u32,
+            identified: fused.targets.len() as f64,
         }
+    }
+}
+
+/// Several agents' metrics of one step summarised: each metric's mean over the agents that
+/// have it, and its worst value (largest UA, OA, target-set area and localisation error;
+/// smallest explored ground and identified count).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AgentSpread {
+    /// Mean over agents.
+    pub mean: SetMetrics,
+    /// Worst agent, metric by metric (not necessarily one agent for all).
+    pub worst: SetMetrics,
+}
+
+impl AgentSpread {
+    /// Summarises per-agent metrics; `None` for none.
+    pub fn over<'a>(agents: impl IntoIterator<Item = &'a SetMetrics>) -> Option<AgentSpread> {
+        let agents: Vec<&SetMetrics> = agents.into_iter().collect();
+        if agents.is_empty() {
+            return None;
+        }
+        let spread = |f: fn(&SetMetrics) -> Option<f64>| {
+            let v: Vec<f64> = agents.iter().filter_map(|s| f(s)).collect();
+            let min = v.iter().copied().reduce(f64::min);
+            let max = v.iter().copied().reduce(f64::max);
+            (mean(&v), min, max)
+        };
+        let (explored, explored_min, _) = spread(|s| Some(s.explored));
+        let (ua, _, ua_max) = spread(|s| Some(s.ua));
+        let (oa, _, oa_max) = spread(|s| Some(s.oa));
+        let (area, _, area_max) = spread(|s| s.target_set_area);
+        let (error, _, error_max) = spread(|s| s.loc_error_m);
+        let (identified, identified_min, _) = spread(|s| Some(s.identified));
+        // Never empty: there is at least one agent.
+        let always = |v: Option<f64>| v.unwrap_or_default();
+        Some(AgentSpread {
+            mean: SetMetrics {
+                explored: always(explored),
+                ua: always(ua),
+                oa: always(oa),
+                target_set_area: area,
+                loc_error_m: error,
+                identified: always(identified),
+            },
+            worst: SetMetrics {
+                explored: always(explored_min),
+                ua: always(ua_max),
+                oa: always(oa_max),
+                target_set_area: area_max,
+                loc_error_m: error_max,
+                identified: always(identified_min),
+            },
+        })
     }
 }
 
@@ -219,14 +309,14 @@ pub fn violations(
     let mut out = Vec::new();
     for t in truth {
         let p = ground_point(t);
-        let (set, kind) = match estimate.targets.get(&t.id) {
+        let (set, kind) = match estimate.estimate.targets.get(&t.id) {
             Some(set) => (set, ViolatedSet::Target),
-            None => (&estimate.undetected, ViolatedSet::Undetected),
+            None => (&estimate.estimate.undetected, ViolatedSet::Undetected),
         };
         let inside = cell_of_closed(grid, &p).is_some_and(|c| set.contains(c));
         if !inside {
             out.push(Violation {
-                uav: estimate.uav,
+                uav: estimate.uav(),
                 target: t.id,
                 set: kind,
                 distance_m: distance_to_set(set, grid, &p),
@@ -270,12 +360,17 @@ pub fn identified_ids<'a>(
 ) -> BTreeSet<u32> {
     estimates
         .into_iter()
-        .flat_map(|e| e.targets.keys().copied())
+        .flat_map(|e| e.estimate.targets.keys().copied())
         .collect()
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
+    use protocol::camera::CameraPose;
+    use protocol::math::Point3;
+    use protocol::scenario::Scenario;
+    use uav_agent::estimator::EstimatorState;
+
     use super::*;
 
     /// A 10 x 10 grid of 1 m cells over [-5, 5]^2.
@@ -283,24 +378,75 @@ mod tests {
         GroundGrid::new(5.0, 1.0)
     }
 
+    /// The estimator configuration of [`grid`].
+    fn config() -> EstimatorConfig {
+        let mut scenario = Scenario::default();
+        scenario.region.half_extent_m = 5.0;
+        scenario.estimator.cell_m = 1.0;
+        scenario.estimator.oem_cell_m = 5.0;
+        let config = EstimatorConfig::from_scenario(&scenario);
+        assert_eq!(config.grid, grid());
+        config
+    }
+
     fn set(cells: &[CellIndex]) -> CellSet {
         CellSet::from_cells(&grid(), cells.iter().copied())
     }
 
-    fn estimate(uav: u32, undetected: CellSet, targets: &[(u32, CellSet)]) -> ObservedEstimate {
-        let g = grid();
+    /// An estimate on `grid` knowing nothing: `X̄` full, every other set empty.
+    pub(crate) fn blank(grid: &GroundGrid, uav: u32, step: u64) -> ObservedEstimate {
         ObservedEstimate {
-            uav,
-            step: 3,
-            incarnation: 1,
-            seq: 3,
-            undetected,
-            targets: targets.iter().cloned().collect(),
-            obstacle_free: CellSet::empty(&g),
-            explored: CellSet::empty(&g),
-            unseen: CellSet::full(&g),
+            estimate: PeerEstimate {
+                uav,
+                step,
+                time_s: step as f64 * 0.5,
+                seq: step,
+                incarnation: 1,
+                pose: None,
+                undetected: CellSet::full(grid),
+                targets: BTreeMap::new(),
+                obstacle_free: CellSet::empty(grid),
+                explored: CellSet::empty(grid),
+                hidden: CellSet::empty(grid),
+                oem: OccupancyMap::new(*grid),
+                oem_full: false,
+            },
+            unseen: CellSet::empty(grid),
             stats: AgentStats::default(),
         }
+    }
+
+    fn estimate(uav: u32, undetected: CellSet, targets: &[(u32, CellSet)]) -> ObservedEstimate {
+        let mut e = blank(&grid(), uav, 3);
+        e.estimate.undetected = undetected;
+        e.estimate.targets = targets.iter().cloned().collect();
+        e
+    }
+
+    /// A camera at `(x, 0)`, 40 m up.
+    fn at(x: f64) -> Option<CameraPose> {
+        Some(CameraPose {
+            position: Point3::new(x, 0.0, 40.0),
+            yaw: 0.0,
+        })
+    }
+
+    /// A reproducible pseudo-random set of about `density` of the grid.
+    fn scattered(seed: u64, density: f64) -> CellSet {
+        let g = grid();
+        let mut x = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let mut s = CellSet::empty(&g);
+        for iy in 0..g.ny {
+            for ix in 0..g.nx {
+                x = x
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                s.set((ix, iy), ((x >> 33) as f64 / (1u64 << 31) as f64) < density);
+            }
+        }
+        s
     }
 
     fn target(id: u32, x: f64, y: f64) -> TargetTruth {
@@ -312,43 +458,183 @@ mod tests {
     }
 
     #[test]
-    fn fusion_meets_outer_sets_and_joins_proven_ones() {
+    fn an_agents_fused_sets_are_what_its_estimator_holds_after_fusing() {
+        let cfg = config();
+        // Three agents of one step with overlapping knowledge; target 1 identified by all,
+        // 2 by the first only, 3 by the others only.
+        let mut all: Vec<ObservedEstimate> = (0..3)
+            .map(|uav| {
+                let seed = 10 * u64::from(uav);
+                let mut e = blank(&grid(), uav, 3);
+                let mut x1 = scattered(seed + 1, 0.5);
+                x1.or_assign(&set(&[(4, 4), (5, 4)]));
+                e.estimate.undetected = scattered(seed + 2, 0.8);
+                e.estimate.targets.insert(1, x1);
+                if uav == 0 {
+                    e.estimate.targets.insert(2, scattered(seed + 3, 0.5));
+                } else {
+                    e.estimate.targets.insert(3, scattered(seed + 4, 0.6));
+                }
+                e.estimate.obstacle_free = scattered(seed + 5, 0.1);
+                e.estimate.explored = scattered(seed + 6, 0.3);
+                e.estimate.hidden = scattered(seed + 7, 0.2);
+                e.unseen = scattered(seed + 8, 0.3);
+                e.unseen.or_assign(&e.estimate.hidden);
+                e
+            })
+            .collect();
+        for e in &mut all {
+            e.estimate.pose = at(f64::from(e.uav()));
+        }
+        for own in &all {
+            // The agent: its state as published, then the peers fused in its order.
+            let e = &own.estimate;
+            let mut state = EstimatorState::new(&cfg);
+            state.step = e.step;
+            state.undetected = e.undetected.clone();
+            state.targets = e.targets.clone();
+            state.obstacle_free = e.obstacle_free.clone();
+            state.explored = e.explored.clone();
+            state.hidden = e.hidden.clone();
+            state
+                .hidden_history
+                .record(e.step, &own.unseen, &CellSet::empty(&cfg.grid));
+            assert_eq!(state.hidden_history.unseen(), &own.unseen);
+            for peer in all.iter().filter(|p| p.uav() != own.uav()) {
+                state.fuse(&peer.estimate, &cfg);
+            }
+            let observed = FusedSets::of_agent(own, &all, &cfg, f64::INFINITY);
+            assert_eq!(observed.undetected, state.undetected, "X̄ of {}", own.uav());
+            assert_eq!(observed.targets, state.targets, "X_j of {}", own.uav());
+            assert_eq!(observed.obstacle_free, state.obstacle_free);
+            assert_eq!(observed.explored, state.explored);
+            assert_eq!(&observed.unseen, state.hidden_history.unseen());
+            assert_eq!(
+                observed.targets.keys().copied().collect::<Vec<_>>(),
+                vec![1, 2, 3]
+            );
+        }
+    }
+
+    #[test]
+    fn a_target_one_agent_has_not_identified_is_met_with_its_undetected_set() {
+        let cfg = config();
+        // Agent 0 identified target 4 over a 2 x 1 block; agent 1 has not, and has proven the
+        // block's east cell free (not in its X̄).
+        let a = estimate(0, CellSet::full(&grid()), &[(4, set(&[(5, 5), (6, 5)]))]);
+        let mut b_undetected = CellSet::full(&grid());
+        b_undetected.set((6, 5), false);
+        let b = estimate(1, b_undetected, &[]);
+        let all = [a, b];
+        for own in &all {
+            let fused = FusedSets::of_agent(own, &all, &cfg, f64::INFINITY);
+            assert_eq!(fused.targets[&4], set(&[(5, 5)]), "seen from {}", own.uav());
+        }
+    }
+
+    #[test]
+    fn with_a_finite_range_each_agent_measures_what_it_fused_itself() {
+        let cfg = config();
+        let g = grid();
+        // Three agents along x, the first two 50 m apart and the third 500 m away, links of
+        // 100 m. Each holds occluded ground of its own in its X̄: row `uav`, never seen by
+        // the others (whose X̄ keeps it too).
+        let all: Vec<ObservedEstimate> = [0.0, 50.0, 550.0]
+            .into_iter()
+            .enumerate()
+            .map(|(i, x)| {
+                let uav = i as u32;
+                let mut e = blank(&g, uav, 3);
+                e.estimate.pose = at(x);
+                let row: Vec<CellIndex> = (0..g.nx).map(|ix| (ix, uav)).collect();
+                e.unseen = set(&row);
+                // Each agent explored a column of its own.
+                let column: Vec<CellIndex> = (0..g.ny).map(|iy| (9 - uav, iy)).collect();
+                e.estimate.explored = set(&column);
+                e.estimate.undetected.and_not_assign(&e.estimate.explored);
+                e
+            })
+            .collect();
+        let measure = |range: f64| -> Vec<SetMetrics> {
+            all.iter()
+                .map(|own| {
+                    SetMetrics::measure(&FusedSets::of_agent(own, &all, &cfg, range), &[], &g)
+                })
+                .collect()
+        };
+        assert_eq!(
+            fused_peers(&all[0], &all, 100.0)
+                .map(ObservedEstimate::uav)
+                .collect::<Vec<_>>(),
+            vec![1]
+        );
+        assert_eq!(fused_peers(&all[2], &all, 100.0).count(), 0);
+        let near = measure(100.0);
+        let perfect = measure(f64::INFINITY);
+        // Agents 0 and 1 removed each other's column; agent 2 only its own.
+        assert_eq!((near[0].ua, near[1].ua, near[2].ua), (0.8, 0.8, 0.9));
+        assert_eq!((near[0].explored, near[2].explored), (0.2, 0.1));
+        assert!(perfect.iter().all(|m| m.ua == 0.7 && m.explored == 0.3));
+        // Each agent's occluded ground is still in its X̄: OA is not 0. (The intersection of
+        // every agent's H̄ is empty, which the fleet-wide reading used to report.)
+        assert_eq!((near[0].oa, near[1].oa, near[2].oa), (0.08, 0.08, 0.09));
+        assert!(perfect.iter().all(|m| m.oa > 0.0));
+        let spread = AgentSpread::over(&near).unwrap();
+        assert!((spread.mean.ua - (0.8 + 0.8 + 0.9) / 3.0).abs() < 1e-12);
+        assert_eq!((spread.worst.ua, spread.worst.explored), (0.9, 0.1));
+        let all_to_all = AgentSpread::over(&perfect).unwrap();
+        assert!(spread.mean.ua > all_to_all.mean.ua);
+    }
+
+    #[test]
+    fn measures_and_spread_over_agents() {
         let g = grid();
         let mut a = estimate(
             0,
             set(&[(0, 0), (1, 0), (2, 0)]),
-            &[(4, set(&[(5, 5), (6, 5)]))],
+            &[(4, set(&[(5, 5), (6, 5)])), (7, set(&[(0, 9)]))],
         );
-        a.explored = set(&[(9, 9)]);
-        a.unseen = set(&[(1, 0), (2, 0)]);
-        let mut b = estimate(
-            1,
-            set(&[(1, 0), (2, 0), (3, 0)]),
-            &[(4, set(&[(6, 5)])), (7, set(&[(0, 9)]))],
-        );
-        b.explored = set(&[(8, 9)]);
-        b.unseen = set(&[(2, 0), (3, 0)]);
-        let f = FusedSets::fuse([&a, &b]).unwrap();
-        assert_eq!(&f.undetected, &set(&[(1, 0), (2, 0)]));
-        assert_eq!(f.targets[&4], set(&[(6, 5)]));
-        assert_eq!(f.targets[&7], set(&[(0, 9)]));
-        assert_eq!(f.explored, set(&[(8, 9), (9, 9)]));
+        a.estimate.explored = set(&[(8, 9), (9, 9)]);
+        a.unseen = set(&[(1, 0), (5, 5)]);
+        let fused = FusedSets::fuse(&a, [], &config());
         let truth = [target(4, 1.5, 1.5), target(7, -4.5, 4.5)];
-        let m = SetMetrics::measure(&f, &truth, &g);
-        assert_eq!(m.ua, 0.02);
+        let m = SetMetrics::measure(&fused, &truth, &g);
+        assert_eq!(m.ua, 0.03);
         assert_eq!(m.oa, 0.01);
         assert_eq!(m.explored, 0.02);
-        assert_eq!(m.identified, 2);
-        assert_eq!(m.target_set_area, Some(0.01));
-        // Target 4 is 1 m from the centre (1.5, 0.5) of cell (6, 5); target 7 sits on its own.
-        assert!((m.loc_error_m.unwrap() - 0.5).abs() < 1e-12);
-        assert!(FusedSets::fuse(std::iter::empty()).is_none());
+        assert_eq!(m.identified, 2.0);
+        assert_eq!(m.target_set_area, Some(0.015));
+        // Target 4's set has its barycentre at (1.0, 0.5), 0.5 m west and 1 m south of it;
+        // target 7 sits on its set's only cell centre.
+        let expected = (0.5_f64.hypot(1.0) + 0.0) / 2.0;
+        assert!((m.loc_error_m.unwrap() - expected).abs() < 1e-12);
+
+        let b = SetMetrics {
+            explored: 0.5,
+            ua: 0.01,
+            oa: 0.0,
+            target_set_area: None,
+            loc_error_m: None,
+            identified: 0.0,
+        };
+        let s = AgentSpread::over([&m, &b]).unwrap();
+        assert_eq!(s.mean.identified, 1.0);
+        assert_eq!(s.worst.identified, 0.0);
+        assert_eq!(
+            (s.worst.ua, s.worst.oa, s.worst.explored),
+            (0.03, 0.01, 0.02)
+        );
+        assert!((s.mean.ua - 0.02).abs() < 1e-12);
+        // Only the agent that has a target set counts for the target metrics.
+        assert_eq!(s.mean.target_set_area, Some(0.015));
+        assert_eq!(s.worst.loc_error_m, m.loc_error_m);
+        assert!(AgentSpread::over([]).is_none());
     }
 
     #[test]
     fn nothing_identified_leaves_the_target_metrics_empty() {
         let e = estimate(0, CellSet::full(&grid()), &[]);
-        let m = SetMetrics::measure(&FusedSets::fuse([&e]).unwrap(), &[], &grid());
+        let m = SetMetrics::measure(&FusedSets::fuse(&e, [], &config()), &[], &grid());
         assert_eq!((m.ua, m.target_set_area, m.loc_error_m), (1.0, None, None));
     }
 
@@ -372,6 +658,7 @@ mod tests {
         assert!((v[0].distance_m - 2.5).abs() < 1e-12);
         assert_eq!((v[1].target, v[1].set), (3, ViolatedSet::Undetected));
         assert!(v[1].distance_m > 10.0);
+        assert_eq!(identified_ids([&e]), BTreeSet::from([2]));
     }
 
     #[test]

@@ -15,6 +15,16 @@
 //! step. In lockstep a killed agent is gone before frame `k + 1`, so fault runs are
 //! reproducible too.
 //!
+//! What is measured ([`metrics`] has the details):
+//! - **per agent**, on the sets that agent holds after its own fusion of the step (its
+//!   estimate fused with those of the peers it fuses, by the agents' law and range rule):
+//!   explored, UA, OA, target-set area, localisation error, identified count
+//!   ([`StepMetrics::agents`]), summarised as the mean over agents ([`StepMetrics::mean`])
+//!   and the worst agent ([`StepMetrics::worst`]);
+//! - **fleet-wide**: guarantee violations (each published estimate against the truth), the
+//!   targets identified by any agent ([`StepMetrics::identified_any`]), traffic, and the
+//!   fleet's map (every map update merged).
+//!
 //! Signals are left to the tokio side ([`SignalHandlingMode::Disabled`]).
 
 pub mod metrics;
@@ -47,7 +57,7 @@ use tokio::sync::mpsc::UnboundedSender;
 use uav_agent::estimator::EstimatorConfig;
 use uav_agent::occupancy::OccupancyMap;
 
-use metrics::{FusedSets, ObservedEstimate, SetMetrics, violations};
+use metrics::{AgentSpread, FusedSets, ObservedEstimate, SetMetrics, identified_ids, violations};
 use tally::{AgentTally, Comms, ServiceKind};
 
 /// What the observer needs to know about the run.
@@ -66,7 +76,7 @@ pub struct ObserverConfig {
 }
 
 /// The metrics of one step.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct StepMetrics {
     /// Step.
     pub step: u64,
@@ -76,8 +86,15 @@ pub struct StepMetrics {
     pub live_agents: u32,
     /// Estimates of this step the metrics were computed from.
     pub estimates: u32,
-    /// The set metrics, `None` when no estimate of the step arrived.
-    pub sets: Option<SetMetrics>,
+    /// Each agent's set metrics on its own fused sets, by UAV (the agents whose estimate of
+    /// the step arrived).
+    pub agents: BTreeMap<u32, SetMetrics>,
+    /// Mean over [`StepMetrics::agents`], `None` when no estimate of the step arrived.
+    pub mean: Option<SetMetrics>,
+    /// Worst agent, metric by metric, `None` when no estimate of the step arrived.
+    pub worst: Option<SetMetrics>,
+    /// Targets identified by at least one agent (fleet-wide).
+    pub identified_any: u32,
     /// Truth-outside-set events this step.
     pub violations: u32,
 }
@@ -108,14 +125,16 @@ pub enum ObserverEnd {
     Stopped,
 }
 
-/// The fleet's final knowledge, for the pictures.
+/// One agent's final knowledge, for the pictures.
 #[derive(Clone, Debug)]
 pub struct FinalState {
     /// Step.
     pub step: u64,
     /// Simulated time, seconds.
     pub time_s: f64,
-    /// The fused sets of the step.
+    /// The agent whose sets these are (the lowest id measured at that step).
+    pub uav: u32,
+    /// That agent's fused sets of the step.
     pub sets: FusedSets,
     /// The targets' truth at that step.
     pub targets: Vec<TargetTruth>,
@@ -134,7 +153,7 @@ pub struct ObserverReport {
     pub comms: Comms,
     /// Messages the observer could not use, by reason.
     pub dropped: BTreeMap<String, u64>,
-    /// The last measured step's fused sets.
+    /// The last measured step's fused sets of one agent.
     pub final_state: Option<FinalState>,
     /// The fleet's map: every map update of every estimate merged.
     pub oem: OccupancyMap,
@@ -408,11 +427,11 @@ impl Observer<'_> {
             let decoded = ObservedEstimate::decode(sample.payload(), &self.estimator);
             drop(sample);
             match decoded {
-                Ok((e, _)) if e.uav != sender => {
+                Ok((e, _)) if e.uav() != sender => {
                     self.drop_estimate(sender, "estimate:sender");
                     tracing::warn!(
                         uav = sender,
-                        claims = e.uav,
+                        claims = e.uav(),
                         "estimate of another UAV dropped"
                     );
                 }
@@ -420,7 +439,7 @@ impl Observer<'_> {
                     self.report.oem.merge(&map);
                     self.report.agents.entry(sender).or_default().observe(&e);
                     let steps = self.store.entry(sender).or_default();
-                    steps.insert(e.step, e);
+                    steps.insert(e.step(), e);
                     while steps.len() > MAX_STORED_STEPS {
                         steps.pop_first();
                     }
@@ -539,18 +558,26 @@ impl Observer<'_> {
                 );
             }
         }
-        let fused = FusedSets::fuse(&estimates);
-        let sets = fused
-            .as_ref()
-            .map(|f| SetMetrics::measure(f, truth.targets(), &grid));
-        if let Some(fused) = fused {
-            self.report.final_state = Some(FinalState {
-                step: k,
-                time_s: truth.time_s,
-                sets: fused,
-                targets: truth.targets().to_vec(),
-            });
+        let range_m = self.config.scenario.comms.range_m;
+        let mut agents = BTreeMap::new();
+        for own in &estimates {
+            let fused = FusedSets::of_agent(own, &estimates, &self.estimator, range_m);
+            agents.insert(
+                own.uav(),
+                SetMetrics::measure(&fused, truth.targets(), &grid),
+            );
+            // The lowest id comes first: its sets are the ones drawn.
+            if agents.len() == 1 {
+                self.report.final_state = Some(FinalState {
+                    step: k,
+                    time_s: truth.time_s,
+                    uav: own.uav(),
+                    sets: fused,
+                    targets: truth.targets().to_vec(),
+                });
+            }
         }
+        let spread = AgentSpread::over(agents.values());
         for u in truth.uavs() {
             if let Some(track) = self.report.tracks.get_mut(u.id as usize) {
                 track.push([u.position[0], u.position[1]]);
@@ -571,7 +598,10 @@ impl Observer<'_> {
             time_s: truth.time_s,
             live_agents,
             estimates: estimates.len() as u32,
-            sets,
+            identified_any: identified_ids(&estimates).len() as u32,
+            mean: spread.map(|s| s.mean),
+            worst: spread.map(|s| s.worst),
+            agents,
             violations: violation_count,
         }
     }

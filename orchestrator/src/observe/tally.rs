@@ -95,20 +95,21 @@ pub struct AgentTally {
 
 impl AgentTally {
     /// Folds in a decoded estimate.
-    pub fn observe(&mut self, e: &ObservedEstimate) {
+    pub fn observe(&mut self, observed: &ObservedEstimate) {
+        let e = &observed.estimate;
         self.estimates_seen += 1;
         self.last_step = Some(self.last_step.map_or(e.step, |s| s.max(e.step)));
         match self.incarnations.iter_mut().find(|i| i.id == e.incarnation) {
             Some(i) if e.seq >= i.last_seq => {
                 i.last_seq = e.seq;
-                i.stats = e.stats;
+                i.stats = observed.stats;
             }
             Some(_) => {}
             None => self.incarnations.push(Incarnation {
                 id: e.incarnation,
                 first_step: e.step,
                 last_seq: e.seq,
-                stats: e.stats,
+                stats: observed.stats,
             }),
         }
     }
@@ -161,28 +162,19 @@ impl AgentTally {
 #[cfg(test)]
 mod tests {
     use protocol::grid::GroundGrid;
-    use protocol::raster::CellSet;
 
     use super::*;
 
     fn estimate(incarnation: u64, seq: u64, frames: u64) -> ObservedEstimate {
-        let g = GroundGrid::new(2.0, 1.0);
-        ObservedEstimate {
-            uav: 0,
-            step: seq,
-            incarnation,
-            seq,
-            undetected: CellSet::full(&g),
-            targets: BTreeMap::new(),
-            obstacle_free: CellSet::empty(&g),
-            explored: CellSet::empty(&g),
-            unseen: CellSet::empty(&g),
-            stats: AgentStats {
-                frames,
-                estimates_received: 2 * frames,
-                ..AgentStats::default()
-            },
-        }
+        let mut e = crate::observe::metrics::tests::blank(&GroundGrid::new(2.0, 1.0), 0, seq);
+        e.estimate.incarnation = incarnation;
+        e.estimate.seq = seq;
+        e.stats = AgentStats {
+            frames,
+            estimates_received: 2 * frames,
+            ..AgentStats::default()
+        };
+        e
     }
 
     #[test]

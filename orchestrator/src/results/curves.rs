@@ -1,6 +1,7 @@
 //! Metric curves over time: a run's `metrics.png` (the paper's Fig. 8: explored, UA, OA,
 //! target-set area and localisation error) and a sweep's `metrics.png` (UA and OA per
-//! variant, mean and ±1 standard deviation over seeds).
+//! variant, mean and ±1 standard deviation over seeds). Every curve is of the set metrics'
+//! mean over agents ([`StepMetrics::mean`]).
 
 use std::ops::Range;
 use std::path::Path;
@@ -21,11 +22,12 @@ struct Curve {
     band: Option<Vec<(f64, f64, f64)>>,
 }
 
-/// The points of one metric over a series, skipping the steps where it does not exist.
+/// The points of one metric (mean over agents) over a series, skipping the steps where it
+/// does not exist.
 fn points(series: &[StepMetrics], f: impl Fn(&SetMetrics) -> Option<f64>) -> Vec<(f64, f64)> {
     series
         .iter()
-        .filter_map(|m| m.sets.as_ref().and_then(&f).map(|v| (m.time_s, v)))
+        .filter_map(|m| m.mean.as_ref().and_then(&f).map(|v| (m.time_s, v)))
         .filter(|(_, v)| v.is_finite())
         .collect()
 }
@@ -158,7 +160,8 @@ pub fn draw_run(series: &[StepMetrics], title: &str, path: &Path) -> anyhow::Res
     Ok(())
 }
 
-/// Mean and ±1 standard deviation over runs of one metric, per step index.
+/// Mean and ±1 standard deviation over runs of one metric (mean over agents), per step
+/// index.
 pub fn band(
     runs: &[Vec<StepMetrics>],
     f: impl Fn(&SetMetrics) -> f64,
@@ -167,7 +170,7 @@ pub fn band(
     (0..steps)
         .filter_map(|i| {
             let at: Vec<&StepMetrics> = runs.iter().filter_map(|r| r.get(i)).collect();
-            let values: Vec<f64> = at.iter().filter_map(|m| m.sets.as_ref().map(&f)).collect();
+            let values: Vec<f64> = at.iter().filter_map(|m| m.mean.as_ref().map(&f)).collect();
             let time = at.first()?.time_s;
             let (mean, sd) = mean_sd(&values)?;
             Some((time, mean, (mean - sd).max(0.0), mean + sd))
@@ -250,11 +253,11 @@ mod tests {
             time_s: i as f64 * 0.5,
             live_agents: 1,
             estimates: 1,
-            sets: Some(SetMetrics {
+            mean: Some(SetMetrics {
                 ua,
                 ..SetMetrics::default()
             }),
-            violations: 0,
+            ..StepMetrics::default()
         }
     }
 

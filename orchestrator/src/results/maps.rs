@@ -3,8 +3,9 @@
 //! - [`draw_map`]: the fused occupancy elevation map (the paper's Fig. 7 from above), unknown
 //!   cells grey, ground pale green, obstacles coloured by height, with the true building
 //!   outlines over it for comparison.
-//! - [`draw_sets`]: the final fused sets over the city: explored ground, `S^o`, `H̄`, `X̄`,
-//!   each `X_j`, the true targets and the UAV tracks.
+//! - [`draw_sets`]: one agent's final fused sets over the city (the lowest id measured at the
+//!   last step; with perfect links every agent holds the same sets but `H̄`): explored
+//!   ground, `S^o`, `H̄`, `X̄`, each `X_j`, the true targets and the UAV tracks.
 //!
 //! Both share one layout: a title line, a square chart of the region in metres and a legend
 //! panel on the right. The cell layers are composed per pixel into one bitmap (the set grid
@@ -85,7 +86,7 @@ pub fn draw_map(oem: &OccupancyMap, scenario: &Scenario, path: &Path) -> anyhow:
     Ok(())
 }
 
-/// Draws the final fused sets over the city into `path` (PNG): building footprints, explored
+/// Draws one agent's final fused sets over the city into `path` (PNG): building footprints, explored
 /// ground, `S^o`, `H̄` (hatched), `X̄`, each `X_j` in its target's colour, the true targets
 /// and each UAV's track (`tracks[i]`: UAV `i`'s ground positions) with its final position.
 /// Fails when the sets do not live on the scenario's grid.
@@ -187,8 +188,9 @@ fn paint_sets(
         .filter(|id| sets.targets.contains_key(id))
         .count();
     let title = format!(
-        "Final sets at t = {:.1} s (step {}): {found} of {} targets identified, areas in % of \
-         the region",
+        "UAV {}'s final sets at t = {:.1} s (step {}): {found} of {} targets identified, \
+         areas in % of the region",
+        state.uav,
         state.time_s,
         state.step,
         truth_ids.len()
@@ -1142,6 +1144,7 @@ mod tests {
         FinalState {
             step: 40,
             time_s: 20.0,
+            uav: 0,
             sets: FusedSets {
                 undetected,
                 targets: sets,
@@ -1258,7 +1261,7 @@ mod tests {
         for est in sim.estimators() {
             oem.merge(&est.state().oem);
         }
-        let sets = FusedSets::fuse(&observed).unwrap();
+        let sets = FusedSets::of_agent(&observed[0], &observed, &config, f64::INFINITY);
         // Traffic does not depend on the UAVs: a second world gives the cars of the last frame.
         let mut shadow = World::new(&scenario).unwrap();
         for _ in 0..steps - 1 {
@@ -1267,6 +1270,7 @@ mod tests {
         let state = FinalState {
             step: shadow.step(),
             time_s: shadow.time_s(),
+            uav: 0,
             sets,
             targets: truth_of(&shadow),
         };

@@ -1,5 +1,19 @@
 //! `summary.json`: the run's final metrics, faults, agents and traffic (DESIGN.md §7).
 //!
+//! The set metrics are the paper's, defined for one UAV on its own fused sets
+//! ([`crate::observe::metrics`]). The keys DESIGN.md §7 names (`ua_final`, `oa_final`,
+//! `explored_final`, `target_set_area_mean`, `loc_error_mean_m`, `identified_final`,
+//! `time_all_identified_s`) are the **mean over agents** of each agent's own metric; the same
+//! keys suffixed `_worst` are the worst agent's (largest UA, OA, area, error and time, smallest
+//! explored and identified), and `agents[i].metrics` holds each agent's own. Fleet-wide values
+//! are `violations` (every published estimate checked) and `identified_any_final` /
+//! `time_all_identified_any_s` (targets identified by any agent).
+//!
+//! A `*_final` value is read at the last measured step, over the agents measured then; a
+//! `*_mean` value is the mean over the steps where it exists of the per-step mean over agents
+//! (or worst agent). `time_all_identified_s` is the mean over the agents measured at the last
+//! step of the time each first held every target, `null` if one of them never did.
+//!
 //! Two runs of the same scenario and seed in lockstep give byte-identical summaries except
 //! for what depends on the wall clock, which lives only under keys named `wall_s`,
 //! `real_time_factor` and `timing` (at any depth), so a comparison can drop them. Maps are
@@ -11,6 +25,8 @@ use std::io::Write;
 use serde::Serialize;
 
 use crate::bench::Stats;
+use crate::observe::StepMetrics;
+use crate::observe::metrics::SetMetrics;
 use crate::observe::tally::ServiceKind;
 use crate::run::RunRecord;
 use crate::run::faults::FaultRecord;
@@ -40,20 +56,42 @@ pub struct Summary {
     pub interrupted: bool,
     /// Truth-outside-set events (must be 0).
     pub violations: u64,
-    /// Explored ground at the last measured step, fraction of the region.
+    /// Explored ground at the last measured step, fraction of the region, mean over agents.
     pub explored_final: Option<f64>,
-    /// UA (undetected area) at the last measured step, fraction of the region.
+    /// UA (undetected area) at the last measured step, fraction, mean over agents.
     pub ua_final: Option<f64>,
-    /// OA (undetected area in occluded ground) at the last measured step, fraction.
+    /// OA (undetected area in occluded ground) at the last measured step, fraction, mean
+    /// over agents.
     pub oa_final: Option<f64>,
-    /// Mean target-set area over the steps with at least one identified target, fraction.
+    /// Mean target-set area over the steps with an identified target, fraction, mean over
+    /// agents.
     pub target_set_area_mean: Option<f64>,
-    /// Mean localisation error over the steps with at least one identified target, metres.
+    /// Mean localisation error over the steps with an identified target, metres, mean over
+    /// agents.
     pub loc_error_mean_m: Option<f64>,
-    /// Targets identified at the last measured step.
-    pub identified_final: u32,
-    /// First time every target was identified, seconds (`null` if never).
+    /// Targets identified at the last measured step, mean over agents.
+    pub identified_final: f64,
+    /// First time an agent held every target, seconds, mean over agents (`null` if one
+    /// never did).
     pub time_all_identified_s: Option<f64>,
+    /// `explored_final` of the worst agent (least explored).
+    pub explored_final_worst: Option<f64>,
+    /// `ua_final` of the worst agent.
+    pub ua_final_worst: Option<f64>,
+    /// `oa_final` of the worst agent.
+    pub oa_final_worst: Option<f64>,
+    /// Mean over steps of the largest target-set area of an agent.
+    pub target_set_area_mean_worst: Option<f64>,
+    /// Mean over steps of the largest localisation error of an agent, metres.
+    pub loc_error_mean_m_worst: Option<f64>,
+    /// `identified_final` of the worst agent.
+    pub identified_final_worst: f64,
+    /// `time_all_identified_s` of the slowest agent.
+    pub time_all_identified_s_worst: Option<f64>,
+    /// Targets identified by any agent at the last measured step (fleet-wide).
+    pub identified_any_final: u32,
+    /// First time every target was identified by some agent, seconds (fleet-wide).
+    pub time_all_identified_any_s: Option<f64>,
     /// Faults injected.
     pub faults: Vec<FaultRecord>,
     /// Per agent.
@@ -87,6 +125,75 @@ pub struct AgentSummary {
     pub token_timeouts: u64,
     /// Restarts injected.
     pub restarts: u64,
+    /// The set metrics of this agent's own fused sets.
+    pub metrics: MetricFinals,
+}
+
+/// The summary values of one series of set metrics: one agent's, or the per-step mean over
+/// agents or worst agent (see the module docs). Fractions of the region, seconds, metres.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct MetricFinals {
+    /// Explored ground at the last step of the series.
+    pub explored_final: Option<f64>,
+    /// UA at the last step.
+    pub ua_final: Option<f64>,
+    /// OA at the last step.
+    pub oa_final: Option<f64>,
+    /// Target-set area, mean over the steps that have one.
+    pub target_set_area_mean: Option<f64>,
+    /// Localisation error, mean over the steps that have one.
+    pub loc_error_mean_m: Option<f64>,
+    /// Identified targets at the last step.
+    pub identified_final: Option<f64>,
+    /// First time `targets` targets were identified.
+    pub time_all_identified_s: Option<f64>,
+}
+
+impl MetricFinals {
+    /// The values of a series of `(time, metrics)` in time order, in a world of `targets`.
+    pub fn of<'a>(
+        series: impl IntoIterator<Item = (f64, &'a SetMetrics)>,
+        targets: u32,
+    ) -> MetricFinals {
+        let series: Vec<(f64, &SetMetrics)> = series.into_iter().collect();
+        let last = series.last().map(|(_, s)| *s);
+        let mean_of = |f: fn(&SetMetrics) -> Option<f64>| {
+            let v: Vec<f64> = series.iter().filter_map(|(_, s)| f(s)).collect();
+            (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+        };
+        MetricFinals {
+            explored_final: last.map(|s| s.explored),
+            ua_final: last.map(|s| s.ua),
+            oa_final: last.map(|s| s.oa),
+            target_set_area_mean: mean_of(|s| s.target_set_area),
+            loc_error_mean_m: mean_of(|s| s.loc_error_m),
+            identified_final: last.map(|s| s.identified),
+            time_all_identified_s: series
+                .iter()
+                .find(|(_, s)| targets > 0 && s.identified >= f64::from(targets))
+                .map(|(t, _)| *t),
+        }
+    }
+
+    /// The values of one agent's series.
+    pub fn of_agent(series: &[StepMetrics], uav: u32, targets: u32) -> MetricFinals {
+        let points = series
+            .iter()
+            .filter_map(|m| m.agents.get(&uav).map(|s| (m.time_s, s)));
+        MetricFinals::of(points, targets)
+    }
+}
+
+/// Mean and largest value, `None` if any value is.
+fn mean_and_max(values: &[Option<f64>]) -> (Option<f64>, Option<f64>) {
+    let v: Option<Vec<f64>> = values.iter().copied().collect();
+    match v {
+        Some(v) if !v.is_empty() => (
+            Some(v.iter().sum::<f64>() / v.len() as f64),
+            v.iter().copied().reduce(f64::max),
+        ),
+        _ => (None, None),
+    }
 }
 
 /// Traffic of one service kind.
@@ -139,24 +246,37 @@ impl Summary {
     pub fn build(record: &RunRecord) -> Summary {
         let scenario = &record.config.scenario;
         let series = &record.series;
-        let measured: Vec<_> = series
-            .iter()
-            .filter_map(|m| m.sets.map(|s| (m, s)))
-            .collect();
-        let last = measured.last().map(|(_, s)| *s);
-        let mean_of = |f: &dyn Fn(&crate::observe::metrics::SetMetrics) -> Option<f64>| {
-            let v: Vec<f64> = measured
-                .iter()
-                .filter(|(_, s)| s.identified > 0)
-                .filter_map(|(_, s)| f(s))
-                .collect();
-            (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-        };
         let all = scenario.targets.count;
-        let time_all_identified_s = measured
+        let mean = MetricFinals::of(
+            series
+                .iter()
+                .filter_map(|m| m.mean.as_ref().map(|s| (m.time_s, s))),
+            all,
+        );
+        let worst = MetricFinals::of(
+            series
+                .iter()
+                .filter_map(|m| m.worst.as_ref().map(|s| (m.time_s, s))),
+            all,
+        );
+        let per_agent: BTreeMap<u32, MetricFinals> = (0..scenario.uavs.count)
+            .map(|uav| (uav, MetricFinals::of_agent(series, uav, all)))
+            .collect();
+        let last = series.iter().rev().find(|m| m.mean.is_some());
+        // The agents of the end of the run, each at its own first time.
+        let times: Vec<Option<f64>> = last
+            .map(|m| {
+                m.agents
+                    .keys()
+                    .map(|uav| per_agent.get(uav).and_then(|f| f.time_all_identified_s))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let (time_all_identified_s, time_all_identified_s_worst) = mean_and_max(&times);
+        let time_all_identified_any_s = series
             .iter()
-            .find(|(_, s)| all > 0 && s.identified >= all)
-            .map(|(m, _)| m.time_s);
+            .find(|m| all > 0 && m.identified_any >= all)
+            .map(|m| m.time_s);
         let steps = series.len() as u64;
         let sim_s = steps as f64 * scenario.timing.cvs_period_s;
         let observer = record.observer.as_ref();
@@ -173,6 +293,7 @@ impl Summary {
                     decisions: t.map_or(0, |t| t.decisions()),
                     token_timeouts: t.map_or(0, |t| t.token_timeouts()),
                     restarts: record.faults.restarts(uav),
+                    metrics: per_agent.get(&uav).cloned().unwrap_or_default(),
                 }
             })
             .collect();
@@ -219,18 +340,27 @@ impl Summary {
             steps,
             interrupted: record.interrupted || record.failure.is_some(),
             violations: record.violations(),
-            explored_final: last.map(|s| s.explored),
-            ua_final: last.map(|s| s.ua),
-            oa_final: last.map(|s| s.oa),
-            target_set_area_mean: mean_of(&|s| s.target_set_area),
-            loc_error_mean_m: mean_of(&|s| s.loc_error_m),
-            identified_final: last.map_or(0, |s| s.identified),
+            explored_final: mean.explored_final,
+            ua_final: mean.ua_final,
+            oa_final: mean.oa_final,
+            target_set_area_mean: mean.target_set_area_mean,
+            loc_error_mean_m: mean.loc_error_mean_m,
+            identified_final: mean.identified_final.unwrap_or_default(),
             time_all_identified_s,
+            explored_final_worst: worst.explored_final,
+            ua_final_worst: worst.ua_final,
+            oa_final_worst: worst.oa_final,
+            target_set_area_mean_worst: worst.target_set_area_mean,
+            loc_error_mean_m_worst: worst.loc_error_mean_m,
+            identified_final_worst: worst.identified_final.unwrap_or_default(),
+            time_all_identified_s_worst,
+            identified_any_final: last.map_or(0, |m| m.identified_any),
+            time_all_identified_any_s,
             faults: record.faults.records().to_vec(),
             agents,
             comms,
             observer: ObserverSummary {
-                steps_without_estimates: series.iter().filter(|m| m.sets.is_none()).count() as u64,
+                steps_without_estimates: series.iter().filter(|m| m.mean.is_none()).count() as u64,
                 dropped: observer.map(|o| o.dropped.clone()).unwrap_or_default(),
             },
             timing: RunTiming {
@@ -255,6 +385,9 @@ impl Summary {
         let opt = |v: Option<f64>, digits: usize| {
             v.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"))
         };
+        let spread = |mean: Option<f64>, worst: Option<f64>, digits: usize| {
+            format!("{}  ({})", opt(mean, digits), opt(worst, digits))
+        };
         let rows: Vec<(&str, String)> = vec![
             ("seed", self.seed.to_string()),
             (
@@ -268,19 +401,43 @@ impl Summary {
             ("wall time", format!("{:.1} s", self.wall_s)),
             ("real-time factor", format!("{:.2}", self.real_time_factor)),
             ("violations", self.violations.to_string()),
-            ("explored (final)", opt(self.explored_final, 4)),
-            ("UA (final)", opt(self.ua_final, 4)),
-            ("OA (final)", opt(self.oa_final, 4)),
-            ("target-set area (mean)", opt(self.target_set_area_mean, 5)),
-            ("loc. error (mean, m)", opt(self.loc_error_mean_m, 2)),
             (
-                "identified (final)",
-                format!("{} / {}", self.identified_final, self.targets),
+                "identified by any (final)",
+                format!("{} / {}", self.identified_any_final, self.targets),
+            ),
+            ("set metrics", "mean over agents  (worst agent)".to_owned()),
+            (
+                "explored (final)",
+                spread(self.explored_final, self.explored_final_worst, 4),
+            ),
+            ("UA (final)", spread(self.ua_final, self.ua_final_worst, 4)),
+            ("OA (final)", spread(self.oa_final, self.oa_final_worst, 4)),
+            (
+                "target-set area (mean)",
+                spread(
+                    self.target_set_area_mean,
+                    self.target_set_area_mean_worst,
+                    5,
+                ),
             ),
             (
-                "all identified at",
-                self.time_all_identified_s
-                    .map_or_else(|| "never".to_owned(), |t| format!("{t:.1} s")),
+                "loc. error (mean, m)",
+                spread(self.loc_error_mean_m, self.loc_error_mean_m_worst, 2),
+            ),
+            (
+                "identified (final)",
+                format!(
+                    "{:.2}  ({}) / {}",
+                    self.identified_final, self.identified_final_worst, self.targets
+                ),
+            ),
+            (
+                "all identified at (s)",
+                spread(
+                    self.time_all_identified_s,
+                    self.time_all_identified_s_worst,
+                    1,
+                ),
             ),
             ("interrupted", self.interrupted.to_string()),
         ];

@@ -2,38 +2,54 @@
 //! of the region's area, times in seconds, distances in metres; an empty cell where a metric
 //! does not exist at that step (no estimate arrived, nothing identified). No wall-clock
 //! column, so the file is reproducible in lockstep.
+//!
+//! The set metrics come twice: the mean over the agents measured at that step (`explored`,
+//! `ua`, ...) and the worst agent (the same names suffixed `_worst`). `identified_any` and
+//! `violations` are fleet-wide.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::observe::StepMetrics;
+use crate::observe::metrics::SetMetrics;
 
 /// The header row.
-pub const HEADER: &str = "step,time_s,live_agents,estimates,explored,ua,oa,target_set_area,\
-                          loc_error_m,identified,violations";
+pub const HEADER: &str = "step,time_s,live_agents,estimates,\
+                          explored,ua,oa,target_set_area,loc_error_m,identified,\
+                          explored_worst,ua_worst,oa_worst,target_set_area_worst,\
+                          loc_error_m_worst,identified_worst,identified_any,violations";
+
+/// The six set-metric cells of one aggregate, empty where missing.
+fn set_cells(s: Option<&SetMetrics>) -> String {
+    let cell = |v: Option<f64>| v.map_or_else(String::new, |v| v.to_string());
+    [
+        cell(s.map(|s| s.explored)),
+        cell(s.map(|s| s.ua)),
+        cell(s.map(|s| s.oa)),
+        cell(s.and_then(|s| s.target_set_area)),
+        cell(s.and_then(|s| s.loc_error_m)),
+        cell(s.map(|s| s.identified)),
+    ]
+    .join(",")
+}
 
 /// The CSV text of a series.
 pub fn to_csv(series: &[StepMetrics]) -> String {
-    let mut out = String::with_capacity(64 * (series.len() + 1));
+    let mut out = String::with_capacity(128 * (series.len() + 1));
     out.push_str(HEADER);
     out.push('\n');
-    let cell = |v: Option<f64>| v.map_or_else(String::new, |v| v.to_string());
     for m in series {
-        let s = m.sets;
         // Writing to a String cannot fail.
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{}",
             m.step,
             m.time_s,
             m.live_agents,
             m.estimates,
-            cell(s.map(|s| s.explored)),
-            cell(s.map(|s| s.ua)),
-            cell(s.map(|s| s.oa)),
-            cell(s.and_then(|s| s.target_set_area)),
-            cell(s.and_then(|s| s.loc_error_m)),
-            s.map_or(0, |s| s.identified),
+            set_cells(m.mean.as_ref()),
+            set_cells(m.worst.as_ref()),
+            m.identified_any,
             m.violations
         );
     }
@@ -49,33 +65,39 @@ pub fn write(series: &[StepMetrics], path: &Path) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::observe::metrics::SetMetrics;
 
     #[test]
     fn rows_have_every_column_and_empty_cells_for_missing_metrics() {
+        let mean = SetMetrics {
+            explored: 0.25,
+            ua: 0.5,
+            oa: 0.125,
+            target_set_area: None,
+            loc_error_m: None,
+            identified: 0.5,
+        };
         let series = [
             StepMetrics {
                 step: 0,
                 time_s: 0.0,
                 live_agents: 2,
-                estimates: 0,
-                sets: None,
-                violations: 0,
+                ..StepMetrics::default()
             },
             StepMetrics {
                 step: 1,
                 time_s: 0.5,
                 live_agents: 2,
                 estimates: 2,
-                sets: Some(SetMetrics {
-                    explored: 0.25,
-                    ua: 0.5,
-                    oa: 0.125,
-                    target_set_area: None,
-                    loc_error_m: None,
-                    identified: 0,
+                mean: Some(mean),
+                worst: Some(SetMetrics {
+                    ua: 0.75,
+                    loc_error_m: Some(2.0),
+                    identified: 0.0,
+                    ..mean
                 }),
+                identified_any: 1,
                 violations: 1,
+                ..StepMetrics::default()
             },
         ];
         let csv = to_csv(&series);
@@ -83,7 +105,10 @@ mod tests {
         assert_eq!(lines.len(), 3);
         let columns = HEADER.split(',').count();
         assert!(lines.iter().all(|l| l.split(',').count() == columns));
-        assert_eq!(lines[1], "0,0,2,0,,,,,,0,0");
-        assert_eq!(lines[2], "1,0.5,2,2,0.25,0.5,0.125,,,0,1");
+        assert_eq!(lines[1], "0,0,2,0,,,,,,,,,,,,,0,0");
+        assert_eq!(
+            lines[2],
+            "1,0.5,2,2,0.25,0.5,0.125,,,0.5,0.25,0.75,0.125,,2,0,1,1"
+        );
     }
 }

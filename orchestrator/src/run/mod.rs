@@ -133,7 +133,7 @@ pub fn write_results(record: &RunRecord) -> anyhow::Result<Summary> {
     summary.write_json(&out.join("summary.json"))?;
     timeseries::write(&record.series, &out.join("timeseries.csv"))?;
     let title = format!(
-        "seed {}, {} UAVs, {} targets",
+        "seed {}, {} UAVs, {} targets: mean over agents",
         scenario.seed, scenario.uavs.count, scenario.targets.count
     );
     curves::draw_run(&record.series, &title, &out.join("metrics.png"))?;

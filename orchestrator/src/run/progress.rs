@@ -49,8 +49,9 @@ impl Progress {
         self.violations += u64::from(m.violations);
         let done = m.step + 1;
         let rtf = m.time_s / self.started.elapsed().as_secs_f64().max(1e-9);
-        let ua = m.sets.map_or(f64::NAN, |s| s.ua);
-        let identified = m.sets.map_or(0, |s| s.identified);
+        // Means over agents.
+        let ua = m.mean.map_or(f64::NAN, |s| s.ua);
+        let identified = m.mean.map_or(0.0, |s| s.identified);
         let text = format!(
             "t={:.1}s rtf={rtf:.2} UA={ua:.3} identified={identified} violations={}",
             m.time_s, self.violations

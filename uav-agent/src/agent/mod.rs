@@ -25,6 +25,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
+use protocol::camera::CameraPose;
 use protocol::codec;
 use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
@@ -208,6 +209,23 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentRe
         end: Some(end),
         ..report
     })
+}
+
+/// Whether an agent whose camera is at `receiver` fuses an estimate sent from `sender` (the
+/// poses of the same step) over links of range `range_m`: always with an infinite range,
+/// else when the cameras are within `range_m` of each other horizontally. An unknown pose is
+/// out of every finite range. The observer applies the same rule to reproduce what each
+/// agent fused.
+pub fn in_comms_range(
+    range_m: f64,
+    receiver: Option<CameraPose>,
+    sender: Option<CameraPose>,
+) -> bool {
+    range_m.is_infinite()
+        || match (receiver, sender) {
+            (Some(a), Some(b)) => (a.position - b.position).xy().norm() <= range_m,
+            _ => false,
+        }
 }
 
 /// A number that differs at each start of an agent process.
@@ -490,12 +508,7 @@ impl Agent<'_> {
                     continue;
                 }
                 info.fused_step = Some(p.step);
-                let in_range = range.is_infinite()
-                    || match (my_pose, p.pose) {
-                        (Some(a), Some(b)) => (a.position - b.position).xy().norm() <= range,
-                        _ => false,
-                    };
-                if in_range {
+                if in_comms_range(range, my_pose, p.pose) {
                     self.estimator.fuse(&p);
                     self.report.estimates_received += 1;
                 } else {
