@@ -25,50 +25,43 @@ pub fn square_gap_field(window: &CellBox, seeds: &[bool]) -> Vec<u64> {
     let h = (window.y1 - window.y0 + 1) as usize;
     assert_eq!(seeds.len(), w * h, "one seed flag per cell of the window");
     // The seeds grown by their 8 neighbours, inside the window.
-    let mut rows_grown = vec![false; w * h];
-    for y in 0..h {
-        let (src, row) = (
-            &seeds[y * w..(y + 1) * w],
-            &mut rows_grown[y * w..(y + 1) * w],
-        );
+    let mut across = vec![false; w * h];
+    for (src, row) in seeds.chunks_exact(w).zip(across.chunks_exact_mut(w)) {
         for x in 0..w {
-            row[x] = src[x.saturating_sub(1)..(x + 2).min(w)].iter().any(|&b| b);
+            row[x] = src[x] || (x > 0 && src[x - 1]) || (x + 1 < w && src[x + 1]);
         }
     }
-    let mut grown = vec![false; w * h];
+    let mut grown = across.clone();
     for y in 0..h {
-        for dy in y.saturating_sub(1)..(y + 2).min(h) {
-            let (src, dst) = (dy * w, y * w);
-            for x in 0..w {
-                grown[dst + x] |= rows_grown[src + x];
-            }
+        let (row, above) = (y * w, y.checked_sub(1).map(|a| a * w));
+        let below = (y + 1 < h).then_some((y + 1) * w);
+        for x in 0..w {
+            grown[row + x] |=
+                above.is_some_and(|a| across[a + x]) || below.is_some_and(|b| across[b + x]);
         }
     }
-    drop(rows_grown);
+    drop(across);
 
-    // Vertical distance to the nearest grown seed in the same column, in cells.
-    let far = u64::MAX / 4;
+    // Vertical distance to the nearest grown seed in the same column, in cells: down the
+    // window, then up it.
+    let far = u32::MAX / 4;
     let mut vertical = vec![far; w * h];
-    let mut last = vec![far; w];
     for y in 0..h {
         for x in 0..w {
-            last[x] = if grown[y * w + x] {
+            vertical[y * w + x] = if grown[y * w + x] {
                 0
+            } else if y > 0 {
+                vertical[(y - 1) * w + x].saturating_add(1)
             } else {
-                last[x].saturating_add(1)
+                far
             };
-            vertical[y * w + x] = last[x];
         }
     }
-    last.fill(far);
-    for y in (0..h).rev() {
+    for y in (0..h.saturating_sub(1)).rev() {
         for x in 0..w {
-            last[x] = if grown[y * w + x] {
-                0
-            } else {
-                last[x].saturating_add(1).min(vertical[y * w + x])
-            };
-            vertical[y * w + x] = last[x];
+            let from_below = vertical[(y + 1) * w + x].saturating_add(1);
+            let v = &mut vertical[y * w + x];
+            *v = (*v).min(from_below);
         }
     }
 
@@ -104,10 +97,10 @@ impl Envelope {
     /// `out[x] = min over x' with g[x'] < far of (x - x')² + g[x']²`; [`UNREACHED`] when every
     /// `g` is `far`. Windows are at most a few thousand cells wide, so every product below
     /// stays far inside `i64`.
-    fn lower(&mut self, g: &[u64], far: u64, out: &mut [u64]) {
+    fn lower(&mut self, g: &[u32], far: u32, out: &mut [u64]) {
         self.apex.clear();
         self.from.clear();
-        let value = |q: usize| (g[q] * g[q]) as i64;
+        let value = |q: usize| i64::from(g[q]) * i64::from(g[q]);
         for q in 0..g.len() {
             if g[q] >= far {
                 continue;
@@ -146,7 +139,7 @@ impl Envelope {
             }
             let p = self.apex[k];
             let d = x.abs_diff(p) as u64;
-            *o = d * d + g[p] * g[p];
+            *o = d * d + u64::from(g[p]) * u64::from(g[p]);
         }
     }
 }
@@ -203,7 +196,7 @@ mod tests {
         assert_eq!(at(15, 23), 2 * 2 + 1);
         assert_eq!(f, brute(&window, &[(12, 21)]));
         assert!(
-            square_gap_field(&window, |_, _| false)
+            square_gap_field(&window, &mask(&window, &[]))
                 .iter()
                 .all(|&v| v == UNREACHED)
         );
