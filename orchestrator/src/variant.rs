@@ -79,7 +79,7 @@ impl Variant {
                 "guidance.lambda=10",
                 "guidance.lookahead_periods=6",
                 "guidance.beam_width=4",
-                "guidance.target_weight=4",
+                "guidance.target_weight=1",
                 "guidance.growth_horizon_s=10",
                 "guidance.spread_m=60",
             ],

@@ -181,11 +181,9 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
             ));
         }
     }
-    report.cases.push(decision_case(
-        "setfleet all",
-        MAX_OTHERS,
-        &setfleet_overall,
-    ));
+    report
+        .cases
+        .push(decision_case("setfleet all", MAX_OTHERS, &setfleet_overall));
     let sum = &mut report.summary;
     sum.insert("decision_ms_median".into(), overall.median.into());
     sum.insert("decision_ms_p99".into(), overall.p99.into());
@@ -196,7 +194,10 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
         "setfleet_decision_ms_median".into(),
         setfleet_overall.median.into(),
     );
-    sum.insert("setfleet_decision_ms_p99".into(), setfleet_overall.p99.into());
+    sum.insert(
+        "setfleet_decision_ms_p99".into(),
+        setfleet_overall.p99.into(),
+    );
     sum.insert(
         "setfleet_sequences_per_decision".into(),
         setfleet_sequences.into(),

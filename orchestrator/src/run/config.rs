@@ -334,7 +334,10 @@ mod tests {
             c.scenario.guidance.planner,
             protocol::scenario::Planner::Setfleet
         );
-        assert_eq!(c.scenario.guidance.beam_width, 3, "--set applies after the variant");
+        assert_eq!(
+            c.scenario.guidance.beam_width, 3,
+            "--set applies after the variant"
+        );
         let e = args(&["--uavs", "0"]).validate().unwrap_err();
         assert!(e.0.contains("uavs.count"), "{e}");
         let e = args(&["--uavs", "2", "--fault", "kill:3@1"])

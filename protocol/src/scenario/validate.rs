@@ -127,13 +127,11 @@ fn check_value(value: &mut Value, expected: &Value, key: &str) -> Result<(), Sce
         }
         (Value::Integer(_), Value::Integer(i)) => check_integer(key, i128::from(*i)),
         (Value::String(_), Value::String(text)) => match string_choices(key) {
-            Some(choices) if !choices.contains(&text.as_str()) => {
-                Err(ScenarioError::OutOfRange {
-                    key: key.to_owned(),
-                    value: format!("{text:?}"),
-                    accepted: format!("one of {}", choices.join(", ")),
-                })
-            }
+            Some(choices) if !choices.contains(&text.as_str()) => Err(ScenarioError::OutOfRange {
+                key: key.to_owned(),
+                value: format!("{text:?}"),
+                accepted: format!("one of {}", choices.join(", ")),
+            }),
             _ => Ok(()),
         },
         (Value::Array(schema), Value::Array(user)) => check_array(user, schema, key),
@@ -744,7 +742,9 @@ mod tests {
             }),
             ("guidance.beam_width", |s| s.guidance.beam_width = 0),
             ("guidance.beam_width", |s| s.guidance.beam_width = 65),
-            ("guidance.target_weight", |s| s.guidance.target_weight = -1.0),
+            ("guidance.target_weight", |s| {
+                s.guidance.target_weight = -1.0
+            }),
             ("guidance.growth_horizon_s", |s| {
                 s.guidance.growth_horizon_s = 601.0
             }),
@@ -769,7 +769,9 @@ mod tests {
         let s = Scenario::from_toml_str("[guidance]\nplanner = \"paper\"\n").unwrap();
         assert_eq!(s, Scenario::default());
         for bad in ["guidance.planner=magic", "guidance.planner=3"] {
-            let e = Scenario::load(None, &[bad.to_owned()]).unwrap_err().to_string();
+            let e = Scenario::load(None, &[bad.to_owned()])
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("guidance.planner"), "{bad}: {e}");
             assert!(e.contains("paper, setfleet"), "{bad}: {e}");
         }

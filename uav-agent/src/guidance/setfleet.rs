@@ -101,7 +101,15 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let depth = sp.lookahead_periods.max(1) as usize;
     let per = params.steps_per_period as usize;
     let others_seen: Vec<CellSet> = (0..depth)
-        .map(|d| seen_by_others(params, &grid, input.others, d * per..(d + 1) * per, obstacles))
+        .map(|d| {
+            seen_by_others(
+                params,
+                &grid,
+                input.others,
+                d * per..(d + 1) * per,
+                obstacles,
+            )
+        })
         .collect();
     // Where the others' plans leave their view centres, per CVS step of this horizon.
     let others_centres: Vec<Vec<Point2>> = input
@@ -151,7 +159,7 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     }];
     let mut sequences = 0;
     let mut excluded = 0;
-    for d in 0..depth {
+    for (d, seen_ahead) in others_seen.iter().enumerate() {
         let rings = (reach(d + 1) - reach(d)) as usize;
         let last = d + 1 == depth;
         let mut children = Vec::with_capacity(beam.len() * params.increments.len());
@@ -162,8 +170,8 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
                 u0 = u0.dilate(&grid, 0.0);
                 t0 = t0.dilate(&grid, 0.0);
             }
-            u0.and_not_assign(&others_seen[d]);
-            t0.and_not_assign(&others_seen[d]);
+            u0.and_not_assign(seen_ahead);
+            t0.and_not_assign(seen_ahead);
             for &inc in &params.increments {
                 let yaw_ref = node.state.yaw + inc;
                 let mut state = node.state;
@@ -191,11 +199,12 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
                 let mut t = t0.clone();
                 t.and_not_assign(&seen);
                 let value_sum = node.value_sum + value(&u, &t);
-                let centre = poses
-                    .last()
-                    .map_or(Point2::new(0.0, 0.0), |p| view::view_centre(&params.camera, p));
+                let centre = poses.last().map_or(Point2::new(0.0, 0.0), |p| {
+                    view::view_centre(&params.camera, p)
+                });
                 let distance_m = distance.at(&centre);
-                let crowding = spread_charge(sp.spread_m, fov_area, &centre, &others_centres, poses.len());
+                let crowding =
+                    spread_charge(sp.spread_m, fov_area, &centre, &others_centres, poses.len());
                 let hidden_m2 = if last {
                     (u.intersection_count(&hidden) + t.intersection_count(&hidden)) as f64
                         * grid.cell_area()
@@ -356,7 +365,11 @@ pub fn boundary_count(set: &CellSet) -> u64 {
             }
             let pad = if w + 1 == wpr { pad_mask } else { 0 };
             let low_in = if w == 0 { 1 } else { row[w - 1] >> 63 };
-            let high_in = if w + 1 < wpr { row[w + 1] << 63 } else { 1 << 63 };
+            let high_in = if w + 1 < wpr {
+                row[w + 1] << 63
+            } else {
+                1 << 63
+            };
             let left = (cur << 1) | low_in;
             let right = ((cur | pad) >> 1) | high_in;
             let interior = cur & left & right & (above[w] | pad) & (below[w] | pad);
@@ -383,7 +396,10 @@ impl DistanceMap {
         for (x, y) in set.iter() {
             d[y as usize * nx + x as usize] = 0.0;
         }
-        let (a, b) = (grid.cell_m as f32, grid.cell_m as f32 * std::f32::consts::SQRT_2);
+        let (a, b) = (
+            grid.cell_m as f32,
+            grid.cell_m as f32 * std::f32::consts::SQRT_2,
+        );
         for y in 0..ny {
             for x in 0..nx {
                 let mut v = d[y * nx + x];
