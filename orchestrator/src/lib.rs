@@ -7,6 +7,7 @@
 //!   the scenario key and the accepted range: exit code 2).
 //! - [`run`](mod@run): `fleet run`, one run of the fleet as processes; [`observe`] measures it and
 //!   [`results`] writes what it produced.
+//! - [`variant`]: the guidance variants, named sets of scenario settings (`--variant`).
 //! - [`sweep`]: `fleet sweep`, every variant on several seeds, the paper's Table I.
 //! - [`render_cmd`]: `fleet render`, one frame as pictures.
 //! - [`bench`](mod@bench): `fleet bench`, whole-system measurements as [`bench::BenchReport`]s.
@@ -33,6 +34,7 @@ pub mod render_cmd;
 pub mod results;
 pub mod run;
 pub mod sweep;
+pub mod variant;
 
 use cli::{BenchKind, Cli, FleetCommand, UsageError};
 

@@ -5,16 +5,15 @@
 //! Writes into `--out`: each run's results under `<variant>/seed-<n>/`, `table.json`,
 //! `table.md` and `metrics.png` (UA and OA over time per variant, mean ± 1 sd).
 //!
-//! The variants (DESIGN.md §7): `paper` (the MPC with the map and `kappa = 1`), `kappa0`
-//! (occluded ground not rewarded, `kappa = 0`) and `nomap` (the MPC without the map, the
-//! paper's reference \[3\]: no occlusion by buildings predicted and `kappa = 0`).
+//! The variants are those of [`crate::variant`]: `nomap`, `kappa0`, `paper` (the paper's
+//! Table I columns) and `setfleet` (the project's planner).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use clap::{Args, ValueEnum};
+use clap::Args;
 use serde::Serialize;
 
 use crate::Outcome;
@@ -24,39 +23,8 @@ use crate::results::curves::{draw_sweep, mean_sd};
 use crate::results::summary::Summary;
 use crate::run::config::{RunConfig, new_run_id};
 use crate::run::{execute, outcome, runtime, write_results};
+pub use crate::variant::Variant;
 use world_server::server::StepMode;
-
-/// A guidance variant compared by the sweep.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, ValueEnum, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Variant {
-    /// The paper's MPC: map and occluded ground (`kappa = 1`).
-    Paper,
-    /// The map, but occluded ground not rewarded (`kappa = 0`).
-    Kappa0,
-    /// No map in the MPC (reference \[3\] of the paper).
-    Nomap,
-}
-
-impl Variant {
-    /// The variant's name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Variant::Paper => "paper",
-            Variant::Kappa0 => "kappa0",
-            Variant::Nomap => "nomap",
-        }
-    }
-
-    /// The scenario overrides that make the variant.
-    pub fn overrides(self) -> &'static [&'static str] {
-        match self {
-            Variant::Paper => &["guidance.kappa=1", "guidance.use_map=true"],
-            Variant::Kappa0 => &["guidance.kappa=0", "guidance.use_map=true"],
-            Variant::Nomap => &["guidance.kappa=0", "guidance.use_map=false"],
-        }
-    }
-}
 
 /// `fleet sweep`.
 #[derive(Debug, Clone, Args)]
@@ -67,9 +35,9 @@ pub struct SweepArgs {
     /// Number of seeds: runs use seeds 1..=N.
     #[arg(long)]
     pub seeds: u32,
-    /// Variants to run, comma-separated, in the table's column order.
-    #[arg(long, value_enum, value_delimiter = ',',
-          default_values_t = vec![Variant::Nomap, Variant::Kappa0, Variant::Paper])]
+    /// Variants to run, comma-separated, in the table's column order (each is a named set of
+    /// scenario settings; `--set` overrides apply after them).
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = Variant::ALL.to_vec())]
     pub variants: Vec<Variant>,
     /// Overrides the scenario's `duration_s`, seconds of simulated time.
     #[arg(long)]
@@ -112,8 +80,7 @@ impl SweepArgs {
         let mut runs = Vec::new();
         for &variant in &variants {
             for seed in 1..=u64::from(self.seeds) {
-                let mut overrides = self.scenario.overrides.clone();
-                overrides.extend(variant.overrides().iter().map(|s| (*s).to_owned()));
+                let mut overrides = variant.with_user_overrides(&self.scenario.overrides);
                 overrides.push(format!("seed={seed}"));
                 if let Some(d) = self.duration {
                     overrides.push(format!("duration_s={d:?}"));
@@ -135,6 +102,7 @@ impl SweepArgs {
                         strict: false,
                         run_id: new_run_id(sequence),
                         progress_bar,
+                        variant,
                     },
                 ));
             }

@@ -252,6 +252,38 @@ pub struct GuidanceConfig {
     pub kappa: f64,
     /// Whether the MPC uses the OEM.
     pub use_map: bool,
+    /// Which planner decides: `"paper"` (the paper's MPC, the default) or `"setfleet"` (the
+    /// project's beam search). The keys below are read by `setfleet` only.
+    pub planner: Planner,
+    /// `setfleet`: guidance periods looked ahead by the beam search.
+    pub lookahead_periods: u32,
+    /// `setfleet`: partial sequences kept after each period of the beam search.
+    pub beam_width: u32,
+    /// `setfleet`: weight of the identified targets' set area against `X̄`'s (per m²).
+    pub target_weight: f64,
+    /// `setfleet`: seconds of future growth charged on the boundary of every set left
+    /// unobserved (0: only today's area counts).
+    pub growth_horizon_s: f64,
+    /// `setfleet`: distance between view centres below which this UAV's plan is charged for
+    /// overlapping the plans already in the token, metres (0: no charge).
+    pub spread_m: f64,
+}
+
+/// The guidance planner (`guidance.planner`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Planner {
+    /// The paper's MPC, exhaustive over `U^h` (DESIGN.md §4).
+    #[default]
+    Paper,
+    /// The project's planner: beam search over longer sequences, with the future growth of
+    /// unobserved sets in its cost.
+    Setfleet,
+}
+
+impl Planner {
+    /// Every planner's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["paper", "setfleet"];
 }
 
 /// `[comms]`.
@@ -356,6 +388,12 @@ impl Default for GuidanceConfig {
             lambda: 1e-5,
             kappa: 1.0,
             use_map: true,
+            planner: Planner::Paper,
+            lookahead_periods: 6,
+            beam_width: 4,
+            target_weight: 4.0,
+            growth_horizon_s: 10.0,
+            spread_m: 60.0,
         }
     }
 }

@@ -69,6 +69,7 @@ fn a_small_fleet_runs_end_to_end_as_processes() {
     assert_eq!(s["steps"], steps, "{s}");
     assert_eq!(s["violations"], 0, "{s}");
     assert_eq!(s["interrupted"], false);
+    assert_eq!(s["variant"], "paper", "the default variant is recorded");
     for a in s["agents"].as_array().expect("agents") {
         assert_eq!(a["steps_processed"], steps, "an agent missed steps: {a}");
         assert_eq!(a["restarts"], 0);
@@ -295,6 +296,12 @@ fn bad_faults_and_arguments_exit_with_code_2_naming_the_flag() {
         (vec!["--uavs", "0"], "uavs.count"),
         (vec!["--duration=-3"], "duration_s"),
         (vec!["--mode", "realtime", "--speedup", "0"], "--speedup"),
+        (vec!["--variant", "best"], "--variant"),
+        (vec!["--set", "guidance.planner=magic"], "guidance.planner"),
+        (
+            vec!["--variant", "setfleet", "--set", "guidance.beam_width=0"],
+            "guidance.beam_width",
+        ),
     ] {
         let out = finish(
             &t,
@@ -302,5 +309,57 @@ fn bad_faults_and_arguments_exit_with_code_2_naming_the_flag() {
         );
         assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
         assert!(stderr(&out).contains(names), "{args:?}: {}", stderr(&out));
+    }
+}
+
+#[test]
+fn the_setfleet_variant_runs_and_is_recorded() {
+    let t = TestRun::new("run-setfleet");
+    let file = t.write("scenario.toml", &scenario(20.0, 2));
+    let out_dir = t.dir.join("out");
+    let out = finish(
+        &t,
+        ChildGuard::spawn(&mut fleet_run(
+            &t,
+            &file,
+            &out_dir,
+            &["--strict", "--variant", "setfleet"],
+        )),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let s = summary(&out_dir);
+    assert_eq!(s["variant"], "setfleet", "{s}");
+    assert_eq!(s["violations"], 0, "{s}");
+    for a in s["agents"].as_array().expect("agents") {
+        // One decision per 1 s guidance period: 20 in 20 s (the first at step 0).
+        assert!(a["decisions"].as_u64().expect("decisions") >= 19, "{a}");
+        assert_eq!(a["token_timeouts"], 0, "{a}");
+    }
+    let resolved = std::fs::read_to_string(out_dir.join("scenario.toml")).expect("scenario");
+    assert!(resolved.contains("planner = \"setfleet\""), "{resolved}");
+    assert!(resolved.contains("guidance_period_s = 1.0"), "{resolved}");
+}
+
+#[test]
+fn run_and_sweep_help_list_and_explain_every_variant() {
+    for command in ["run", "sweep"] {
+        let out = Command::new(binary("fleet"))
+            .args([command, "--help"])
+            .output()
+            .expect("fleet --help");
+        assert!(out.status.success());
+        let help = String::from_utf8_lossy(&out.stdout);
+        assert!(help.contains("--variant"), "{command}: {help}");
+        for (name, word) in [
+            ("paper", "paper's MPC as written"),
+            ("kappa0", "kappa = 0"),
+            ("nomap", "without the map"),
+            ("setfleet", "project's planner"),
+        ] {
+            assert!(
+                help.contains(&format!("{name}:")) && help.contains(word),
+                "{command} --help does not explain {name}: {help}"
+            );
+        }
     }
 }

@@ -1,11 +1,16 @@
-//! `fleet bench guidance`: the time of one MPC decision ([`uav_agent::guidance::plan`]) on
-//! realistic inputs.
+//! `fleet bench guidance`: the time of one guidance decision on realistic inputs, for both
+//! planners: the paper's MPC ([`uav_agent::guidance::plan`], the `paper` variant) and the
+//! project's ([`uav_agent::guidance::setfleet::plan`], the `setfleet` variant).
 //!
 //! Method: the fleet runs in-process ([`FleetSim`]) so the sets and each UAV's map are a run's.
 //! At every guidance step after the warm-up, each UAV's decision is timed as the agent takes it
 //! (the same inputs as `uav_agent::agent`: its pose, `X̄` and every `X_j`, the recently hidden
 //! ground, the obstacle cells of its map) with 0, 1, 2 and 3 other UAVs' plans in the token
-//! (the round's real plans of the other UAVs), `repeats` times each.
+//! (the round's real plans of the other UAVs), `repeats` times each, by each planner on the
+//! same inputs. The fleet flies the `paper` variant's scenario; the `setfleet` planner gets the
+//! `setfleet` variant's settings (both with the user's `--set` overrides on top). The summary's
+//! `decision_ms_median`/`decision_ms_p99` are the paper's MPC, `setfleet_decision_ms_*` the
+//! project's.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -14,11 +19,12 @@ use std::time::Instant;
 use clap::Args;
 use protocol::scenario::Scenario;
 use protocol::wire::PlannedView;
-use uav_agent::guidance;
+use uav_agent::guidance::{self, GuidanceParams};
 
 use super::estimator::{FleetSim, PlanningState};
 use super::{BenchCase, BenchReport, Metrics, Stats};
 use crate::cli::{ScenarioArgs, UsageError};
+use crate::variant::Variant;
 
 /// Most plans of other UAVs put in the token.
 const MAX_OTHERS: usize = 3;
@@ -46,8 +52,10 @@ pub struct BenchGuidanceArgs {
 /// A validated `fleet bench guidance`.
 #[derive(Debug, Clone)]
 pub struct BenchGuidanceConfig {
-    /// The scenario.
+    /// The scenario the fleet flies (the `paper` variant's).
     pub scenario: Scenario,
+    /// The scenario with the `setfleet` variant's settings, for the setfleet planner.
+    pub setfleet: Scenario,
     /// Steps simulated.
     pub steps: u64,
     /// Steps before timing.
@@ -61,7 +69,15 @@ pub struct BenchGuidanceConfig {
 impl BenchGuidanceArgs {
     /// Checks the counts.
     pub fn validate(&self) -> Result<BenchGuidanceConfig, UsageError> {
-        let scenario = self.scenario.load()?;
+        let load = |variant: Variant| {
+            ScenarioArgs {
+                scenario: self.scenario.scenario.clone(),
+                overrides: variant.with_user_overrides(&self.scenario.overrides),
+            }
+            .load()
+        };
+        let scenario = load(Variant::Paper)?;
+        let setfleet = load(Variant::Setfleet)?;
         if self.warm_up >= self.steps || self.steps > 100_000 {
             return Err(UsageError(format!(
                 "--steps {} --warm-up {}: need warm-up < steps <= 100000",
@@ -76,6 +92,7 @@ impl BenchGuidanceArgs {
         }
         Ok(BenchGuidanceConfig {
             scenario,
+            setfleet,
             steps: self.steps,
             warm_up: self.warm_up,
             repeats: self.repeats,
@@ -98,9 +115,12 @@ fn token_for(uav: usize, round: &[PlannedView], count: usize) -> Vec<PlannedView
 pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
     let mut report = BenchReport::new("guidance");
     let mut sim = FleetSim::new(&config.scenario)?;
+    let setfleet = GuidanceParams::from_scenario(&config.setfleet);
     let mut by_others: Vec<Vec<f64>> = vec![Vec::new(); MAX_OTHERS + 1];
+    let mut setfleet_by_others: Vec<Vec<f64>> = vec![Vec::new(); MAX_OTHERS + 1];
     let mut obstacle_cells = Vec::new();
     let mut sequences = 0;
+    let mut setfleet_sequences = 0;
     let mut rounds = 0u64;
     let period = u64::from(sim.guidance().steps_per_period.max(1));
     for _ in 0..config.steps {
@@ -114,14 +134,18 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
             for (i, estimator) in sim.estimators().iter().enumerate() {
                 let state = PlanningState::of(estimator)?;
                 obstacle_cells.push(state.obstacle_count() as f64);
-                for (count, times) in by_others.iter_mut().enumerate() {
+                for count in 0..=MAX_OTHERS {
                     let others = token_for(i, &round, count);
                     let input = state.input(i as u32, &others);
                     for _ in 0..config.repeats {
                         let start = Instant::now();
                         let decision = guidance::plan(sim.guidance(), &input);
-                        times.push(start.elapsed().as_secs_f64() * 1e3);
+                        by_others[count].push(start.elapsed().as_secs_f64() * 1e3);
                         sequences = decision.sequences;
+                        let start = Instant::now();
+                        let decision = guidance::setfleet::plan(&setfleet, &input);
+                        setfleet_by_others[count].push(start.elapsed().as_secs_f64() * 1e3);
+                        setfleet_sequences = decision.sequences;
                     }
                 }
             }
@@ -145,12 +169,39 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
     report
         .cases
         .push(decision_case("all", MAX_OTHERS, &overall));
+    let setfleet_all: Vec<f64> = setfleet_by_others.iter().flatten().copied().collect();
+    let setfleet_overall = Stats::from_samples(&setfleet_all)
+        .ok_or_else(|| anyhow::anyhow!("no setfleet decision was timed"))?;
+    for (count, times) in setfleet_by_others.iter().enumerate() {
+        if let Some(s) = Stats::from_samples(times) {
+            report.cases.push(decision_case(
+                &format!("setfleet others={count}"),
+                count,
+                &s,
+            ));
+        }
+    }
+    report
+        .cases
+        .push(decision_case("setfleet all", MAX_OTHERS, &setfleet_overall));
     let sum = &mut report.summary;
     sum.insert("decision_ms_median".into(), overall.median.into());
     sum.insert("decision_ms_p99".into(), overall.p99.into());
     sum.insert("decisions".into(), overall.n.into());
     sum.insert("rounds".into(), rounds.into());
     sum.insert("sequences_per_decision".into(), sequences.into());
+    sum.insert(
+        "setfleet_decision_ms_median".into(),
+        setfleet_overall.median.into(),
+    );
+    sum.insert(
+        "setfleet_decision_ms_p99".into(),
+        setfleet_overall.p99.into(),
+    );
+    sum.insert(
+        "setfleet_sequences_per_decision".into(),
+        setfleet_sequences.into(),
+    );
     if let Some(s) = Stats::from_samples(&obstacle_cells) {
         sum.insert("obstacle_cells_median".into(), s.median.into());
     }

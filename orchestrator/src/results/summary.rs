@@ -36,6 +36,8 @@ use crate::run::faults::FaultRecord;
 pub struct Summary {
     /// Scenario seed.
     pub seed: u64,
+    /// The guidance variant (`paper`, `kappa0`, `nomap`, `setfleet`).
+    pub variant: &'static str,
     /// UAVs in the fleet.
     pub uavs: u32,
     /// Targets in the world.
@@ -323,6 +325,7 @@ impl Summary {
             .unwrap_or_default();
         Summary {
             seed: scenario.seed,
+            variant: record.config.variant.name(),
             uavs: scenario.uavs.count,
             targets: all,
             mode: match record.config.mode {
@@ -390,6 +393,7 @@ impl Summary {
         };
         let rows: Vec<(&str, String)> = vec![
             ("seed", self.seed.to_string()),
+            ("variant", self.variant.to_owned()),
             (
                 "UAVs / targets",
                 format!("{} / {}", self.uavs, self.targets),

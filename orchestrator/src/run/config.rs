@@ -11,6 +11,7 @@ use protocol::service::RunId;
 use world_server::server::StepMode;
 
 use crate::cli::{ScenarioArgs, UsageError};
+use crate::variant::Variant;
 
 /// `fleet run`.
 #[derive(Debug, Clone, Args)]
@@ -18,6 +19,10 @@ pub struct RunArgs {
     /// The scenario.
     #[command(flatten)]
     pub scenario: ScenarioArgs,
+    /// The guidance variant: a named set of scenario settings, applied after the scenario
+    /// file and before `--set`.
+    #[arg(long, value_enum, default_value_t = Variant::Paper)]
+    pub variant: Variant,
     /// Overrides the scenario's `seed`.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -131,13 +136,15 @@ pub struct RunConfig {
     pub run_id: RunId,
     /// Whether to draw a progress bar (else a log line every ~10 %).
     pub progress_bar: bool,
+    /// The guidance variant the scenario was built with.
+    pub variant: Variant,
 }
 
 impl RunArgs {
     /// Loads the scenario, applies the overrides and checks the faults against the fleet and
     /// the run's duration.
     pub fn validate(&self) -> Result<RunConfig, UsageError> {
-        let mut overrides = self.scenario.overrides.clone();
+        let mut overrides = self.variant.with_user_overrides(&self.scenario.overrides);
         // The dedicated flags are overrides like any other, so the scenario's checks name
         // the key and its range.
         if let Some(seed) = self.seed {
@@ -174,6 +181,7 @@ impl RunArgs {
             strict: self.strict,
             run_id: self.run_id.clone().unwrap_or_else(|| new_run_id(0)),
             progress_bar: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+            variant: self.variant,
         })
     }
 }
@@ -316,6 +324,20 @@ mod tests {
             (9, 12.0, 3)
         );
         assert_eq!(c.mode, StepMode::Lockstep);
+        assert_eq!(c.variant, Variant::Paper);
+        assert_eq!(c.scenario.guidance, Scenario::default().guidance);
+        let c = args(&["--variant", "setfleet", "--set", "guidance.beam_width=3"])
+            .validate()
+            .unwrap();
+        assert_eq!(c.variant, Variant::Setfleet);
+        assert_eq!(
+            c.scenario.guidance.planner,
+            protocol::scenario::Planner::Setfleet
+        );
+        assert_eq!(
+            c.scenario.guidance.beam_width, 3,
+            "--set applies after the variant"
+        );
         let e = args(&["--uavs", "0"]).validate().unwrap_err();
         assert!(e.0.contains("uavs.count"), "{e}");
         let e = args(&["--uavs", "2", "--fault", "kill:3@1"])

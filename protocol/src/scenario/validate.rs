@@ -31,6 +31,12 @@ const MAX_CELLS_PER_SIDE: u32 = 20_000;
 const MAX_YAW_INCREMENTS: usize = 9;
 /// Most control sequences `|U|^h` the MPC evaluates per decision.
 const MAX_CONTROL_SEQUENCES: usize = 10_000;
+/// Most periods the `setfleet` planner looks ahead.
+const MAX_LOOKAHEAD_PERIODS: u32 = 16;
+/// Widest beam of the `setfleet` planner.
+const MAX_BEAM_WIDTH: u32 = 64;
+/// Longest future growth the `setfleet` planner charges, seconds.
+const MAX_GROWTH_HORIZON_S: f64 = 600.0;
 /// Smallest image side, pixels.
 const MIN_IMAGE_SIDE: u32 = 8;
 /// Relative tolerance of "a whole number of CVS periods".
@@ -42,6 +48,14 @@ const MAX_TARGETS: usize = if TRUTH_MAX_TARGETS < FRAME_MAX_BOXES {
 } else {
     FRAME_MAX_BOXES
 };
+
+/// The accepted values of every string key.
+pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
+    match key {
+        "guidance.planner" => Some(&super::Planner::NAMES),
+        _ => None,
+    }
+}
 
 /// The accepted range of every integer key, inclusive.
 ///
@@ -60,6 +74,8 @@ pub(super) fn integer_range(key: &str) -> Option<(i128, i128)> {
         ),
         "camera.min_pixels" => (1, FRAME_MAX_PIXELS as i128),
         "guidance.horizon" => (1, 4),
+        "guidance.lookahead_periods" => (1, MAX_LOOKAHEAD_PERIODS as i128),
+        "guidance.beam_width" => (1, MAX_BEAM_WIDTH as i128),
         _ => return None,
     };
     Some(range)
@@ -110,6 +126,14 @@ fn check_value(value: &mut Value, expected: &Value, key: &str) -> Result<(), Sce
             Ok(())
         }
         (Value::Integer(_), Value::Integer(i)) => check_integer(key, i128::from(*i)),
+        (Value::String(_), Value::String(text)) => match string_choices(key) {
+            Some(choices) if !choices.contains(&text.as_str()) => Err(ScenarioError::OutOfRange {
+                key: key.to_owned(),
+                value: format!("{text:?}"),
+                accepted: format!("one of {}", choices.join(", ")),
+            }),
+            _ => Ok(()),
+        },
         (Value::Array(schema), Value::Array(user)) => check_array(user, schema, key),
         (_, found) => Err(ScenarioError::WrongType {
             key: key.to_owned(),
@@ -165,7 +189,10 @@ fn describe_expected(expected: &Value, key: &str) -> String {
             None => "an integer".to_owned(),
         },
         Value::Boolean(_) => "a boolean (true or false)".to_owned(),
-        Value::String(_) => "a string".to_owned(),
+        Value::String(_) => match string_choices(key) {
+            Some(choices) => format!("a string, one of {}", choices.join(", ")),
+            None => "a string".to_owned(),
+        },
         Value::Datetime(_) => "a date-time".to_owned(),
         Value::Table(_) => "a table".to_owned(),
         Value::Array(items) => {
@@ -532,7 +559,16 @@ impl Scenario {
             ),
         )?;
         Interval::NON_NEGATIVE.check("guidance.lambda", guidance.lambda)?;
-        Interval::NON_NEGATIVE.check("guidance.kappa", guidance.kappa)
+        Interval::NON_NEGATIVE.check("guidance.kappa", guidance.kappa)?;
+        check_integer(
+            "guidance.lookahead_periods",
+            i128::from(guidance.lookahead_periods),
+        )?;
+        check_integer("guidance.beam_width", i128::from(guidance.beam_width))?;
+        Interval::NON_NEGATIVE.check("guidance.target_weight", guidance.target_weight)?;
+        Interval::closed(0.0, MAX_GROWTH_HORIZON_S)
+            .check("guidance.growth_horizon_s", guidance.growth_horizon_s)?;
+        Interval::closed(0.0, 1e4).check("guidance.spread_m", guidance.spread_m)
     }
 }
 
@@ -698,6 +734,21 @@ mod tests {
             }),
             ("guidance.lambda", |s| s.guidance.lambda = -1.0),
             ("guidance.kappa", |s| s.guidance.kappa = f64::INFINITY),
+            ("guidance.lookahead_periods", |s| {
+                s.guidance.lookahead_periods = 0
+            }),
+            ("guidance.lookahead_periods", |s| {
+                s.guidance.lookahead_periods = 17
+            }),
+            ("guidance.beam_width", |s| s.guidance.beam_width = 0),
+            ("guidance.beam_width", |s| s.guidance.beam_width = 65),
+            ("guidance.target_weight", |s| {
+                s.guidance.target_weight = -1.0
+            }),
+            ("guidance.growth_horizon_s", |s| {
+                s.guidance.growth_horizon_s = 601.0
+            }),
+            ("guidance.spread_m", |s| s.guidance.spread_m = f64::NAN),
             ("comms.range_m", |s| s.comms.range_m = 0.0),
             ("comms.range_m", |s| s.comms.range_m = f64::NAN),
             ("seed", |s| s.seed = u64::MAX),
@@ -707,6 +758,29 @@ mod tests {
             edit(&mut scenario);
             assert_eq!(out_of_range_key(&scenario), *key, "{scenario:?}");
         }
+    }
+
+    #[test]
+    fn the_planner_is_one_of_its_names_and_defaults_to_the_paper() {
+        use super::super::Planner;
+        assert_eq!(Scenario::default().guidance.planner, Planner::Paper);
+        let s = Scenario::load(None, &["guidance.planner=setfleet".to_owned()]).unwrap();
+        assert_eq!(s.guidance.planner, Planner::Setfleet);
+        let s = Scenario::from_toml_str("[guidance]\nplanner = \"paper\"\n").unwrap();
+        assert_eq!(s, Scenario::default());
+        for bad in ["guidance.planner=magic", "guidance.planner=3"] {
+            let e = Scenario::load(None, &[bad.to_owned()])
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("guidance.planner"), "{bad}: {e}");
+            assert!(e.contains("paper, setfleet"), "{bad}: {e}");
+        }
+        // The resolved scenario writes the planner back as its name.
+        assert!(
+            Scenario::default()
+                .to_toml_string()
+                .contains("planner = \"paper\"")
+        );
     }
 
     #[test]

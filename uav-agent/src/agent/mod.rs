@@ -6,7 +6,8 @@
 //! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are fused when
 //!    they come, dilated by the steps they lag) and fuses them;
 //! 4. on a guidance step it takes its turn in the token ring ([`crate::guidance::ring`]) and
-//!    runs the MPC ([`crate::guidance::plan`]);
+//!    runs the planner the scenario names ([`crate::guidance::decide`]: the paper's MPC or
+//!    `setfleet`);
 //! 5. it acks step `k` to the world with its yaw reference.
 //!
 //! Every wait is bounded. Peers are live while their iceoryx2 node is (a SIGKILLed peer shows
@@ -612,7 +613,7 @@ impl Agent<'_> {
                 height_m: c.height_m as f64,
             })
             .collect();
-        let decision = guidance::plan(
+        let decision = guidance::decide(
             &self.guidance,
             &PlanningInput {
                 uav: self.config.uav,

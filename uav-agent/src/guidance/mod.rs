@@ -1,4 +1,11 @@
-//! Guidance: the MPC of DESIGN.md §4, one decision per guidance period.
+//! Guidance: one decision per guidance period, by the planner `guidance.planner` names.
+//!
+//! - `paper` (the default): the MPC of DESIGN.md §4 as the paper writes it, [`plan`], below.
+//!   The `paper` variant runs it untouched.
+//! - `setfleet`: the project's own planner, [`setfleet::plan`]: a beam search over longer
+//!   sequences that values the future growth of unobserved sets (see its docs).
+//!
+//! [`decide`] picks between them. The rest of this page is the paper's MPC.
 //!
 //! For every sequence of yaw increments in `U^h`, the UAV's own states are predicted with the
 //! world's dynamics ([`protocol::flight::advance`]) at every CVS step of the horizon; the
@@ -23,6 +30,7 @@
 
 pub mod coarse;
 pub mod ring;
+pub mod setfleet;
 pub mod view;
 
 use protocol::camera::{CameraModel, CameraPose};
@@ -30,11 +38,12 @@ use protocol::flight::{self, UavState};
 use protocol::grid::{GroundGrid, Rect};
 use protocol::math::{Point2, Point3};
 use protocol::raster::CellSet;
-use protocol::scenario::Scenario;
+use protocol::scenario::{Planner, Scenario};
 use protocol::wire::PlannedView;
 
 pub use coarse::CoarseGrid;
 pub use ring::{TokenRing, Turn};
+pub use setfleet::SetfleetParams;
 pub use view::ObstacleCell;
 
 /// Everything about the MPC that does not change during a run.
@@ -66,6 +75,10 @@ pub struct GuidanceParams {
     pub max_yaw_rate: f64,
     /// Targets' speed bound, m/s.
     pub target_max_speed: f64,
+    /// Which planner [`decide`] runs.
+    pub planner: Planner,
+    /// The `setfleet` planner's settings (unused by the paper's MPC).
+    pub setfleet: SetfleetParams,
 }
 
 impl GuidanceParams {
@@ -89,6 +102,14 @@ impl GuidanceParams {
             speed: s.uavs.speed_mps,
             max_yaw_rate: s.uavs.max_yaw_rate_rps,
             target_max_speed: s.targets.max_speed_mps,
+            planner: s.guidance.planner,
+            setfleet: SetfleetParams {
+                lookahead_periods: s.guidance.lookahead_periods,
+                beam_width: s.guidance.beam_width,
+                target_weight: s.guidance.target_weight,
+                growth_horizon_s: s.guidance.growth_horizon_s,
+                spread_m: s.guidance.spread_m,
+            },
         }
     }
 
@@ -168,7 +189,15 @@ struct Search<'a> {
     excluded: usize,
 }
 
-/// Picks the best sequence of yaw increments (DESIGN.md §4).
+/// One decision by the planner of `params` (`guidance.planner`).
+pub fn decide(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
+    match params.planner {
+        Planner::Paper => plan(params, input),
+        Planner::Setfleet => setfleet::plan(params, input),
+    }
+}
+
+/// Picks the best sequence of yaw increments (DESIGN.md §4): the paper's MPC.
 pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let grid = *params.planning_grid();
     let mut sets = CellSet::empty(&grid);

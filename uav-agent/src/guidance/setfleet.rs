@@ -1,0 +1,593 @@
+//! The `setfleet` planner: the project's own guidance (`guidance.planner = "setfleet"`), beside
+//! the paper's MPC ([`super::plan`]), which stays exactly as the paper writes it.
+//!
+//! Same inputs, same dynamics ([`protocol::flight::advance`]), same camera and field-of-view
+//! prediction ([`super::view`]), same yaw increments `U` held for one guidance period each, same
+//! token. What changes is how far it looks and what it values:
+//!
+//! - **Longer sequences for the same cost: a beam search.** Instead of every sequence of `U^h`,
+//!   it expands `lookahead_periods` periods, keeping after each period the `beam_width` best
+//!   partial sequences (each expanded by every increment of `U`). With the variant's 1 s
+//!   period, 6 periods look 6 s ahead and cost about 120 expansions per decision, where the
+//!   exhaustive search would cost `5^6`.
+//! - **Time counts.** A sequence is scored by the mean over its periods of the predicted
+//!   sets' value, not by the value at the end only, so clearing ground early beats clearing it
+//!   late.
+//! - **What a pocket left unobserved will cost later.** A set left alone grows at the targets'
+//!   speed `v` from its whole boundary: in `G` seconds a boundary of length `L` adds about
+//!   `L v G` m² (and the area keeps growing with the square of time). The value of a set is
+//!   therefore its area plus `L v G` (`G = growth_horizon_s`), which makes the planner clear
+//!   pockets whole rather than shave them (shaving keeps the boundary), and revisit identified
+//!   cars before their sets grow: the identified targets' sets count `target_weight` times
+//!   their area, since every square metre of them is localisation error.
+//! - **Somewhere to go when nothing is in reach.** The distance from the predicted view
+//!   centre to the nearest set cell is charged `lambda` m² per metre, as the paper's `Φ_d`,
+//!   but read from a distance map of the sets computed once per decision (and given real
+//!   weight by the variant), so a UAV that has cleared its surroundings heads for the nearest
+//!   remaining set instead of circling.
+//! - **Spreading with the token.** Ground the UAVs ahead in the token will see is removed from
+//!   the predicted sets period by period and from the distance map, as in the paper; in
+//!   addition a view centre within `spread_m` of another UAV's planned view centre is charged
+//!   up to one field of view's area, linearly in how close it is, so the UAVs do not follow
+//!   one another beyond the others' horizon.
+//! - `kappa` keeps the paper's meaning: the area of the final sets inside ground occluded in
+//!   the last periods is charged `kappa` m² per m².
+//!
+//! The planning grid has [`super::coarse::PLANNING_CELL_M`] cells like the paper's; the sets
+//! grow by whole cells (8-neighbour rings) when the targets' accumulated reach crosses a cell,
+//! not by a rounded-up disc every period, so the predicted growth has the targets' true speed.
+//! Sequences leaving the RoI are excluded as in the paper. Ties keep the first sequence in
+//! lexicographic order of the increments (stable sorts, no unordered containers), so the
+//! decision is a pure function of the inputs.
+
+use protocol::camera::{Camera, CameraPose};
+use protocol::flight::{self, UavState};
+use protocol::grid::GroundGrid;
+use protocol::math::Point2;
+use protocol::raster::CellSet;
+use protocol::wire::PlannedView;
+
+use super::{Cost, Decision, GuidanceParams, ObstacleCell, PlanningInput, stray, view};
+
+/// The `setfleet` planner's own settings (from `[guidance]`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SetfleetParams {
+    /// Guidance periods looked ahead.
+    pub lookahead_periods: u32,
+    /// Partial sequences kept after each period.
+    pub beam_width: u32,
+    /// Weight of the identified targets' set area against `X̄`'s.
+    pub target_weight: f64,
+    /// Seconds of future growth charged on the boundary of the sets.
+    pub growth_horizon_s: f64,
+    /// Distance between view centres under which a plan overlapping the token's is charged, m.
+    pub spread_m: f64,
+}
+
+/// A partial sequence of the beam.
+#[derive(Clone)]
+struct Node {
+    increments: Vec<f64>,
+    state: UavState,
+    poses: Vec<CameraPose>,
+    undetected: CellSet,
+    targets: CellSet,
+    /// Sum over the periods so far of the sets' value, m².
+    value_sum: f64,
+    stray_m: f64,
+    /// Ranking key: the mean value plus the distance and spread charges, m².
+    rank: f64,
+    cost: Cost,
+}
+
+/// Picks the yaw increments with the `setfleet` planner (see the module docs).
+pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
+    let sp = &params.setfleet;
+    let grids = &params.grids;
+    let grid = grids.coarse;
+    let mut undetected = CellSet::empty(&grid);
+    let mut targets = CellSet::empty(&grid);
+    // `sets[0]` is `X̄`, the others the identified targets' sets (the agent's order).
+    for (i, s) in input.sets.iter().enumerate() {
+        let coarse = grids.downsample(s);
+        if i == 0 {
+            undetected = coarse;
+        } else {
+            targets.or_assign(&coarse);
+        }
+    }
+    let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
+    let hidden = grids.downsample(input.recently_hidden);
+    let depth = sp.lookahead_periods.max(1) as usize;
+    let per = params.steps_per_period as usize;
+    let others_seen: Vec<CellSet> = (0..depth)
+        .map(|d| {
+            seen_by_others(
+                params,
+                &grid,
+                input.others,
+                d * per..(d + 1) * per,
+                obstacles,
+            )
+        })
+        .collect();
+    // Where the others' plans leave their view centres, per CVS step of this horizon.
+    let others_centres: Vec<Vec<Point2>> = input
+        .others
+        .iter()
+        .map(|v| {
+            v.poses
+                .iter()
+                .filter(|p| p.position.iter().all(|c| c.is_finite()) && p.yaw.is_finite())
+                .map(|p| view::view_centre(&params.camera, p))
+                .collect::<Vec<_>>()
+        })
+        .filter(|c| !c.is_empty())
+        .collect();
+    // The distance map: to the nearest cell of the sets nobody ahead will see.
+    let mut attractive = undetected.clone();
+    attractive.or_assign(&targets);
+    for seen in &others_seen {
+        attractive.and_not_assign(seen);
+    }
+    let distance = DistanceMap::new(&grid, &attractive);
+    let fov_area = footprint_area(params, &input.state);
+    let period_s = params.steps_per_period as f64 * params.dt;
+    let reach = |d: usize| (params.target_max_speed * period_s * d as f64 / grid.cell_m).floor();
+    let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
+    let value = |u: &CellSet, t: &CellSet| {
+        let area = u.count() as f64 + sp.target_weight * t.count() as f64;
+        let edge = boundary_count(u) as f64 + sp.target_weight * boundary_count(t) as f64;
+        area * grid.cell_area() + edge * growth_m2_per_cell
+    };
+
+    let mut beam = vec![Node {
+        increments: Vec::new(),
+        state: input.state,
+        poses: Vec::new(),
+        undetected,
+        targets,
+        value_sum: 0.0,
+        stray_m: 0.0,
+        rank: 0.0,
+        cost: Cost {
+            area_m2: 0.0,
+            distance_m: 0.0,
+            hidden_m2: 0.0,
+            total: 0.0,
+        },
+    }];
+    let mut sequences = 0;
+    let mut excluded = 0;
+    for (d, seen_ahead) in others_seen.iter().enumerate() {
+        let rings = (reach(d + 1) - reach(d)) as usize;
+        let last = d + 1 == depth;
+        let mut children = Vec::with_capacity(beam.len() * params.increments.len());
+        for node in &beam {
+            let (mut u0, mut t0) = (node.undetected.clone(), node.targets.clone());
+            for _ in 0..rings {
+                // Radius 0 adds exactly the 8 neighbours: one ring of cells.
+                u0 = u0.dilate(&grid, 0.0);
+                t0 = t0.dilate(&grid, 0.0);
+            }
+            u0.and_not_assign(seen_ahead);
+            t0.and_not_assign(seen_ahead);
+            for &inc in &params.increments {
+                let yaw_ref = node.state.yaw + inc;
+                let mut state = node.state;
+                let mut poses = node.poses.clone();
+                let mut seen = CellSet::empty(&grid);
+                let mut stray_m = node.stray_m;
+                for _ in 0..per {
+                    state = flight::advance(
+                        state,
+                        yaw_ref,
+                        params.dt,
+                        params.speed,
+                        params.max_yaw_rate,
+                    );
+                    stray_m = stray_m.max(stray(&params.region, &state.position));
+                    let pose = CameraPose {
+                        position: state.position,
+                        yaw: state.yaw,
+                    };
+                    view::add_visible_ground(&mut seen, &grid, &params.camera, &pose, obstacles);
+                    poses.push(pose);
+                }
+                let mut u = u0.clone();
+                u.and_not_assign(&seen);
+                let mut t = t0.clone();
+                t.and_not_assign(&seen);
+                let value_sum = node.value_sum + value(&u, &t);
+                let centre = poses.last().map_or(Point2::new(0.0, 0.0), |p| {
+                    view::view_centre(&params.camera, p)
+                });
+                let distance_m = distance.at(&centre);
+                let crowding =
+                    spread_charge(sp.spread_m, fov_area, &centre, &others_centres, poses.len());
+                let hidden_m2 = if last {
+                    (u.intersection_count(&hidden) + t.intersection_count(&hidden)) as f64
+                        * grid.cell_area()
+                } else {
+                    0.0
+                };
+                let mean = value_sum / (d + 1) as f64;
+                let rank = mean + params.lambda * distance_m + crowding + params.kappa * hidden_m2;
+                let mut increments = node.increments.clone();
+                increments.push(inc);
+                children.push(Node {
+                    increments,
+                    state,
+                    poses,
+                    undetected: u,
+                    targets: t,
+                    value_sum,
+                    stray_m,
+                    rank,
+                    cost: Cost {
+                        area_m2: mean,
+                        distance_m,
+                        hidden_m2,
+                        total: rank,
+                    },
+                });
+            }
+        }
+        if last {
+            sequences = children.len();
+            excluded = children.iter().filter(|c| c.stray_m > 0.0).count();
+        }
+        // Inside the RoI first, then the least stray, then the rank; the sort is stable, so
+        // equals keep the lexicographic order of their increments.
+        children.sort_by(|a, b| {
+            a.stray_m
+                .total_cmp(&b.stray_m)
+                .then(a.rank.total_cmp(&b.rank))
+        });
+        children.truncate(sp.beam_width.max(1) as usize);
+        beam = children;
+    }
+    let best = beam.into_iter().next();
+    let (increments, cost, poses) = match best {
+        Some(node) => (node.increments, node.cost, node.poses),
+        // Only when U is empty; the scenario refuses that, but stay total.
+        None => (
+            Vec::new(),
+            Cost {
+                area_m2: 0.0,
+                distance_m: 0.0,
+                hidden_m2: 0.0,
+                total: 0.0,
+            },
+            Vec::new(),
+        ),
+    };
+    Decision {
+        yaw_ref: input.state.yaw + increments.first().copied().unwrap_or(0.0),
+        increments,
+        cost,
+        view: PlannedView {
+            uav: input.uav,
+            poses,
+        },
+        sequences,
+        excluded,
+    }
+}
+
+/// Ground the UAVs ahead in the token will see during the CVS steps `steps` of this horizon
+/// (as much of it as their plans cover).
+fn seen_by_others(
+    params: &GuidanceParams,
+    grid: &GroundGrid,
+    others: &[PlannedView],
+    steps: std::ops::Range<usize>,
+    obstacles: &[ObstacleCell],
+) -> CellSet {
+    let mut seen = CellSet::empty(grid);
+    for view in others {
+        let end = steps.end.min(view.poses.len());
+        let start = steps.start.min(end);
+        for pose in &view.poses[start..end] {
+            if pose.position.iter().all(|v| v.is_finite()) && pose.yaw.is_finite() {
+                view::add_visible_ground(&mut seen, grid, &params.camera, pose, obstacles);
+            }
+        }
+    }
+    seen
+}
+
+/// The charge for a view centre near the others' planned view centres at the same CVS step
+/// (or their last one): up to `fov_area` each, falling linearly to 0 at `spread_m`.
+fn spread_charge(
+    spread_m: f64,
+    fov_area: f64,
+    centre: &Point2,
+    others: &[Vec<Point2>],
+    step: usize,
+) -> f64 {
+    if spread_m <= 0.0 {
+        return 0.0;
+    }
+    others
+        .iter()
+        .filter_map(|c| c.get(step.saturating_sub(1)).or(c.last()))
+        .map(|q| fov_area * (1.0 - (q - centre).norm() / spread_m).max(0.0))
+        .sum()
+}
+
+/// Area of the ground footprint of the camera at `state`, m² (0 if it misses the ground).
+fn footprint_area(params: &GuidanceParams, state: &UavState) -> f64 {
+    let camera = Camera::new(
+        params.camera,
+        CameraPose {
+            position: state.position,
+            yaw: state.yaw,
+        },
+    );
+    camera.image_ground_footprint().map_or(0.0, |p| {
+        let mut twice = 0.0;
+        for i in 0..p.len() {
+            let (a, b) = (p[i], p[(i + 1) % p.len()]);
+            twice += a.x * b.y - b.x * a.y;
+        }
+        twice.abs() / 2.0
+    })
+}
+
+/// Cells of `set` with a 4-neighbour outside it (the RoI's edge does not count: nothing
+/// grows in from outside), computed a word at a time.
+pub fn boundary_count(set: &CellSet) -> u64 {
+    let wpr = set.words_per_row();
+    let (nx, ny) = (set.nx() as usize, set.ny());
+    if wpr == 0 || ny == 0 {
+        return 0;
+    }
+    let tail_bits = nx - (wpr - 1) * 64;
+    let pad_mask: u64 = if tail_bits >= 64 {
+        0
+    } else {
+        u64::MAX << tail_bits
+    };
+    let ones = vec![u64::MAX; wpr];
+    let mut total = 0u64;
+    for y in 0..ny {
+        let row = set.row(y);
+        if row.iter().all(|&w| w == 0) {
+            continue;
+        }
+        let above = if y + 1 < ny { set.row(y + 1) } else { &ones };
+        let below = if y > 0 { set.row(y - 1) } else { &ones };
+        for w in 0..wpr {
+            let cur = row[w];
+            if cur == 0 {
+                continue;
+            }
+            let pad = if w + 1 == wpr { pad_mask } else { 0 };
+            let low_in = if w == 0 { 1 } else { row[w - 1] >> 63 };
+            let high_in = if w + 1 < wpr {
+                row[w + 1] << 63
+            } else {
+                1 << 63
+            };
+            let left = (cur << 1) | low_in;
+            let right = ((cur | pad) >> 1) | high_in;
+            let interior = cur & left & right & (above[w] | pad) & (below[w] | pad);
+            total += u64::from((cur & !interior).count_ones());
+        }
+    }
+    total
+}
+
+/// Distance from every planning cell to the nearest cell of a set (chamfer 3-4 distance, within
+/// about 8 % of the Euclidean distance), metres.
+struct DistanceMap {
+    grid: GroundGrid,
+    metres: Vec<f32>,
+    /// Used when the set is empty: nothing to go to.
+    empty: bool,
+}
+
+impl DistanceMap {
+    fn new(grid: &GroundGrid, set: &CellSet) -> Self {
+        let (nx, ny) = (grid.nx as usize, grid.ny as usize);
+        let far = f32::INFINITY;
+        let mut d = vec![far; nx * ny];
+        for (x, y) in set.iter() {
+            d[y as usize * nx + x as usize] = 0.0;
+        }
+        let (a, b) = (
+            grid.cell_m as f32,
+            grid.cell_m as f32 * std::f32::consts::SQRT_2,
+        );
+        for y in 0..ny {
+            for x in 0..nx {
+                let mut v = d[y * nx + x];
+                if x > 0 {
+                    v = v.min(d[y * nx + x - 1] + a);
+                }
+                if y > 0 {
+                    v = v.min(d[(y - 1) * nx + x] + a);
+                    if x > 0 {
+                        v = v.min(d[(y - 1) * nx + x - 1] + b);
+                    }
+                    if x + 1 < nx {
+                        v = v.min(d[(y - 1) * nx + x + 1] + b);
+                    }
+                }
+                d[y * nx + x] = v;
+            }
+        }
+        for y in (0..ny).rev() {
+            for x in (0..nx).rev() {
+                let mut v = d[y * nx + x];
+                if x + 1 < nx {
+                    v = v.min(d[y * nx + x + 1] + a);
+                }
+                if y + 1 < ny {
+                    v = v.min(d[(y + 1) * nx + x] + a);
+                    if x + 1 < nx {
+                        v = v.min(d[(y + 1) * nx + x + 1] + b);
+                    }
+                    if x > 0 {
+                        v = v.min(d[(y + 1) * nx + x - 1] + b);
+                    }
+                }
+                d[y * nx + x] = v;
+            }
+        }
+        Self {
+            grid: *grid,
+            metres: d,
+            empty: set.is_empty(),
+        }
+    }
+
+    /// The distance at `p` (clamped into the grid); 0 when the set is empty.
+    fn at(&self, p: &Point2) -> f64 {
+        if self.empty {
+            return 0.0;
+        }
+        let g = &self.grid;
+        let clamp = |v: f64, n: u32| v.clamp(0.0, n as f64 - 1.0) as usize;
+        let x = clamp(((p.x - g.origin.x) / g.cell_m).floor(), g.nx);
+        let y = clamp(((p.y - g.origin.y) / g.cell_m).floor(), g.ny);
+        f64::from(self.metres[y * g.nx as usize + x])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::guidance::{GuidanceParams, plan as paper_plan};
+    use protocol::math::Point3;
+    use protocol::raster::Coverage;
+    use protocol::scenario::{Planner, Scenario};
+
+    fn params() -> GuidanceParams {
+        let mut s = Scenario::default();
+        s.region.half_extent_m = 150.0;
+        s.guidance.planner = Planner::Setfleet;
+        s.timing.guidance_period_s = 1.0;
+        s.guidance.lambda = 10.0;
+        GuidanceParams::from_scenario(&s)
+    }
+
+    fn blob(params: &GuidanceParams, centre: Point2, radius: f64) -> CellSet {
+        let mut s = CellSet::empty(&params.grids.fine);
+        s.fill_disc(&params.grids.fine, centre, radius, Coverage::Outer);
+        s
+    }
+
+    fn decide(params: &GuidanceParams, sets: &[&CellSet], others: &[PlannedView]) -> Decision {
+        let hidden = CellSet::empty(&params.grids.fine);
+        plan(
+            params,
+            &PlanningInput {
+                uav: 1,
+                state: UavState {
+                    position: Point3::new(0.0, 0.0, 60.0),
+                    yaw: 0.0,
+                },
+                sets,
+                recently_hidden: &hidden,
+                obstacles: &[],
+                others,
+            },
+        )
+    }
+
+    #[test]
+    fn boundary_counts_cells_next_to_the_outside_but_not_the_edge() {
+        let grid = GroundGrid::new(50.0, 1.0); // 100 x 100
+        let full = CellSet::full(&grid);
+        assert_eq!(boundary_count(&full), 0);
+        let mut block = CellSet::empty(&grid);
+        for y in 10..20 {
+            block.fill_row_span(y, 60, 69); // crosses the word boundary at 64
+        }
+        let n = block.count();
+        assert_eq!(n, 100);
+        assert_eq!(boundary_count(&block), 36);
+        let mut single = CellSet::empty(&grid);
+        single.set((99, 0), true);
+        assert_eq!(boundary_count(&single), 1);
+    }
+
+    #[test]
+    fn the_distance_map_measures_to_the_nearest_cell() {
+        let grid = GroundGrid::new(50.0, 1.0);
+        let mut s = CellSet::empty(&grid);
+        s.set((50, 50), true);
+        let d = DistanceMap::new(&grid, &s);
+        let at = |x: f64, y: f64| d.at(&Point2::new(x, y));
+        assert_eq!(at(0.5, 0.5), 0.0);
+        assert!((at(10.5, 0.5) - 10.0).abs() < 1e-6);
+        assert!((at(10.5, 10.5) - 10.0 * std::f64::consts::SQRT_2).abs() < 1e-3);
+    }
+
+    #[test]
+    fn turns_toward_the_sets_and_plans_its_whole_lookahead() {
+        let p = params();
+        let north = blob(&p, Point2::new(0.0, 80.0), 20.0);
+        let d = decide(&p, &[&north], &[]);
+        assert!(d.increments[0] > 0.0, "{d:?}");
+        let south = blob(&p, Point2::new(0.0, -80.0), 20.0);
+        let d = decide(&p, &[&south], &[]);
+        assert!(d.increments[0] < 0.0, "{d:?}");
+        assert_eq!(d.increments.len(), p.setfleet.lookahead_periods as usize);
+        assert_eq!(
+            d.view.poses.len(),
+            (p.setfleet.lookahead_periods * p.steps_per_period) as usize
+        );
+        assert_eq!(
+            d.sequences,
+            p.setfleet.beam_width as usize * p.increments.len()
+        );
+    }
+
+    #[test]
+    fn leaves_to_the_uav_ahead_what_it_will_see() {
+        let p = params();
+        let north = blob(&p, Point2::new(0.0, 80.0), 20.0);
+        let south = blob(&p, Point2::new(0.0, -80.0), 20.0);
+        let ahead = PlannedView {
+            uav: 0,
+            poses: (0..12)
+                .map(|_| CameraPose {
+                    position: Point3::new(0.0, -20.0, 70.0),
+                    yaw: -std::f64::consts::FRAC_PI_2,
+                })
+                .collect(),
+        };
+        let d = decide(&p, &[&north, &south], &[ahead]);
+        assert!(d.increments[0] > 0.0, "{d:?}");
+    }
+
+    #[test]
+    fn decisions_are_deterministic_and_the_paper_is_untouched() {
+        let p = params();
+        let a = blob(&p, Point2::new(40.0, 60.0), 25.0);
+        let b = blob(&p, Point2::new(-70.0, -20.0), 10.0);
+        assert_eq!(decide(&p, &[&a, &b], &[]), decide(&p, &[&a, &b], &[]));
+        // The dispatcher runs the paper's MPC unless asked for setfleet.
+        let paper = GuidanceParams::from_scenario(&Scenario::default());
+        let hidden = CellSet::empty(&paper.grids.fine);
+        let everything = CellSet::full(&paper.grids.fine);
+        let input = PlanningInput {
+            uav: 0,
+            state: UavState {
+                position: Point3::new(0.0, 0.0, 60.0),
+                yaw: 0.0,
+            },
+            sets: &[&everything],
+            recently_hidden: &hidden,
+            obstacles: &[],
+            others: &[],
+        };
+        assert_eq!(
+            crate::guidance::decide(&paper, &input),
+            paper_plan(&paper, &input)
+        );
+    }
+}
