@@ -368,6 +368,7 @@ pub fn identified_ids<'a>(
 pub(crate) mod tests {
     use protocol::camera::CameraPose;
     use protocol::math::Point3;
+    use protocol::raster::ReachSet;
     use protocol::scenario::Scenario;
     use uav_agent::estimator::EstimatorState;
 
@@ -491,8 +492,12 @@ pub(crate) mod tests {
             let e = &own.estimate;
             let mut state = EstimatorState::new(&cfg);
             state.step = e.step;
-            state.undetected = e.undetected.clone();
-            state.targets = e.targets.clone();
+            state.undetected = ReachSet::with_cells(e.undetected.clone());
+            state.targets = e
+                .targets
+                .iter()
+                .map(|(id, s)| (*id, ReachSet::with_cells(s.clone())))
+                .collect();
             state.obstacle_free = e.obstacle_free.clone();
             state.explored = e.explored.clone();
             state.hidden = e.hidden.clone();
@@ -504,8 +509,18 @@ pub(crate) mod tests {
                 state.fuse(&peer.estimate, &cfg);
             }
             let observed = FusedSets::of_agent(own, &all, &cfg, f64::INFINITY);
-            assert_eq!(observed.undetected, state.undetected, "X̄ of {}", own.uav());
-            assert_eq!(observed.targets, state.targets, "X_j of {}", own.uav());
+            assert_eq!(
+                &observed.undetected,
+                state.undetected.cells(),
+                "X̄ of {}",
+                own.uav()
+            );
+            let cells: BTreeMap<u32, CellSet> = state
+                .targets
+                .iter()
+                .map(|(id, s)| (*id, s.cells().clone()))
+                .collect();
+            assert_eq!(observed.targets, cells, "X_j of {}", own.uav());
             assert_eq!(observed.obstacle_free, state.obstacle_free);
             assert_eq!(observed.explored, state.explored);
             assert_eq!(&observed.unseen, state.hidden_history.unseen());

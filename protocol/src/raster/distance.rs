@@ -101,8 +101,8 @@ impl Envelope {
         self.apex.clear();
         self.from.clear();
         let value = |q: usize| i64::from(g[q]) * i64::from(g[q]);
-        for q in 0..g.len() {
-            if g[q] >= far {
+        for (q, &gq) in g.iter().enumerate() {
+            if gq >= far {
                 continue;
             }
             // Where the parabola at q undercuts the one at p: s = (f(q) + q² - f(p) - p²) /
