@@ -131,22 +131,31 @@ fn without_wall_clock(mut v: Value) -> Value {
 
 #[test]
 fn the_same_seed_in_lockstep_gives_the_same_results() {
-    let results: Vec<(Value, String)> = (0..2)
-        .map(|_| {
-            let t = TestRun::new("run-determinism");
-            let file = t.write("scenario.toml", &scenario(20.0, 2));
-            let out_dir = t.dir.join("out");
-            let out = finish(
-                &t,
-                ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &[])),
-            );
-            assert!(out.status.success(), "{}", stderr(&out));
-            let csv = std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv");
-            (without_wall_clock(summary(&out_dir)), csv)
-        })
-        .collect();
-    assert_eq!(results[0].1, results[1].1, "timeseries.csv differs");
-    assert_eq!(results[0].0, results[1].0, "summary.json differs");
+    // `paper`, `kappa0` and `nomap` share the paper's planner; `setfleet` has its own.
+    for variant in ["paper", "setfleet"] {
+        let results: Vec<(Value, String)> = (0..2)
+            .map(|_| {
+                let t = TestRun::new("run-determinism");
+                let file = t.write("scenario.toml", &scenario(20.0, 2));
+                let out_dir = t.dir.join("out");
+                let out = finish(
+                    &t,
+                    ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &["--variant", variant])),
+                );
+                assert!(out.status.success(), "{variant}: {}", stderr(&out));
+                let csv = std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv");
+                (without_wall_clock(summary(&out_dir)), csv)
+            })
+            .collect();
+        assert_eq!(
+            results[0].1, results[1].1,
+            "{variant}: timeseries.csv differs"
+        );
+        assert_eq!(
+            results[0].0, results[1].0,
+            "{variant}: summary.json differs"
+        );
+    }
 }
 
 #[test]
