@@ -24,7 +24,7 @@ pub enum Variant {
     Paper,
     /// The paper's MPC with the map, occluded ground not rewarded (kappa = 0).
     Kappa0,
-    /// The paper's MPC without the map (the paper's reference [3], kappa = 0).
+    /// The paper's MPC without the map (reference 3 of the paper, kappa = 0).
     Nomap,
     /// The project's planner: decides every 1 s, beam search 6 s ahead, values the future
     /// growth of unobserved sets and the targets' sets, spreads the UAVs.
