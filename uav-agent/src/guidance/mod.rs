@@ -223,20 +223,30 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         sets,
         stray_m: 0.0,
     });
-    let (increments, cost, poses) = match search.best {
-        Some((_, cost, node)) => (node.increments, cost, node.poses),
-        // Only when U is empty; the scenario refuses that, but stay total.
-        None => (
-            Vec::new(),
-            Cost {
-                area_m2: 0.0,
-                distance_m: 0.0,
-                hidden_m2: 0.0,
-                total: 0.0,
-            },
-            Vec::new(),
-        ),
-    };
+    let best = search
+        .best
+        .map(|(_, cost, node)| (node.increments, cost, node.poses));
+    decision(input, best, search.sequences, search.excluded)
+}
+
+/// The decision for the best sequence found (increments, cost, poses), or holding the yaw
+/// when there was none (only when `U` is empty; the scenario refuses that, but stay total).
+fn decision(
+    input: &PlanningInput<'_>,
+    best: Option<(Vec<f64>, Cost, Vec<CameraPose>)>,
+    sequences: usize,
+    excluded: usize,
+) -> Decision {
+    let (increments, cost, poses) = best.unwrap_or((
+        Vec::new(),
+        Cost {
+            area_m2: 0.0,
+            distance_m: 0.0,
+            hidden_m2: 0.0,
+            total: 0.0,
+        },
+        Vec::new(),
+    ));
     Decision {
         yaw_ref: input.state.yaw + increments.first().copied().unwrap_or(0.0),
         increments,
@@ -245,8 +255,8 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
             uav: input.uav,
             poses,
         },
-        sequences: search.sequences,
-        excluded: search.excluded,
+        sequences,
+        excluded,
     }
 }
 

@@ -47,7 +47,7 @@ use protocol::math::Point2;
 use protocol::raster::CellSet;
 use protocol::wire::PlannedView;
 
-use super::{Cost, Decision, GuidanceParams, ObstacleCell, PlanningInput, stray, view};
+use super::{Cost, Decision, GuidanceParams, ObstacleCell, PlanningInput, decision, stray, view};
 
 /// The `setfleet` planner's own settings (from `[guidance]`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -247,32 +247,11 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         children.truncate(sp.beam_width.max(1) as usize);
         beam = children;
     }
-    let best = beam.into_iter().next();
-    let (increments, cost, poses) = match best {
-        Some(node) => (node.increments, node.cost, node.poses),
-        // Only when U is empty; the scenario refuses that, but stay total.
-        None => (
-            Vec::new(),
-            Cost {
-                area_m2: 0.0,
-                distance_m: 0.0,
-                hidden_m2: 0.0,
-                total: 0.0,
-            },
-            Vec::new(),
-        ),
-    };
-    Decision {
-        yaw_ref: input.state.yaw + increments.first().copied().unwrap_or(0.0),
-        increments,
-        cost,
-        view: PlannedView {
-            uav: input.uav,
-            poses,
-        },
-        sequences,
-        excluded,
-    }
+    let best = beam
+        .into_iter()
+        .next()
+        .map(|node| (node.increments, node.cost, node.poses));
+    decision(input, best, sequences, excluded)
 }
 
 /// Ground the UAVs ahead in the token will see during the CVS steps `steps` of this horizon
