@@ -1,4 +1,4 @@
-//! Guidance variants: named sets of scenario settings (DESIGN.md §4, §7).
+//! Guidance variants: named sets of scenario settings (docs/design.md §4, §7).
 //!
 //! A variant is nothing but scenario overrides, applied after the scenario file and before the
 //! user's `--set` overrides (so a user can still change any key of a variant). `fleet run

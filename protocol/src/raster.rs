@@ -2,7 +2,7 @@
 //!
 //! A [`CellSet`] is `ny` rows of `u64` words, bit `ix % 64` of word `ix / 64` of row `iy` set
 //! when cell `(ix, iy)` belongs to the set. The algebra keeps the guarantee when used by the
-//! rules of DESIGN.md section 3:
+//! rules of docs/design.md §3:
 //! - a set that must *contain* something is rasterised [`Coverage::Outer`] (every cell the true
 //!   set touches); a set *proven free* is rasterised [`Coverage::Inner`] (only cells wholly
 //!   inside);

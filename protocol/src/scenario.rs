@@ -1,4 +1,4 @@
-//! The scenario: one TOML file, every key with the paper's value built in (DESIGN.md §5).
+//! The scenario: one TOML file, every key with the paper's value built in (docs/design.md §5).
 //!
 //! An empty file (or none) is the paper's scenario; a file names only what it changes:
 //!
@@ -273,7 +273,7 @@ pub struct GuidanceConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Planner {
-    /// The paper's MPC, exhaustive over `U^h` (DESIGN.md §4).
+    /// The paper's MPC, exhaustive over `U^h` (docs/design.md §4).
     #[default]
     Paper,
     /// The project's planner: beam search over longer sequences, with the future growth of
@@ -382,7 +382,7 @@ impl Default for GuidanceConfig {
         use std::f64::consts::PI;
         Self {
             horizon: 2,
-            // `PI / 3.0`, not `FRAC_PI_3` (one ulp apart): these are the very numbers DESIGN.md
+            // `PI / 3.0`, not `FRAC_PI_3` (one ulp apart): these are the very numbers docs/design.md
             // §5 writes, so its example file is exactly the default.
             yaw_increments_rad: vec![-PI / 3.0, -PI / 6.0, 0.0, PI / 6.0, PI / 3.0],
             lambda: 1e-5,

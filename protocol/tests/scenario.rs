@@ -5,57 +5,18 @@ use std::path::{Path, PathBuf};
 use proptest::prelude::*;
 use protocol::scenario::{Scenario, ScenarioError};
 
-/// The example block of DESIGN.md §5, verbatim.
-const DESIGN_EXAMPLE: &str = r#"
-seed = 1
-duration_s = 300.0
+/// The design document, whose §5 shows the default scenario as a TOML block.
+const DESIGN: &str = include_str!("../../docs/design.md");
 
-[region]
-half_extent_m = 250.0          # RoI is [-h, h]^2
-building_fraction = 0.05       # share of the ground under buildings
-building_height_m = [10.0, 60.0]
-
-[targets]
-count = 8
-max_speed_mps = 2.0
-size_m = [4.6, 1.8, 1.5]       # length, width, height
-radius_m = 2.5                 # r_t
-cylinder_height_m = 2.0        # h_t
-safety_distance_m = 3.0        # r_s
-
-[uavs]
-count = 4
-speed_mps = 10.0
-altitudes_m = []               # empty: distinct altitudes above every building
-max_yaw_rate_rps = 1.0
-
-[camera]
-rows = 360
-cols = 480
-aperture_rad = 0.7853981633974483
-tilt_rad = 0.7853981633974483  # below the horizon
-depth_noise = [-0.01, 0.01]
-unknown_fraction = 0.0         # extra pixels labelled U at random
-min_pixels = 20                # pixels needed to identify a target
-
-[timing]
-cvs_period_s = 0.5
-guidance_period_s = 3.0
-
-[estimator]
-cell_m = 0.5                   # bit-raster cell side
-oem_cell_m = 5.0
-
-[guidance]
-horizon = 2
-yaw_increments_rad = [-1.0471975511965976, -0.5235987755982988, 0.0, 0.5235987755982988, 1.0471975511965976]
-lambda = 1e-5
-kappa = 1.0
-use_map = true                 # false: the earlier work's guidance, no OEM in the MPC
-
-[comms]
-range_m = inf                  # perfect links by default; finite: only neighbours within range
-"#;
+/// The TOML block of the design document's §5.
+fn design_example() -> &'static str {
+    let start = DESIGN
+        .find("```toml\n")
+        .expect("a TOML block in docs/design.md")
+        + 8;
+    let len = DESIGN[start..].find("```").expect("the block ends");
+    &DESIGN[start..start + len]
+}
 
 fn overrides(texts: &[&str]) -> Vec<String> {
     texts.iter().map(|t| (*t).to_owned()).collect()
@@ -101,7 +62,7 @@ fn empty_text_and_no_file_are_the_default() {
 #[test]
 fn design_example_is_the_default() {
     assert_eq!(
-        Scenario::from_toml_str(DESIGN_EXAMPLE).unwrap(),
+        Scenario::from_toml_str(design_example()).unwrap(),
         Scenario::default()
     );
 }

@@ -5,7 +5,7 @@ use std::process::Command;
 
 use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, small_scenario_toml};
 
-/// The keys DESIGN.md §7 names for `fleet bench ipc`, all positive numbers.
+/// The keys docs/design.md §7 names for `fleet bench ipc`, all positive numbers.
 const IPC_KEYS: [&str; 8] = [
     "frame_p50_us",
     "frame_p99_us",

@@ -1,6 +1,6 @@
 //! `fleet bench`: whole-system measurements, each written as a [`BenchReport`] (JSON) and
 //! printed as a table. The report type is shared by every kind (`render`, `ipc`,
-//! `estimator`, `guidance`): a headline `summary` (the keys DESIGN.md names, flattened at
+//! `estimator`, `guidance`): a headline `summary` (the keys docs/design.md names, flattened at
 //! the top level of the JSON), one [`BenchCase`] per configuration measured, the machine, the
 //! command line and the date.
 
@@ -148,7 +148,7 @@ pub struct BenchReport {
     pub date: String,
     /// The machine.
     pub machine: MachineInfo,
-    /// Headline figures (DESIGN.md's keys), at the top level of the JSON.
+    /// Headline figures (docs/design.md's keys), at the top level of the JSON.
     #[serde(flatten)]
     pub summary: BTreeMap<String, serde_json::Value>,
     /// Per configuration.

@@ -1,4 +1,4 @@
-//! The per-step metrics of DESIGN.md §6 and the guarantee check, as pure functions of the
+//! The per-step metrics of docs/design.md §6 and the guarantee check, as pure functions of the
 //! agents' published estimates and the ground truth (so they are unit-tested without
 //! processes).
 //!

@@ -1,7 +1,7 @@
-//! `summary.json`: the run's final metrics, faults, agents and traffic (DESIGN.md §7).
+//! `summary.json`: the run's final metrics, faults, agents and traffic (docs/design.md §7).
 //!
 //! The set metrics are the paper's, defined for one UAV on its own fused sets
-//! ([`crate::observe::metrics`]). The keys DESIGN.md §7 names (`ua_final`, `oa_final`,
+//! ([`crate::observe::metrics`]). The keys docs/design.md §7 names (`ua_final`, `oa_final`,
 //! `explored_final`, `target_set_area_mean`, `loc_error_mean_m`, `identified_final`,
 //! `time_all_identified_s`) are the **mean over agents** of each agent's own metric; the same
 //! keys suffixed `_worst` are the worst agent's (largest UA, OA, area, error and time, smallest

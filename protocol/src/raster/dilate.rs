@@ -1,4 +1,4 @@
-//! Conservative disc dilation on cell distance (DESIGN.md section 3).
+//! Conservative disc dilation on cell distance (docs/design.md §3).
 //!
 //! Cell `(x + dx, y + dy)` joins when the closed squares of the two cells are within the
 //! radius: `cell_m * hypot(max(|dx| - 1, 0), max(|dy| - 1, 0)) <= radius` (plus a margin).

@@ -1,6 +1,6 @@
 //! The agent process's loop: one UAV of a run, over iceoryx2.
 //!
-//! Per frame `k` (DESIGN.md §3 "Estimator step" and §4):
+//! Per frame `k` (docs/design.md §3 "Estimator step" and §4):
 //! 1. the estimator folds the frame in (predict, correct);
 //! 2. the agent publishes its corrected sets on `{run}/uav/{i}/estimate`;
 //! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are fused when

@@ -1,4 +1,4 @@
-//! Fusion of estimates between UAVs (DESIGN.md §3, estimator step 3).
+//! Fusion of estimates between UAVs (docs/design.md §3, estimator step 3).
 //!
 //! Two estimates of the same fleet are combined as a meet of outer sets and a join of proven
 //! facts: `X̄` and every `X_j` are intersected (a target one side has not identified uses that

@@ -1,4 +1,4 @@
-//! The sets one CVS frame proves (DESIGN.md §3, "How each CVS-derived set is computed").
+//! The sets one CVS frame proves (docs/design.md §3, "How each CVS-derived set is computed").
 //!
 //! Every function here reads a [`FrameView`]: the frame with its posed camera and each pixel's
 //! *effective* label, where a pixel whose depth is not a finite positive number counts as

@@ -1,4 +1,4 @@
-//! The guaranteed set-membership estimator (DESIGN.md §3, "Estimator step").
+//! The guaranteed set-membership estimator (docs/design.md §3, "Estimator step").
 //!
 //! An [`Estimator`] pairs an [`EstimatorConfig`] with an explicit [`EstimatorState`]; one call
 //! to [`Estimator::step`] folds one CVS frame into the state and returns a [`StepReport`]:

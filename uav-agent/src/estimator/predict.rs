@@ -1,5 +1,5 @@
 //! Prediction: every target moves at most `v_max`, so after `dt` it is within `v_max * dt` of
-//! where it could be (DESIGN.md §3, estimator step 1).
+//! where it could be (docs/design.md §3, estimator step 1).
 //!
 //! The estimator's own sets are [`ReachSet`]s, which grow by exactly that motion
 //! ([`advance`]); sets received from peers are plain rasters, dilated whole-cell by [`grow`].

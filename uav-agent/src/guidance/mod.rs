@@ -1,6 +1,6 @@
 //! Guidance: one decision per guidance period, by the planner `guidance.planner` names.
 //!
-//! - `paper` (the default): the MPC of DESIGN.md §4 as the paper writes it, [`plan`], below.
+//! - `paper` (the default): the MPC of docs/design.md §4 as the paper writes it, [`plan`], below.
 //!   The `paper` variant runs it untouched.
 //! - `setfleet`: the project's own planner, [`setfleet::plan`]: a beam search over longer
 //!   sequences that values the future growth of unobserved sets (see its docs).
@@ -23,7 +23,7 @@
 //! it, the one that strays least is taken. Ties keep the first sequence in lexicographic
 //! order of the increments, so decisions are deterministic.
 //!
-//! Choices where DESIGN.md and the paper are silent: fields of view are swept at every CVS
+//! Choices where docs/design.md and the paper are silent: fields of view are swept at every CVS
 //! step of a period (not only at its end), since the camera sees at every step; `Φ_d` is
 //! measured from the point the optical axis meets the ground, which is what the camera looks
 //! at with a tilted gimbal.
@@ -197,7 +197,7 @@ pub fn decide(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     }
 }
 
-/// Picks the best sequence of yaw increments (DESIGN.md §4): the paper's MPC.
+/// Picks the best sequence of yaw increments (docs/design.md §4): the paper's MPC.
 pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let grid = *params.planning_grid();
     let mut sets = CellSet::empty(&grid);

@@ -10,7 +10,7 @@
 //!   by whoever waits for it (the caller says so with `waited_out`).
 //!
 //! An agent decides at most once per round; a late duplicate token only adds plans.
-//! (DESIGN.md says the lowest live UAV reissues a lost token; reissuing by the next live UAV
+//! (docs/design.md says the lowest live UAV reissues a lost token; reissuing by the next live UAV
 //! in the order keeps the round's order and loses no plan, and is the same UAV whenever the
 //! first holder is the one that died.)
 

@@ -1,4 +1,4 @@
-//! Rendering a CVS frame (DESIGN.md §3): depth, labels and target boxes of one camera, with
+//! Rendering a CVS frame (docs/design.md §3): depth, labels and target boxes of one camera, with
 //! the paper's assumptions holding by construction.
 //!
 //! 1. Every object's box is projected exactly into the image ([`footprint`]): per row, the
