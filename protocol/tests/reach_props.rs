@@ -179,9 +179,20 @@ proptest! {
                 if gap > reach + REACH_UNIT_M + 1e-6 {
                     prop_assert!(!set.contains((ix, iy)), "cell {:?} gap {} reach {}", (ix, iy), gap, reach);
                 }
-                // Hence every point of the set within n R plus a diagonal of the pocket.
+                // Hence every point of the set lies within n R plus a diagonal of the pocket:
+                // checked on the cell's centre, measured to the pocket's squares in metres.
                 if set.contains((ix, iy)) {
-                    prop_assert!(gap + diagonal <= reach + diagonal + REACH_UNIT_M + 1e-6);
+                    let c = g.cell_centre((ix, iy));
+                    let to_pocket = pocket
+                        .iter()
+                        .map(|&p| {
+                            let r = g.cell_rect(p);
+                            let dx = (r.min.x - c.x).max(c.x - r.max.x).max(0.0);
+                            let dy = (r.min.y - c.y).max(c.y - r.max.y).max(0.0);
+                            dx.hypot(dy)
+                        })
+                        .fold(f64::INFINITY, f64::min);
+                    prop_assert!(to_pocket <= reach + diagonal / 2.0 + REACH_UNIT_M + 1e-6);
                 }
             }
         }

@@ -38,6 +38,38 @@ pub(crate) mod cell_set {
     }
 }
 
+/// A map stored as `(key, stored value)` pairs, each value through `store`.
+fn serialize_map<K, V, W, S>(
+    map: &BTreeMap<K, V>,
+    store: impl Fn(&V) -> W,
+    s: S,
+) -> Result<S::Ok, S::Error>
+where
+    K: Serialize + Ord,
+    W: Serialize,
+    S: Serializer,
+{
+    let stored: Vec<(&K, W)> = map.iter().map(|(k, v)| (k, store(v))).collect();
+    stored.serialize(s)
+}
+
+/// The map [`serialize_map`] stored, each value through `load`; the first failure refuses it.
+fn deserialize_map<'de, K, V, W, D>(
+    d: D,
+    load: impl Fn(&W) -> Result<V, String>,
+) -> Result<BTreeMap<K, V>, D::Error>
+where
+    K: Deserialize<'de> + Ord,
+    W: Deserialize<'de>,
+    D: Deserializer<'de>,
+{
+    Vec::<(K, W)>::deserialize(d)?
+        .into_iter()
+        .map(|(k, w)| load(&w).map(|v| (k, v)))
+        .collect::<Result<_, _>>()
+        .map_err(D::Error::custom)
+}
+
 /// `#[serde(with = "cell_set_map")]` for a `BTreeMap<K, CellSet>` field.
 pub(crate) mod cell_set_map {
     use super::*;
@@ -47,8 +79,7 @@ pub(crate) mod cell_set_map {
         K: Serialize + Ord,
         S: Serializer,
     {
-        let encoded: Vec<(&K, EncodedSet)> = map.iter().map(|(k, v)| (k, v.encode())).collect();
-        encoded.serialize(s)
+        serialize_map(map, CellSet::encode, s)
     }
 
     pub(crate) fn deserialize<'de, K, D>(d: D) -> Result<BTreeMap<K, CellSet>, D::Error>
@@ -56,12 +87,7 @@ pub(crate) mod cell_set_map {
         K: Deserialize<'de> + Ord,
         D: Deserializer<'de>,
     {
-        let encoded = Vec::<(K, EncodedSet)>::deserialize(d)?;
-        encoded
-            .into_iter()
-            .map(|(k, e)| decode_self_sized(&e).map(|s| (k, s)))
-            .collect::<Result<_, _>>()
-            .map_err(D::Error::custom)
+        deserialize_map(d, decode_self_sized)
     }
 }
 
@@ -141,8 +167,7 @@ pub(crate) mod reach_set_map {
         K: Serialize + Ord,
         S: Serializer,
     {
-        let stored: Vec<(&K, StoredReach)> = map.iter().map(|(k, v)| (k, store_reach(v))).collect();
-        stored.serialize(s)
+        serialize_map(map, store_reach, s)
     }
 
     pub(crate) fn deserialize<'de, K, D>(d: D) -> Result<BTreeMap<K, ReachSet>, D::Error>
@@ -150,11 +175,6 @@ pub(crate) mod reach_set_map {
         K: Deserialize<'de> + Ord,
         D: Deserializer<'de>,
     {
-        let stored = Vec::<(K, StoredReach)>::deserialize(d)?;
-        stored
-            .into_iter()
-            .map(|(k, s)| load_reach(&s).map(|r| (k, r)))
-            .collect::<Result<_, _>>()
-            .map_err(D::Error::custom)
+        deserialize_map(d, load_reach)
     }
 }
