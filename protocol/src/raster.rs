@@ -10,11 +10,13 @@
 //! - [`CellSet::dilate`] contains every point within the radius of the set;
 //! - a [`ReachSet`] is an outer set that grows by the targets' motion without rounding it out
 //!   to whole cells at every step ([`reach`] argues its guarantee), using the exact gaps
-//!   between cell squares of [`distance`].
+//!   between cell squares of [`distance`] and, around ground no car enters, the lower bounds
+//!   of [`geodesic`].
 //!
 //! The operations live one per file: `polygon` and `disc` rasterise shapes, `dilate` grows a
 //! set, `extent` measures and crops it, `encode` turns it into an [`EncodedSet`] and back,
-//! `distance` measures gaps between cells and `reach` keeps sets that grow exactly.
+//! `distance` measures gaps between cells, `geodesic` the ways round what cannot be crossed,
+//! and `reach` keeps sets that grow exactly.
 //!
 //! ```
 //! use protocol::grid::GroundGrid;
@@ -35,6 +37,7 @@ mod disc;
 pub mod distance;
 mod encode;
 mod extent;
+pub mod geodesic;
 mod polygon;
 pub mod reach;
 

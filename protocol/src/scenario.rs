@@ -182,6 +182,10 @@ pub struct TargetsConfig {
     pub cylinder_height_m: f64,
     /// Safety distance `r_s` from obstacles and other targets.
     pub safety_distance_m: f64,
+    /// Spread of the cars' cruise speeds: each car cruises at `v_max (1 - spread u)`, `u`
+    /// uniform in `[0, 1)` (the paper does not say how its speeds are drawn; 0: every car at
+    /// `v_max`).
+    pub cruise_spread: f64,
 }
 
 /// `[uavs]`.
@@ -236,6 +240,31 @@ pub struct EstimatorConfig {
     pub cell_m: f64,
     /// OEM cell side, metres.
     pub oem_cell_m: f64,
+    /// How the sets grow between observations: `"reach"` (the default), `"geodesic"` or
+    /// `"cells"` ([`SetGrowth`]).
+    pub sets: SetGrowth,
+}
+
+/// How the estimator's sets grow between observations (`estimator.sets`); every choice keeps
+/// the guarantee, they differ in how tight the sets stay.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SetGrowth {
+    /// Whole-cell dilation by the motion at every step, the rasters of the paper: the growth
+    /// is rounded out to whole cells at every step.
+    Cells,
+    /// Each cell remembers how far the set's targets are from it, so sets grow by exactly the
+    /// motion (`protocol::raster::reach`).
+    #[default]
+    Reach,
+    /// As `reach`, and the distances go around the ground proven to be within `r_s` of an
+    /// obstacle, which no car can cross (`protocol::raster::geodesic`).
+    Geodesic,
+}
+
+impl SetGrowth {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 3] = ["cells", "reach", "geodesic"];
 }
 
 /// `[guidance]`.
@@ -330,6 +359,7 @@ impl Default for TargetsConfig {
             radius_m: 2.5,
             cylinder_height_m: 2.0,
             safety_distance_m: 3.0,
+            cruise_spread: 0.8,
         }
     }
 }
@@ -373,6 +403,7 @@ impl Default for EstimatorConfig {
         Self {
             cell_m: 0.5,
             oem_cell_m: 5.0,
+            sets: SetGrowth::Reach,
         }
     }
 }

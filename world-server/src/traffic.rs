@@ -147,7 +147,8 @@ impl Traffic {
                         id,
                         position: p,
                         heading: h.y.atan2(h.x),
-                        cruise_mps: t.max_speed_mps * (1.0 - 0.8 * rng.random::<Real>()),
+                        cruise_mps: t.max_speed_mps
+                            * (1.0 - t.cruise_spread * rng.random::<Real>()),
                         speed_mps: 0.0,
                         lane,
                         path: VecDeque::new(),

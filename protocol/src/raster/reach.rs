@@ -56,6 +56,7 @@
 //! ```
 
 use super::distance::{UNREACHED, square_gap_field};
+use super::geodesic::{self, geodesic_gap_field};
 use super::{CellBox, CellSet};
 use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
@@ -220,24 +221,86 @@ impl ReachSet {
     /// lowers the bounds.
     pub fn clear(&mut self, grid: &GroundGrid, free: &CellSet, window: &CellBox) {
         debug_assert!(self.cells.same_shape(free));
-        if let Some(w) = clamp_box(window, 2, &self.cells) {
-            // A side of the window inside the grid stands for every cell beyond it: counting
-            // it as not free keeps each gap at most the true one.
-            let (nx, ny) = (self.cells.nx(), self.cells.ny());
-            let mut seeds = free.window_flags(&w, false);
-            let width = (w.x1 - w.x0 + 1) as usize;
-            let height = seeds.len() / width;
-            for (k, seed) in seeds.iter_mut().enumerate() {
-                let (x, y) = (k % width, k / width);
-                *seed = !*seed
-                    || (x == 0 && w.x0 > 0)
-                    || (x + 1 == width && w.x1 + 1 < nx)
-                    || (y == 0 && w.y0 > 0)
-                    || (y + 1 == height && w.y1 + 1 < ny);
-            }
+        if let Some((w, seeds)) = self.window_seeds(free, window) {
             self.raise_outside(grid, &w, &seeds);
         }
         self.remove(free);
+    }
+
+    /// As [`ReachSet::clear`], and the reach of the free cells inside `window` is also raised
+    /// to the length of the shortest way round `blocked` from the nearest cell that is not
+    /// free ([`super::geodesic`]): `blocked` is ground no target ever enters (no target in
+    /// the closed square of any of its cells, at any time), which the targets must drive
+    /// around. Distances along such paths are at least the straight ones, so (I1) holds with
+    /// them in place of the straight distance, and every other operation keeps it.
+    pub fn clear_around(
+        &mut self,
+        grid: &GroundGrid,
+        free: &CellSet,
+        blocked: &CellSet,
+        window: &CellBox,
+    ) {
+        debug_assert!(self.cells.same_shape(free) && self.cells.same_shape(blocked));
+        if let Some((w, seeds)) = self.window_seeds(free, window) {
+            self.raise_outside(grid, &w, &seeds);
+            let walls = blocked.window_flags(&w, false);
+            if walls.contains(&true) {
+                let sources: Vec<bool> = seeds.iter().zip(&walls).map(|(s, b)| *s && !*b).collect();
+                if let Some(field) = geodesic_gap_field(&w, &sources, &walls) {
+                    self.raise_around(grid, &w, &seeds, &walls, &field);
+                }
+            }
+        }
+        self.remove(free);
+    }
+
+    /// The window clamped to the grid and grown by 2 cells, and its seeds: the cells that are
+    /// not free, and the cells of every window side inside the grid (they stand for every cell
+    /// beyond it, so counting them as not free keeps each gap at most the true one).
+    fn window_seeds(&self, free: &CellSet, window: &CellBox) -> Option<(CellBox, Vec<bool>)> {
+        let w = clamp_box(window, 2, &self.cells)?;
+        let (nx, ny) = (self.cells.nx(), self.cells.ny());
+        let mut seeds = free.window_flags(&w, false);
+        let width = (w.x1 - w.x0 + 1) as usize;
+        let height = seeds.len() / width;
+        for (k, seed) in seeds.iter_mut().enumerate() {
+            let (x, y) = (k % width, k / width);
+            *seed = !*seed
+                || (x == 0 && w.x0 > 0)
+                || (x + 1 == width && w.x1 + 1 < nx)
+                || (y == 0 && w.y0 > 0)
+                || (y + 1 == height && w.y1 + 1 < ny);
+        }
+        Some((w, seeds))
+    }
+
+    /// Raises `τ` of every cell of `window` that is neither a seed nor blocked to the geodesic
+    /// bound of its `field` value ([`super::geodesic::gap_cells`]); a cell no seed reaches
+    /// can hold no target while the clock stands, and gets the largest reach.
+    fn raise_around(
+        &mut self,
+        grid: &GroundGrid,
+        window: &CellBox,
+        seeds: &[bool],
+        blocked: &[bool],
+        field: &[u32],
+    ) {
+        let nx = self.cells.nx() as usize;
+        let w = (window.x1 - window.x0 + 1) as usize;
+        let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
+        for (k, &d) in field.iter().enumerate() {
+            if seeds[k] || blocked[k] {
+                continue;
+            }
+            let tau = match geodesic::gap_cells(d) {
+                // Truncation is the floor here (non-negative); `as` saturates.
+                Some(gap) => (gap * unit + clock - UNIT_MARGIN).max(0.0) as u32,
+                None => u32::MAX - 1,
+            };
+            let (ix, iy) = (window.x0 as usize + k % w, window.y0 as usize + k / w);
+            let slot = &mut self.reach[iy * nx + ix];
+            *slot = (*slot).max(tau.min(u32::MAX - 1));
+        }
     }
 
     /// Restricts the set to an outer raster `outer` of its targets at the current clock (a

@@ -53,6 +53,7 @@ const MAX_TARGETS: usize = if TRUTH_MAX_TARGETS < FRAME_MAX_BOXES {
 pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
     match key {
         "guidance.planner" => Some(&super::Planner::NAMES),
+        "estimator.sets" => Some(&super::SetGrowth::NAMES),
         _ => None,
     }
 }
@@ -385,6 +386,7 @@ impl Scenario {
         let targets = &self.targets;
         check_integer("targets.count", i128::from(targets.count))?;
         Interval::open_closed(0.0, 50.0).check("targets.max_speed_mps", targets.max_speed_mps)?;
+        Interval::closed_open(0.0, 1.0).check("targets.cruise_spread", targets.cruise_spread)?;
         Interval::POSITIVE.check("targets.radius_m", targets.radius_m)?;
         Interval::POSITIVE.check("targets.cylinder_height_m", targets.cylinder_height_m)?;
         let [length, width, height] = targets.size_m;
@@ -675,6 +677,8 @@ mod tests {
                 s.targets.count = MAX_TARGETS as u32 + 1
             }),
             ("targets.max_speed_mps", |s| s.targets.max_speed_mps = 0.0),
+            ("targets.cruise_spread", |s| s.targets.cruise_spread = 1.0),
+            ("targets.cruise_spread", |s| s.targets.cruise_spread = -0.1),
             ("targets.size_m", |s| s.targets.size_m = [6.0, 2.0, 1.5]),
             ("targets.size_m", |s| s.targets.size_m = [4.6, 1.8, 2.5]),
             ("targets.size_m", |s| s.targets.size_m = [4.6, -1.0, 1.5]),
@@ -761,7 +765,7 @@ mod tests {
     }
 
     #[test]
-    fn the_planner_is_one_of_its_names_and_defaults_to_the_paper() {
+    fn the_planner_and_the_set_growth_are_one_of_their_names() {
         use super::super::Planner;
         assert_eq!(Scenario::default().guidance.planner, Planner::Paper);
         let s = Scenario::load(None, &["guidance.planner=setfleet".to_owned()]).unwrap();
@@ -775,6 +779,12 @@ mod tests {
             assert!(e.contains("guidance.planner"), "{bad}: {e}");
             assert!(e.contains("paper, setfleet"), "{bad}: {e}");
         }
+        let s = Scenario::load(None, &["estimator.sets=geodesic".to_owned()]).unwrap();
+        assert_eq!(s.estimator.sets, super::super::SetGrowth::Geodesic);
+        let e = Scenario::load(None, &["estimator.sets=exact".to_owned()])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cells, reach, geodesic"), "{e}");
         // The resolved scenario writes the planner back as its name.
         assert!(
             Scenario::default()

@@ -17,6 +17,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use protocol::camera::CameraPose;
 use protocol::grid::GroundGrid;
 use protocol::raster::{CellSet, ReachSet};
+use protocol::scenario::SetGrowth;
 
 use super::predict;
 use super::{EstimatorConfig, EstimatorState};
@@ -203,8 +204,12 @@ impl EstimatorState {
             self.hidden_history.add_hidden(step, &peer.hidden);
         }
         // A target learned from a peer starts from this side's X̄, whose reach knows nothing
-        // near the target: bound it by its (small) set's box.
-        for id in &report.new_targets {
+        // near the target: bound it by its (small) set's box (whole-cell growth keeps none).
+        let new_targets = match config.sets {
+            SetGrowth::Cells => &[][..],
+            SetGrowth::Reach | SetGrowth::Geodesic => &report.new_targets[..],
+        };
+        for id in new_targets {
             if let Some(set) = self.targets.get_mut(id) {
                 set.bound_by_box(&config.grid);
             }

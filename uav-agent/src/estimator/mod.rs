@@ -35,7 +35,7 @@ use protocol::frame::CvsFrame;
 use protocol::grid::GroundGrid;
 use protocol::math::Real;
 use protocol::raster::{CellBox, CellSet, ReachSet};
-use protocol::scenario::Scenario;
+use protocol::scenario::{Scenario, SetGrowth};
 use serde::{Deserialize, Serialize};
 
 pub use fusion::{FuseReport, PeerEstimate};
@@ -76,6 +76,8 @@ pub struct EstimatorConfig {
     pub obstacle_pixel_stride: u32,
     /// A message carries the whole OEM every this many messages.
     pub oem_full_every: u64,
+    /// How the sets grow between observations (`estimator.sets`).
+    pub sets: SetGrowth,
 }
 
 impl EstimatorConfig {
@@ -93,6 +95,7 @@ impl EstimatorConfig {
             hidden_periods: scenario.guidance.horizon.max(1),
             obstacle_pixel_stride: 3,
             oem_full_every: 20,
+            sets: scenario.estimator.sets,
         }
     }
 }
@@ -371,7 +374,13 @@ impl Estimator {
         let mut free = free_ground.clone();
         free.or_assign(&st.obstacle_free);
         let window = free_ground.bounding_box();
-        clear(&mut st.undetected, grid, &free, window.as_ref());
+        let clearing = Clearing {
+            grid,
+            growth: cfg.sets,
+            free: &free,
+            blocked: &st.obstacle_free,
+        };
+        clearing.clear(&mut st.undetected, window.as_ref());
         let margin = (TARGET_REACH_MARGIN_M / grid.cell_m).ceil() as u32;
         let mut measured_ids = Vec::new();
         for (id, measurement) in measurements {
@@ -388,7 +397,7 @@ impl Estimator {
                 }
             };
             if x.cells().intersects(&xm) {
-                x.restrict(grid, &xm, margin);
+                clearing.restrict(&mut x, &xm, margin);
             } else {
                 tracing::error!(
                     target_id = id,
@@ -398,7 +407,7 @@ impl Estimator {
                 report.empty_intersections.push(id);
                 x = ReachSet::full(grid);
                 x.advance(clock);
-                x.restrict(grid, &xm, margin);
+                clearing.restrict(&mut x, &xm, margin);
             }
             st.targets.insert(id, x);
             measured_ids.push(id);
@@ -414,7 +423,7 @@ impl Estimator {
                 .then(|| set.cells().bounding_box())
                 .flatten()
                 .and_then(|b| intersect_boxes(&grow_box(&b, margin), window.as_ref()?));
-            clear(set, grid, &free, near.as_ref());
+            clearing.clear(set, near.as_ref());
         }
         report.measured = measured_ids;
         st.explored.or_assign(&free_ground);
@@ -453,10 +462,35 @@ impl Estimator {
 
 /// Removes `free` from `set`, raising the reach over `window` (the part of the frame's free
 /// ground that matters to the set), or only removing it when there is no such window.
-fn clear(set: &mut ReachSet, grid: &GroundGrid, free: &CellSet, window: Option<&CellBox>) {
-    match window {
-        Some(w) => set.clear(grid, free, w),
-        None => set.remove(free),
+/// What a frame proves free, and how the sets' reach learns from it ([`SetGrowth`]).
+struct Clearing<'a> {
+    grid: &'a GroundGrid,
+    growth: SetGrowth,
+    /// `P^g ∪ S^o`.
+    free: &'a CellSet,
+    /// `S^o`: ground no target ever enters.
+    blocked: &'a CellSet,
+}
+
+impl Clearing<'_> {
+    /// Removes the free ground from `set`, raising its reach over `window` (none: the free
+    /// cells only leave the set).
+    fn clear(&self, set: &mut ReachSet, window: Option<&CellBox>) {
+        match (self.growth, window) {
+            (SetGrowth::Cells, _) | (_, None) => set.remove(self.free),
+            (SetGrowth::Reach, Some(w)) => set.clear(self.grid, self.free, w),
+            (SetGrowth::Geodesic, Some(w)) => {
+                set.clear_around(self.grid, self.free, self.blocked, w)
+            }
+        }
+    }
+
+    /// Restricts `set` to the measurement `xm`, raising its reach within `margin` cells.
+    fn restrict(&self, set: &mut ReachSet, xm: &CellSet, margin: u32) {
+        match self.growth {
+            SetGrowth::Cells => set.intersect(xm),
+            SetGrowth::Reach | SetGrowth::Geodesic => set.restrict(self.grid, xm, margin),
+        }
     }
 }
 
