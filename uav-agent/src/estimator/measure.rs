@@ -31,7 +31,7 @@
 use protocol::camera::{Camera, range_interval};
 use protocol::frame::{CvsFrame, Label, TargetBox};
 use protocol::grid::GroundGrid;
-use protocol::math::{Point2, Real, Vector3, convex_hull};
+use protocol::math::{Point2, Real, Vector3, convex_hull, floor_fast};
 use protocol::raster::{CellSet, Coverage};
 
 use crate::occupancy::OccupancyMap;
@@ -109,30 +109,78 @@ impl<'a> FrameView<'a> {
         range_interval(self.frame.depth_at(r, c), self.noise)
     }
 
-    /// Cell rectangle of `grid` worth examining: the cells touching the ground footprint of the
-    /// image, or the whole grid when the image reaches the horizon.
-    fn cell_window(&self, grid: &GroundGrid) -> Option<(u32, u32, u32, u32)> {
-        match self.camera.image_ground_footprint() {
-            Some(quad) => {
-                let (mut x0, mut x1, mut y0, mut y1) = (
-                    Real::INFINITY,
-                    Real::NEG_INFINITY,
-                    Real::INFINITY,
-                    Real::NEG_INFINITY,
-                );
-                for p in quad {
-                    x0 = x0.min(p.x);
-                    x1 = x1.max(p.x);
-                    y0 = y0.min(p.y);
-                    y1 = y1.max(p.y);
+    /// The cells of `grid` worth examining: those touching the ground footprint of the image
+    /// (a convex quadrilateral), row by row, or the whole grid when the image reaches the
+    /// horizon.
+    fn cell_window(&self, grid: &GroundGrid) -> Option<CellWindow> {
+        let Some(quad) = self.camera.image_ground_footprint() else {
+            let full = (0, grid.nx.checked_sub(1)?);
+            return Some(CellWindow {
+                iy0: 0,
+                spans: vec![Some(full); grid.ny as usize],
+            });
+        };
+        let (y0, y1) = quad
+            .iter()
+            .fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.y), hi.max(p.y))
+            });
+        let (iy0, iy1) = grid.rows_touching(y0, y1)?;
+        let spans = (iy0..=iy1)
+            .map(|iy| {
+                let band_lo = grid.origin.y + Real::from(iy) * grid.cell_m;
+                let (x0, x1) = x_extent_in_band(&quad, band_lo, band_lo + grid.cell_m)?;
+                // The margin of a cell covers every rounding of the projections.
+                grid.columns_touching(x0 - grid.cell_m, x1 + grid.cell_m)
+            })
+            .collect();
+        Some(CellWindow { iy0, spans })
+    }
+}
+
+/// The cells a frame can say something about: per row from `iy0`, the columns touching the
+/// image's ground footprint (a cell outside projects partly outside the image).
+struct CellWindow {
+    iy0: u32,
+    /// `(ix0, ix1)` per row, `None` for a row the footprint misses.
+    spans: Vec<Option<(u32, u32)>>,
+}
+
+impl CellWindow {
+    /// `(iy, ix0, ix1)` of every row the footprint touches.
+    fn rows(&self) -> impl Iterator<Item = (u32, u32, u32)> + '_ {
+        (self.iy0..)
+            .zip(&self.spans)
+            .filter_map(|(iy, span)| span.map(|(a, b)| (iy, a, b)))
+    }
+
+    /// The columns of row `iy`, if the footprint touches it.
+    fn span(&self, iy: u32) -> Option<(u32, u32)> {
+        let k = iy.checked_sub(self.iy0)? as usize;
+        self.spans.get(k).copied().flatten()
+    }
+}
+
+/// The x-extent of the convex hull of `points` within the band `ya <= y <= yb`: reached at a
+/// point inside the band or where a segment between two points crosses a side of the band.
+fn x_extent_in_band(points: &[Point2; 4], ya: Real, yb: Real) -> Option<(Real, Real)> {
+    let (mut lo, mut hi) = (Real::INFINITY, Real::NEG_INFINITY);
+    for (i, p) in points.iter().enumerate() {
+        if (ya..=yb).contains(&p.y) {
+            lo = lo.min(p.x);
+            hi = hi.max(p.x);
+        }
+        for q in &points[i + 1..] {
+            for y in [ya, yb] {
+                if (p.y - y) * (q.y - y) < 0.0 {
+                    let x = p.x + (y - p.y) / (q.y - p.y) * (q.x - p.x);
+                    lo = lo.min(x);
+                    hi = hi.max(x);
                 }
-                let (ix0, ix1) = grid.columns_touching(x0, x1)?;
-                let (iy0, iy1) = grid.rows_touching(y0, y1)?;
-                Some((ix0, ix1, iy0, iy1))
             }
-            None => Some((0, grid.nx - 1, 0, grid.ny - 1)),
         }
     }
+    (lo <= hi).then_some((lo, hi))
 }
 
 /// Projects ground points into the image with one affine map per frame: the camera-frame
@@ -229,27 +277,43 @@ impl NotGroundSums {
 /// `P^g(Y^g)`, inner: cells whose projection touches only ground pixels (see the module docs).
 pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
     let mut out = CellSet::empty(grid);
-    let Some((ix0, ix1, iy0, iy1)) = view.cell_window(grid) else {
+    let Some(window) = view.cell_window(grid) else {
         return out;
     };
     let sums = NotGroundSums::new(view);
     let p = &view.projector;
     let (rows, cols) = (view.rows as Real, view.cols as Real);
-    let width = (ix1 - ix0 + 2) as usize;
-    let vertex_row = |iy: u32, buf: &mut Vec<Option<(Real, Real)>>| {
-        buf.clear();
+    // The corners of row iy's cells are vertex rows iy and iy + 1, columns ix0..=ix1 + 1; a
+    // vertex row is projected over the columns of the cell rows below and above it, and no
+    // other entry of it is read.
+    let vertex_row = |iy: u32, buf: &mut [Option<(Real, Real)>]| {
         let y = grid.origin.y + iy as Real * grid.cell_m;
-        buf.extend((0..width).map(|k| {
-            let x = grid.origin.x + (ix0 as usize + k) as Real * grid.cell_m;
-            p.image_point(&p.camera_coords(x, y))
-        }));
+        let spans = [iy.checked_sub(1).and_then(|b| window.span(b)), window.span(iy)];
+        let Some((a, b)) = spans
+            .into_iter()
+            .flatten()
+            .reduce(|(a0, b0), (a1, b1)| (a0.min(a1), b0.max(b1)))
+        else {
+            return;
+        };
+        for (k, slot) in buf.iter_mut().enumerate().take(b as usize + 2).skip(a as usize) {
+            let x = grid.origin.x + k as Real * grid.cell_m;
+            *slot = p.image_point(&p.camera_coords(x, y));
+        }
     };
-    let (mut south, mut north) = (Vec::with_capacity(width), Vec::with_capacity(width));
-    vertex_row(iy0, &mut north);
-    for iy in iy0..=iy1 {
-        std::mem::swap(&mut south, &mut north);
+    let mut south = vec![None; grid.nx as usize + 1];
+    let mut north = south.clone();
+    let mut next_vertex_row = None;
+    for (iy, ix0, ix1) in window.rows() {
+        if next_vertex_row == Some(iy) {
+            std::mem::swap(&mut south, &mut north);
+        } else {
+            vertex_row(iy, &mut south);
+        }
         vertex_row(iy + 1, &mut north);
-        for k in 0..width - 1 {
+        next_vertex_row = Some(iy + 1);
+        for ix in ix0..=ix1 {
+            let k = ix as usize;
             let corners = [south[k], south[k + 1], north[k], north[k + 1]];
             let mut bb = [
                 Real::INFINITY,
@@ -274,15 +338,15 @@ pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
             }
             // Closed pixel c covers [c, c+1]: the columns touching [u0, u1] run from
             // floor(u0) (minus one when u0 sits on a pixel edge) to floor(u1).
-            let c0 = (bb[0] - PIXEL_EPSILON).floor();
-            let c1 = (bb[1] + PIXEL_EPSILON).floor();
-            let r0 = (bb[2] - PIXEL_EPSILON).floor();
-            let r1 = (bb[3] + PIXEL_EPSILON).floor();
+            let c0 = floor_fast(bb[0] - PIXEL_EPSILON);
+            let c1 = floor_fast(bb[1] + PIXEL_EPSILON);
+            let r0 = floor_fast(bb[2] - PIXEL_EPSILON);
+            let r1 = floor_fast(bb[3] + PIXEL_EPSILON);
             if !(c0 >= 0.0 && r0 >= 0.0 && c1 < cols && r1 < rows) {
                 continue;
             }
             if sums.count(r0 as usize, r1 as usize, c0 as usize, c1 as usize) == 0 {
-                out.set((ix0 + k as u32, iy), true);
+                out.set((ix, iy), true);
             }
         }
     }
@@ -292,11 +356,11 @@ pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
 /// `H^CVS`, approximate: cells whose centre projects into an obstacle, target or unknown pixel.
 pub fn hidden_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
     let mut out = CellSet::empty(grid);
-    let Some((ix0, ix1, iy0, iy1)) = view.cell_window(grid) else {
+    let Some(window) = view.cell_window(grid) else {
         return out;
     };
     let p = &view.projector;
-    for iy in iy0..=iy1 {
+    for (iy, ix0, ix1) in window.rows() {
         let y = grid.origin.y + (iy as Real + 0.5) * grid.cell_m;
         for ix in ix0..=ix1 {
             let x = grid.origin.x + (ix as Real + 0.5) * grid.cell_m;
@@ -420,11 +484,11 @@ pub fn observe_map(view: &FrameView<'_>, map: &mut OccupancyMap) -> usize {
         }
     }
     let grid = *map.grid();
-    let Some((ix0, ix1, iy0, iy1)) = view.cell_window(&grid) else {
+    let Some(window) = view.cell_window(&grid) else {
         return changed;
     };
     let pr = &view.projector;
-    for iy in iy0..=iy1 {
+    for (iy, ix0, ix1) in window.rows() {
         for ix in ix0..=ix1 {
             let centre = grid.cell_centre((ix, iy));
             if let Some((u, v)) = pr.image_point(&pr.camera_coords(centre.x, centre.y))
