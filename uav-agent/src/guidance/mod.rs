@@ -576,16 +576,16 @@ mod tests {
     /// A fingerprint of everything a decision holds (FNV-1a over the bits of its numbers).
     fn fingerprint(d: &Decision) -> u64 {
         let c = &d.cost;
-        let numbers = d
-            .increments
-            .iter()
-            .copied()
-            .chain([d.yaw_ref, c.area_m2, c.distance_m, c.hidden_m2, c.total])
-            .map(f64::to_bits)
-            .chain(d.view.poses.iter().flat_map(|p| {
-                [p.position.x, p.position.y, p.position.z, p.yaw].map(f64::to_bits)
-            }))
-            .chain([u64::from(d.view.uav), d.sequences as u64, d.excluded as u64]);
+        let numbers =
+            d.increments
+                .iter()
+                .copied()
+                .chain([d.yaw_ref, c.area_m2, c.distance_m, c.hidden_m2, c.total])
+                .map(f64::to_bits)
+                .chain(d.view.poses.iter().flat_map(|p| {
+                    [p.position.x, p.position.y, p.position.z, p.yaw].map(f64::to_bits)
+                }))
+                .chain([u64::from(d.view.uav), d.sequences as u64, d.excluded as u64]);
         numbers.fold(0xcbf2_9ce4_8422_2325_u64, |h, w| {
             (h ^ w).wrapping_mul(0x100_0000_01b3)
         })
