@@ -34,12 +34,27 @@ impl CellSet {
         polygon: &[Point2],
         coverage: Coverage,
     ) {
+        self.fill_convex_polygon_rows(grid, polygon, coverage, (0, u32::MAX));
+    }
+
+    /// [`CellSet::fill_convex_polygon`] in the rows `first..=last` of `rows` only: adds
+    /// exactly the cells of those rows it adds, and spends no time on the other rows (for a
+    /// caller that needs only some rows of a tall polygon).
+    pub fn fill_convex_polygon_rows(
+        &mut self,
+        grid: &GroundGrid,
+        polygon: &[Point2],
+        coverage: Coverage,
+        rows: (u32, u32),
+    ) {
         if polygon.is_empty() {
             return;
         }
         if !polygon_is_finite(polygon) {
-            if coverage == Coverage::Outer {
-                self.fill_all();
+            if coverage == Coverage::Outer && self.nx > 0 {
+                for iy in rows.0..=rows.1.min(self.ny.saturating_sub(1)) {
+                    self.fill_row_span(iy, 0, self.nx - 1);
+                }
             }
             return;
         }
@@ -48,18 +63,27 @@ impl CellSet {
             .fold(grid_scale(grid), |m, p| m.max(p.x.abs()).max(p.y.abs()));
         let eps = margin(scale);
         match coverage {
-            Coverage::Outer => self.fill_polygon_outer(grid, polygon, eps),
-            Coverage::Inner => self.fill_polygon_inner(grid, polygon, eps),
+            Coverage::Outer => self.fill_polygon_outer(grid, polygon, eps, rows),
+            Coverage::Inner => self.fill_polygon_inner(grid, polygon, eps, rows),
         }
     }
 
-    fn fill_polygon_outer(&mut self, grid: &GroundGrid, polygon: &[Point2], eps: Real) {
+    fn fill_polygon_outer(
+        &mut self,
+        grid: &GroundGrid,
+        polygon: &[Point2],
+        eps: Real,
+        rows: (u32, u32),
+    ) {
         let (y_min, y_max) = polygon
             .iter()
             .fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), p| {
                 (lo.min(p.y), hi.max(p.y))
             });
-        let Some((r0, r1)) = grid.rows_touching(y_min - eps, y_max + eps) else {
+        let Some((r0, r1)) = grid
+            .rows_touching(y_min - eps, y_max + eps)
+            .and_then(|r| within(r, rows))
+        else {
             return;
         };
         let rows = (r1 - r0) as usize + 1;
@@ -68,7 +92,10 @@ impl CellSet {
         let n = polygon.len();
         for i in 0..n {
             let (a, b) = (polygon[i], polygon[(i + 1) % n]);
-            let Some((e0, e1)) = grid.rows_touching(a.y.min(b.y) - eps, a.y.max(b.y) + eps) else {
+            let Some((e0, e1)) = grid
+                .rows_touching(a.y.min(b.y) - eps, a.y.max(b.y) + eps)
+                .and_then(|r| within(r, (r0, r1)))
+            else {
                 continue;
             };
             for iy in e0..=e1 {
@@ -88,7 +115,13 @@ impl CellSet {
         }
     }
 
-    fn fill_polygon_inner(&mut self, grid: &GroundGrid, polygon: &[Point2], eps: Real) {
+    fn fill_polygon_inner(
+        &mut self,
+        grid: &GroundGrid,
+        polygon: &[Point2],
+        eps: Real,
+        rows: (u32, u32),
+    ) {
         if polygon.len() < 3 {
             return;
         }
@@ -127,7 +160,10 @@ impl CellSet {
             .fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), p| {
                 (lo.min(p.y), hi.max(p.y))
             });
-        let Some((r0, r1)) = grid.rows_touching(y_min, y_max) else {
+        let Some((r0, r1)) = grid
+            .rows_touching(y_min, y_max)
+            .and_then(|r| within(r, rows))
+        else {
             return;
         };
         for iy in r0..=r1 {
@@ -157,6 +193,12 @@ impl CellSet {
             }
         }
     }
+}
+
+/// The rows of `range` that are also in `window` (both inclusive), if any.
+fn within(range: (u32, u32), window: (u32, u32)) -> Option<(u32, u32)> {
+    let (a, b) = (range.0.max(window.0), range.1.min(window.1));
+    (a <= b).then_some((a, b))
 }
 
 /// Whether every vertex of `polygon` has finite coordinates, the condition for
@@ -369,5 +411,35 @@ mod tests {
         assert_eq!(columns_inside(&g, -4.5, 0.0), Some((1, 4)));
         assert_eq!(columns_inside(&g, -1e9, 1e9), Some((0, 9)));
         assert_eq!(columns_inside(&g, Real::NAN, 1.0), None);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+
+        /// Filling some rows adds exactly the cells of those rows that filling all adds.
+        #[test]
+        fn filling_some_rows_adds_those_rows_of_the_whole_fill(
+            points in proptest::collection::vec((-7.0f64..7.0, -7.0f64..7.0), 1..7),
+            outer: bool,
+            infinite: bool,
+            a in 0u32..12,
+            b in 0u32..12,
+        ) {
+            let g = grid();
+            let mut polygon: Vec<Point2> = points.iter().map(|&(x, y)| Point2::new(x, y)).collect();
+            if infinite {
+                polygon[0].x = Real::INFINITY;
+            }
+            let coverage = if outer { Coverage::Outer } else { Coverage::Inner };
+            let rows = (a.min(b), a.max(b));
+            let mut all = CellSet::empty(&g);
+            all.fill_convex_polygon(&g, &polygon, coverage);
+            let mut some = CellSet::empty(&g);
+            some.fill_convex_polygon_rows(&g, &polygon, coverage, rows);
+            for iy in 0..g.ny {
+                let expected: &[u64] = if (rows.0..=rows.1).contains(&iy) { all.row(iy) } else { &[0] };
+                proptest::prop_assert_eq!(some.row(iy), expected, "row {}", iy);
+            }
+        }
     }
 }

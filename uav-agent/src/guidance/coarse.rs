@@ -37,37 +37,35 @@ impl CoarseGrid {
     }
 
     /// The coarse set of every coarse cell holding a cell of `fine_set`.
+    ///
+    /// The `factor` fine rows of a coarse row are merged (a word at a time) first, so each
+    /// coarse cell is looked at once per coarse row.
     pub fn downsample(&self, fine_set: &CellSet) -> CellSet {
         let mut out = CellSet::empty(&self.coarse);
         let f = self.factor as usize;
-        let mut coarse_row = vec![false; self.coarse.nx as usize];
+        let mut merged = vec![0u64; fine_set.words_per_row()];
         for cy in 0..self.coarse.ny {
-            coarse_row.iter_mut().for_each(|b| *b = false);
             let y0 = cy * self.factor;
             let y1 = (y0 + self.factor).min(self.fine.ny);
-            let mut any = false;
+            merged.fill(0);
             for fy in y0..y1 {
-                for (w, &word) in fine_set.row(fy).iter().enumerate() {
-                    let mut bits = word;
-                    while bits != 0 {
-                        let b = bits.trailing_zeros() as usize;
-                        let fx = w * 64 + b;
-                        let cx = fx / f;
-                        coarse_row[cx] = true;
-                        any = true;
-                        // Skip the rest of this coarse cell's bits in the word.
-                        let next = ((cx + 1) * f).saturating_sub(w * 64);
-                        bits = if next >= 64 {
-                            0
-                        } else {
-                            bits & (u64::MAX << next)
-                        };
-                    }
+                for (m, &word) in merged.iter_mut().zip(fine_set.row(fy)) {
+                    *m |= word;
                 }
             }
-            if any {
-                for (cx, _) in coarse_row.iter().enumerate().filter(|(_, b)| **b) {
+            for (w, &word) in merged.iter().enumerate() {
+                let mut bits = word;
+                while bits != 0 {
+                    let b = bits.trailing_zeros() as usize;
+                    let cx = (w * 64 + b) / f;
                     out.set((cx as u32, cy), true);
+                    // Skip the rest of this coarse cell's bits in the word.
+                    let next = ((cx + 1) * f).saturating_sub(w * 64);
+                    bits = if next >= 64 {
+                        0
+                    } else {
+                        bits & (u64::MAX << next)
+                    };
                 }
             }
         }
@@ -78,6 +76,41 @@ impl CoarseGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(128))]
+
+        /// A coarse cell is in the downsampled set exactly when one of its fine cells is in
+        /// the fine set, for any cell size (whole factors, partial blocks at the far edges).
+        #[test]
+        fn downsample_matches_the_block_definition(
+            half in 3.0f64..30.0,
+            cell in prop_oneof![Just(0.5), Just(0.3), Just(0.1), Just(0.02), Just(2.5), Just(4.0)],
+            cells in proptest::collection::vec((0u32..6000, 0u32..6000), 0..400),
+            rows in proptest::collection::vec((0u32..6000, 0u32..6000, 0u32..6000), 0..20),
+        ) {
+            let fine = GroundGrid::new(half, cell);
+            let cg = CoarseGrid::new(fine);
+            let mut s = CellSet::empty(&fine);
+            for (x, y) in cells {
+                s.set((x % fine.nx, y % fine.ny), true);
+            }
+            for (y, a, b) in rows {
+                let (a, b) = (a % fine.nx, b % fine.nx);
+                s.fill_row_span(y % fine.ny, a.min(b), a.max(b));
+            }
+            let d = cg.downsample(&s);
+            for cy in 0..cg.coarse.ny {
+                for cx in 0..cg.coarse.nx {
+                    let f = cg.factor;
+                    let any = (cy * f..((cy + 1) * f).min(fine.ny))
+                        .any(|fy| (cx * f..((cx + 1) * f).min(fine.nx)).any(|fx| s.contains((fx, fy))));
+                    prop_assert_eq!(d.contains((cx, cy)), any, "cell {:?}", (cx, cy));
+                }
+            }
+        }
+    }
 
     #[test]
     fn downsample_marks_blocks_with_any_cell() {

@@ -572,4 +572,130 @@ mod tests {
                 .all(|p| p.position.x.abs() <= 150.0 && p.position.y.abs() <= 150.0)
         );
     }
+
+    /// A fingerprint of everything a decision holds (FNV-1a over the bits of its numbers).
+    fn fingerprint(d: &Decision) -> u64 {
+        let c = &d.cost;
+        let numbers =
+            d.increments
+                .iter()
+                .copied()
+                .chain([d.yaw_ref, c.area_m2, c.distance_m, c.hidden_m2, c.total])
+                .map(f64::to_bits)
+                .chain(d.view.poses.iter().flat_map(|p| {
+                    [p.position.x, p.position.y, p.position.z, p.yaw].map(f64::to_bits)
+                }))
+                .chain([u64::from(d.view.uav), d.sequences as u64, d.excluded as u64]);
+        numbers.fold(0xcbf2_9ce4_8422_2325_u64, |h, w| {
+            (h ^ w).wrapping_mul(0x100_0000_01b3)
+        })
+    }
+
+    /// Decisions of both planners on busy inputs (sets, buildings, plans ahead) are the very
+    /// ones recorded: a change meant only to make the planners faster must keep every bit of
+    /// every decision. (A change of what the planners decide updates the fingerprints.)
+    #[test]
+    fn decisions_are_the_recorded_ones() {
+        let paper = GuidanceParams::from_scenario(&scenario());
+        let mut s = scenario();
+        // The `setfleet` variant's settings.
+        s.guidance.planner = Planner::Setfleet;
+        s.timing.guidance_period_s = 1.0;
+        s.guidance.lambda = 10.0;
+        s.guidance.target_weight = 1.0;
+        let setfleet = GuidanceParams::from_scenario(&s);
+        // A fixed xorshift stream: uniform in [lo, hi).
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut uniform = move |lo: f64, hi: f64| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            lo + (hi - lo) * (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut fingerprints = Vec::new();
+        for case in 0..6 {
+            let fine = &paper.grids.fine;
+            let mut disc = |lo: f64, hi: f64| {
+                let (x, y, r) = (
+                    uniform(-140.0, 140.0),
+                    uniform(-140.0, 140.0),
+                    uniform(lo, hi),
+                );
+                let mut d = CellSet::empty(fine);
+                d.fill_disc(fine, Point2::new(x, y), r, Coverage::Outer);
+                d
+            };
+            let mut undetected = CellSet::empty(fine);
+            for _ in 0..5 {
+                undetected.or_assign(&disc(10.0, 60.0));
+            }
+            let targets: Vec<CellSet> = (0..case % 3).map(|_| disc(3.0, 12.0)).collect();
+            let hidden = disc(5.0, 40.0);
+            let obstacles: Vec<ObstacleCell> = (0..40 + 30 * case)
+                .map(|_| {
+                    let (x, y) = (
+                        uniform(-30.0, 30.0).floor() * 5.0,
+                        uniform(-30.0, 30.0).floor() * 5.0,
+                    );
+                    ObstacleCell {
+                        rect: Rect {
+                            min: Point2::new(x, y),
+                            max: Point2::new(x + 5.0, y + 5.0),
+                        },
+                        height_m: uniform(10.0, 60.0),
+                    }
+                })
+                .collect();
+            let mut flown = |uav: u32| {
+                let mut state = UavState {
+                    position: Point3::new(uniform(-100.0, 100.0), uniform(-100.0, 100.0), 60.0),
+                    yaw: uniform(-3.0, 3.0),
+                };
+                let turn = uniform(-1.0, 1.0);
+                let poses = (0..12)
+                    .map(|_| {
+                        state = flight::advance(state, state.yaw + turn, 0.5, 10.0, 1.0);
+                        CameraPose {
+                            position: state.position,
+                            yaw: state.yaw,
+                        }
+                    })
+                    .collect();
+                (state, PlannedView { uav, poses })
+            };
+            let others: Vec<PlannedView> = (0..case % 4).map(|u| flown(u).1).collect();
+            let me = flown(7).0;
+            let mut sets = vec![&undetected];
+            sets.extend(targets.iter());
+            let input = PlanningInput {
+                uav: 7,
+                state: UavState {
+                    position: Point3::new(me.position.x, me.position.y, 50.0 + 5.0 * case as f64),
+                    yaw: me.yaw,
+                },
+                sets: &sets,
+                recently_hidden: &hidden,
+                obstacles: &obstacles,
+                others: &others,
+            };
+            fingerprints.push(fingerprint(&plan(&paper, &input)));
+            fingerprints.push(fingerprint(&setfleet::plan(&setfleet, &input)));
+        }
+        // Paper, setfleet, for each case.
+        let recorded: [u64; 12] = [
+            0x0e04_f031_d77b_ae59,
+            0xd4ce_cd2e_8a90_0c71,
+            0x24c4_c384_cf18_d850,
+            0xc627_d2a4_05fb_0103,
+            0xc695_76a1_33c5_855f,
+            0xc3fb_a2f7_098f_2d0c,
+            0x878d_2e04_628e_0aab,
+            0x0b6a_403d_cb36_9ef1,
+            0xb3a3_a5ac_2c01_ba91,
+            0xb1ea_e9f9_a44f_ab05,
+            0x72e9_7fc7_4d93_b48d,
+            0x4ee4_5686_6ce9_29ac,
+        ];
+        assert_eq!(fingerprints, recorded, "{fingerprints:#x?}");
+    }
 }

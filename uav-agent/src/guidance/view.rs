@@ -92,11 +92,15 @@ pub fn add_visible_ground(
         let mut shadows = CellSet::empty(grid);
         let mut any = false;
         for o in obstacles {
-            // The box first: most shadows lie far from the field of view.
-            if shadow_bounds(&pose.position, o).is_some_and(|b| overlaps(&b, &fov_box))
+            // The boxes first: most shadows lie far from the field of view, and a shadow's rows
+            // without cells visible and not yet shadowed change nothing (tall buildings cast
+            // shadows far longer than the field of view).
+            if let Some(b) = shadow_bounds(&pose.position, o)
+                && overlaps(&b, &fov_box)
+                && let Some(rows) = rows_to_cover(grid, &b, &visible, &shadows)
                 && let Some(hull) = shadow(&pose.position, o)
             {
-                shadows.fill_convex_polygon(grid, &hull, Coverage::Outer);
+                shadows.fill_convex_polygon_rows(grid, &hull, Coverage::Outer, rows);
                 any = true;
             }
         }
@@ -105,6 +109,54 @@ pub fn add_visible_ground(
         }
     }
     seen.or_assign(&visible);
+}
+
+/// The first and last rows where the outer raster of a polygon whose vertices lie in
+/// `bounds` may hold a cell of `visible` not yet in `shadows`: `None` when it holds none, every
+/// row when it cannot tell (non-finite bounds).
+///
+/// The raster's cells lie in the cells touching `bounds` widened by the rasteriser's margin
+/// (about `1e-9 * (1 + |coordinates|)`) and by the rounding of its edge clipping (a few ulps);
+/// widening by `1e-6 * (1 + |coordinates|)` bounds both, so the rows left out are exact.
+fn rows_to_cover(
+    grid: &GroundGrid,
+    bounds: &Rect,
+    visible: &CellSet,
+    shadows: &CellSet,
+) -> Option<(u32, u32)> {
+    let scale = [bounds.min, bounds.max, grid.origin, grid.bounds().max]
+        .iter()
+        .fold(0.0_f64, |m, p| m.max(p.x.abs()).max(p.y.abs()));
+    if !scale.is_finite() {
+        return Some((0, u32::MAX));
+    }
+    let slack = 1e-6 * (1.0 + scale);
+    let (Some((x0, x1)), Some((y0, y1))) = (
+        grid.columns_touching(bounds.min.x - slack, bounds.max.x + slack),
+        grid.rows_touching(bounds.min.y - slack, bounds.max.y + slack),
+    ) else {
+        return None;
+    };
+    let (w0, w1) = (x0 as usize / 64, x1 as usize / 64);
+    let uncovered = |&y: &u32| {
+        let (v, s) = (visible.row(y), shadows.row(y));
+        (w0..=w1).any(|w| {
+            let lo = if w == w0 {
+                u64::MAX << (x0 % 64)
+            } else {
+                u64::MAX
+            };
+            let hi = if w == w1 {
+                u64::MAX >> (63 - x1 % 64)
+            } else {
+                u64::MAX
+            };
+            v[w] & !s[w] & lo & hi != 0
+        })
+    };
+    let first = (y0..=y1).find(uncovered)?;
+    let last = (first..=y1).rev().find(uncovered)?;
+    Some((first, last))
 }
 
 /// Whether a known obstacle blocks the segment from `eye` to the ground point `target`
@@ -150,6 +202,81 @@ pub fn view_centre(model: &CameraModel, pose: &CameraPose) -> Point2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+    use protocol::scenario::Scenario;
+
+    /// [`add_visible_ground`] rasterising in full every shadow whose box meets the field of
+    /// view's.
+    fn add_visible_ground_every_shadow(
+        seen: &mut CellSet,
+        grid: &GroundGrid,
+        model: &CameraModel,
+        pose: &CameraPose,
+        obstacles: &[ObstacleCell],
+    ) {
+        let camera = Camera::new(*model, *pose);
+        let Some(footprint) = camera.image_ground_footprint() else {
+            return;
+        };
+        let mut visible = CellSet::empty(grid);
+        visible.fill_convex_polygon(grid, &footprint, Coverage::Inner);
+        let fov_box = bbox(&footprint);
+        let mut shadows = CellSet::empty(grid);
+        for o in obstacles {
+            if shadow_bounds(&pose.position, o).is_some_and(|b| overlaps(&b, &fov_box))
+                && let Some(hull) = shadow(&pose.position, o)
+            {
+                shadows.fill_convex_polygon(grid, &hull, Coverage::Outer);
+            }
+        }
+        visible.and_not_assign(&shadows);
+        seen.or_assign(&visible);
+    }
+
+    fn obstacle_strategy() -> impl Strategy<Value = ObstacleCell> {
+        // 5 m cells of a 300 m region or packed in its middle (where shadows overlap), some
+        // of them taller than the UAVs fly.
+        let cell = prop_oneof![-30i32..30, -6i32..6];
+        (cell.clone(), cell, 5.0f64..90.0).prop_map(|(x, y, height_m)| {
+            let min = Point2::new(x as f64 * 5.0, y as f64 * 5.0);
+            ObstacleCell {
+                rect: Rect {
+                    min,
+                    max: Point2::new(min.x + 5.0, min.y + 5.0),
+                },
+                height_m,
+            }
+        })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        /// Skipping the shadows, and the rows of shadows, that can only cover cells already
+        /// shadowed or not visible changes no cell.
+        #[test]
+        fn skipped_shadows_change_nothing(
+            x in -100.0f64..100.0,
+            y in -100.0f64..100.0,
+            z in 20.0f64..80.0,
+            yaw in -4.0f64..4.0,
+            obstacles in proptest::collection::vec(obstacle_strategy(), 0..120),
+        ) {
+            let mut s = Scenario::default();
+            s.region.half_extent_m = 150.0;
+            let model = s.camera_model();
+            let grid = super::super::CoarseGrid::new(s.grid()).coarse;
+            let pose = CameraPose {
+                position: Point3::new(x, y, z),
+                yaw,
+            };
+            let mut fast = CellSet::empty(&grid);
+            add_visible_ground(&mut fast, &grid, &model, &pose, &obstacles);
+            let mut reference = CellSet::empty(&grid);
+            add_visible_ground_every_shadow(&mut reference, &grid, &model, &pose, &obstacles);
+            prop_assert_eq!(fast, reference);
+        }
+    }
 
     #[test]
     fn shadow_points_away_from_the_eye() {
