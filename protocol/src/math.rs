@@ -88,9 +88,25 @@ mod tests {
     #[test]
     fn floor_fast_is_floor_bit_for_bit() {
         let special = [
-            0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5, -2.5, 1e-300, -1e-300, 4503599627370495.5,
-            -4503599627370495.5, 4503599627370496.0, 1e300, -1e300, Real::INFINITY,
-            Real::NEG_INFINITY, Real::MIN_POSITIVE, -Real::MIN_POSITIVE,
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.5,
+            -2.5,
+            1e-300,
+            -1e-300,
+            4503599627370495.5,
+            -4503599627370495.5,
+            4503599627370496.0,
+            1e300,
+            -1e300,
+            Real::INFINITY,
+            Real::NEG_INFINITY,
+            Real::MIN_POSITIVE,
+            -Real::MIN_POSITIVE,
         ];
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
         let random = (0..100_000).map(|_| {

@@ -171,18 +171,15 @@ impl ReachSet {
                 let x0 = w * 64;
                 let x1 = (x0 + 64).min(nx);
                 let base = iy as usize * nx;
-                let taus = &self.reach[base + x0..base + x1];
-                // Two plain passes the compiler vectorises: the reached cells, then the
-                // least reach of the others.
-                let bits = taus
-                    .iter()
-                    .enumerate()
-                    .fold(0u64, |bits, (b, &tau)| bits | (u64::from(tau <= reached) << b));
-                let next = taus
-                    .iter()
-                    .map(|&tau| if tau > reached { tau } else { u32::MAX })
-                    .min()
-                    .unwrap_or(u32::MAX);
+                let mut bits = 0u64;
+                let mut next = u32::MAX;
+                for (b, &tau) in self.reach[base + x0..base + x1].iter().enumerate() {
+                    if tau <= reached {
+                        bits |= 1 << b;
+                    } else {
+                        next = next.min(tau);
+                    }
+                }
                 self.cells.row_mut(iy)[w] |= bits;
                 self.pending[slot] = next;
             }
@@ -381,24 +378,16 @@ impl ReachSet {
         }
     }
 
-    /// Removes the bits `remove(cells, row, word)` of every word; the word's pending bound
-    /// takes the least reach of the removed cells, so the next advance settles the word only
-    /// if the clock can reach one of them.
+    /// Removes the bits `remove(cells, row, word)` of every word; their pending bound drops
+    /// to 0 (always a lower bound), so the next advance settles those words.
     fn remove_where(&mut self, remove: impl Fn(&CellSet, u32, usize) -> u64) {
-        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        let wpr = self.cells.words_per_row();
         for iy in 0..self.cells.ny() {
             for w in 0..wpr {
-                let mut gone = remove(&self.cells, iy, w);
-                if gone == 0 {
-                    continue;
-                }
-                self.cells.row_mut(iy)[w] &= !gone;
-                let base = iy as usize * nx + w * 64;
-                let slot = &mut self.pending[iy as usize * wpr + w];
-                while gone != 0 {
-                    let b = gone.trailing_zeros() as usize;
-                    *slot = (*slot).min(self.reach[base + b]);
-                    gone &= gone - 1;
+                let gone = remove(&self.cells, iy, w);
+                if gone != 0 {
+                    self.cells.row_mut(iy)[w] &= !gone;
+                    self.pending[iy as usize * wpr + w] = 0;
                 }
             }
         }

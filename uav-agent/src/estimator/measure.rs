@@ -275,20 +275,28 @@ impl NotGroundSums {
 }
 
 /// `P^g(Y^g)`, inner: cells whose projection touches only ground pixels (see the module docs).
+///
+/// The cells are examined in bands of [`BLOCK`] rows. A block of `BLOCK x BLOCK` cells whose
+/// projection lies inside the image and touches only ground pixels is free as a whole: the
+/// projection of a ground rectangle in front of the camera is the convex quadrilateral of its
+/// corners' images, so every cell's pixels are among the block's (the block's pixel range is
+/// widened by [`BLOCK_MARGIN`] against the rounding of the separate projections). Every other
+/// cell is examined alone; the result is the same cell by cell.
 pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
     let mut out = CellSet::empty(grid);
     let Some(window) = view.cell_window(grid) else {
         return out;
     };
-    let sums = NotGroundSums::new(view);
+    let test = PixelTest::new(view);
     let p = &view.projector;
-    let (rows, cols) = (view.rows as Real, view.cols as Real);
-    // The corners of row iy's cells are vertex rows iy and iy + 1, columns ix0..=ix1 + 1; a
-    // vertex row is projected over the columns of the cell rows below and above it, and no
-    // other entry of it is read.
+    // Vertex row `iy` is projected over the columns of the cell rows below and above it,
+    // `ix0..=ix1 + 1`; no other entry of it is read.
     let vertex_row = |iy: u32, buf: &mut [Option<(Real, Real)>]| {
         let y = grid.origin.y + iy as Real * grid.cell_m;
-        let spans = [iy.checked_sub(1).and_then(|b| window.span(b)), window.span(iy)];
+        let spans = [
+            iy.checked_sub(1).and_then(|b| window.span(b)),
+            window.span(iy),
+        ];
         let Some((a, b)) = spans
             .into_iter()
             .flatten()
@@ -296,65 +304,142 @@ pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
         else {
             return;
         };
-        for (k, slot) in buf.iter_mut().enumerate().take(b as usize + 2).skip(a as usize) {
+        for (k, slot) in buf
+            .iter_mut()
+            .enumerate()
+            .take(b as usize + 2)
+            .skip(a as usize)
+        {
             let x = grid.origin.x + k as Real * grid.cell_m;
             *slot = p.image_point(&p.camera_coords(x, y));
         }
     };
-    let mut south = vec![None; grid.nx as usize + 1];
-    let mut north = south.clone();
-    let mut next_vertex_row = None;
-    for (iy, ix0, ix1) in window.rows() {
-        if next_vertex_row == Some(iy) {
-            std::mem::swap(&mut south, &mut north);
-        } else {
-            vertex_row(iy, &mut south);
+    let width = grid.nx as usize + 1;
+    let mut vertices = vec![None; width * (BLOCK as usize + 1)];
+    let last_row = window.iy0 + window.spans.len() as u32;
+    for band in (window.iy0..last_row).step_by(BLOCK as usize) {
+        let band_end = (band + BLOCK).min(last_row);
+        for (j, iy) in (band..=band_end).enumerate() {
+            vertex_row(iy, &mut vertices[j * width..(j + 1) * width]);
         }
-        vertex_row(iy + 1, &mut north);
-        next_vertex_row = Some(iy + 1);
-        for ix in ix0..=ix1 {
-            let k = ix as usize;
-            let corners = [south[k], south[k + 1], north[k], north[k + 1]];
-            let mut bb = [
-                Real::INFINITY,
-                Real::NEG_INFINITY,
-                Real::INFINITY,
-                Real::NEG_INFINITY,
-            ];
-            let mut in_front = true;
-            for c in corners {
-                match c {
-                    Some((u, v)) => {
-                        bb[0] = bb[0].min(u);
-                        bb[1] = bb[1].max(u);
-                        bb[2] = bb[2].min(v);
-                        bb[3] = bb[3].max(v);
-                    }
-                    None => in_front = false,
+        let vertex = |iy: u32, ix: u32| vertices[(iy - band) as usize * width + ix as usize];
+        // Blocks inside every row's span of the band, free as a whole.
+        let common = (band..band_end)
+            .map(|iy| window.span(iy))
+            .reduce(|a, b| Some((a?.0.max(b?.0), a?.1.min(b?.1))))
+            .flatten();
+        let mut free_blocks = Vec::new();
+        if let Some((a, b)) = common.filter(|_| band_end - band == BLOCK) {
+            let mut bx = a.div_ceil(BLOCK) * BLOCK;
+            while bx + BLOCK - 1 <= b {
+                let corners = [
+                    vertex(band, bx),
+                    vertex(band, bx + BLOCK),
+                    vertex(band_end, bx),
+                    vertex(band_end, bx + BLOCK),
+                ];
+                if test.all_ground(corners, BLOCK_MARGIN) {
+                    free_blocks.push(bx);
                 }
+                bx += BLOCK;
             }
-            if !in_front {
+        }
+        for iy in band..band_end {
+            let Some((ix0, ix1)) = window.span(iy) else {
                 continue;
+            };
+            for &bx in &free_blocks {
+                out.fill_row_span(iy, bx, bx + BLOCK - 1);
             }
-            // Closed pixel c covers [c, c+1]: the columns touching [u0, u1] run from
-            // floor(u0) (minus one when u0 sits on a pixel edge) to floor(u1).
-            let c0 = floor_fast(bb[0] - PIXEL_EPSILON);
-            let c1 = floor_fast(bb[1] + PIXEL_EPSILON);
-            let r0 = floor_fast(bb[2] - PIXEL_EPSILON);
-            let r1 = floor_fast(bb[3] + PIXEL_EPSILON);
-            if !(c0 >= 0.0 && r0 >= 0.0 && c1 < cols && r1 < rows) {
-                continue;
-            }
-            if sums.count(r0 as usize, r1 as usize, c0 as usize, c1 as usize) == 0 {
-                out.set((ix, iy), true);
+            let mut blocks = free_blocks.iter().peekable();
+            let mut ix = ix0;
+            while ix <= ix1 {
+                if blocks.peek() == Some(&&ix) {
+                    blocks.next();
+                    ix += BLOCK;
+                    continue;
+                }
+                let corners = [
+                    vertex(iy, ix),
+                    vertex(iy, ix + 1),
+                    vertex(iy + 1, ix),
+                    vertex(iy + 1, ix + 1),
+                ];
+                if test.all_ground(corners, 0.0) {
+                    out.set((ix, iy), true);
+                }
+                ix += 1;
             }
         }
     }
     out
 }
 
+/// Cells per side of the blocks [`free_ground`] tries whole.
+const BLOCK: u32 = 8;
+/// Extra widening, pixels, of a block's pixel range: far above the rounding of projecting its
+/// corners and its cells' corners separately, far below a pixel.
+const BLOCK_MARGIN: Real = 1e-6;
+
+/// Whether a ground quadrilateral, given by the images of its corners, projects inside the
+/// image onto ground pixels only.
+struct PixelTest {
+    sums: NotGroundSums,
+    rows: Real,
+    cols: Real,
+}
+
+impl PixelTest {
+    fn new(view: &FrameView<'_>) -> Self {
+        Self {
+            sums: NotGroundSums::new(view),
+            rows: view.rows as Real,
+            cols: view.cols as Real,
+        }
+    }
+
+    /// True when every corner is in front of the camera and the closed pixels touching the
+    /// corners' bounding box, widened by [`PIXEL_EPSILON`] and `margin`, lie in the image and
+    /// are all ground.
+    fn all_ground(&self, corners: [Option<(Real, Real)>; 4], margin: Real) -> bool {
+        let mut bb = [
+            Real::INFINITY,
+            Real::NEG_INFINITY,
+            Real::INFINITY,
+            Real::NEG_INFINITY,
+        ];
+        for c in corners {
+            let Some((u, v)) = c else {
+                return false;
+            };
+            bb[0] = bb[0].min(u);
+            bb[1] = bb[1].max(u);
+            bb[2] = bb[2].min(v);
+            bb[3] = bb[3].max(v);
+        }
+        // Closed pixel c covers [c, c+1]: the columns touching [u0, u1] run from floor(u0)
+        // (minus one when u0 sits on a pixel edge) to floor(u1).
+        let widen = PIXEL_EPSILON + margin;
+        let c0 = floor_fast(bb[0] - widen);
+        let c1 = floor_fast(bb[1] + widen);
+        let r0 = floor_fast(bb[2] - widen);
+        let r1 = floor_fast(bb[3] + widen);
+        c0 >= 0.0
+            && r0 >= 0.0
+            && c1 < self.cols
+            && r1 < self.rows
+            && self
+                .sums
+                .count(r0 as usize, r1 as usize, c0 as usize, c1 as usize)
+                == 0
+    }
+}
+
 /// `H^CVS`, approximate: cells whose centre projects into an obstacle, target or unknown pixel.
-pub fn hidden_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
+///
+/// The cells of `free`, this frame's [`free_ground`], are not examined: every pixel their
+/// projection touches is ground, so their centre's is.
+pub fn hidden_ground(view: &FrameView<'_>, grid: &GroundGrid, free: &CellSet) -> CellSet {
     let mut out = CellSet::empty(grid);
     let Some(window) = view.cell_window(grid) else {
         return out;
@@ -362,7 +447,7 @@ pub fn hidden_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
     let p = &view.projector;
     for (iy, ix0, ix1) in window.rows() {
         let y = grid.origin.y + (iy as Real + 0.5) * grid.cell_m;
-        for ix in ix0..=ix1 {
+        for ix in (ix0..=ix1).filter(|&ix| !free.contains((ix, iy))) {
             let x = grid.origin.x + (ix as Real + 0.5) * grid.cell_m;
             if let Some((u, v)) = p.image_point(&p.camera_coords(x, y))
                 && u >= 0.0

@@ -342,7 +342,7 @@ impl Estimator {
 
         let t = Instant::now();
         let free_ground = measure::free_ground(&view, grid);
-        let hidden = measure::hidden_ground(&view, grid);
+        let hidden = measure::hidden_ground(&view, grid, &free_ground);
         report.timings.free_ground = t.elapsed();
 
         let t = Instant::now();
