@@ -56,6 +56,61 @@ pub fn to_csv(series: &[StepMetrics]) -> String {
     out
 }
 
+/// Reads a series back from the text [`to_csv`] wrote (e.g. to merge sweeps); an error names
+/// the line that does not fit.
+pub fn from_csv(text: &str) -> anyhow::Result<Vec<StepMetrics>> {
+    let mut lines = text.lines();
+    anyhow::ensure!(
+        lines.next() == Some(HEADER),
+        "not a timeseries.csv: the header differs"
+    );
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            parse_row(line).ok_or_else(|| anyhow::anyhow!("line {}: not a timeseries row", i + 2))
+        })
+        .collect()
+}
+
+fn parse_row(line: &str) -> Option<StepMetrics> {
+    let cells: Vec<&str> = line.split(',').collect();
+    if cells.len() != HEADER.split(',').count() {
+        return None;
+    }
+    let opt = |c: &str| -> Option<Option<f64>> {
+        if c.is_empty() {
+            Some(None)
+        } else {
+            c.parse().ok().map(Some)
+        }
+    };
+    let set = |c: &[&str]| -> Option<Option<SetMetrics>> {
+        let v: Vec<Option<f64>> = c.iter().map(|c| opt(c)).collect::<Option<_>>()?;
+        Some(match (v[0], v[1], v[2], v[5]) {
+            (Some(explored), Some(ua), Some(oa), Some(identified)) => Some(SetMetrics {
+                explored,
+                ua,
+                oa,
+                target_set_area: v[3],
+                loc_error_m: v[4],
+                identified,
+            }),
+            _ => None,
+        })
+    };
+    Some(StepMetrics {
+        step: cells[0].parse().ok()?,
+        time_s: cells[1].parse().ok()?,
+        live_agents: cells[2].parse().ok()?,
+        estimates: cells[3].parse().ok()?,
+        mean: set(&cells[4..10])?,
+        worst: set(&cells[10..16])?,
+        identified_any: cells[16].parse().ok()?,
+        violations: cells[17].parse().ok()?,
+        ..StepMetrics::default()
+    })
+}
+
 /// Writes the series to `path`.
 pub fn write(series: &[StepMetrics], path: &Path) -> anyhow::Result<()> {
     std::fs::write(path, to_csv(series))
@@ -109,6 +164,19 @@ mod tests {
         assert_eq!(
             lines[2],
             "1,0.5,2,2,0.25,0.5,0.125,,,0.5,0.25,0.75,0.125,,2,0,1,1"
+        );
+        // What is written reads back to the same text.
+        let back = from_csv(&csv).expect("reads back");
+        assert_eq!(back.len(), 2);
+        assert_eq!(back[1].mean, Some(mean));
+        assert_eq!(to_csv(&back), csv);
+        assert!(from_csv("step,time_s\n").is_err());
+        let broken = csv.replace("0.125,,2", "x,,2");
+        assert!(
+            from_csv(&broken)
+                .unwrap_err()
+                .to_string()
+                .contains("line 3")
         );
     }
 }

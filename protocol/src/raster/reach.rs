@@ -27,6 +27,12 @@
 //! `τ(c) ← max(τ(c), ⌊(gap + b) / unit⌋)` keeps (I1), and removing the cell keeps (I2). The
 //! floor and a `1e-6`-unit margin make every rounding err low, the safe way.
 //!
+//! The distance in (I1) may be taken along the ground the targets can drive on: a target
+//! never enters a cell of `S^o` (ground proven within `r_s` of an obstacle), so it must drive
+//! round it, and its path is at least the straight distance. Every bound above is a straight
+//! one, so it holds for the driven distance too; [`ReachSet::clear_around`] adds the bounds of
+//! [`super::geodesic`], which go round `S^o`, and takes the larger.
+//!
 //! Fusion with another estimate of the same target intersects the cells (both hold the target)
 //! and would take the larger reach (both bounds hold); the fleet exchanges cells only, so a
 //! peer's set enters as an outer raster through [`ReachSet::intersect`].
