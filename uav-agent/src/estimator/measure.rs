@@ -276,11 +276,11 @@ impl NotGroundSums {
 
 /// `P^g(Y^g)`, inner: cells whose projection touches only ground pixels (see the module docs).
 ///
-/// The cells are examined in bands of [`BLOCK`] rows. A block of `BLOCK x BLOCK` cells whose
+/// The cells are examined in bands of 8 rows. A block of 8 x 8 cells whose
 /// projection lies inside the image and touches only ground pixels is free as a whole: the
 /// projection of a ground rectangle in front of the camera is the convex quadrilateral of its
 /// corners' images, so every cell's pixels are among the block's (the block's pixel range is
-/// widened by [`BLOCK_MARGIN`] against the rounding of the separate projections). Every other
+/// widened by `1e-6` pixels against the rounding of the separate projections). Every other
 /// cell is examined alone; the result is the same cell by cell.
 pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
     let mut out = CellSet::empty(grid);
