@@ -10,6 +10,9 @@
 //! reference holds is a position some target can really be at, so a sample outside the set's
 //! cells is a broken guarantee.
 
+mod common;
+
+use common::{box_set, cell_box};
 use proptest::prelude::*;
 use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
@@ -180,28 +183,11 @@ enum Event {
     Free(CellBox),
 }
 
-fn cell_box(n: u32, max_side: u32) -> impl Strategy<Value = CellBox> {
-    (0..n, 0..n, 1..=max_side, 1..=max_side).prop_map(move |(x0, y0, w, h)| CellBox {
-        x0,
-        y0,
-        x1: (x0 + w - 1).min(n - 1),
-        y1: (y0 + h - 1).min(n - 1),
-    })
-}
-
 fn event(n: u32) -> impl Strategy<Value = Event> {
     prop_oneof![
         1 => (0.1f64..1.6).prop_map(Event::Move),
         1 => cell_box(n, 12).prop_map(Event::Free),
     ]
-}
-
-fn box_set(g: &GroundGrid, b: &CellBox) -> CellSet {
-    let mut s = CellSet::empty(g);
-    for iy in b.y0..=b.y1 {
-        s.fill_row_span(iy, b.x0, b.x1);
-    }
-    s
 }
 
 /// Whether two boxes of cells are at least one cell apart.

@@ -6,6 +6,9 @@
 //! the samples in its cells. Every sample the reference holds is a position some target can
 //! really be at, so a sample outside the set's cells is a broken guarantee.
 
+mod common;
+
+use common::{box_set, cell_box};
 use proptest::prelude::*;
 use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
@@ -50,32 +53,15 @@ enum Event {
     Measure(CellBox),
 }
 
-fn cell_box(n: u32) -> impl Strategy<Value = CellBox> {
-    (0..n, 0..n, 1u32..12, 1u32..12).prop_map(move |(x0, y0, w, h)| CellBox {
-        x0,
-        y0,
-        x1: (x0 + w - 1).min(n - 1),
-        y1: (y0 + h - 1).min(n - 1),
-    })
-}
-
 fn event(n: u32) -> impl Strategy<Value = Event> {
     prop_oneof![
         4 => (0.1f64..1.6).prop_map(Event::Move),
-        4 => cell_box(n).prop_map(Event::Free),
-        1 => cell_box(n).prop_map(move |b| {
+        4 => cell_box(n, 11).prop_map(Event::Free),
+        1 => cell_box(n, 11).prop_map(move |b| {
             // Measurements are larger: a few metres around the target.
             Event::Measure(CellBox { x1: (b.x1 + 6).min(n - 1), y1: (b.y1 + 6).min(n - 1), ..b })
         }),
     ]
-}
-
-fn box_set(g: &GroundGrid, b: &CellBox) -> CellSet {
-    let mut s = CellSet::empty(g);
-    for iy in b.y0..=b.y1 {
-        s.fill_row_span(iy, b.x0, b.x1);
-    }
-    s
 }
 
 proptest! {

@@ -91,13 +91,7 @@ pub fn geodesic_gap_field(
     let graph = Graph::new(w, h, blocked);
     let mut dist = vec![UNREACHED; graph.vw * (h + 1)];
     for (k, _) in sources.iter().enumerate().filter(|(_, s)| **s) {
-        let (x, y) = (k % w, k / w);
-        for v in [
-            y * graph.vw + x,
-            y * graph.vw + x + 1,
-            (y + 1) * graph.vw + x,
-            (y + 1) * graph.vw + x + 1,
-        ] {
+        for v in graph.corners(k) {
             dist[v] = 0;
         }
     }
@@ -111,11 +105,12 @@ pub fn geodesic_gap_field(
     }
     let mut field = vec![UNREACHED; w * h];
     for (k, out) in field.iter_mut().enumerate() {
-        let v = (k / w) * graph.vw + k % w;
-        *out = dist[v]
-            .min(dist[v + 1])
-            .min(dist[v + graph.vw])
-            .min(dist[v + graph.vw + 1]);
+        *out = graph
+            .corners(k)
+            .map(|v| dist[v])
+            .into_iter()
+            .min()
+            .unwrap_or(UNREACHED);
     }
     Some(field)
 }
@@ -171,6 +166,13 @@ impl Graph {
             }
         }
         Self { vw, vh, edges }
+    }
+
+    /// The vertices at the corners of the window's cell `k` (row-major).
+    fn corners(&self, k: usize) -> [usize; 4] {
+        let (x, y) = (k % (self.vw - 1), k / (self.vw - 1));
+        let v = y * self.vw + x;
+        [v, v + 1, v + self.vw, v + self.vw + 1]
     }
 
     /// Relaxes every vertex from its left, lower-left, lower and lower-right neighbours, in
@@ -262,13 +264,7 @@ mod tests {
         let mut dist = vec![UNREACHED; g.vw * g.vh];
         let mut heap = BinaryHeap::new();
         for (k, _) in sources.iter().enumerate().filter(|(_, s)| **s) {
-            let (x, y) = (k % w, k / w);
-            for v in [
-                y * g.vw + x,
-                y * g.vw + x + 1,
-                (y + 1) * g.vw + x,
-                (y + 1) * g.vw + x + 1,
-            ] {
+            for v in g.corners(k) {
                 dist[v] = 0;
                 heap.push(Reverse((0, v)));
             }
