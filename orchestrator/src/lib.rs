@@ -71,10 +71,12 @@ pub fn run(cli: Cli) -> Outcome {
             Ok(config) => return finish(run::run(&config)),
             Err(e) => return bad_input(e),
         },
-        FleetCommand::Sweep(args) => match (args.merge_config(), args.validate()) {
-            (Some(merge), _) => return finish(sweep::merge(&merge)),
-            (None, Ok(config)) => return finish(sweep::run(&config)),
-            (None, Err(e)) => return bad_input(e),
+        FleetCommand::Sweep(args) => match args.merge_config() {
+            Some(merge) => return finish(sweep::merge(&merge)),
+            None => match args.validate() {
+                Ok(config) => return finish(sweep::run(&config)),
+                Err(e) => return bad_input(e),
+            },
         },
         FleetCommand::Render(args) => match args.validate() {
             Ok(config) => render_cmd::run(&config),

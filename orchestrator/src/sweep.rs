@@ -53,7 +53,7 @@ pub struct SweepArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Runs nothing: builds the table and picture from the runs of these sweep directories.
-    #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration"])]
+    #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration", "variants", "scenario", "overrides"])]
     pub merge: Vec<PathBuf>,
 }
 
@@ -724,6 +724,17 @@ mod tests {
         let ids: std::collections::BTreeSet<_> =
             c.runs.iter().map(|r| r.2.run_id.to_string()).collect();
         assert_eq!(ids.len(), 4, "every run has its own id");
+        // A merge runs nothing, so it takes no run settings.
+        for extra in [
+            ["--seeds", "2"],
+            ["--variants", "paper"],
+            ["--set", "seed=3"],
+        ] {
+            let args = ["x", "--merge", "a", extra[0], extra[1]];
+            assert!(Wrap::try_parse_from(args).is_err(), "{extra:?}");
+        }
+        let w = Wrap::try_parse_from(["x", "--merge", "a", "b"]).unwrap();
+        assert_eq!(w.sweep.merge_config().unwrap().sources.len(), 2);
         let w = Wrap::try_parse_from(["x", "--seeds", "0"]).unwrap();
         assert!(w.sweep.validate().unwrap_err().0.contains("--seeds"));
         assert!(Wrap::try_parse_from(["x", "--seeds", "1", "--variants", "best"]).is_err());

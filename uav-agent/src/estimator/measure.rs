@@ -319,7 +319,14 @@ pub fn free_ground(view: &FrameView<'_>, grid: &GroundGrid) -> CellSet {
     let last_row = window.iy0 + window.spans.len() as u32;
     for band in (window.iy0..last_row).step_by(BLOCK as usize) {
         let band_end = (band + BLOCK).min(last_row);
-        for (j, iy) in (band..=band_end).enumerate() {
+        // The previous band's top vertex row is this band's bottom one.
+        let (fresh, first) = if band == window.iy0 {
+            (0, band)
+        } else {
+            vertices.copy_within(BLOCK as usize * width.., 0);
+            (1, band + 1)
+        };
+        for (j, iy) in (fresh..).zip(first..=band_end) {
             vertex_row(iy, &mut vertices[j * width..(j + 1) * width]);
         }
         let vertex = |iy: u32, ix: u32| vertices[(iy - band) as usize * width + ix as usize];

@@ -492,14 +492,10 @@ mod tests {
         assert!((d.yaw_ref - d.increments[0]).abs() < 1e-12);
     }
 
-    #[test]
-    fn leaves_to_the_uav_ahead_what_it_will_see() {
-        let params = GuidanceParams::from_scenario(&scenario());
-        let north = blob(&params, Point2::new(0.0, 80.0), 20.0);
-        let south = blob(&params, Point2::new(0.0, -80.0), 20.0);
-        // Without a plan ahead, the two blobs tie and the first sequence (turning right)
-        // wins; with the UAV ahead watching the south blob, this one takes the north.
-        let ahead = PlannedView {
+    /// The plan of a UAV ahead in the token hovering south of the centre and looking south,
+    /// for 12 steps.
+    pub(super) fn watching_the_south() -> PlannedView {
+        PlannedView {
             uav: 0,
             poses: (0..12)
                 .map(|_| CameraPose {
@@ -507,8 +503,17 @@ mod tests {
                     yaw: -std::f64::consts::FRAC_PI_2,
                 })
                 .collect(),
-        };
-        let d = decide(&params, &[&north, &south], &[], &[ahead]);
+        }
+    }
+
+    #[test]
+    fn leaves_to_the_uav_ahead_what_it_will_see() {
+        let params = GuidanceParams::from_scenario(&scenario());
+        let north = blob(&params, Point2::new(0.0, 80.0), 20.0);
+        let south = blob(&params, Point2::new(0.0, -80.0), 20.0);
+        // Without a plan ahead, the two blobs tie and the first sequence (turning right)
+        // wins; with the UAV ahead watching the south blob, this one takes the north.
+        let d = decide(&params, &[&north, &south], &[], &[watching_the_south()]);
         assert!(d.increments[0] > 0.0, "{d:?}");
     }
 

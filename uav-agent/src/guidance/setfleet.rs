@@ -530,16 +530,11 @@ mod tests {
         let p = params();
         let north = blob(&p, Point2::new(0.0, 80.0), 20.0);
         let south = blob(&p, Point2::new(0.0, -80.0), 20.0);
-        let ahead = PlannedView {
-            uav: 0,
-            poses: (0..12)
-                .map(|_| CameraPose {
-                    position: Point3::new(0.0, -20.0, 70.0),
-                    yaw: -std::f64::consts::FRAC_PI_2,
-                })
-                .collect(),
-        };
-        let d = decide(&p, &[&north, &south], &[ahead]);
+        let d = decide(
+            &p,
+            &[&north, &south],
+            &[super::super::tests::watching_the_south()],
+        );
         assert!(d.increments[0] > 0.0, "{d:?}");
     }
 
