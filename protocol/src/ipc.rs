@@ -95,7 +95,9 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
-use iceoryx2::waitset::{WaitSetCreateError, WaitSetRunError, WaitSetRunResult};
+use iceoryx2::waitset::{
+    WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError, WaitSetRunResult,
+};
 
 use crate::frame::CvsFrame;
 use crate::service::{self, RunId};
@@ -220,6 +222,9 @@ pub enum IpcOpenError {
     /// A wait set could not be created.
     #[error("cannot create a wait set: {0}")]
     WaitSet(#[from] WaitSetCreateError),
+    /// A listener could not be attached to a wait set.
+    #[error("cannot wait on a wake-up event: {0}")]
+    Attach(#[from] WaitSetAttachmentError),
 }
 
 /// Why the nodes of a run could not be listed.
@@ -477,7 +482,8 @@ pub struct Wake {
     /// One of them was [`WakeEvent::EndOfRun`].
     pub end_of_run: bool,
     /// The wait set reported SIGINT or SIGTERM (only under
-    /// [`SignalHandlingMode::HandleTerminationRequests`]).
+    /// [`SignalHandlingMode::HandleTerminationRequests`]). Other signals that cut a wait short
+    /// (SIGCONT after SIGSTOP, SIGCHLD) are not interrupts: the wait returns without a wake.
     pub interrupted: bool,
 }
 
@@ -502,10 +508,11 @@ pub fn wait_for_wake(
         },
         timeout,
     )?;
-    wake.interrupted = matches!(
-        result,
-        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
-    );
+    // Only a termination request stops a process. `Interrupt` is any other signal that cut
+    // the wait short: SIGCONT after a SIGSTOP, SIGCHLD, a profiler's. SIGINT and SIGTERM
+    // first show up as one too (under `HandleTerminationRequests` the next wait reports
+    // them), so an interrupted wait is a spurious wake-up and the caller simply waits again.
+    wake.interrupted = result == WaitSetRunResult::TerminationRequest;
     Ok(wake)
 }
 

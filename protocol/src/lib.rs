@@ -13,6 +13,7 @@
 //! - [`ipc`]: iceoryx2 nodes and services with the fleet's quality of service, wake-up events,
 //!   cleanup after dead processes.
 //! - [`codec`]: the one place that encodes and decodes variable-size messages.
+//! - [`timeouts`]: every bounded wait of a run, derived from one place.
 
 #![warn(missing_docs)]
 
@@ -26,4 +27,5 @@ pub mod math;
 pub mod raster;
 pub mod scenario;
 pub mod service;
+pub mod timeouts;
 pub mod wire;

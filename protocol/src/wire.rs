@@ -12,7 +12,7 @@ use crate::camera::CameraPose;
 use crate::raster::EncodedSet;
 
 /// Version of every message layout in this module and in [`crate::frame`].
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 /// Targets a truth message can hold.
 pub const TRUTH_MAX_TARGETS: usize = 64;
 /// UAVs a truth message can hold, and the largest fleet.
@@ -24,10 +24,22 @@ pub const MAX_UAVS: usize = 32;
 /// that means "observer ready".
 pub const HELLO_STEP: u64 = u64::MAX;
 
+/// Bit `uav` of a UAV mask (the [`crate::frame::FrameHeader::served`] and
+/// [`ObserverAck::restarted`] fields): bit `i` stands for UAV `i`. 0 for a UAV beyond
+/// [`MAX_UAVS`].
+pub fn uav_bit(uav: u32) -> u32 {
+    1u32.checked_shl(uav).unwrap_or(0)
+}
+
+/// The UAVs of a mask, ascending.
+pub fn uavs_in(mask: u32) -> impl Iterator<Item = u32> {
+    (0..MAX_UAVS as u32).filter(move |&i| mask & uav_bit(i) != 0)
+}
+
 /// Agent -> world: the yaw reference for a UAV, and the lockstep ack of `step`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("setfleet.UavCommand.v1")]
+#[type_name("setfleet.UavCommand.v2")]
 pub struct UavCommand {
     /// [`crate::service::RunId::tag`] of the run.
     pub run_tag: u64,
@@ -39,6 +51,9 @@ pub struct UavCommand {
     pub has_yaw_ref: u32,
     /// Yaw reference, radians.
     pub yaw_ref_rad: f64,
+    /// A number that differs at each start of the agent's process: a command of a new
+    /// incarnation tells the world that the previous one is gone, whatever its node shows.
+    pub incarnation: u64,
 }
 
 /// Observer -> world: the observer has processed the truth (and whatever else it needs) of
@@ -46,12 +61,17 @@ pub struct UavCommand {
 /// [`HELLO_STEP`] means "observer ready".
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ZeroCopySend)]
-#[type_name("setfleet.ObserverAck.v1")]
+#[type_name("setfleet.ObserverAck.v2")]
 pub struct ObserverAck {
     /// [`crate::service::RunId::tag`] of the run.
     pub run_tag: u64,
     /// The step acknowledged.
     pub step: u64,
+    /// Agents restarted at this step, bit `i` for UAV `i`: the world waits for their hellos
+    /// (bounded) before it publishes the next step, so they are served from it.
+    pub restarted: u32,
+    /// Zero.
+    pub reserved: u32,
 }
 
 /// Ground truth of one target.
@@ -266,4 +286,22 @@ pub struct GuidanceToken {
     pub issued_by: u32,
     /// Plans of the UAVs that already decided this round.
     pub plans: Vec<PlannedView>,
+}
+
+#[cfg(test)]
+mod mask_tests {
+    use super::*;
+
+    #[test]
+    fn masks_hold_every_uav_of_the_largest_fleet_and_nothing_beyond() {
+        let all: Vec<u32> = (0..MAX_UAVS as u32).collect();
+        let mask = all.iter().fold(0, |m, &u| m | uav_bit(u));
+        assert_eq!(mask, u32::MAX);
+        assert_eq!(uavs_in(mask).collect::<Vec<_>>(), all);
+        assert_eq!(uav_bit(MAX_UAVS as u32), 0);
+        assert_eq!(
+            uavs_in(uav_bit(3) | uav_bit(31)).collect::<Vec<_>>(),
+            [3, 31]
+        );
+    }
 }

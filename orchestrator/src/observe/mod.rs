@@ -111,8 +111,9 @@ pub enum ObserverEvent {
         step: u64,
         /// Its simulated time.
         time_s: f64,
-        /// Signalled once the faults are applied.
-        done: std::sync::mpsc::Sender<()>,
+        /// Signalled once the faults are applied, with the mask of the agents restarted (bit
+        /// `i` for UAV `i`): the world waits for their hellos before the next step.
+        done: std::sync::mpsc::Sender<u32>,
     },
 }
 
@@ -315,7 +316,7 @@ impl Observer<'_> {
             if self.first_truth.is_none()
                 && last_hello.is_none_or(|t| t.elapsed() >= HELLO_INTERVAL)
             {
-                self.send_ack(HELLO_STEP)?;
+                self.send_ack(HELLO_STEP, 0)?;
                 last_hello = Some(Instant::now());
             }
             self.drain();
@@ -342,12 +343,14 @@ impl Observer<'_> {
         }
     }
 
-    fn send_ack(&self, step: u64) -> anyhow::Result<()> {
+    fn send_ack(&self, step: u64, restarted: u32) -> anyhow::Result<()> {
         self.ports
             .ack
             .send_copy(ObserverAck {
                 run_tag: self.run_tag,
                 step,
+                restarted,
+                reserved: 0,
             })
             .context("cannot send the observer's ack")?;
         if let Err(e) = self
@@ -519,8 +522,8 @@ impl Observer<'_> {
         }
         // Faults first (a killed agent is gone before frame k + 1), then the ack, so the world
         // renders the next step while this one is measured.
-        self.apply_faults(truth);
-        self.send_ack(k)?;
+        let restarted = self.apply_faults(truth);
+        self.send_ack(k, restarted)?;
         let step = self.measure(truth, live_agents);
         self.report.steps += 1;
         if let Some(t) = self.first_truth {
@@ -607,8 +610,8 @@ impl Observer<'_> {
     }
 
     /// Lets the orchestrator apply the faults due by this step's time before the step is
-    /// acked.
-    fn apply_faults(&mut self, truth: &TruthState) {
+    /// acked; returns the mask of the agents it restarted.
+    fn apply_faults(&mut self, truth: &TruthState) -> u32 {
         let times = &self.config.fault_times;
         let mut due = false;
         // A tiny slack so that a time written as a multiple of T is reached at that step.
@@ -617,7 +620,7 @@ impl Observer<'_> {
             due = true;
         }
         if !due {
-            return;
+            return 0;
         }
         let (done, applied) = std::sync::mpsc::channel();
         let event = ObserverEvent::FaultsDue {
@@ -626,16 +629,18 @@ impl Observer<'_> {
             done,
         };
         if self.events.send(event).is_err() {
-            return;
+            return 0;
         }
         let deadline = Instant::now() + self.config.fault_wait;
         while !self.stopping() && Instant::now() < deadline {
             match applied.recv_timeout(WAIT_SLICE) {
-                Ok(()) | Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return,
+                Ok(restarted) => return restarted,
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return 0,
                 Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
             }
         }
         tracing::warn!(step = truth.step, "faults were not applied in time");
+        0
     }
 }
 

@@ -29,6 +29,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use protocol::ipc::{cleanup_stale, remove_run_files, run_files};
+use protocol::timeouts::Timeouts;
 use tokio::signal::unix::{SignalKind, signal};
 use tokio::sync::mpsc;
 
@@ -41,9 +42,6 @@ use config::{FaultKind, RunConfig};
 use faults::FaultPlan;
 use progress::Progress;
 
-/// Longest wait for the agents' estimates of a step before the observer measures without
-/// the missing ones (an agent killed mid-step is noticed sooner by the node scan).
-const ESTIMATE_WAIT: Duration = Duration::from_secs(5);
 /// Longest wait for a fault to be applied before the observer acknowledges its step.
 const FAULT_WAIT: Duration = Duration::from_secs(10);
 /// How long the observer may go on after the world exited (it drains the last steps).
@@ -186,7 +184,8 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         ObserverConfig {
             run: run.clone(),
             scenario: config.scenario.clone(),
-            estimate_wait: ESTIMATE_WAIT,
+            // An agent killed mid-step is noticed sooner, by the node scan.
+            estimate_wait: Timeouts::default().estimate_wait(),
             fault_times: plan.times(),
             fault_wait: FAULT_WAIT,
         },
@@ -195,11 +194,14 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     )
     .context("cannot start the observer thread")?;
 
+    let checkpoints = out.join("checkpoints");
+    fresh_dir(&checkpoints)?;
     let mut children = Children::new(
         run.clone(),
         binaries,
         scenario_file,
         logs.clone(),
+        checkpoints,
         config.mode,
     );
     let mut world = children.spawn_world()?;
@@ -228,9 +230,13 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
                     series.push(m);
                 }
                 Some(ObserverEvent::FaultsDue { step, time_s, done }) => {
+                    let mut restarted = 0;
                     for (index, kind, uav) in plan.due(time_s) {
                         let effective = apply_fault(&mut children, run, kind, uav).await;
                         plan.applied(index, step, time_s, effective);
+                        if effective && kind == FaultKind::Restart {
+                            restarted |= protocol::wire::uav_bit(uav);
+                        }
                         let verb = match kind {
                             FaultKind::Kill => "killed",
                             FaultKind::Restart => "restarted",
@@ -238,7 +244,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
                         progress.note(&format!("t={time_s:.1}s: agent {uav} {verb}"));
                     }
                     // The observer may have given up waiting; then nobody listens.
-                    let _ = done.send(());
+                    let _ = done.send(restarted);
                 }
                 None => break,
             },
@@ -333,6 +339,17 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         started_utc,
         leftover_files,
     })
+}
+
+/// Creates `dir`, emptied of what an earlier run into the same output directory left (an
+/// agent must never resume from another run's checkpoint; it would refuse it anyway).
+fn fresh_dir(dir: &std::path::Path) -> anyhow::Result<()> {
+    match std::fs::remove_dir_all(dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(e).with_context(|| format!("cannot empty {}", dir.display())),
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
 }
 
 /// Applies one fault; whether it took effect.

@@ -11,7 +11,7 @@ use std::time::Duration;
 use clap::{Parser, ValueEnum};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
-use world_server::World;
+use protocol::timeouts::Timeouts;
 use world_server::server::{self, ServerConfig, StepMode};
 
 /// Publishes every UAV's camera frames and the ground truth of one setfleet run.
@@ -39,12 +39,21 @@ struct Args {
     /// Wait for an observer's hello and acks (lockstep).
     #[arg(long)]
     wait_observer: bool,
-    /// Longest wait for the agents' hellos, milliseconds.
-    #[arg(long, default_value_t = 10_000)]
-    start_timeout_ms: u64,
-    /// Longest wait for the acks of one step, milliseconds.
-    #[arg(long, default_value_t = 5_000)]
-    ack_timeout_ms: u64,
+    /// The agents' longest wait for their peers' estimates of a step, milliseconds (default:
+    /// the agents' default). The ack wait is derived from it.
+    #[arg(long)]
+    peer_wait_ms: Option<u64>,
+    /// The agents' longest wait for one token holder, milliseconds (default: the agents'
+    /// default). The ack wait is derived from it.
+    #[arg(long)]
+    token_wait_ms: Option<u64>,
+    /// Longest wait for the agents' hellos, milliseconds (default: 30 s).
+    #[arg(long)]
+    start_timeout_ms: Option<u64>,
+    /// Longest wait for the acks of one step, milliseconds (default: derived from the
+    /// agents' waits, so that a healthy agent is never timed out).
+    #[arg(long)]
+    ack_timeout_ms: Option<u64>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -83,31 +92,22 @@ fn main() -> ExitCode {
             speedup: args.speedup,
         },
     };
-    let config = ServerConfig {
-        run_id: args.run_id,
-        expected_agents: args
-            .agents
-            .unwrap_or_else(|| (0..scenario.uavs.count).collect()),
-        mode,
-        wait_for_observer: args.wait_observer,
-        start_timeout: Duration::from_millis(args.start_timeout_ms),
-        ack_timeout: Duration::from_millis(args.ack_timeout_ms),
-        scenario,
-    };
-    if let Err(e) = config.validate() {
-        eprintln!("world-server: {e}");
-        return ExitCode::from(2);
+    let timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms);
+    let mut config = ServerConfig::new(args.run_id, scenario, &timeouts);
+    if let Some(agents) = args.agents {
+        config.expected_agents = agents;
     }
-    let world = match World::new(&config.scenario) {
-        Ok(w) => w,
-        Err(e) => {
-            eprintln!("world-server: bad scenario: {e}");
-            return ExitCode::from(2);
-        }
-    };
+    config.mode = mode;
+    config.wait_for_observer = args.wait_observer;
+    if let Some(ms) = args.start_timeout_ms {
+        config.start_timeout = Duration::from_millis(ms);
+    }
+    if let Some(ms) = args.ack_timeout_ms {
+        config.ack_timeout = Duration::from_millis(ms);
+    }
     // SIGTERM/SIGINT are handled by iceoryx2's wait set; nothing else sets this flag.
     let shutdown = AtomicBool::new(false);
-    match server::run_with_world(config, world, &shutdown) {
+    match server::run(config, &shutdown) {
         Ok(report) => {
             for a in &report.agents {
                 tracing::info!(
@@ -121,8 +121,12 @@ fn main() -> ExitCode {
             }
             ExitCode::SUCCESS
         }
+        Err(e) if e.is_usage() => {
+            eprintln!("world-server: {e}");
+            ExitCode::from(2)
+        }
         Err(e) => {
-            eprintln!("world-server: run failed: {e:#}");
+            eprintln!("world-server: run failed: {e}");
             ExitCode::from(1)
         }
     }
