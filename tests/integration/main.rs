@@ -5,5 +5,6 @@ mod agents;
 mod bench;
 mod cli;
 mod frames;
+mod recovery;
 mod render;
 mod run;

@@ -3,9 +3,10 @@
 //! The harness of setfleet's integration tests, which spawn the real binaries:
 //!
 //! - [`binary`] finds `world-server`, `uav-agent`, `fleet` next to the test executable
-//!   (`target/<profile>/`), building each package once on demand (`$CARGO build --bins -p
-//!   PACKAGE` with the test's profile): `cargo test --workspace` does not build other
-//!   packages' binaries for this package's tests.
+//!   (`target/<profile>/`), building all three once on demand (`$CARGO build --bins -p ...`
+//!   with the test's profile): `cargo test --workspace` does not build other packages'
+//!   binaries for this package's tests. All at once, so that a test never waits for a build
+//!   (behind another test's, on cargo's lock) after it started a process that waits for it.
 //! - [`TestRun`] gives each test a unique [`RunId`] (so its own iceoryx2 prefix) and a temp
 //!   dir; dropping it removes both, including the run's iceoryx2 files.
 //! - [`ChildGuard`] kills (SIGKILL) and reaps its child when dropped, so a failing test never
@@ -44,21 +45,26 @@ pub fn target_dir() -> PathBuf {
         .unwrap_or_default()
 }
 
-/// Path of binary `name` (`world-server`, `fleet`, ...), built first (once per test process,
-/// with the test's profile) if it is missing or older than the test executable. Panics,
-/// failing the test, if it cannot be built.
+/// Path of binary `name` (`world-server`, `fleet`, ...). The first call in a test process
+/// builds every binary (with the test's profile) if any is missing or older than the test
+/// executable. Panics, failing the test, if they cannot be built.
 pub fn binary(name: &str) -> PathBuf {
-    static BUILT: [OnceLock<Result<(), String>>; BINARIES.len()] =
-        [OnceLock::new(), OnceLock::new(), OnceLock::new()];
-    let Some(index) = BINARIES.iter().position(|(bin, _)| *bin == name) else {
+    static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
+    if !BINARIES.iter().any(|(bin, _)| *bin == name) {
         panic!("unknown binary {name:?}");
-    };
-    let path = target_dir().join(name);
-    if is_stale(&path)
-        && let Err(e) = BUILT[index].get_or_init(|| build_package(BINARIES[index].1))
-    {
-        panic!("cannot build {name}: {e}");
     }
+    let built = BUILT.get_or_init(|| {
+        let dir = target_dir();
+        if BINARIES.iter().any(|(bin, _)| is_stale(&dir.join(bin))) {
+            build_packages()
+        } else {
+            Ok(())
+        }
+    });
+    if let Err(e) = built {
+        panic!("cannot build the binaries: {e}");
+    }
+    let path = target_dir().join(name);
     assert!(path.exists(), "binary {} not found", path.display());
     path
 }
@@ -72,7 +78,7 @@ fn is_stale(bin: &Path) -> bool {
     }
 }
 
-fn build_package(package: &str) -> Result<(), String> {
+fn build_packages() -> Result<(), String> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let dir = target_dir();
     let profile = match dir.file_name().and_then(|n| n.to_str()) {
@@ -80,7 +86,10 @@ fn build_package(package: &str) -> Result<(), String> {
         Some(other) => other.to_owned(),
     };
     let mut cmd = Command::new(cargo);
-    cmd.args(["build", "--bins", "--profile", &profile, "-p", package]);
+    cmd.args(["build", "--bins", "--profile", &profile]);
+    for (_, package) in BINARIES {
+        cmd.args(["-p", package]);
+    }
     if let Some(target) = dir.parent() {
         cmd.arg("--target-dir").arg(target);
     }
