@@ -206,6 +206,8 @@ pub struct AgentReport {
     pub checkpoints: u64,
     /// Checkpoints that could not be written.
     pub checkpoint_failures: u64,
+    /// Wall time spent writing checkpoints (encoding, writing, flushing), milliseconds.
+    pub checkpoint_ms: f64,
     /// How the loop ended.
     pub end: Option<EndReason>,
 }
@@ -531,7 +533,10 @@ impl Agent<'_> {
         let Some(file) = &self.checkpoint else {
             return;
         };
-        match file.save(self.estimator.state()) {
+        let started = Instant::now();
+        let saved = file.save(self.estimator.state());
+        self.report.checkpoint_ms += started.elapsed().as_secs_f64() * 1e3;
+        match saved {
             Ok(()) => self.report.checkpoints += 1,
             Err(e) => {
                 self.report.checkpoint_failures += 1;
