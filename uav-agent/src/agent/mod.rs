@@ -33,13 +33,15 @@ use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, NodeScanError, RunNode, scan_nodes, wait_for_wake};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
-use protocol::wire::{AgentStats, GuidanceToken, HELLO_STEP, UavCommand, WireKind};
+use protocol::wire::{
+    AgentStats, DropReason, GuidanceToken, HELLO_STEP, UavCommand, WireKind, unix_now_ns,
+};
 use serde::Serialize;
 
 use crate::estimator::{Estimator, EstimatorConfig, PeerEstimate, message};
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use crate::occupancy::OemStatus;
-use links::{DropReason, Links, check_header};
+use links::Links;
 
 /// How an agent runs.
 #[derive(Clone, Debug)]
@@ -231,7 +233,7 @@ pub fn in_comms_range(
 
 /// A number that differs at each start of an agent process.
 fn incarnation() -> u64 {
-    links::unix_now_ns() ^ ((std::process::id() as u64) << 32)
+    unix_now_ns() ^ ((std::process::id() as u64) << 32)
 }
 
 #[derive(Default)]
@@ -452,8 +454,7 @@ impl Agent<'_> {
                     }
                 };
                 let header = *sample.user_header();
-                let checked = check_header(
-                    &header,
+                let checked = header.check(
                     sample.payload().len(),
                     WireKind::Estimate,
                     self.run_tag,
@@ -530,13 +531,9 @@ impl Agent<'_> {
                 }
             };
             let header = *sample.user_header();
-            if let Err(reason) = check_header(
-                &header,
-                sample.payload().len(),
-                WireKind::Token,
-                self.run_tag,
-                None,
-            ) {
+            if let Err(reason) =
+                header.check(sample.payload().len(), WireKind::Token, self.run_tag, None)
+            {
                 drop(sample);
                 self.drop_message(reason, "token", &format!("from UAV {}", header.sender));
                 continue;
