@@ -464,39 +464,38 @@ fn typical_estimate(scenario: &Scenario, steps: u64) -> anyhow::Result<Vec<u8>> 
 /// Start of every bench run id: `bench-ipc-{pid}-{nanos}`.
 const RUN_ID_PREFIX: &str = "bench-ipc-";
 
-/// The run id of a bench run's file in `/dev/shm`, if the process that made it is gone (a
-/// bench killed with SIGKILL cannot clean up; the next one does).
-fn stale_run(file_name: &str) -> Option<RunId> {
-    let rest = file_name
-        .strip_prefix("iox2_sf_")?
-        .strip_prefix(RUN_ID_PREFIX)?;
-    let mut parts = rest.splitn(3, '-');
-    let pid: libc::pid_t = parts.next()?.parse().ok()?;
-    let nanos: u32 = parts.next()?.split('_').next()?.parse().ok()?;
+/// Whether `run` is a bench run (`bench-ipc-{pid}-{nanos}`) whose process is gone (a bench
+/// killed with SIGKILL cannot clean up; the next one does).
+fn is_stale_bench_run(run: &RunId) -> bool {
+    let Some((pid, nanos)) = run
+        .as_str()
+        .strip_prefix(RUN_ID_PREFIX)
+        .and_then(|rest| rest.split_once('-'))
+    else {
+        return false;
+    };
+    let (Ok(pid), Ok(_)) = (pid.parse::<libc::pid_t>(), nanos.parse::<u32>()) else {
+        return false;
+    };
     // SAFETY: kill with signal 0 only checks whether the process exists.
-    let gone = unsafe { libc::kill(pid, 0) } != 0
-        && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
-    gone.then(|| RunId::new(&format!("{RUN_ID_PREFIX}{pid}-{nanos}")).ok())
-        .flatten()
+    let failed = unsafe { libc::kill(pid, 0) } != 0;
+    failed && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH)
 }
 
 /// Removes what earlier bench runs killed before their cleanup left behind.
 fn remove_stale_runs() {
-    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
-        return;
-    };
-    let stale: std::collections::BTreeSet<String> = entries
-        .filter_map(Result::ok)
-        .filter_map(|e| stale_run(&e.file_name().to_string_lossy()))
-        .map(|r| r.to_string())
-        .collect();
-    for id in stale {
-        if let Ok(run) = RunId::new(&id) {
-            drop(RunFiles {
-                dir: std::env::temp_dir().join(format!("fleet-{run}")),
-                run,
-            });
+    let runs = match pipc::runs_with_files() {
+        Ok(runs) => runs,
+        Err(e) => {
+            tracing::debug!(error = %e, "cannot list the iceoryx2 files of earlier runs");
+            return;
         }
+    };
+    for run in runs.into_iter().filter(is_stale_bench_run) {
+        drop(RunFiles {
+            dir: std::env::temp_dir().join(format!("fleet-{run}")),
+            run,
+        });
     }
 }
 
@@ -696,20 +695,17 @@ mod tests {
     }
 
     #[test]
-    fn only_runs_of_dead_processes_are_stale() {
+    fn only_bench_runs_of_dead_processes_are_stale() {
+        let run = |id: &str| RunId::new(id).unwrap();
         let me = std::process::id();
-        assert_eq!(
-            stale_run(&format!("iox2_sf_bench-ipc-{me}-5_abc.service")),
-            None
-        );
-        assert_eq!(stale_run("iox2_sf_other-run_abc"), None);
-        assert_eq!(stale_run("iox2_sf_bench-ipc-x-5_abc"), None);
+        assert!(!is_stale_bench_run(&run(&format!("bench-ipc-{me}-5"))));
+        assert!(!is_stale_bench_run(&run("other-run")));
+        assert!(!is_stale_bench_run(&run("bench-ipc-x-5")));
+        assert!(!is_stale_bench_run(&run("bench-ipc-2147483632-4-2")));
         // Pid 0x7ffffff0 is above Linux's pid_max, so no process has it.
-        let stale = stale_run("iox2_sf_bench-ipc-2147483632-42_0354a209029e7d094a81.service");
-        assert_eq!(
-            stale.map(|r| r.to_string()),
-            Some("bench-ipc-2147483632-42".into())
-        );
+        assert!(is_stale_bench_run(&run("bench-ipc-2147483632-42")));
+        let file = "iox2_sf_bench-ipc-2147483632-42_0354a209029e7d094a81.service";
+        assert!(pipc::run_of_file(file).is_some_and(|r| is_stale_bench_run(&r)));
     }
 
     #[test]
