@@ -48,7 +48,7 @@ use serde::{Deserialize, Serialize};
 
 use super::estimator::FleetSim;
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use crate::cli::{ScenarioArgs, UsageError};
+use crate::usage::{ScenarioArgs, UsageError};
 use children::ChildSet;
 use roles::Role;
 
