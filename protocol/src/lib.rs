@@ -13,6 +13,8 @@
 //! - [`ipc`]: iceoryx2 nodes and services with the fleet's quality of service, wake-up events,
 //!   cleanup after dead processes.
 //! - [`codec`]: the one place that encodes and decodes variable-size messages.
+//! - [`process`]: how every setfleet binary starts (logging, arguments, dying with its
+//!   parent).
 
 #![warn(missing_docs)]
 
@@ -23,6 +25,7 @@ pub mod frame;
 pub mod grid;
 pub mod ipc;
 pub mod math;
+pub mod process;
 pub mod raster;
 pub mod scenario;
 pub mod service;

@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
 
 use clap::Parser;
+use protocol::process::{self, Role};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use uav_agent::agent::{self, AgentConfig, AgentStartError};
@@ -44,20 +45,9 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    die_with_parent();
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
-    let args = match Args::try_parse() {
+    let args: Args = match process::start(Role::Child) {
         Ok(args) => args,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(e.exit_code().clamp(0, 255) as u8);
-        }
+        Err(code) => return code,
     };
     let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
         Ok(s) => s,
@@ -93,14 +83,5 @@ fn main() -> ExitCode {
                 _ => ExitCode::from(1),
             }
         }
-    }
-}
-
-/// Children of `fleet` die with it (Linux), so no agent outlives an interrupted run.
-fn die_with_parent() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a process attribute; no memory is involved.
-    unsafe {
-        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
     }
 }
