@@ -5,7 +5,9 @@
 //! - [`binary`] finds `world-server`, `uav-agent`, `fleet` next to the test executable
 //!   (`target/<profile>/`), building each package once on demand (`$CARGO build --bins -p
 //!   PACKAGE` with the test's profile): `cargo test --workspace` does not build other
-//!   packages' binaries for this package's tests.
+//!   packages' binaries for this package's tests. The agent is built with its `test-hooks`
+//!   feature (which this crate's dev-dependency on `uav-agent` also turns on), so fault
+//!   injection such as `SETFLEET_TEST_HOLD_TOKEN_MS` works here and nowhere else.
 //! - [`TestRun`] gives each test a unique [`RunId`] (so its own iceoryx2 prefix) and a temp
 //!   dir; dropping it removes both, including the run's iceoryx2 files.
 //! - [`ChildGuard`] kills (SIGKILL) and reaps its child when dropped, so a failing test never
@@ -24,11 +26,12 @@ use std::time::{Duration, Instant};
 use protocol::ipc;
 use protocol::service::RunId;
 
-/// The binaries the tests run and the packages that build them.
-const BINARIES: [(&str, &str); 3] = [
-    ("world-server", "world-server"),
-    ("uav-agent", "uav-agent"),
-    ("fleet", "orchestrator"),
+/// The binaries the tests run, the packages that build them and the features the tests need
+/// (the agent's fault-injection hooks, which shipped builds leave out).
+const BINARIES: [(&str, &str, &str); 3] = [
+    ("world-server", "world-server", ""),
+    ("uav-agent", "uav-agent", "test-hooks"),
+    ("fleet", "orchestrator", ""),
 ];
 
 /// Longest wait for a process that should end on its own.
@@ -45,17 +48,20 @@ pub fn target_dir() -> PathBuf {
 }
 
 /// Path of binary `name` (`world-server`, `fleet`, ...), built first (once per test process,
-/// with the test's profile) if it is missing or older than the test executable. Panics,
-/// failing the test, if it cannot be built.
+/// with the test's profile) if it is missing or older than the test executable, or always
+/// when the tests need it with features (a file's age cannot tell which features it was
+/// built with, and a `cargo build -p uav-agent` leaves the hooks out). Panics, failing the
+/// test, if it cannot be built.
 pub fn binary(name: &str) -> PathBuf {
     static BUILT: [OnceLock<Result<(), String>>; BINARIES.len()] =
         [OnceLock::new(), OnceLock::new(), OnceLock::new()];
-    let Some(index) = BINARIES.iter().position(|(bin, _)| *bin == name) else {
+    let Some(index) = BINARIES.iter().position(|(bin, _, _)| *bin == name) else {
         panic!("unknown binary {name:?}");
     };
+    let (_, package, features) = BINARIES[index];
     let path = target_dir().join(name);
-    if is_stale(&path)
-        && let Err(e) = BUILT[index].get_or_init(|| build_package(BINARIES[index].1))
+    if (!features.is_empty() || is_stale(&path))
+        && let Err(e) = BUILT[index].get_or_init(|| build_package(package, features))
     {
         panic!("cannot build {name}: {e}");
     }
@@ -72,7 +78,9 @@ fn is_stale(bin: &Path) -> bool {
     }
 }
 
-fn build_package(package: &str) -> Result<(), String> {
+/// Builds `package`'s binaries with `features` (the same features `cargo test` unifies in,
+/// so the two builds do not undo each other).
+fn build_package(package: &str, features: &str) -> Result<(), String> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let dir = target_dir();
     let profile = match dir.file_name().and_then(|n| n.to_str()) {
@@ -81,6 +89,9 @@ fn build_package(package: &str) -> Result<(), String> {
     };
     let mut cmd = Command::new(cargo);
     cmd.args(["build", "--bins", "--profile", &profile, "-p", package]);
+    if !features.is_empty() {
+        cmd.args(["--features", features]);
+    }
     if let Some(target) = dir.parent() {
         cmd.arg("--target-dir").arg(target);
     }

@@ -61,7 +61,8 @@ pub struct AgentConfig {
     /// Interval of hellos until the first frame arrives.
     pub hello_interval: Duration,
     /// Fault-injection hook: how long the agent sits on the token before planning, so tests
-    /// can kill a holder mid-turn (0 in normal runs).
+    /// can kill a holder mid-turn (0 in normal runs; only with the `test-hooks` feature).
+    #[cfg(feature = "test-hooks")]
     pub hold_token: Duration,
 }
 
@@ -76,6 +77,7 @@ impl AgentConfig {
             token_wait: Duration::from_secs(3),
             world_timeout: Duration::from_secs(10),
             hello_interval: Duration::from_millis(200),
+            #[cfg(feature = "test-hooks")]
             hold_token: Duration::ZERO,
         }
     }
@@ -560,6 +562,7 @@ impl Agent<'_> {
             match self.ring.turn(round, &live, waited_out) {
                 Turn::Done => return Ok(None),
                 Turn::Decide { others } => {
+                    #[cfg(feature = "test-hooks")]
                     if !self.config.hold_token.is_zero() {
                         tracing::info!(round, hold = ?self.config.hold_token, "holding the token");
                         std::thread::sleep(self.config.hold_token);

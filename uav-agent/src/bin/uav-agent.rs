@@ -14,7 +14,9 @@ use protocol::service::RunId;
 use uav_agent::agent::{self, AgentConfig, AgentStartError};
 
 /// Environment variable (milliseconds) that makes the agent sit on the guidance token before
-/// planning: a test hook to kill a holder mid-turn.
+/// planning: a test hook to kill a holder mid-turn. Only in builds with the `test-hooks`
+/// feature, which the `tests` crate enables; shipped builds ignore the variable.
+#[cfg(feature = "test-hooks")]
 const HOLD_TOKEN_ENV: &str = "SETFLEET_TEST_HOLD_TOKEN_MS";
 
 /// Runs one UAV's estimator, guidance and peer exchange in a setfleet run.
@@ -60,13 +62,8 @@ fn main() -> ExitCode {
     config.peer_wait = std::time::Duration::from_millis(args.peer_wait_ms);
     config.token_wait = std::time::Duration::from_millis(args.token_wait_ms);
     config.world_timeout = std::time::Duration::from_millis(args.world_timeout_ms);
-    // Fault-injection hook for tests (inherited through `fleet run`): sit on the token.
-    if let Some(ms) = std::env::var(HOLD_TOKEN_ENV)
-        .ok()
-        .and_then(|v| v.parse::<u64>().ok())
-    {
-        config.hold_token = std::time::Duration::from_millis(ms);
-    }
+    #[cfg(feature = "test-hooks")]
+    apply_test_hooks(&mut config);
     let shutdown = AtomicBool::new(false);
     match agent::run(config, &shutdown) {
         Ok(report) => {
@@ -83,5 +80,16 @@ fn main() -> ExitCode {
                 _ => ExitCode::from(1),
             }
         }
+    }
+}
+
+/// Fault-injection hooks for tests (inherited through `fleet run`): sit on the token.
+#[cfg(feature = "test-hooks")]
+fn apply_test_hooks(config: &mut AgentConfig) {
+    if let Some(ms) = std::env::var(HOLD_TOKEN_ENV)
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+    {
+        config.hold_token = std::time::Duration::from_millis(ms);
     }
 }
