@@ -17,10 +17,12 @@
 
 #![warn(missing_docs)]
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use protocol::ipc;
@@ -158,18 +160,26 @@ impl Drop for TestRun {
 /// A spawned child that is killed (SIGKILL) and reaped when dropped.
 pub struct ChildGuard {
     child: Option<Child>,
+    /// The threads draining the child's stdout and stderr into buffers.
+    stdout: Option<JoinHandle<Vec<u8>>>,
+    stderr: Option<JoinHandle<Vec<u8>>>,
 }
 
 impl ChildGuard {
-    /// Spawns `cmd` with stdout and stderr captured.
+    /// Spawns `cmd` with stdout and stderr captured. A thread per pipe reads it as the child
+    /// writes, so a child that writes more than a pipe holds (64 KiB) never blocks on it.
     pub fn spawn(cmd: &mut Command) -> ChildGuard {
-        let child = cmd
+        let mut child = cmd
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .unwrap_or_else(|e| panic!("cannot spawn {cmd:?}: {e}"));
-        ChildGuard { child: Some(child) }
+        ChildGuard {
+            stdout: child.stdout.take().map(drain),
+            stderr: child.stderr.take().map(drain),
+            child: Some(child),
+        }
     }
 
     /// The process id.
@@ -196,22 +206,41 @@ impl ChildGuard {
             .is_some_and(|c| matches!(c.try_wait(), Ok(None)))
     }
 
-    /// Waits at most `timeout` for the child to exit; returns its status and output, or
-    /// `None` if it is still running (it is then killed when the guard drops).
+    /// Waits at most `timeout` for the child to exit; returns its status and everything it
+    /// wrote, or `None` if it is still running (it is then killed when the guard drops).
     pub fn wait_timeout(&mut self, timeout: Duration) -> Option<Output> {
         let deadline = Instant::now() + timeout;
-        loop {
+        let status = loop {
             let child = self.child.as_mut()?;
             match child.try_wait() {
-                Ok(Some(_)) => break,
+                Ok(Some(status)) => break status,
                 Ok(None) if Instant::now() < deadline => {
                     std::thread::sleep(Duration::from_millis(20))
                 }
                 _ => return None,
             }
-        }
-        self.child.take()?.wait_with_output().ok()
+        };
+        self.child = None;
+        // The pipes end when the child and whatever inherited them have exited.
+        let collect = |reader: Option<JoinHandle<Vec<u8>>>| {
+            reader.and_then(|r| r.join().ok()).unwrap_or_default()
+        };
+        Some(Output {
+            status,
+            stdout: collect(self.stdout.take()),
+            stderr: collect(self.stderr.take()),
+        })
     }
+}
+
+/// Reads `pipe` to its end on a thread of its own; the thread returns what it read.
+fn drain(mut pipe: impl Read + Send + 'static) -> JoinHandle<Vec<u8>> {
+    std::thread::spawn(move || {
+        let mut buffer = Vec::new();
+        // A read error ends the capture; what was read so far is kept.
+        let _ = pipe.read_to_end(&mut buffer);
+        buffer
+    })
 }
 
 impl Drop for ChildGuard {
@@ -262,5 +291,35 @@ pub fn wait_until(what: &str, timeout: Duration, mut done: impl FnMut() -> bool)
     while !done() {
         assert!(Instant::now() < deadline, "timed out waiting for {what}");
         std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_child_that_fills_its_pipes_is_reaped_with_all_its_output() {
+        const MIB: usize = 1 << 20;
+        // More than a pipe holds on each stream, stdout first: a harness that reads nothing
+        // until the child exits leaves it blocked on its first write.
+        let script = format!("head -c {MIB} /dev/zero; head -c {MIB} /dev/zero | tr '\\0' e >&2");
+        let mut child = ChildGuard::spawn(Command::new("sh").args(["-c", &script]));
+        let out = child
+            .wait_timeout(EXIT_TIMEOUT)
+            .expect("the child exited and was reaped");
+        assert!(out.status.success(), "{:?}", out.status);
+        assert_eq!(out.stdout.len(), MIB);
+        assert!(out.stdout.iter().all(|&b| b == 0));
+        assert_eq!(out.stderr.len(), MIB);
+        assert!(out.stderr.iter().all(|&b| b == b'e'));
+    }
+
+    #[test]
+    fn a_child_still_running_at_the_timeout_is_reported_and_killed() {
+        let mut child = ChildGuard::spawn(Command::new("sleep").arg("60"));
+        assert!(child.wait_timeout(Duration::from_millis(50)).is_none());
+        assert!(child.is_running());
+        drop(child);
     }
 }
