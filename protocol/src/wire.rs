@@ -386,28 +386,32 @@ mod tests {
     #[test]
     fn headers_are_checked_field_by_field() {
         let h = header();
-        let check = |h: WireHeader, len, kind, run, sender| h.check(len, kind, run, sender);
-        assert_eq!(
-            check(h, 9, WireKind::Estimate, 5, Some(2)),
-            Err(DropReason::Length)
-        );
-        assert_eq!(
-            check(h, 10, WireKind::Token, 5, Some(2)),
-            Err(DropReason::Kind)
-        );
-        assert_eq!(
-            check(h, 10, WireKind::Estimate, 6, Some(2)),
-            Err(DropReason::OtherRun)
-        );
-        assert_eq!(
-            check(h, 10, WireKind::Estimate, 5, Some(1)),
-            Err(DropReason::Sender)
-        );
-        let old = WireHeader { version: 0, ..h };
-        assert_eq!(
-            check(old, 10, WireKind::Estimate, 5, Some(2)),
-            Err(DropReason::Version)
-        );
+        let cases = [
+            (
+                WireHeader { version: 0, ..h },
+                10,
+                WireKind::Estimate,
+                5,
+                DropReason::Version,
+            ),
+            (h, 10, WireKind::Estimate, 6, DropReason::OtherRun),
+            (h, 10, WireKind::Token, 5, DropReason::Kind),
+            (
+                WireHeader { sender: 1, ..h },
+                10,
+                WireKind::Estimate,
+                5,
+                DropReason::Sender,
+            ),
+            (h, 9, WireKind::Estimate, 5, DropReason::Length),
+        ];
+        for (header, len, kind, run, reason) in cases {
+            assert_eq!(
+                header.check(len, kind, run, Some(2)),
+                Err(reason),
+                "{reason:?}"
+            );
+        }
     }
 
     #[test]
