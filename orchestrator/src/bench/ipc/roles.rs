@@ -27,11 +27,11 @@ use uav_agent::guidance::ring::ROUND_COMPLETE;
 use uav_agent::guidance::{TokenRing, Turn};
 
 use super::children::{GO, READY, RESULT};
-use super::socket::{self, SocketFrame};
-use super::{
-    Ack, BenchServices, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame,
-    monotonic_ns,
+use super::message::{
+    Ack, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame, monotonic_ns,
 };
+use super::services::BenchServices;
+use super::socket::{self, SocketFrame};
 
 /// Longest wait for a peer's message, an ack or the parent's `go`.
 pub const IDLE: Duration = Duration::from_secs(10);
