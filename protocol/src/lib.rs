@@ -14,6 +14,8 @@
 //!   cleanup after dead processes.
 //! - [`codec`]: the one place that encodes and decodes variable-size messages.
 //! - [`timeouts`]: every bounded wait of a run, derived from one place.
+//! - [`process`]: how every setfleet binary starts (logging, arguments, dying with its
+//!   parent).
 
 #![warn(missing_docs)]
 
@@ -24,6 +26,7 @@ pub mod frame;
 pub mod grid;
 pub mod ipc;
 pub mod math;
+pub mod process;
 pub mod raster;
 pub mod scenario;
 pub mod service;

@@ -35,7 +35,7 @@ use protocol::wire::{HELLO_STEP, MAX_UAVS, ObserverAck, TruthState, UavCommand, 
 use serde::Serialize;
 
 use crate::World;
-use crate::world::WorldBuildError;
+use crate::error::WorldBuildError;
 
 /// How the world steps.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -50,8 +50,8 @@ use protocol::ipc::{
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::wire::{
-    HELLO_STEP, ObserverAck, PROTOCOL_VERSION, TargetTruth, TruthState, UavCommand, WireHeader,
-    WireKind,
+    DropReason, HELLO_STEP, ObserverAck, TargetTruth, TruthState, UavCommand, WireHeader, WireKind,
+    unix_now_ns,
 };
 use tokio::sync::mpsc::UnboundedSender;
 use uav_agent::estimator::EstimatorConfig;
@@ -380,7 +380,7 @@ impl Observer<'_> {
                         );
                         self.truths.push_back(truth);
                     } else {
-                        self.drop_message("truth:other-run");
+                        self.drop_message("truth", DropReason::OtherRun);
                     }
                 }
                 Ok(None) => break,
@@ -396,8 +396,10 @@ impl Observer<'_> {
         self.drain_tokens();
     }
 
-    fn drop_message(&mut self, reason: &str) {
-        *self.report.dropped.entry(reason.to_owned()).or_default() += 1;
+    /// Counts a dropped message as `{what}:{reason}` (e.g. `estimate:other-run`).
+    fn drop_message(&mut self, what: &str, reason: DropReason) {
+        let key = format!("{what}:{}", reason.label());
+        *self.report.dropped.entry(key).or_default() += 1;
     }
 
     fn drain_estimates(&mut self, idx: usize) {
@@ -420,18 +422,16 @@ impl Observer<'_> {
                 header.sent_unix_ns,
                 unix_now_ns(),
             );
-            if let Err(reason) =
-                check_header(&header, len, WireKind::Estimate, self.run_tag, sender)
-            {
+            if let Err(reason) = header.check(len, WireKind::Estimate, self.run_tag, Some(sender)) {
                 drop(sample);
-                self.drop_estimate(sender, &format!("estimate:{reason}"));
+                self.drop_estimate(sender, reason);
                 continue;
             }
             let decoded = ObservedEstimate::decode(sample.payload(), &self.estimator);
             drop(sample);
             match decoded {
                 Ok((e, _)) if e.uav() != sender => {
-                    self.drop_estimate(sender, "estimate:sender");
+                    self.drop_estimate(sender, DropReason::Sender);
                     tracing::warn!(
                         uav = sender,
                         claims = e.uav(),
@@ -449,15 +449,15 @@ impl Observer<'_> {
                 }
                 Err(err) => {
                     tracing::warn!(uav = sender, error = %err, "undecodable estimate dropped");
-                    self.drop_estimate(sender, "estimate:malformed");
+                    self.drop_estimate(sender, DropReason::Malformed);
                 }
             }
         }
     }
 
-    fn drop_estimate(&mut self, uav: u32, reason: &str) {
+    fn drop_estimate(&mut self, uav: u32, reason: DropReason) {
         self.report.agents.entry(uav).or_default().estimates_dropped += 1;
-        self.drop_message(reason);
+        self.drop_message("estimate", reason);
     }
 
     fn drain_tokens(&mut self) {
@@ -473,8 +473,9 @@ impl Observer<'_> {
             let header = *sample.user_header();
             let len = sample.payload().len();
             drop(sample);
-            if header.run_tag != self.run_tag || header.version != PROTOCOL_VERSION {
-                self.drop_message("token:foreign");
+            // Any agent may send the token: the sender is not checked.
+            if let Err(reason) = header.check(len, WireKind::Token, self.run_tag, None) {
+                self.drop_message("token", reason);
                 continue;
             }
             self.report.comms.count_timed(
@@ -641,69 +642,5 @@ impl Observer<'_> {
         }
         tracing::warn!(step = truth.step, "faults were not applied in time");
         0
-    }
-}
-
-/// Checks a received header against what the service carries; the reason when it does not.
-fn check_header(
-    header: &WireHeader,
-    payload_len: usize,
-    kind: WireKind,
-    run_tag: u64,
-    sender: u32,
-) -> Result<(), &'static str> {
-    if header.version != PROTOCOL_VERSION {
-        Err("version")
-    } else if header.run_tag != run_tag {
-        Err("other-run")
-    } else if header.kind != kind as u32 {
-        Err("kind")
-    } else if header.sender != sender {
-        Err("sender")
-    } else if header.len as usize != payload_len {
-        Err("length")
-    } else {
-        Ok(())
-    }
-}
-
-/// Wall-clock time, nanoseconds since the Unix epoch (the clock of `WireHeader::sent_unix_ns`).
-fn unix_now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn headers_are_checked_field_by_field() {
-        let h = WireHeader {
-            version: PROTOCOL_VERSION,
-            kind: WireKind::Estimate as u32,
-            run_tag: 5,
-            sender: 2,
-            len: 10,
-            step: 0,
-            sent_unix_ns: 0,
-        };
-        assert_eq!(check_header(&h, 10, WireKind::Estimate, 5, 2), Ok(()));
-        assert_eq!(check_header(&h, 9, WireKind::Estimate, 5, 2), Err("length"));
-        assert_eq!(check_header(&h, 10, WireKind::Token, 5, 2), Err("kind"));
-        assert_eq!(
-            check_header(&h, 10, WireKind::Estimate, 6, 2),
-            Err("other-run")
-        );
-        assert_eq!(
-            check_header(&h, 10, WireKind::Estimate, 5, 1),
-            Err("sender")
-        );
-        let old = WireHeader { version: 0, ..h };
-        assert_eq!(
-            check_header(&old, 10, WireKind::Estimate, 5, 2),
-            Err("version")
-        );
     }
 }

@@ -10,7 +10,7 @@ use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use world_server::server::StepMode;
 
-use crate::cli::{ScenarioArgs, UsageError};
+use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
 
 /// `fleet run`.

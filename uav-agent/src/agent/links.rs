@@ -11,7 +11,7 @@ use protocol::ipc::{
     EventService, Ipc, IpcOpenError, PubSubService, RunNode, WakeEvent, WirePublisher, WireService,
     WireSubscriber,
 };
-use protocol::wire::{PROTOCOL_VERSION, UavCommand, WireHeader, WireKind};
+use protocol::wire::{UavCommand, WireHeader, WireKind, unix_now_ns};
 
 /// Initial sample size of estimate messages; samples grow when a message is larger.
 const ESTIMATE_INITIAL_BYTES: usize = 64 * 1024;
@@ -144,15 +144,9 @@ impl Links {
             WireKind::Token => (&self.token_out, WakeEvent::Token),
         };
         let mut sample = publisher.loan_slice_uninit(bytes.len())?;
-        *sample.user_header_mut() = WireHeader {
-            version: PROTOCOL_VERSION,
-            kind: kind as u32,
-            run_tag,
-            sender,
-            len: u32::try_from(bytes.len()).map_err(|_| LinkError::TooLong(bytes.len()))?,
-            step,
-            sent_unix_ns: unix_now_ns(),
-        };
+        let len = u32::try_from(bytes.len()).map_err(|_| LinkError::TooLong(bytes.len()))?;
+        *sample.user_header_mut() =
+            WireHeader::new(kind, run_tag, sender, step, len, unix_now_ns());
         sample.write_from_slice(bytes).send()?;
         for peer in &self.peer_wakes {
             notify(peer, event);
@@ -164,63 +158,10 @@ impl Links {
     }
 }
 
-/// Wall-clock time, nanoseconds since the Unix epoch (0 if the clock is before it).
-pub fn unix_now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or(0)
-}
-
 /// Notifies, logging (not failing) when nobody listens or the event cannot be sent: a wake-up
 /// is a hint, the data is in the samples.
 pub fn notify(notifier: &Notifier<Ipc>, event: WakeEvent) {
     if let Err(e) = notifier.notify_with_custom_event_id(event.id()) {
         tracing::debug!(error = ?e, ?event, "notify failed");
     }
-}
-
-/// Why a variable-size message was dropped.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum DropReason {
-    /// Another protocol version.
-    Version,
-    /// Another run.
-    OtherRun,
-    /// Another kind of message than the service carries.
-    Kind,
-    /// The sender field does not match the service it came on.
-    Sender,
-    /// The header's length does not match the payload.
-    Length,
-    /// The payload does not decode or does not validate.
-    Malformed,
-    /// The sender's process was replaced by a newer one (a restart) since.
-    Superseded,
-}
-
-/// Checks a received header against what the service must carry.
-pub fn check_header(
-    header: &WireHeader,
-    payload_len: usize,
-    kind: WireKind,
-    run_tag: u64,
-    sender: Option<u32>,
-) -> Result<(), DropReason> {
-    if header.version != PROTOCOL_VERSION {
-        return Err(DropReason::Version);
-    }
-    if header.run_tag != run_tag {
-        return Err(DropReason::OtherRun);
-    }
-    if header.kind != kind as u32 {
-        return Err(DropReason::Kind);
-    }
-    if sender.is_some_and(|s| s != header.sender) {
-        return Err(DropReason::Sender);
-    }
-    if header.len as usize != payload_len {
-        return Err(DropReason::Length);
-    }
-    Ok(())
 }

@@ -44,7 +44,9 @@ use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
-use protocol::wire::{AgentStats, GuidanceToken, HELLO_STEP, UavCommand, WireKind, uav_bit};
+use protocol::wire::{
+    AgentStats, DropReason, GuidanceToken, HELLO_STEP, UavCommand, WireKind, uav_bit, unix_now_ns,
+};
 use serde::Serialize;
 
 use crate::estimator::{
@@ -53,7 +55,7 @@ use crate::estimator::{
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use crate::occupancy::OemStatus;
 use checkpoint::{CheckpointFile, Owner};
-use links::{DropReason, LinkError, Links, check_header};
+use links::{LinkError, Links};
 
 /// How an agent runs.
 #[derive(Clone, Debug)]
@@ -71,7 +73,8 @@ pub struct AgentConfig {
     /// The file this agent checkpoints its state to and resumes from (none: no checkpoints).
     pub checkpoint: Option<PathBuf>,
     /// Fault-injection hook: how long the agent sits on the token before planning, so tests
-    /// can kill a holder mid-turn (0 in normal runs).
+    /// can kill a holder mid-turn (0 in normal runs; only with the `test-hooks` feature).
+    #[cfg(feature = "test-hooks")]
     pub hold_token: Duration,
 }
 
@@ -86,6 +89,7 @@ impl AgentConfig {
             timeouts,
             world_timeout: timeouts.world_lost(),
             checkpoint: None,
+            #[cfg(feature = "test-hooks")]
             hold_token: Duration::ZERO,
         }
     }
@@ -326,7 +330,7 @@ pub fn in_comms_range(
 /// A number that grows at each start of an agent process (the wall clock in nanoseconds), so
 /// the world and the peers tell a restarted agent from its predecessor and ignore the latter.
 fn incarnation() -> u64 {
-    links::unix_now_ns()
+    unix_now_ns()
 }
 
 #[derive(Default)]
@@ -617,8 +621,7 @@ impl Agent<'_> {
                     }
                 };
                 let header = *sample.user_header();
-                let checked = check_header(
-                    &header,
+                let checked = header.check(
                     sample.payload().len(),
                     WireKind::Estimate,
                     self.run_tag,
@@ -700,13 +703,9 @@ impl Agent<'_> {
                 }
             };
             let header = *sample.user_header();
-            if let Err(reason) = check_header(
-                &header,
-                sample.payload().len(),
-                WireKind::Token,
-                self.run_tag,
-                None,
-            ) {
+            if let Err(reason) =
+                header.check(sample.payload().len(), WireKind::Token, self.run_tag, None)
+            {
                 drop(sample);
                 self.drop_message(reason, "token", &format!("from UAV {}", header.sender));
                 continue;
@@ -733,6 +732,7 @@ impl Agent<'_> {
             match self.ring.turn(round, &live, waited_out) {
                 Turn::Done => return Ok(None),
                 Turn::Decide { others } => {
+                    #[cfg(feature = "test-hooks")]
                     if !self.config.hold_token.is_zero() {
                         tracing::info!(round, hold = ?self.config.hold_token, "holding the token");
                         std::thread::sleep(self.config.hold_token);

@@ -6,17 +6,19 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
-
-use clap::Parser;
-use protocol::scenario::Scenario;
-use protocol::service::RunId;
 use std::time::Duration;
 
+use clap::Parser;
+use protocol::process::{self, Role};
+use protocol::scenario::Scenario;
+use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
 use uav_agent::agent::{self, AgentConfig};
 
 /// Environment variable (milliseconds) that makes the agent sit on the guidance token before
-/// planning: a test hook to kill a holder mid-turn.
+/// planning: a test hook to kill a holder mid-turn. Only in builds with the `test-hooks`
+/// feature, which the `tests` crate enables; shipped builds ignore the variable.
+#[cfg(feature = "test-hooks")]
 const HOLD_TOKEN_ENV: &str = "SETFLEET_TEST_HOLD_TOKEN_MS";
 
 /// Runs one UAV's estimator, guidance and peer exchange in a setfleet run.
@@ -54,20 +56,9 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    die_with_parent();
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
-    let args = match Args::try_parse() {
+    let args: Args = match process::start(Role::Child) {
         Ok(args) => args,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(e.exit_code().clamp(0, 255) as u8);
-        }
+        Err(code) => return code,
     };
     let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
         Ok(s) => s,
@@ -84,13 +75,8 @@ fn main() -> ExitCode {
     config.checkpoint = args
         .checkpoint_dir
         .map(|dir| AgentConfig::checkpoint_in(&dir, args.id));
-    // Fault-injection hook for tests (inherited through `fleet run`): sit on the token.
-    if let Some(ms) = std::env::var(HOLD_TOKEN_ENV)
-        .ok()
-        .and_then(|v| v.parse::<u64>().ok())
-    {
-        config.hold_token = Duration::from_millis(ms);
-    }
+    #[cfg(feature = "test-hooks")]
+    apply_test_hooks(&mut config);
     let shutdown = AtomicBool::new(false);
     match agent::run(config, &shutdown) {
         Ok(report) => {
@@ -107,11 +93,13 @@ fn main() -> ExitCode {
     }
 }
 
-/// Children of `fleet` die with it (Linux), so no agent outlives an interrupted run.
-fn die_with_parent() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a process attribute; no memory is involved.
-    unsafe {
-        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+/// Fault-injection hooks for tests (inherited through `fleet run`): sit on the token.
+#[cfg(feature = "test-hooks")]
+fn apply_test_hooks(config: &mut AgentConfig) {
+    if let Some(ms) = std::env::var(HOLD_TOKEN_ENV)
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+    {
+        config.hold_token = std::time::Duration::from_millis(ms);
     }
 }

@@ -9,6 +9,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use clap::{Parser, ValueEnum};
+use protocol::process::{self, Role};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
@@ -63,21 +64,9 @@ enum Mode {
 }
 
 fn main() -> ExitCode {
-    die_with_parent();
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
-    let args = match Args::try_parse() {
+    let args: Args = match process::start(Role::Child) {
         Ok(args) => args,
-        // clap prints help/version with code 0 and usage errors with code 2.
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(e.exit_code().clamp(0, 255) as u8);
-        }
+        Err(code) => return code,
     };
     let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
         Ok(s) => s,
@@ -129,15 +118,5 @@ fn main() -> ExitCode {
             eprintln!("world-server: run failed: {e}");
             ExitCode::from(1)
         }
-    }
-}
-
-/// Asks the kernel to send SIGTERM when the parent (`fleet`, a test) dies, so no world-server
-/// outlives the run that started it.
-fn die_with_parent() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a process attribute; no memory is involved.
-    unsafe {
-        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
     }
 }
