@@ -255,7 +255,7 @@ impl Sim {
             self.handle(uav, event)?;
         }
         // The round is over: every event has been handled.
-        let mut union: Option<Vec<PlannedView>> = None;
+        let mut agreed: Option<Vec<PlannedView>> = None;
         for i in self.alive() {
             let a = &self.agents[i as usize];
             prop_assert_eq!(
@@ -271,10 +271,10 @@ impl Sim {
                 plans.iter().map(|p| (p.uav, p.clone())).collect();
             prop_assert_eq!(plans.len(), held.len(), "two plans of one UAV: {:?}", plans);
             prop_assert_eq!(&held, &self.made, "UAV {} lost plans of round {}", i, round);
-            if let Some(u) = &union {
+            if let Some(u) = &agreed {
                 prop_assert_eq!(u, &plans, "survivors disagree on the order of the plans");
             }
-            union = Some(plans);
+            agreed = Some(plans);
         }
         Ok(())
     }
