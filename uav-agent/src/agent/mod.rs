@@ -720,16 +720,18 @@ impl Agent<'_> {
     }
 
     /// Takes this agent's turn in the ring for the round starting at step `k`; returns the
-    /// yaw reference to send.
+    /// yaw reference to send. Each holder gets one bounded wait (`token_wait`), started when
+    /// it becomes the holder this agent waits for; a holder silent for longer is skipped for
+    /// the rest of the round and the next one gets a fresh wait.
     fn decide(&mut self, k: u64) -> Result<Option<f64>, AgentError> {
         let round = k / self.guidance.steps_per_period as u64;
-        let deadline = Instant::now() + self.config.timeouts.token_wait;
+        let mut waiting_for: Option<(u32, Instant)> = None;
+        let mut waited_out = false;
         loop {
             self.drain_tokens();
             let mut live = self.awaited_peers();
             live.insert(self.config.uav);
-            let waited_out = Instant::now() >= deadline;
-            match self.ring.turn(round, &live, waited_out) {
+            match self.ring.turn(round, &live) {
                 Turn::Done => return Ok(None),
                 Turn::Decide { others } => {
                     #[cfg(feature = "test-hooks")]
@@ -739,13 +741,30 @@ impl Agent<'_> {
                     }
                     if waited_out {
                         self.report.token_timeouts += 1;
-                        tracing::warn!(round, "token holder silent: deciding without it");
                     }
                     return self.plan_and_pass(round, k, &live, &others).map(Some);
                 }
                 Turn::Wait { holder } => {
                     if self.stopping() || self.end_of_run {
                         return Ok(None);
+                    }
+                    let deadline = match waiting_for {
+                        Some((h, deadline)) if h == holder => deadline,
+                        _ => {
+                            let deadline = Instant::now() + self.config.timeouts.token_wait;
+                            waiting_for = Some((holder, deadline));
+                            deadline
+                        }
+                    };
+                    if Instant::now() >= deadline {
+                        waited_out = true;
+                        tracing::warn!(
+                            round,
+                            holder,
+                            "token holder silent: skipping it this round"
+                        );
+                        self.ring.holder_silent(round, holder);
+                        continue;
                     }
                     self.wait(deadline.min(Instant::now() + WAIT_SLICE));
                     // The holder may have died meanwhile: a dead holder is skipped at once.

@@ -1,20 +1,45 @@
 //! The round-robin guidance token, as a state machine that does no I/O.
 //!
-//! One round per guidance period. The lowest live UAV issues the token, plans first and
-//! passes it; each next UAV in the round's order plans around the plans already in it, appends
-//! its own and passes it on. Every agent sees every token sent (the guidance service is
-//! all-to-all), so each knows how far the round got. A round never stalls the fleet:
-//! - a holder that is known dead is skipped at once: the next live UAV in the order after it
-//!   takes the turn and reissues the token with the plans gathered so far;
-//! - a holder that stays silent longer than the agent's bounded wait is treated the same way
-//!   by whoever waits for it (the caller says so with `waited_out`).
+//! One round per guidance period. Every agent sees every token sent (the guidance service is
+//! all-to-all) and keeps, per round, the MERGE of all the round's tokens it has seen: the
+//! union of their plans (at most one plan per UAV; the first seen is kept, and an agent's own
+//! plan always wins for itself), the round's order, and the holders it gave up on. A token of
+//! an older round is counted in [`TokenRing::stale_tokens`] and dropped; a token of a newer
+//! round replaces the older round. Tokens may therefore arrive late, twice or out of order,
+//! and two UAVs that took the turn concurrently lose none of each other's plans.
 //!
-//! An agent decides at most once per round; a late duplicate token only adds plans.
-//! (docs/design.md says the lowest live UAV reissues a lost token; reissuing by the next live UAV
-//! in the order keeps the round's order and loses no plan, and is the same UAV whenever the
-//! first holder is the one that died.)
+//! The rules of a round:
+//! - **Order.** The first holder issues the token with the UAVs it believes live, ascending;
+//!   a UAV that decides while missing from the order appends itself. Merged orders: the
+//!   longest order seen (ties: the lexicographically smallest), then every other UAV named by
+//!   some token, ascending; then, for this agent's turn, the live UAVs named by no token,
+//!   ascending (late joiners). The result depends only on the tokens seen and the live set.
+//! - **Holder.** One UAV holds the turn, computed by every agent from the same inputs (the
+//!   round's order, the plans gathered, the live set and the silent holders), never read from
+//!   a token: starting after the furthest UAV of the order that has decided (the start of
+//!   the order when none has), the first UAV, wrapping around, that is live, has not decided
+//!   and is not silent. Agents with the same view agree on it, so one live holder decides at
+//!   a time. A holder known dead is skipped at once.
+//! - **Silent holders.** A holder that is alive but does not pass the token (stalled, e.g.
+//!   SIGSTOPped) is skipped once the caller's bounded wait for THAT holder runs out
+//!   ([`TokenRing::holder_silent`]); it is treated as dead for the rest of the round. The
+//!   next live undecided UAV after it takes over, and every other waiter waits for that new
+//!   holder with a fresh bounded wait, so takeovers too happen one at a time. (Waits that
+//!   started at different times may still run out at different times: then two UAVs can
+//!   decide concurrently, and the merge keeps both plans.)
+//! - **Once per round.** An agent decides at most once per round, and not in a round older
+//!   than one it decided in. An agent that comes back or joins late (the round complete
+//!   without it) is still the holder once the others have decided, and decides once, around
+//!   all the plans. An agent asked about a round older than the newest it has seen tokens of
+//!   decides at once around no plans (that round's plans were dropped with it).
+//! - **Passing.** [`TokenRing::pass`] adds this agent's plan to the merge and returns the
+//!   token to publish: every merged plan, the merged order, and as holder the next holder by
+//!   the rule above ([`ROUND_COMPLETE`] when nobody is left), for information only.
+//!
+//! (The first holder is the lowest live UAV; a lost or stalled turn is taken over by the next
+//! live UAV in the order, which keeps the round's order and loses no plan.)
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 
 use protocol::wire::{GuidanceToken, PlannedView};
 
@@ -24,26 +49,125 @@ pub const ROUND_COMPLETE: u32 = u32::MAX;
 /// What the agent should do about the current round.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Turn {
-    /// Someone before this agent has not decided yet: wait (bounded).
+    /// Another UAV holds the turn: wait for it (bounded; see [`TokenRing::holder_silent`]).
     Wait {
         /// The UAV expected to act.
         holder: u32,
     },
     /// Decide now, planning around these plans.
     Decide {
-        /// Plans of the UAVs that decided before.
+        /// Plans of the UAVs that decided before, in the round's order.
         others: Vec<PlannedView>,
     },
     /// This agent already decided this round.
     Done,
 }
 
+/// One round as an agent knows it: the merge of the round's tokens it saw.
+#[derive(Clone, Debug)]
+struct RoundState {
+    round: u64,
+    /// Smallest step carried by the round's tokens.
+    step: Option<u64>,
+    /// The longest order seen (ties: the lexicographically smallest).
+    best_order: Vec<u32>,
+    /// Every UAV named by the order of some token.
+    named: BTreeSet<u32>,
+    /// One plan per UAV that decided.
+    plans: BTreeMap<u32, PlannedView>,
+    /// Holders named by a token, with the smallest issuer of a token naming them.
+    issuers: BTreeMap<u32, u32>,
+    /// Holders this agent gave up waiting for.
+    silent: BTreeSet<u32>,
+}
+
+impl RoundState {
+    fn new(round: u64) -> Self {
+        Self {
+            round,
+            step: None,
+            best_order: Vec::new(),
+            named: BTreeSet::new(),
+            plans: BTreeMap::new(),
+            issuers: BTreeMap::new(),
+            silent: BTreeSet::new(),
+        }
+    }
+
+    fn merge(&mut self, token: GuidanceToken) {
+        self.step = Some(self.step.map_or(token.step, |s| s.min(token.step)));
+        self.named.extend(token.order.iter().copied());
+        let longer = token.order.len() > self.best_order.len()
+            || (token.order.len() == self.best_order.len() && token.order < self.best_order);
+        if longer {
+            self.best_order = token.order;
+        }
+        if token.holder != ROUND_COMPLETE {
+            let issuer = self.issuers.entry(token.holder).or_insert(token.issued_by);
+            *issuer = (*issuer).min(token.issued_by);
+        }
+        for plan in token.plans {
+            self.plans.entry(plan.uav).or_insert(plan);
+        }
+    }
+
+    /// The merged order of the round's tokens.
+    fn order(&self) -> Vec<u32> {
+        let mut order = self.best_order.clone();
+        let rest: Vec<u32> = self
+            .named
+            .iter()
+            .copied()
+            .filter(|u| !self.best_order.contains(u))
+            .collect();
+        order.extend(rest);
+        order
+    }
+
+    /// The plans, in the round's order (UAVs outside it last, ascending).
+    fn plans(&self) -> Vec<PlannedView> {
+        let order = self.order();
+        let mut plans: Vec<&PlannedView> = self.plans.values().collect();
+        plans.sort_by_key(|p| {
+            let at = order.iter().position(|&u| u == p.uav);
+            (at.unwrap_or(usize::MAX), p.uav)
+        });
+        plans.into_iter().cloned().collect()
+    }
+
+    /// The holder seen by `me` with this live set: after the furthest UAV of the order that
+    /// has decided, the first one, wrapping around, that is live (`me` always is), has not
+    /// decided and is not silent. `None` when the round is complete.
+    fn holder(&self, me: u32, live: &BTreeSet<u32>) -> Option<u32> {
+        let mut order = self.order();
+        let late: BTreeSet<u32> = live
+            .iter()
+            .copied()
+            .chain([me])
+            .filter(|u| !order.contains(u))
+            .collect();
+        order.extend(late);
+        let start = order
+            .iter()
+            .rposition(|u| self.plans.contains_key(u))
+            .map_or(0, |p| p + 1);
+        let n = order.len();
+        (0..n).map(|i| order[(start + i) % n]).find(|&u| {
+            (u == me || live.contains(&u))
+                && !self.plans.contains_key(&u)
+                && !self.silent.contains(&u)
+        })
+    }
+}
+
 /// One agent's view of the token ring.
 #[derive(Clone, Debug)]
 pub struct TokenRing {
     me: u32,
+    /// The newest round this agent decided in.
     decided_round: Option<u64>,
-    latest: Option<GuidanceToken>,
+    /// The newest round seen (a token, a turn taken or a silent holder).
+    current: Option<RoundState>,
     /// Tokens dropped because they belonged to an older round.
     pub stale_tokens: u64,
 }
@@ -54,77 +178,88 @@ impl TokenRing {
         Self {
             me,
             decided_round: None,
-            latest: None,
+            current: None,
             stale_tokens: 0,
         }
     }
 
-    /// Takes note of a token seen on the guidance service (including this agent's own).
+    /// The state of `round`, started afresh if it is newer than the current one; `None` if
+    /// it is older.
+    fn state_mut(&mut self, round: u64) -> Option<&mut RoundState> {
+        if self.current.as_ref().is_none_or(|s| s.round < round) {
+            self.current = Some(RoundState::new(round));
+        }
+        self.current.as_mut().filter(|s| s.round == round)
+    }
+
+    /// Whether `round` is older than the newest round seen.
+    fn is_past(&self, round: u64) -> bool {
+        self.current.as_ref().is_some_and(|s| s.round > round)
+    }
+
+    /// Takes note of a token seen on the guidance service (including this agent's own): it is
+    /// merged into its round's state, replaces an older round, or is counted stale and dropped
+    /// if its round is older than the newest seen.
     pub fn observe(&mut self, token: GuidanceToken) {
-        let keep = match &self.latest {
-            None => true,
-            Some(cur) => {
-                token.round > cur.round
-                    || (token.round == cur.round && token.plans.len() >= cur.plans.len())
-            }
-        };
-        if keep {
-            self.latest = Some(token);
-        } else {
-            self.stale_tokens += 1;
+        match self.state_mut(token.round) {
+            Some(state) => state.merge(token),
+            None => self.stale_tokens += 1,
         }
     }
 
-    fn latest_of(&self, round: u64) -> Option<&GuidanceToken> {
-        self.latest.as_ref().filter(|t| t.round == round)
+    /// Records that this agent's bounded wait for `holder` ran out in `round`: `holder` is
+    /// skipped as if dead for the rest of the round. (This agent never skips itself.)
+    pub fn holder_silent(&mut self, round: u64, holder: u32) {
+        let me = self.me;
+        if let Some(state) = self.state_mut(round)
+            && holder != me
+        {
+            state.silent.insert(holder);
+        }
     }
 
-    /// What to do in `round`, given the UAVs this agent believes live (itself included) and
-    /// whether its bounded wait for the holder has run out.
-    pub fn turn(&self, round: u64, live: &BTreeSet<u32>, waited_out: bool) -> Turn {
-        if self.decided_round == Some(round) {
+    /// The plans of `round` gathered so far, merged, in the round's order (empty if `round` is
+    /// not the newest round seen).
+    pub fn plans(&self, round: u64) -> Vec<PlannedView> {
+        self.current
+            .as_ref()
+            .filter(|s| s.round == round)
+            .map(RoundState::plans)
+            .unwrap_or_default()
+    }
+
+    /// What to do in `round`, given the UAVs this agent believes live (itself included).
+    pub fn turn(&self, round: u64, live: &BTreeSet<u32>) -> Turn {
+        if self.decided_round.is_some_and(|d| d >= round) {
             return Turn::Done;
         }
-        let token = self.latest_of(round);
-        let others = token.map(|t| t.plans.clone()).unwrap_or_default();
-        if waited_out {
-            return Turn::Decide { others };
+        if self.is_past(round) {
+            return Turn::Decide { others: Vec::new() };
         }
-        let expected = match token {
-            None => live.iter().copied().next().unwrap_or(self.me),
-            Some(t) => self.next_live_holder(t, live),
+        let fresh;
+        let state = match self.current.as_ref().filter(|s| s.round == round) {
+            Some(s) => s,
+            None => {
+                fresh = RoundState::new(round);
+                &fresh
+            }
         };
-        if expected == self.me {
-            Turn::Decide { others }
-        } else {
-            Turn::Wait { holder: expected }
+        if state.plans.contains_key(&self.me) {
+            // A token already carries this UAV's plan (an earlier incarnation decided).
+            return Turn::Done;
         }
-    }
-
-    /// The holder of `t`, or if it is dead, the next live UAV in the order that has not
-    /// decided; this agent when nobody else qualifies.
-    fn next_live_holder(&self, t: &GuidanceToken, live: &BTreeSet<u32>) -> u32 {
-        if t.holder == ROUND_COMPLETE || live.contains(&t.holder) {
-            // A complete round that this agent has not decided in means it joined late: act.
-            return if t.holder == ROUND_COMPLETE {
-                self.me
-            } else {
-                t.holder
-            };
+        match state.holder(self.me, live) {
+            Some(h) if h != self.me => Turn::Wait { holder: h },
+            _ => Turn::Decide {
+                others: state.plans(),
+            },
         }
-        let decided: BTreeSet<u32> = t.plans.iter().map(|p| p.uav).collect();
-        let start = t.order.iter().position(|&u| u == t.holder).unwrap_or(0);
-        t.order
-            .iter()
-            .skip(start)
-            .copied()
-            .find(|u| live.contains(u) && !decided.contains(u))
-            .unwrap_or(self.me)
     }
 
     /// Records this agent's decision for `round` (started at `step`) and returns the token to
-    /// publish: the round's latest token (or a new one issued by this agent) with `view`
-    /// appended and the next live UAV of the order as holder.
+    /// publish: every plan of the round merged so far plus `view`, the round's order (this
+    /// agent appended if missing) and as holder the next one by the ring's rule
+    /// ([`ROUND_COMPLETE`] if nobody is left).
     pub fn pass(
         &mut self,
         round: u64,
@@ -132,39 +267,41 @@ impl TokenRing {
         live: &BTreeSet<u32>,
         view: PlannedView,
     ) -> GuidanceToken {
-        let mut token = match self.latest_of(round) {
-            Some(t) => t.clone(),
-            None => GuidanceToken {
-                round,
-                step,
-                order: live.iter().copied().collect(),
-                holder: self.me,
-                issued_by: self.me,
-                plans: Vec::new(),
-            },
+        let me = self.me;
+        self.decided_round = Some(self.decided_round.map_or(round, |d| d.max(round)));
+        // A round older than the newest seen is decided alone, without touching the newest.
+        let mut past = RoundState::new(round);
+        let state = match self.state_mut(round) {
+            Some(s) => s,
+            None => &mut past,
         };
-        if token.holder != self.me {
-            // Taking over from a dead or silent holder: this agent reissues the token.
-            token.issued_by = self.me;
+        let mut order = state.order();
+        if order.is_empty() {
+            order = live
+                .iter()
+                .copied()
+                .chain([me])
+                .collect::<BTreeSet<_>>()
+                .into_iter()
+                .collect();
+        } else if !order.contains(&me) {
+            order.push(me);
         }
-        if !token.order.contains(&self.me) {
-            token.order.push(self.me);
+        let issued_by = state.issuers.get(&me).copied().unwrap_or(me);
+        let step = state.step.unwrap_or(step);
+        state.plans.insert(me, view);
+        state.named.extend(order.iter().copied());
+        if order.len() > state.best_order.len() {
+            state.best_order.clone_from(&order);
         }
-        token.plans.retain(|p| p.uav != self.me);
-        token.plans.push(view);
-        let decided: BTreeSet<u32> = token.plans.iter().map(|p| p.uav).collect();
-        let my_pos = token.order.iter().position(|&u| u == self.me).unwrap_or(0);
-        token.holder = token
-            .order
-            .iter()
-            .skip(my_pos + 1)
-            .chain(token.order.iter().take(my_pos))
-            .copied()
-            .find(|u| live.contains(u) && !decided.contains(u))
-            .unwrap_or(ROUND_COMPLETE);
-        self.decided_round = Some(round);
-        self.latest = Some(token.clone());
-        token
+        GuidanceToken {
+            round,
+            step,
+            order,
+            holder: state.holder(me, live).unwrap_or(ROUND_COMPLETE),
+            issued_by,
+            plans: state.plans(),
+        }
     }
 }
 
@@ -183,39 +320,44 @@ mod tests {
         }
     }
 
+    fn views(uavs: &[u32]) -> Vec<PlannedView> {
+        uavs.iter().copied().map(view).collect()
+    }
+
+    fn others(turn: Turn) -> Vec<u32> {
+        match turn {
+            Turn::Decide { others } => others.iter().map(|p| p.uav).collect(),
+            other => panic!("expected to decide, got {other:?}"),
+        }
+    }
+
     #[test]
     fn a_round_visits_every_live_uav_in_order() {
         let all = live(&[0, 1, 2]);
         let mut rings: Vec<TokenRing> = (0..3).map(TokenRing::new).collect();
-        assert_eq!(rings[1].turn(5, &all, false), Turn::Wait { holder: 0 });
-        assert_eq!(
-            rings[0].turn(5, &all, false),
-            Turn::Decide { others: vec![] }
-        );
+        assert_eq!(rings[1].turn(5, &all), Turn::Wait { holder: 0 });
+        assert_eq!(rings[0].turn(5, &all), Turn::Decide { others: vec![] });
         let t = rings[0].pass(5, 30, &all, view(0));
         assert_eq!(t.holder, 1);
+        assert_eq!(t.order, vec![0, 1, 2]);
         for r in &mut rings {
             r.observe(t.clone());
         }
-        assert_eq!(rings[0].turn(5, &all, false), Turn::Done);
-        assert_eq!(rings[2].turn(5, &all, false), Turn::Wait { holder: 1 });
+        assert_eq!(rings[0].turn(5, &all), Turn::Done);
+        assert_eq!(rings[2].turn(5, &all), Turn::Wait { holder: 1 });
         assert_eq!(
-            rings[1].turn(5, &all, false),
+            rings[1].turn(5, &all),
             Turn::Decide {
                 others: vec![view(0)]
             }
         );
         let t = rings[1].pass(5, 30, &all, view(1));
         rings[2].observe(t);
-        let t = match rings[2].turn(5, &all, false) {
-            Turn::Decide { others } => {
-                assert_eq!(others.len(), 2);
-                rings[2].pass(5, 30, &all, view(2))
-            }
-            other => panic!("{other:?}"),
-        };
+        assert_eq!(others(rings[2].turn(5, &all)), vec![0, 1]);
+        let t = rings[2].pass(5, 30, &all, view(2));
         assert_eq!(t.holder, ROUND_COMPLETE);
-        assert_eq!(t.plans.len(), 3);
+        assert_eq!(t.plans, views(&[0, 1, 2]));
+        assert_eq!(rings[2].turn(5, &all), Turn::Done);
     }
 
     #[test]
@@ -227,7 +369,7 @@ mod tests {
         r2.observe(t);
         // UAV 1 died while holding the token.
         assert_eq!(
-            r2.turn(1, &live(&[0, 2]), false),
+            r2.turn(1, &live(&[0, 2])),
             Turn::Decide {
                 others: vec![view(0)]
             }
@@ -240,38 +382,170 @@ mod tests {
     #[test]
     fn a_dead_issuer_is_replaced_by_the_lowest_live() {
         let r1 = TokenRing::new(1);
-        assert_eq!(
-            r1.turn(0, &live(&[1, 2]), false),
-            Turn::Decide { others: vec![] }
-        );
+        assert_eq!(r1.turn(0, &live(&[1, 2])), Turn::Decide { others: vec![] });
         let r2 = TokenRing::new(2);
-        assert_eq!(r2.turn(0, &live(&[1, 2]), false), Turn::Wait { holder: 1 });
+        assert_eq!(r2.turn(0, &live(&[1, 2])), Turn::Wait { holder: 1 });
+    }
+
+    /// Bug 3: every waiter used to decide once its wait ran out.
+    #[test]
+    fn a_silent_holder_has_exactly_one_successor() {
+        let all = live(&[0, 1, 2, 3]);
+        // No token yet and the first holder is stalled.
+        let mut rings: Vec<TokenRing> = (0..4).map(TokenRing::new).collect();
+        for r in &mut rings[1..] {
+            assert_eq!(r.turn(3, &all), Turn::Wait { holder: 0 });
+            r.holder_silent(3, 0);
+        }
+        assert_eq!(rings[1].turn(3, &all), Turn::Decide { others: vec![] });
+        assert_eq!(rings[2].turn(3, &all), Turn::Wait { holder: 1 });
+        assert_eq!(rings[3].turn(3, &all), Turn::Wait { holder: 1 });
+        // Mid-round: 0 passed to 1, which stalls; 2 and 3 both give up on it.
+        let mut rings: Vec<TokenRing> = (0..4).map(TokenRing::new).collect();
+        let t = rings[0].pass(4, 24, &all, view(0));
+        for r in &mut rings[2..] {
+            r.observe(t.clone());
+            assert_eq!(r.turn(4, &all), Turn::Wait { holder: 1 });
+            r.holder_silent(4, 1);
+        }
+        assert_eq!(others(rings[2].turn(4, &all)), vec![0]);
+        assert_eq!(rings[3].turn(4, &all), Turn::Wait { holder: 2 });
+        let t = rings[2].pass(4, 24, &all, view(2));
+        assert_eq!(t.issued_by, 2, "2 took over");
+        assert_eq!(t.holder, 3);
+        rings[3].observe(t);
+        assert_eq!(others(rings[3].turn(4, &all)), vec![0, 2]);
+    }
+
+    /// Bug 1: a same-round token with as many plans used to replace the one kept.
+    #[test]
+    fn concurrent_takeovers_merge() {
+        let all = live(&[0, 1, 2, 3]);
+        let mut r0 = TokenRing::new(0);
+        let t0 = r0.pass(2, 12, &all, view(0));
+        let (mut r1, mut r2) = (TokenRing::new(1), TokenRing::new(2));
+        r1.observe(t0.clone());
+        r2.observe(t0.clone());
+        // 2 gives up on a stalled 1 and takes over; 1 comes back and decides meanwhile.
+        r2.holder_silent(2, 1);
+        assert_eq!(others(r2.turn(2, &all)), vec![0]);
+        let t2 = r2.pass(2, 12, &all, view(2));
+        assert_eq!(others(r1.turn(2, &all)), vec![0]);
+        let t1 = r1.pass(2, 12, &all, view(1));
+        for tokens in [[&t2, &t1], [&t1, &t2]] {
+            let mut r3 = TokenRing::new(3);
+            r3.observe(t0.clone());
+            for t in tokens {
+                r3.observe(t.clone());
+                r3.observe(t.clone());
+            }
+            assert_eq!(r3.plans(2), views(&[0, 1, 2]));
+            assert_eq!(others(r3.turn(2, &all)), vec![0, 1, 2]);
+            let t3 = r3.pass(2, 12, &all, view(3));
+            assert_eq!(t3.plans, views(&[0, 1, 2, 3]));
+            assert_eq!(t3.holder, ROUND_COMPLETE);
+            assert_eq!(r3.stale_tokens, 0);
+        }
+        // The merge does not depend on the order the tokens came in.
+        r0.observe(t1);
+        r0.observe(t2);
+        assert_eq!(r0.plans(2), views(&[0, 1, 2]));
+    }
+
+    /// Bug 2: the search for the next holder after a dead one did not wrap around and fell
+    /// back to the agent itself.
+    #[test]
+    fn the_next_holder_wraps_around_the_order() {
+        let all = live(&[0, 1, 2, 3, 4]);
+        let mut r0 = TokenRing::new(0);
+        let t0 = r0.pass(7, 42, &all, view(0));
+        // 3 gave up on 1 and 2 (stalled) and passed to 4, which then died.
+        let mut r3 = TokenRing::new(3);
+        r3.observe(t0.clone());
+        r3.holder_silent(7, 1);
+        r3.holder_silent(7, 2);
+        assert_eq!(others(r3.turn(7, &all)), vec![0]);
+        let t3 = r3.pass(7, 42, &all, view(3));
+        assert_eq!(t3.holder, 4);
+        // 1 and 2 come back: 1 is next after 4, wrapping around; 2 waits for it.
+        let survivors = live(&[0, 1, 2, 3]);
+        let (mut r1, mut r2) = (TokenRing::new(1), TokenRing::new(2));
+        for r in [&mut r1, &mut r2] {
+            r.observe(t0.clone());
+            r.observe(t3.clone());
+        }
+        assert_eq!(others(r1.turn(7, &survivors)), vec![0, 3]);
+        assert_eq!(r2.turn(7, &survivors), Turn::Wait { holder: 1 });
+        let t1 = r1.pass(7, 42, &survivors, view(1));
+        assert_eq!(t1.holder, 2);
+        r2.observe(t1);
+        assert_eq!(others(r2.turn(7, &survivors)), vec![0, 1, 3]);
     }
 
     #[test]
-    fn a_silent_holder_is_bypassed_after_the_wait() {
-        let r2 = TokenRing::new(2);
-        assert_eq!(
-            r2.turn(3, &live(&[0, 1, 2]), true),
-            Turn::Decide { others: vec![] }
-        );
+    fn a_late_joiner_decides_once_around_all_plans() {
+        let mut r0 = TokenRing::new(0);
+        let t0 = r0.pass(1, 6, &live(&[0, 1]), view(0));
+        let mut r1 = TokenRing::new(1);
+        r1.observe(t0.clone());
+        let t1 = r1.pass(1, 6, &live(&[0, 1]), view(1));
+        assert_eq!(t1.holder, ROUND_COMPLETE);
+        let mut r2 = TokenRing::new(2);
+        r2.observe(t1);
+        r2.observe(t0);
+        let all = live(&[0, 1, 2]);
+        assert_eq!(others(r2.turn(1, &all)), vec![0, 1]);
+        let t2 = r2.pass(1, 6, &all, view(2));
+        assert_eq!(t2.order, vec![0, 1, 2]);
+        assert_eq!(t2.holder, ROUND_COMPLETE);
+        assert_eq!(r2.turn(1, &all), Turn::Done);
+        // A late joiner waits for the holder of a round still under way.
+        let mut r3 = TokenRing::new(3);
+        let t0 = r0.pass(2, 12, &live(&[0, 1]), view(0));
+        r3.observe(t0);
+        assert_eq!(r3.turn(2, &live(&[0, 1, 3])), Turn::Wait { holder: 1 });
     }
 
     #[test]
-    fn old_tokens_do_not_replace_newer_ones() {
+    fn old_tokens_are_stale_and_a_newer_round_replaces_the_older() {
         let mut r = TokenRing::new(3);
         let mut a = TokenRing::new(0);
+        let t1 = a.pass(1, 6, &live(&[0, 3]), view(0));
         let t2 = a.pass(2, 12, &live(&[0, 3]), view(0));
-        let mut b = TokenRing::new(0);
-        let t1 = b.pass(1, 6, &live(&[0, 3]), view(0));
+        r.observe(t1.clone());
+        assert_eq!(r.plans(1), views(&[0]));
         r.observe(t2);
         r.observe(t1);
         assert_eq!(r.stale_tokens, 1);
+        assert_eq!(r.plans(1), vec![]);
         assert_eq!(
-            r.turn(2, &live(&[0, 3]), false),
+            r.turn(2, &live(&[0, 3])),
             Turn::Decide {
                 others: vec![view(0)]
             }
         );
+        // An agent still in round 1 decides at once; its token does not undo round 2.
+        assert_eq!(r.turn(1, &live(&[0, 3])), Turn::Decide { others: vec![] });
+        let late = r.pass(1, 6, &live(&[0, 3]), view(3));
+        assert_eq!(late.round, 1);
+        assert_eq!(r.plans(2), views(&[0]));
+        assert_eq!(r.turn(1, &live(&[0, 3])), Turn::Done);
+    }
+
+    #[test]
+    fn an_agent_decides_at_most_once_per_round() {
+        let all = live(&[0, 1]);
+        let mut r0 = TokenRing::new(0);
+        let t = r0.pass(3, 18, &all, view(0));
+        assert_eq!(r0.turn(3, &all), Turn::Done);
+        assert_eq!(
+            r0.turn(2, &all),
+            Turn::Done,
+            "no going back to an older round"
+        );
+        // A restarted agent whose plan a token already carries does not decide again.
+        let mut again = TokenRing::new(0);
+        again.observe(t);
+        assert_eq!(again.turn(3, &all), Turn::Done);
     }
 }

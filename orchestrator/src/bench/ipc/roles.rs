@@ -620,7 +620,7 @@ fn token(run: &RunId, args: &BenchChildArgs) -> anyhow::Result<ChildReport> {
         let deadline = Instant::now() + IDLE;
         loop {
             drain(&mut ring, &mut report, None)?;
-            match ring.turn(round, &live, false) {
+            match ring.turn(round, &live) {
                 Turn::Decide { .. } => break,
                 Turn::Done => bail!("round {round}: already decided"),
                 Turn::Wait { .. } => wait_event(&waitset, &wakes.listener, deadline, "token")?,
