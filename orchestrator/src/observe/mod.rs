@@ -99,6 +99,20 @@ pub struct StepMetrics {
     pub violations: u32,
 }
 
+impl StepMetrics {
+    /// Whether the estimate of `uav` of this step arrived in time to be measured: the
+    /// agents of [`StepMetrics::agents`] are exactly those whose estimate of the step the
+    /// observer received before it measured the step (a late one is dropped).
+    pub fn estimated_by(&self, uav: u32) -> bool {
+        self.agents.contains_key(&uav)
+    }
+
+    /// The agents whose estimate of this step arrived in time, ascending.
+    pub fn estimated(&self) -> impl Iterator<Item = u32> + '_ {
+        self.agents.keys().copied()
+    }
+}
+
 /// What the observer tells the tokio side.
 #[derive(Debug)]
 pub enum ObserverEvent {
