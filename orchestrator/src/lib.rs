@@ -3,8 +3,10 @@
 //! The `fleet` command, the one a user types. Its library holds every subcommand so tests
 //! and other tools can drive them in-process:
 //!
-//! - [`cli`]: raw clap arguments and their validation into configs (errors name the flag or
-//!   the scenario key and the accepted range: exit code 2).
+//! - [`cli`]: the subcommands; each command's raw clap arguments live with the command and
+//!   validate into its config (errors name the flag or the scenario key and the accepted
+//!   range: exit code 2).
+//! - [`usage`]: what the commands' arguments share: the scenario flags and [`UsageError`].
 //! - [`run`](mod@run): `fleet run`, one run of the fleet as processes; [`observe`] measures it and
 //!   [`results`] writes what it produced.
 //! - [`variant`]: the guidance variants, named sets of scenario settings (`--variant`).
@@ -14,7 +16,7 @@
 //! - [`pictures`]: plotters drawings with the bundled font.
 //!
 //! The library uses `anyhow` for a command's failures (exit code 1): it is the body of the
-//! `fleet` binary, and [`cli::UsageError`] is the one error a caller must tell apart.
+//! `fleet` binary, and [`UsageError`] is the one error a caller must tell apart.
 //!
 //! ```no_run
 //! use clap::Parser;
@@ -34,9 +36,11 @@ pub mod render_cmd;
 pub mod results;
 pub mod run;
 pub mod sweep;
+pub mod usage;
 pub mod variant;
 
-use cli::{BenchKind, Cli, FleetCommand, UsageError};
+use cli::{BenchKind, Cli, FleetCommand};
+use usage::UsageError;
 
 /// How a `fleet` command ended, and its exit code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -124,7 +128,7 @@ fn bad_input(e: UsageError) -> Outcome {
     Outcome::BadInput
 }
 
-fn bench_render(config: &cli::BenchRenderConfig) -> anyhow::Result<()> {
+fn bench_render(config: &bench::render::BenchRenderConfig) -> anyhow::Result<()> {
     let report = bench::render::run(config)?;
     report.print_table(&mut std::io::stdout().lock())?;
     if let Some(path) = &config.out {

@@ -1,14 +1,83 @@
 //! `fleet render`: one UAV's frame at a given time, as pictures and JSON.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
+use clap::Args;
 use protocol::frame::CvsFrame;
+use protocol::scenario::Scenario;
 use serde::Serialize;
 use world_server::World;
 
-use crate::cli::RenderConfig;
 use crate::pictures::frame::{draw_depth, draw_labels};
 use crate::pictures::topview::draw_topview;
+use crate::usage::{ScenarioArgs, UsageError};
+
+/// `fleet render`.
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// The scenario.
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// UAV index.
+    #[arg(long)]
+    pub uav: u32,
+    /// Simulated time of the frame, seconds (rounded down to a CVS step).
+    #[arg(long)]
+    pub time: f64,
+    /// Output directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// A validated `fleet render`.
+#[derive(Debug, Clone)]
+pub struct RenderConfig {
+    /// The scenario.
+    pub scenario: Scenario,
+    /// UAV index, inside the fleet.
+    pub uav: u32,
+    /// CVS step of the frame.
+    pub step: u64,
+    /// Output directory.
+    pub out: PathBuf,
+}
+
+impl RenderArgs {
+    /// Checks the UAV and the time against the scenario.
+    pub fn validate(&self) -> Result<RenderConfig, UsageError> {
+        let scenario = self.scenario.load()?;
+        validate_render(scenario, self.uav, self.time, self.out.clone())
+    }
+}
+
+fn validate_render(
+    scenario: Scenario,
+    uav: u32,
+    time: f64,
+    out: PathBuf,
+) -> Result<RenderConfig, UsageError> {
+    let count = scenario.uavs.count;
+    if uav >= count {
+        return Err(UsageError(format!(
+            "--uav {uav} is out of range; the scenario has UAVs 0..={}",
+            count.saturating_sub(1)
+        )));
+    }
+    if !(time.is_finite() && (0.0..=scenario.duration_s).contains(&time)) {
+        return Err(UsageError(format!(
+            "--time {time} is out of range; accepted: 0 to duration_s = {}",
+            scenario.duration_s
+        )));
+    }
+    // A tiny slack so that a time written as a multiple of T is not rounded one step down.
+    let step = (time / scenario.timing.cvs_period_s + 1e-9).floor() as u64;
+    Ok(RenderConfig {
+        scenario,
+        uav,
+        step,
+        out,
+    })
+}
 
 /// What `frame.json` holds: the header and the boxes (the pixels are in the pictures).
 #[derive(Debug, Serialize)]
@@ -118,4 +187,21 @@ fn write_json(frame: &CvsFrame, path: &Path) -> anyhow::Result<()> {
     };
     std::fs::write(path, serde_json::to_string_pretty(&json)? + "\n")?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn render_time_and_uav_are_checked_against_the_scenario() {
+        let s = Scenario::default();
+        let ok = validate_render(s.clone(), 3, 2.5, PathBuf::new()).unwrap();
+        assert_eq!(ok.step, 5);
+        let e = validate_render(s.clone(), 4, 0.0, PathBuf::new()).unwrap_err();
+        assert!(e.0.contains("--uav"), "{e}");
+        let e = validate_render(s.clone(), 0, 300.5, PathBuf::new()).unwrap_err();
+        assert!(e.0.contains("--time"), "{e}");
+        assert!(validate_render(s, 0, f64::NAN, PathBuf::new()).is_err());
+    }
 }

@@ -23,13 +23,13 @@ use clap::Args;
 use serde::Serialize;
 
 use crate::Outcome;
-use crate::cli::{ScenarioArgs, UsageError};
 use crate::observe::StepMetrics;
 use crate::results::curves::{draw_sweep, mean_sd};
 use crate::results::summary::Summary;
 use crate::results::timeseries;
 use crate::run::config::{RunConfig, new_run_id};
 use crate::run::{execute, outcome, runtime, write_results};
+use crate::usage::{ScenarioArgs, UsageError};
 pub use crate::variant::Variant;
 use world_server::server::StepMode;
 

@@ -74,7 +74,7 @@ impl TargetBox {
 /// Everything about a frame but its pixels.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("setfleet.FrameHeader.v1")]
+#[type_name("setfleet.FrameHeader.v2")]
 pub struct FrameHeader {
     /// Hash of the run id ([`crate::service::RunId::tag`]).
     pub run_tag: u64,
@@ -90,6 +90,10 @@ pub struct FrameHeader {
     pub cols: u32,
     /// Boxes in use.
     pub box_count: u32,
+    /// The agents the world serves at this step, bit `i` for UAV `i`: every one of them got
+    /// this step's frame and is awaited. The same mask goes to every agent, so all agree on
+    /// whose estimates and whose turn in the token ring to wait for.
+    pub served: u32,
     /// Optical centre, world frame.
     pub camera_position: [f64; 3],
     /// Yaw of the optical axis.
@@ -107,7 +111,7 @@ pub struct FrameHeader {
 /// One camera frame: header, boxes, then depth and labels row-major (`r * cols + c`).
 #[repr(C)]
 #[derive(ZeroCopySend)]
-#[type_name("setfleet.CvsFrame.v1")]
+#[type_name("setfleet.CvsFrame.v2")]
 pub struct CvsFrame {
     /// Metadata.
     pub header: FrameHeader,

@@ -8,8 +8,10 @@
 //!
 //! - **One prefix per run.** Each run's files carry [`RunId::file_prefix`] (iceoryx2's
 //!   `global.prefix`), so runs and tests never see each other and a run's leftovers can be
-//!   removed by prefix ([`remove_run_files`]). The configuration starts from iceoryx2's built-in
-//!   defaults, not from a config file on the machine, so every process agrees.
+//!   removed by prefix ([`remove_run_files`]; [`run_of_file`] reads a file's run back, and
+//!   [`runs_with_files`] lists the runs that left some). The configuration starts from
+//!   iceoryx2's built-in defaults, not from a config file on the machine, so every process
+//!   agrees.
 //! - **Nobody ever blocks on a dead peer.** Every publish-subscribe service uses safe overflow:
 //!   a full subscriber buffer drops its oldest sample instead of stalling the publisher. Every
 //!   message carries its run tag and step, so a receiver tells what it missed.
@@ -83,7 +85,8 @@
 //! # }
 //! ```
 
-use std::path::{Path, PathBuf};
+mod run_files;
+
 use std::time::Duration;
 
 use iceoryx2::node::{NodeCreationFailure, NodeListFailure, NodeView};
@@ -95,11 +98,15 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
-use iceoryx2::waitset::{WaitSetCreateError, WaitSetRunError, WaitSetRunResult};
+use iceoryx2::waitset::{
+    WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError, WaitSetRunResult,
+};
 
 use crate::frame::CvsFrame;
 use crate::service::{self, RunId};
 use crate::wire::{MAX_UAVS, ObserverAck, TruthState, UavCommand, WireHeader};
+
+pub use run_files::{belongs_to_run, remove_run_files, run_files, run_of_file, runs_with_files};
 
 /// The iceoryx2 service flavour every setfleet process uses (inter-process, single-threaded
 /// ports).
@@ -220,6 +227,9 @@ pub enum IpcOpenError {
     /// A wait set could not be created.
     #[error("cannot create a wait set: {0}")]
     WaitSet(#[from] WaitSetCreateError),
+    /// A listener could not be attached to a wait set.
+    #[error("cannot wait on a wake-up event: {0}")]
+    Attach(#[from] WaitSetAttachmentError),
 }
 
 /// Why the nodes of a run could not be listed.
@@ -477,7 +487,8 @@ pub struct Wake {
     /// One of them was [`WakeEvent::EndOfRun`].
     pub end_of_run: bool,
     /// The wait set reported SIGINT or SIGTERM (only under
-    /// [`SignalHandlingMode::HandleTerminationRequests`]).
+    /// [`SignalHandlingMode::HandleTerminationRequests`]). Other signals that cut a wait short
+    /// (SIGCONT after SIGSTOP, SIGCHLD) are not interrupts: the wait returns without a wake.
     pub interrupted: bool,
 }
 
@@ -502,10 +513,11 @@ pub fn wait_for_wake(
         },
         timeout,
     )?;
-    wake.interrupted = matches!(
-        result,
-        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
-    );
+    // Only a termination request stops a process. `Interrupt` is any other signal that cut
+    // the wait short: SIGCONT after a SIGSTOP, SIGCHLD, a profiler's. SIGINT and SIGTERM
+    // first show up as one too (under `HandleTerminationRequests` the next wait reports
+    // them), so an interrupted wait is a spurious wake-up and the caller simply waits again.
+    wake.interrupted = result == WaitSetRunResult::TerminationRequest;
     Ok(wake)
 }
 
@@ -542,91 +554,6 @@ pub fn cleanup_stale(run: &RunId) -> Result<Vec<String>, NodeScanError> {
     Ok(scan_nodes(run, true)?.dead)
 }
 
-/// Last resort once every process of `run` ended: deletes the run's prefixed files in
-/// `/dev/shm` and under iceoryx2's root directory. Returns how many files were removed.
-/// Never call it while a process of the run is alive.
-pub fn remove_run_files(run: &RunId) -> std::io::Result<usize> {
-    let prefix = run.file_prefix();
-    let config = Config::default();
-    let root = PathBuf::from(config.global.root_path().to_string());
-    let mut removed = remove_prefixed(Path::new("/dev/shm"), &prefix, false)?;
-    if root.exists() {
-        removed += remove_prefixed(&root, &prefix, true)?;
-    }
-    Ok(removed)
-}
-
-/// Files of a run under `dir` (and its subdirectories when `recursive`).
-pub fn run_files(run: &RunId) -> std::io::Result<Vec<PathBuf>> {
-    let prefix = run.file_prefix();
-    let root = PathBuf::from(Config::default().global.root_path().to_string());
-    let mut out = Vec::new();
-    collect_prefixed(Path::new("/dev/shm"), &prefix, false, &mut out)?;
-    if root.exists() {
-        collect_prefixed(&root, &prefix, true, &mut out)?;
-    }
-    Ok(out)
-}
-
-fn remove_prefixed(dir: &Path, prefix: &str, recursive: bool) -> std::io::Result<usize> {
-    let mut files = Vec::new();
-    collect_prefixed(dir, prefix, recursive, &mut files)?;
-    let mut removed = 0;
-    for f in &files {
-        match std::fs::remove_file(f) {
-            Ok(()) => removed += 1,
-            // Another cleaner got there first.
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(e),
-        }
-    }
-    // iceoryx2 keeps a node's files in a directory named by the node id (no prefix): remove
-    // the ones this left empty, never the root itself.
-    for f in &files {
-        if let Some(parent) = f.parent().filter(|p| *p != dir) {
-            let _ = std::fs::remove_dir(parent);
-        }
-    }
-    Ok(removed)
-}
-
-fn collect_prefixed(
-    dir: &Path,
-    prefix: &str,
-    recursive: bool,
-    out: &mut Vec<PathBuf>,
-) -> std::io::Result<()> {
-    let entries = match std::fs::read_dir(dir) {
-        Ok(e) => e,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(e),
-    };
-    for entry in entries {
-        let entry = entry?;
-        let kind = entry.file_type()?;
-        if kind.is_dir() {
-            if recursive {
-                collect_prefixed(&entry.path(), prefix, true, out)?;
-            }
-        } else if belongs_to_run(&entry.file_name().to_string_lossy(), prefix) {
-            out.push(entry.path());
-        }
-    }
-    Ok(())
-}
-
-/// Whether a file name carries the run's prefix and nothing that would make it another run's.
-/// Run `a` has prefix `iox2_sf_a_`, and run `a_b`'s files start with it too; iceoryx2 puts
-/// after the prefix a long hex hash, a long decimal node id or `node`, so a first segment
-/// that is none of these (`b`) belongs to a longer run id.
-fn belongs_to_run(file_name: &str, prefix: &str) -> bool {
-    let Some(rest) = file_name.strip_prefix(prefix) else {
-        return false;
-    };
-    let first = rest.split(['_', '.']).next().unwrap_or_default();
-    first == "node" || (first.len() >= 20 && first.bytes().all(|b| b.is_ascii_hexdigit()))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -638,23 +565,6 @@ mod tests {
             assert!(e as usize <= WakeEvent::MAX_ID);
         }
         assert_eq!(WakeEvent::from_id(EventId::new(0)), None);
-    }
-
-    #[test]
-    fn run_files_are_told_apart_from_a_longer_run_id() {
-        let a = RunId::new("a").unwrap().file_prefix();
-        let hash = "0354a209029e7d094a819e2d4030ea331e6caaf0";
-        assert!(belongs_to_run(
-            &format!("iox2_sf_a_{hash}_6338__0.data"),
-            &a
-        ));
-        assert!(belongs_to_run(
-            "iox2_sf_a_372037203897852790578837.node_monitor",
-            &a
-        ));
-        assert!(belongs_to_run("iox2_sf_a_node.details", &a));
-        assert!(!belongs_to_run(&format!("iox2_sf_a_b_{hash}.service"), &a));
-        assert!(!belongs_to_run("iox2_other.service", &a));
     }
 
     #[test]
@@ -679,7 +589,7 @@ mod tests {
             assert!(!run_files(&run).unwrap().is_empty());
         }
         remove_run_files(&run).unwrap();
-        assert_eq!(run_files(&run).unwrap(), Vec::<PathBuf>::new());
+        assert_eq!(run_files(&run).unwrap(), Vec::<std::path::PathBuf>::new());
     }
 
     #[test]

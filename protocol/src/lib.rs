@@ -13,6 +13,9 @@
 //! - [`ipc`]: iceoryx2 nodes and services with the fleet's quality of service, wake-up events,
 //!   cleanup after dead processes.
 //! - [`codec`]: the one place that encodes and decodes variable-size messages.
+//! - [`timeouts`]: every bounded wait of a run, derived from one place.
+//! - [`process`]: how every setfleet binary starts (logging, arguments, dying with its
+//!   parent).
 
 #![warn(missing_docs)]
 
@@ -23,7 +26,9 @@ pub mod frame;
 pub mod grid;
 pub mod ipc;
 pub mod math;
+pub mod process;
 pub mod raster;
 pub mod scenario;
 pub mod service;
+pub mod timeouts;
 pub mod wire;

@@ -160,7 +160,8 @@ pub struct Scenario {
 pub struct RegionConfig {
     /// The RoI is `[-h, h]^2`.
     pub half_extent_m: f64,
-    /// Share of the ground under buildings.
+    /// Share of the ground under buildings, `0 <= value <= 0.3` (the paper's city: about
+    /// 0.05). The world also refuses a share its city blocks cannot hold.
     pub building_fraction: f64,
     /// Range of building heights `[lo, hi]`.
     pub building_height_m: [f64; 2],

@@ -16,6 +16,10 @@ use std::fmt;
 
 use iceoryx2::prelude::ServiceName;
 
+/// Start of every setfleet iceoryx2 file name, before the run id (iceoryx2's own files start
+/// with `iox2_`).
+pub const FILE_PREFIX: &str = "iox2_sf_";
+
 /// Why a run id was refused.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 pub enum RunIdError {
@@ -63,9 +67,9 @@ impl RunId {
         })
     }
 
-    /// Prefix of every iceoryx2 file of this run (starts with `iox2_` like iceoryx2's own).
+    /// Prefix of every iceoryx2 file of this run: [`FILE_PREFIX`], the id, `_`.
     pub fn file_prefix(&self) -> String {
-        format!("iox2_sf_{}_", self.0)
+        format!("{FILE_PREFIX}{}_", self.0)
     }
 }
 

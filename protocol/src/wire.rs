@@ -12,7 +12,7 @@ use crate::camera::CameraPose;
 use crate::raster::EncodedSet;
 
 /// Version of every message layout in this module and in [`crate::frame`].
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 /// Targets a truth message can hold.
 pub const TRUTH_MAX_TARGETS: usize = 64;
 /// UAVs a truth message can hold, and the largest fleet.
@@ -24,10 +24,22 @@ pub const MAX_UAVS: usize = 32;
 /// that means "observer ready".
 pub const HELLO_STEP: u64 = u64::MAX;
 
+/// Bit `uav` of a UAV mask (the [`crate::frame::FrameHeader::served`] and
+/// [`ObserverAck::restarted`] fields): bit `i` stands for UAV `i`. 0 for a UAV beyond
+/// [`MAX_UAVS`].
+pub fn uav_bit(uav: u32) -> u32 {
+    1u32.checked_shl(uav).unwrap_or(0)
+}
+
+/// The UAVs of a mask, ascending.
+pub fn uavs_in(mask: u32) -> impl Iterator<Item = u32> {
+    (0..MAX_UAVS as u32).filter(move |&i| mask & uav_bit(i) != 0)
+}
+
 /// Agent -> world: the yaw reference for a UAV, and the lockstep ack of `step`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("setfleet.UavCommand.v1")]
+#[type_name("setfleet.UavCommand.v2")]
 pub struct UavCommand {
     /// [`crate::service::RunId::tag`] of the run.
     pub run_tag: u64,
@@ -39,6 +51,9 @@ pub struct UavCommand {
     pub has_yaw_ref: u32,
     /// Yaw reference, radians.
     pub yaw_ref_rad: f64,
+    /// A number that differs at each start of the agent's process: a command of a new
+    /// incarnation tells the world that the previous one is gone, whatever its node shows.
+    pub incarnation: u64,
 }
 
 /// Observer -> world: the observer has processed the truth (and whatever else it needs) of
@@ -46,12 +61,17 @@ pub struct UavCommand {
 /// [`HELLO_STEP`] means "observer ready".
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ZeroCopySend)]
-#[type_name("setfleet.ObserverAck.v1")]
+#[type_name("setfleet.ObserverAck.v2")]
 pub struct ObserverAck {
     /// [`crate::service::RunId::tag`] of the run.
     pub run_tag: u64,
     /// The step acknowledged.
     pub step: u64,
+    /// Agents restarted at this step, bit `i` for UAV `i`: the world waits for their hellos
+    /// (bounded) before it publishes the next step, so they are served from it.
+    pub restarted: u32,
+    /// Zero.
+    pub reserved: u32,
 }
 
 /// Ground truth of one target.
@@ -166,6 +186,107 @@ pub struct WireHeader {
     pub sent_unix_ns: u64,
 }
 
+impl WireHeader {
+    /// The header of a `len`-byte payload of `kind` that UAV `sender` sends at `step` of the
+    /// run tagged `run_tag`, in this [`PROTOCOL_VERSION`]; `sent_unix_ns` is usually
+    /// [`unix_now_ns`].
+    pub fn new(
+        kind: WireKind,
+        run_tag: u64,
+        sender: u32,
+        step: u64,
+        len: u32,
+        sent_unix_ns: u64,
+    ) -> Self {
+        Self {
+            version: PROTOCOL_VERSION,
+            kind: kind as u32,
+            run_tag,
+            sender,
+            len,
+            step,
+            sent_unix_ns,
+        }
+    }
+
+    /// Checks a received header against what the service carries: this version, the run
+    /// `run_tag`, payloads of `kind`, from `sender` (`None` when any UAV may send, as on the
+    /// guidance service), and a length that matches the `payload_len` bytes received. The
+    /// first field that does not match is the reason to drop the message.
+    pub fn check(
+        &self,
+        payload_len: usize,
+        kind: WireKind,
+        run_tag: u64,
+        sender: Option<u32>,
+    ) -> Result<(), DropReason> {
+        if self.version != PROTOCOL_VERSION {
+            Err(DropReason::Version)
+        } else if self.run_tag != run_tag {
+            Err(DropReason::OtherRun)
+        } else if self.kind != kind as u32 {
+            Err(DropReason::Kind)
+        } else if sender.is_some_and(|s| s != self.sender) {
+            Err(DropReason::Sender)
+        } else if self.len as usize != payload_len {
+            Err(DropReason::Length)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// Why a received variable-size message was dropped: [`WireHeader::check`]'s verdict, or a
+/// payload that does not decode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, thiserror::Error)]
+pub enum DropReason {
+    /// Another protocol version.
+    #[error("another protocol version")]
+    Version,
+    /// Another run.
+    #[error("another run")]
+    OtherRun,
+    /// Another kind of message than the service carries.
+    #[error("another kind of message than the service carries")]
+    Kind,
+    /// The sender field does not match the service it came on.
+    #[error("a sender that does not match the service")]
+    Sender,
+    /// The header's length does not match the payload.
+    #[error("a length that does not match the payload")]
+    Length,
+    /// The payload does not decode or does not validate.
+    #[error("a payload that does not decode")]
+    Malformed,
+    /// The sender's process was replaced by a newer one (a restart) since.
+    #[error("a sender whose process was replaced since")]
+    Superseded,
+}
+
+impl DropReason {
+    /// A short name for counters: `version`, `other-run`, `kind`, `sender`, `length`,
+    /// `malformed`, `superseded`.
+    pub fn label(self) -> &'static str {
+        match self {
+            DropReason::Version => "version",
+            DropReason::OtherRun => "other-run",
+            DropReason::Kind => "kind",
+            DropReason::Sender => "sender",
+            DropReason::Length => "length",
+            DropReason::Superseded => "superseded",
+            DropReason::Malformed => "malformed",
+        }
+    }
+}
+
+/// Wall-clock time, nanoseconds since the Unix epoch (0 if the clock is before it): the clock
+/// of [`WireHeader::sent_unix_ns`], which every process on the machine shares.
+pub fn unix_now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
 /// One target's set in an estimate.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TargetSetMsg {
@@ -266,4 +387,120 @@ pub struct GuidanceToken {
     pub issued_by: u32,
     /// Plans of the UAVs that already decided this round.
     pub plans: Vec<PlannedView>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn header() -> WireHeader {
+        WireHeader::new(WireKind::Estimate, 5, 2, 7, 10, 0)
+    }
+
+    #[test]
+    fn a_new_header_carries_the_version_and_passes_its_own_check() {
+        let h = header();
+        assert_eq!(h.version, PROTOCOL_VERSION);
+        assert_eq!(h.kind, WireKind::Estimate as u32);
+        assert_eq!((h.run_tag, h.sender, h.step, h.len), (5, 2, 7, 10));
+        assert_eq!(h.check(10, WireKind::Estimate, 5, Some(2)), Ok(()));
+        assert_eq!(h.check(10, WireKind::Estimate, 5, None), Ok(()));
+    }
+
+    #[test]
+    fn headers_are_checked_field_by_field() {
+        let h = header();
+        let cases = [
+            (
+                WireHeader { version: 0, ..h },
+                10,
+                WireKind::Estimate,
+                5,
+                DropReason::Version,
+            ),
+            (h, 10, WireKind::Estimate, 6, DropReason::OtherRun),
+            (h, 10, WireKind::Token, 5, DropReason::Kind),
+            (
+                WireHeader { sender: 1, ..h },
+                10,
+                WireKind::Estimate,
+                5,
+                DropReason::Sender,
+            ),
+            (h, 9, WireKind::Estimate, 5, DropReason::Length),
+        ];
+        for (header, len, kind, run, reason) in cases {
+            assert_eq!(
+                header.check(len, kind, run, Some(2)),
+                Err(reason),
+                "{reason:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_first_field_that_differs_is_the_reason() {
+        // Everything wrong: the version is checked first, then the run, the kind, the sender
+        // and the length last.
+        let bad = WireHeader {
+            version: PROTOCOL_VERSION + 1,
+            kind: WireKind::Token as u32,
+            run_tag: 9,
+            sender: 3,
+            len: 1,
+            ..header()
+        };
+        let reasons = [
+            DropReason::Version,
+            DropReason::OtherRun,
+            DropReason::Kind,
+            DropReason::Sender,
+            DropReason::Length,
+        ];
+        let mut h = bad;
+        for (i, reason) in reasons.into_iter().enumerate() {
+            assert_eq!(
+                h.check(10, WireKind::Estimate, 5, Some(2)),
+                Err(reason),
+                "{i}"
+            );
+            match reason {
+                DropReason::Version => h.version = PROTOCOL_VERSION,
+                DropReason::OtherRun => h.run_tag = 5,
+                DropReason::Kind => h.kind = WireKind::Estimate as u32,
+                DropReason::Sender => h.sender = 2,
+                _ => h.len = 10,
+            }
+        }
+        assert_eq!(h.check(10, WireKind::Estimate, 5, Some(2)), Ok(()));
+    }
+
+    #[test]
+    fn drop_reasons_have_distinct_labels() {
+        let all = [
+            DropReason::Version,
+            DropReason::OtherRun,
+            DropReason::Kind,
+            DropReason::Sender,
+            DropReason::Length,
+            DropReason::Malformed,
+            DropReason::Superseded,
+        ];
+        let labels: std::collections::BTreeSet<_> = all.iter().map(|r| r.label()).collect();
+        assert_eq!(labels.len(), all.len());
+        assert_eq!(DropReason::OtherRun.label(), "other-run");
+    }
+
+    #[test]
+    fn masks_hold_every_uav_of_the_largest_fleet_and_nothing_beyond() {
+        let all: Vec<u32> = (0..MAX_UAVS as u32).collect();
+        let mask = all.iter().fold(0, |m, &u| m | uav_bit(u));
+        assert_eq!(mask, u32::MAX);
+        assert_eq!(uavs_in(mask).collect::<Vec<_>>(), all);
+        assert_eq!(uav_bit(MAX_UAVS as u32), 0);
+        assert_eq!(
+            uavs_in(uav_bit(3) | uav_bit(31)).collect::<Vec<_>>(),
+            [3, 31]
+        );
+    }
 }

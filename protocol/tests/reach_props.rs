@@ -51,6 +51,8 @@ enum Event {
     Free(CellBox),
     /// The target is measured inside a rectangle of cells.
     Measure(CellBox),
+    /// The set is saved as its cells and restored ([`ReachSet::from_cells_at`]).
+    Restore,
 }
 
 fn event(n: u32) -> impl Strategy<Value = Event> {
@@ -61,6 +63,7 @@ fn event(n: u32) -> impl Strategy<Value = Event> {
             // Measurements are larger: a few metres around the target.
             Event::Measure(CellBox { x1: (b.x1 + 6).min(n - 1), y1: (b.y1 + 6).min(n - 1), ..b })
         }),
+        1 => Just(Event::Restore),
     ]
 }
 
@@ -112,6 +115,11 @@ proptest! {
                     }
                     set.restrict(&g, &m, 8);
                     dilated.and_assign(&m);
+                }
+                Event::Restore => {
+                    let restored = ReachSet::from_cells_at(&g, set.cells().clone(), clock);
+                    prop_assert_eq!(restored.cells(), set.cells());
+                    set = restored;
                 }
             }
             for ((p, c), k) in pts.iter().zip(&possible) {

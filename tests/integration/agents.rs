@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use iceoryx2::prelude::SignalHandlingMode;
 use protocol::ipc::{RunNode, WakeEvent, WirePublisher, scan_nodes};
-use protocol::wire::{PROTOCOL_VERSION, WireHeader, WireKind};
+use protocol::wire::{WireHeader, WireKind};
 use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, wait_until};
 
 /// A small scenario with a camera large enough to see and identify cars.
@@ -155,15 +155,7 @@ fn bad_peer_messages_are_counted_and_dropped() {
         .notifier_builder()
         .create()
         .unwrap();
-    let good = |kind: WireKind, len: usize| WireHeader {
-        version: PROTOCOL_VERSION,
-        kind: kind as u32,
-        run_tag: t.run.tag(),
-        sender: 1,
-        len: len as u32,
-        step: 3,
-        sent_unix_ns: 0,
-    };
+    let good = |kind: WireKind, len: usize| WireHeader::new(kind, t.run.tag(), 1, 3, len as u32, 0);
     let garbage: Vec<u8> = (0..200u32).map(|i| (i * 37 % 251) as u8).collect();
     for _ in 0..10 {
         // Corrupted / truncated payloads with a valid header.

@@ -69,6 +69,7 @@ fn agent_receives_intact_frames_in_lockstep_and_the_world_cleans_up() {
                 uav: 0,
                 has_yaw_ref: 0,
                 yaw_ref_rad: 0.0,
+                incarnation: 1,
             };
             commands.send_copy(cmd).unwrap();
             let _ = wake_world.notify_with_custom_event_id(WakeEvent::Command.id());

@@ -6,5 +6,6 @@ mod bench;
 mod chaos;
 mod cli;
 mod frames;
+mod recovery;
 mod render;
 mod run;

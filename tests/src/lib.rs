@@ -3,9 +3,13 @@
 //! The harness of setfleet's integration tests, which spawn the real binaries:
 //!
 //! - [`binary`] finds `world-server`, `uav-agent`, `fleet` next to the test executable
-//!   (`target/<profile>/`), building each package once on demand (`$CARGO build --bins -p
-//!   PACKAGE` with the test's profile): `cargo test --workspace` does not build other
-//!   packages' binaries for this package's tests.
+//!   (`target/<profile>/`), building all three once per test process (`$CARGO build --bins
+//!   -p ...` with the test's profile): `cargo test --workspace` does not build other
+//!   packages' binaries for this package's tests. All at once, so that a test never waits for
+//!   a build (behind another test's, on cargo's lock) after it started a process that waits
+//!   for it. The agent is built with its `test-hooks` feature (which this crate's
+//!   dev-dependency on `uav-agent` also turns on), so fault injection such as
+//!   `SETFLEET_TEST_HOLD_TOKEN_MS` works here and nowhere else.
 //! - [`TestRun`] gives each test a unique [`RunId`] (so its own iceoryx2 prefix) and a temp
 //!   dir; dropping it removes both, including the run's iceoryx2 files.
 //! - [`ChildGuard`] kills (SIGKILL) and reaps its child when dropped, so a failing test never
@@ -15,20 +19,23 @@
 
 #![warn(missing_docs)]
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use protocol::ipc;
 use protocol::service::RunId;
 
-/// The binaries the tests run and the packages that build them.
-const BINARIES: [(&str, &str); 3] = [
-    ("world-server", "world-server"),
-    ("uav-agent", "uav-agent"),
-    ("fleet", "orchestrator"),
+/// The binaries the tests run, the packages that build them and the features the tests need
+/// (the agent's fault-injection hooks, which shipped builds leave out).
+const BINARIES: [(&str, &str, &str); 3] = [
+    ("world-server", "world-server", ""),
+    ("uav-agent", "uav-agent", "test-hooks"),
+    ("fleet", "orchestrator", ""),
 ];
 
 /// Longest wait for a process that should end on its own.
@@ -44,35 +51,27 @@ pub fn target_dir() -> PathBuf {
         .unwrap_or_default()
 }
 
-/// Path of binary `name` (`world-server`, `fleet`, ...), built first (once per test process,
-/// with the test's profile) if it is missing or older than the test executable. Panics,
-/// failing the test, if it cannot be built.
+/// Path of binary `name` (`world-server`, `fleet`, ...). The first call in a test process
+/// builds every binary with the test's profile and the features the tests need (always: a
+/// file's age cannot tell which features it was built with; cargo rebuilds only what
+/// changed). Panics, failing the test, if they cannot be built.
 pub fn binary(name: &str) -> PathBuf {
-    static BUILT: [OnceLock<Result<(), String>>; BINARIES.len()] =
-        [OnceLock::new(), OnceLock::new(), OnceLock::new()];
-    let Some(index) = BINARIES.iter().position(|(bin, _)| *bin == name) else {
+    static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
+    if !BINARIES.iter().any(|(bin, _, _)| *bin == name) {
         panic!("unknown binary {name:?}");
-    };
-    let path = target_dir().join(name);
-    if is_stale(&path)
-        && let Err(e) = BUILT[index].get_or_init(|| build_package(BINARIES[index].1))
-    {
-        panic!("cannot build {name}: {e}");
     }
+    let built = BUILT.get_or_init(build_packages);
+    if let Err(e) = built {
+        panic!("cannot build the binaries: {e}");
+    }
+    let path = target_dir().join(name);
     assert!(path.exists(), "binary {} not found", path.display());
     path
 }
 
-fn is_stale(bin: &Path) -> bool {
-    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
-    let exe = std::env::current_exe().ok();
-    match (modified(bin), exe.as_deref().and_then(modified)) {
-        (Some(b), Some(t)) => b < t,
-        _ => true,
-    }
-}
-
-fn build_package(package: &str) -> Result<(), String> {
+/// Builds every package's binaries with their features (the same features `cargo test`
+/// unifies in, so the two builds do not undo each other).
+fn build_packages() -> Result<(), String> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let dir = target_dir();
     let profile = match dir.file_name().and_then(|n| n.to_str()) {
@@ -80,7 +79,13 @@ fn build_package(package: &str) -> Result<(), String> {
         Some(other) => other.to_owned(),
     };
     let mut cmd = Command::new(cargo);
-    cmd.args(["build", "--bins", "--profile", &profile, "-p", package]);
+    cmd.args(["build", "--bins", "--profile", &profile]);
+    for (_, package, features) in BINARIES {
+        cmd.args(["-p", package]);
+        if !features.is_empty() {
+            cmd.args(["--features", &format!("{package}/{features}")]);
+        }
+    }
     if let Some(target) = dir.parent() {
         cmd.arg("--target-dir").arg(target);
     }
@@ -147,18 +152,26 @@ impl Drop for TestRun {
 /// A spawned child that is killed (SIGKILL) and reaped when dropped.
 pub struct ChildGuard {
     child: Option<Child>,
+    /// The threads draining the child's stdout and stderr into buffers.
+    stdout: Option<JoinHandle<Vec<u8>>>,
+    stderr: Option<JoinHandle<Vec<u8>>>,
 }
 
 impl ChildGuard {
-    /// Spawns `cmd` with stdout and stderr captured.
+    /// Spawns `cmd` with stdout and stderr captured. A thread per pipe reads it as the child
+    /// writes, so a child that writes more than a pipe holds (64 KiB) never blocks on it.
     pub fn spawn(cmd: &mut Command) -> ChildGuard {
-        let child = cmd
+        let mut child = cmd
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .unwrap_or_else(|e| panic!("cannot spawn {cmd:?}: {e}"));
-        ChildGuard { child: Some(child) }
+        ChildGuard {
+            stdout: child.stdout.take().map(drain),
+            stderr: child.stderr.take().map(drain),
+            child: Some(child),
+        }
     }
 
     /// The process id.
@@ -185,22 +198,41 @@ impl ChildGuard {
             .is_some_and(|c| matches!(c.try_wait(), Ok(None)))
     }
 
-    /// Waits at most `timeout` for the child to exit; returns its status and output, or
-    /// `None` if it is still running (it is then killed when the guard drops).
+    /// Waits at most `timeout` for the child to exit; returns its status and everything it
+    /// wrote, or `None` if it is still running (it is then killed when the guard drops).
     pub fn wait_timeout(&mut self, timeout: Duration) -> Option<Output> {
         let deadline = Instant::now() + timeout;
-        loop {
+        let status = loop {
             let child = self.child.as_mut()?;
             match child.try_wait() {
-                Ok(Some(_)) => break,
+                Ok(Some(status)) => break status,
                 Ok(None) if Instant::now() < deadline => {
                     std::thread::sleep(Duration::from_millis(20))
                 }
                 _ => return None,
             }
-        }
-        self.child.take()?.wait_with_output().ok()
+        };
+        self.child = None;
+        // The pipes end when the child and whatever inherited them have exited.
+        let collect = |reader: Option<JoinHandle<Vec<u8>>>| {
+            reader.and_then(|r| r.join().ok()).unwrap_or_default()
+        };
+        Some(Output {
+            status,
+            stdout: collect(self.stdout.take()),
+            stderr: collect(self.stderr.take()),
+        })
     }
+}
+
+/// Reads `pipe` to its end on a thread of its own; the thread returns what it read.
+fn drain(mut pipe: impl Read + Send + 'static) -> JoinHandle<Vec<u8>> {
+    std::thread::spawn(move || {
+        let mut buffer = Vec::new();
+        // A read error ends the capture; what was read so far is kept.
+        let _ = pipe.read_to_end(&mut buffer);
+        buffer
+    })
 }
 
 impl Drop for ChildGuard {
@@ -251,5 +283,35 @@ pub fn wait_until(what: &str, timeout: Duration, mut done: impl FnMut() -> bool)
     while !done() {
         assert!(Instant::now() < deadline, "timed out waiting for {what}");
         std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_child_that_fills_its_pipes_is_reaped_with_all_its_output() {
+        const MIB: usize = 1 << 20;
+        // More than a pipe holds on each stream, stdout first: a harness that reads nothing
+        // until the child exits leaves it blocked on its first write.
+        let script = format!("head -c {MIB} /dev/zero; head -c {MIB} /dev/zero | tr '\\0' e >&2");
+        let mut child = ChildGuard::spawn(Command::new("sh").args(["-c", &script]));
+        let out = child
+            .wait_timeout(EXIT_TIMEOUT)
+            .expect("the child exited and was reaped");
+        assert!(out.status.success(), "{:?}", out.status);
+        assert_eq!(out.stdout.len(), MIB);
+        assert!(out.stdout.iter().all(|&b| b == 0));
+        assert_eq!(out.stderr.len(), MIB);
+        assert!(out.stderr.iter().all(|&b| b == b'e'));
+    }
+
+    #[test]
+    fn a_child_still_running_at_the_timeout_is_reported_and_killed() {
+        let mut child = ChildGuard::spawn(Command::new("sleep").arg("60"));
+        assert!(child.wait_timeout(Duration::from_millis(50)).is_none());
+        assert!(child.is_running());
+        drop(child);
     }
 }

@@ -7,7 +7,7 @@ use protocol::flight::{UavState, advance};
 use protocol::math::{Point3, Real};
 use protocol::scenario::Scenario;
 
-use crate::world::WorldBuildError;
+use crate::error::WorldBuildError;
 
 /// Height above the tallest building of the lowest UAV when the scenario gives no altitudes.
 const CLEARANCE_ABOVE_BUILDINGS_M: Real = 20.0;

@@ -8,7 +8,8 @@
 //! - [`traffic`]: the cars, driving on the lanes and keeping their safety distances.
 //! - [`fleet`]: the UAVs, flying [`protocol::flight::advance`] behind a geofence.
 //! - [`render`]: the CVS frame of a camera, with the paper's assumptions built in.
-//! - [`world`]: the [`World`] that holds them and steps them together.
+//! - [`world`]: the [`World`] that holds them and steps them together; [`WorldBuildError`]
+//!   ([`error`]) is why one could not be built.
 //! - [`server`]: the process loop that publishes frames and truth over iceoryx2 and collects
 //!   the agents' commands, in lockstep or in real time.
 //!
@@ -31,6 +32,7 @@
 
 #![warn(missing_docs)]
 
+pub mod error;
 pub mod fleet;
 pub mod render;
 pub mod scene;
@@ -38,4 +40,5 @@ pub mod server;
 pub mod traffic;
 pub mod world;
 
-pub use world::{World, WorldBuildError};
+pub use error::WorldBuildError;
+pub use world::World;

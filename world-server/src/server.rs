@@ -5,8 +5,14 @@
 //! into a loaned sample, sends it and wakes the agent; publishes truth `k` and wakes the
 //! observers; then waits (at most `ack_timeout`) until every live agent has acked `k` (a
 //! [`UavCommand`] with `step == k`) and, if asked, the observer too. An agent that misses the
-//! deadline is reported and skipped (no more frames) until it sends a newer command (it
-//! rejoins). Then yaw references are applied and the world advances.
+//! deadline is reported and skipped (no more frames) until it sends a newer command or a hello
+//! (it rejoins, and is served from the next frame). Then yaw references are applied and the
+//! world advances. Agents the observer reports restarted at step `k`
+//! ([`ObserverAck::restarted`]) are waited for (their hello, bounded) before frame `k + 1`, so
+//! a restarted agent is served from the step after its restart. Every frame carries the mask
+//! of the agents served at its step ([`protocol::frame::FrameHeader::served`]).
+//!
+//! The waits come from [`protocol::timeouts::Timeouts`], like the agents'.
 //!
 //! **Realtime**: the world advances every `T / speedup` of wall time and applies the commands
 //! that arrived meanwhile; nobody is waited for.
@@ -19,16 +25,17 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::Context as _;
 use iceoryx2::prelude::*;
 use protocol::frame::CvsFrame;
-use protocol::ipc::{self, EventService, Ipc, PubSubService, RunNode, WakeEvent};
+use protocol::ipc::{self, EventService, Ipc, IpcOpenError, PubSubService, RunNode, WakeEvent};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
-use protocol::wire::{HELLO_STEP, MAX_UAVS, ObserverAck, TruthState, UavCommand};
+use protocol::timeouts::Timeouts;
+use protocol::wire::{HELLO_STEP, MAX_UAVS, ObserverAck, TruthState, UavCommand, uav_bit, uavs_in};
 use serde::Serialize;
 
 use crate::World;
+use crate::error::WorldBuildError;
 
 /// How the world steps.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -55,10 +62,48 @@ pub struct ServerConfig {
     pub expected_agents: Vec<u32>,
     /// Whether lockstep waits for an observer's hello and acks.
     pub wait_for_observer: bool,
-    /// Longest wait for the hellos at start.
+    /// Longest wait for the hellos at start, and for an agent the observer reports restarted.
     pub start_timeout: Duration,
     /// Longest wait for the acks of one step (lockstep).
     pub ack_timeout: Duration,
+}
+
+impl ServerConfig {
+    /// A lockstep run of every UAV of `scenario`, without observer, with the waits of
+    /// `timeouts`.
+    pub fn new(run_id: RunId, scenario: Scenario, timeouts: &Timeouts) -> ServerConfig {
+        ServerConfig {
+            run_id,
+            expected_agents: (0..scenario.uavs.count).collect(),
+            scenario,
+            mode: StepMode::Lockstep,
+            wait_for_observer: false,
+            start_timeout: timeouts.start(),
+            ack_timeout: timeouts.ack(),
+        }
+    }
+}
+
+/// Why a world-server run failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ServerError {
+    /// The configuration does not fit the scenario.
+    #[error(transparent)]
+    Config(#[from] ServerConfigError),
+    /// The world cannot be built from the scenario.
+    #[error("bad scenario: {0}")]
+    World(#[from] WorldBuildError),
+    /// The run's node, services or ports could not be opened.
+    #[error(transparent)]
+    Open(#[from] IpcOpenError),
+}
+
+impl ServerError {
+    /// Whether the error is the caller's (a configuration or scenario that cannot run), as
+    /// opposed to a failure of the run.
+    pub fn is_usage(&self) -> bool {
+        matches!(self, ServerError::Config(_) | ServerError::World(_))
+    }
 }
 
 /// Why a [`ServerConfig`] was refused.
@@ -140,20 +185,9 @@ pub struct ServerReport {
 }
 
 /// Runs the world of `config` until the last step or `shutdown`.
-pub fn run(config: ServerConfig, shutdown: &AtomicBool) -> anyhow::Result<ServerReport> {
+pub fn run(config: ServerConfig, shutdown: &AtomicBool) -> Result<ServerReport, ServerError> {
     config.validate()?;
     let world = World::new(&config.scenario)?;
-    run_with_world(config, world, shutdown)
-}
-
-/// Like [`run`], with a world already built (so a caller can tell a bad scenario from a failed
-/// run).
-pub fn run_with_world(
-    config: ServerConfig,
-    world: World,
-    shutdown: &AtomicBool,
-) -> anyhow::Result<ServerReport> {
-    config.validate()?;
     let run = config.run_id.clone();
     if let Ok(dead) = ipc::cleanup_stale(&run)
         && !dead.is_empty()
@@ -169,7 +203,7 @@ pub fn run_with_world(
     let waitset = node.waitset()?;
     let _guard = waitset
         .attach_notification(&ports.wake)
-        .context("cannot wait on the world's wake-up event")?;
+        .map_err(IpcOpenError::from)?;
     let mut server = Server {
         run_tag: run.tag(),
         run,
@@ -190,6 +224,9 @@ pub fn run_with_world(
             expected: config.wait_for_observer,
             ..ObserverLink::default()
         },
+        published: None,
+        restarted: 0,
+        start_timeout: config.start_timeout,
         interrupted: false,
         shutdown,
     };
@@ -249,7 +286,7 @@ struct Services {
 }
 
 impl Ports {
-    fn open(node: &RunNode, uavs: u32) -> anyhow::Result<Ports> {
+    fn open(node: &RunNode, uavs: u32) -> Result<Ports, IpcOpenError> {
         let mut services = Services {
             _cvs: Vec::new(),
             _cmd: Vec::new(),
@@ -301,6 +338,8 @@ struct Link {
     /// Newest step whose frame it was sent: only that frame's ack is awaited, so an agent
     /// that (re)joins while a step is out is awaited from the next one.
     sent: Option<u64>,
+    /// The incarnation of the agent's process that last spoke.
+    incarnation: Option<u64>,
     report: AgentReport,
 }
 
@@ -321,6 +360,11 @@ struct Server<'a> {
     waitset: &'a WaitSet<Ipc>,
     agents: Vec<Link>,
     observer: ObserverLink,
+    /// Newest step whose frames went out.
+    published: Option<u64>,
+    /// Agents the observer reported restarted and the world has not heard from since.
+    restarted: u32,
+    start_timeout: Duration,
     interrupted: bool,
     shutdown: &'a AtomicBool,
 }
@@ -375,8 +419,14 @@ impl Server<'_> {
                 return k;
             }
             self.check_liveness();
+            // Late acks and hellos of the previous step: an agent skipped for missing it
+            // rejoins here, and is served frame `k`.
             self.drain_commands(None);
             self.drain_observer(None);
+            self.wait_for_restarted();
+            if self.interrupted {
+                return k;
+            }
             self.publish(k);
             let deadline = Instant::now() + ack_timeout;
             loop {
@@ -469,6 +519,31 @@ impl Server<'_> {
         true
     }
 
+    /// Waits (bounded by the start timeout) until every agent the observer reported restarted
+    /// said hello, so that it is served from the next frame.
+    fn wait_for_restarted(&mut self) {
+        if self.restarted == 0 {
+            return;
+        }
+        let deadline = Instant::now() + self.start_timeout;
+        loop {
+            self.drain_commands(None);
+            let waiting: Vec<u32> = uavs_in(self.restarted)
+                .filter(|&u| !self.agents.get(u as usize).is_some_and(|a| a.live))
+                .collect();
+            if waiting.is_empty() {
+                break;
+            }
+            if !self.wait_until(deadline) {
+                if !self.interrupted {
+                    tracing::warn!(?waiting, "restarted agents did not say hello in time");
+                }
+                break;
+            }
+        }
+        self.restarted = 0;
+    }
+
     /// Marks agents whose process died as not live (and cleans their resources).
     fn check_liveness(&mut self) {
         let scan = match ipc::scan_nodes(&self.run, true) {
@@ -494,7 +569,9 @@ impl Server<'_> {
         }
     }
 
-    /// Reads every pending command; `current` is the step being acked (None before the first).
+    /// Reads every pending command; `current` is the step whose acks are awaited (None between
+    /// steps: a command answering a published step then rejoins a skipped agent, without
+    /// counting as an ack in time).
     fn drain_commands(&mut self, current: Option<u64>) {
         for uav in 0..self.uavs() {
             loop {
@@ -517,6 +594,25 @@ impl Server<'_> {
             link.report.foreign_commands += 1;
             return;
         }
+        if link.incarnation.is_some_and(|i| cmd.incarnation < i) {
+            // Left behind by a process that was replaced.
+            link.report.stale_commands += 1;
+            return;
+        }
+        if link.incarnation != Some(cmd.incarnation) {
+            // A new process of this agent: the previous one is gone, even if its death was not
+            // noticed yet, and whatever it was sent is no longer awaited.
+            if link.incarnation.is_some() {
+                tracing::info!(uav, "agent restarted");
+                if link.live {
+                    link.report.deaths += 1;
+                    link.live = false;
+                }
+            }
+            link.incarnation = Some(cmd.incarnation);
+            link.last_step = None;
+            link.sent = None;
+        }
         if cmd.step == HELLO_STEP {
             if !link.report.said_hello {
                 tracing::info!(uav, "agent said hello");
@@ -529,7 +625,7 @@ impl Server<'_> {
             return;
         }
         let newer = link.last_step.is_none_or(|s| cmd.step > s);
-        let answers_sent_frame = current.is_some_and(|k| cmd.step <= k);
+        let answers_sent_frame = self.published.is_some_and(|k| cmd.step <= k);
         if !newer || !answers_sent_frame {
             link.report.stale_commands += 1;
             return;
@@ -567,10 +663,12 @@ impl Server<'_> {
                 obs.live = true;
                 continue;
             }
-            if obs.last_step.is_none_or(|s| ack.step > s) && current.is_some_and(|k| ack.step <= k)
+            if obs.last_step.is_none_or(|s| ack.step > s)
+                && self.published.is_some_and(|k| ack.step <= k)
             {
                 obs.live = true;
                 obs.last_step = Some(ack.step);
+                self.restarted |= ack.restarted;
                 if current == Some(ack.step) {
                     obs.acks += 1;
                 }
@@ -613,11 +711,15 @@ impl Server<'_> {
     /// Renders and sends frame `k` to every live agent, then truth `k`.
     fn publish(&mut self, k: u64) {
         debug_assert_eq!(self.world.step(), k);
+        self.published = Some(k);
+        let served = (0..self.uavs() as u32)
+            .filter(|&u| self.agents[u as usize].live)
+            .fold(0, |mask, u| mask | uav_bit(u));
         for uav in 0..self.uavs() {
             if !self.agents[uav].live {
                 continue;
             }
-            if let Err(e) = self.send_frame(uav) {
+            if let Err(e) = self.send_frame(uav, served) {
                 tracing::warn!(uav, step = k, error = %e, "cannot send frame");
                 self.agents[uav].report.send_failures += 1;
                 continue;
@@ -643,10 +745,11 @@ impl Server<'_> {
         notify(&self.ports.observer_wake, WakeEvent::Truth);
     }
 
-    fn send_frame(&self, uav: usize) -> anyhow::Result<()> {
+    fn send_frame(&self, uav: usize, served: u32) -> Result<(), FrameSendError> {
         let mut sample = self.ports.cvs[uav].loan_uninit()?;
         let frame = CvsFrame::init_in_place(sample.payload_mut());
         self.world.render(uav, self.run_tag, frame);
+        frame.header.served = served;
         // SAFETY: init_in_place initialised every byte of the payload.
         let sample = unsafe { sample.assume_init() };
         sample.send()?;
@@ -659,6 +762,15 @@ impl Server<'_> {
         }
         notify(&self.ports.observer_wake, WakeEvent::EndOfRun);
     }
+}
+
+/// Why a frame could not go out.
+#[derive(Debug, thiserror::Error)]
+enum FrameSendError {
+    #[error("cannot loan a frame: {0}")]
+    Loan(#[from] iceoryx2::port::LoanError),
+    #[error("cannot send a frame: {0}")]
+    Send(#[from] iceoryx2::port::SendError),
 }
 
 /// Wakes listeners; a listener that is gone is not an error of the world's.

@@ -21,8 +21,8 @@ use protocol::scenario::Scenario;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::error::WorldBuildError;
 use crate::scene::{Axis, Lane, RoadGrid, RoadProfile};
-use crate::world::WorldBuildError;
 
 /// Steps a car waits, blocked, before turning around.
 pub const DEADLOCK_STEPS: u32 = 20;

@@ -2,13 +2,14 @@
 
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
-use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, TargetBox};
+use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, TargetBox};
 use protocol::math::{Point3, Real};
 use protocol::scenario::Scenario;
 use protocol::wire::{MAX_UAVS, TRUTH_MAX_TARGETS, TargetTruth, TruthState, UavTruth};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::error::WorldBuildError;
 use crate::fleet::{Fleet, Uav};
 use crate::render::{self, FrameSpec, ObjectKind, SceneObject};
 use crate::scene::City;
@@ -22,15 +23,6 @@ pub const UAV_BODY_M: [Real; 3] = [1.0, 1.0, 0.3];
 const CITY_STREAM: u64 = 1;
 const TRAFFIC_STREAM: u64 = 2;
 
-/// Why a world could not be built from a scenario.
-#[derive(Debug, thiserror::Error)]
-pub enum WorldBuildError {
-    /// The scenario asks for something the generator cannot place (e.g. more cars than the
-    /// roads hold with their safety distances), or a value the world cannot simulate.
-    #[error("cannot build the world: {0}")]
-    Placement(String),
-}
-
 /// The whole simulated world of one run. Deterministic: the same scenario gives the same
 /// city, the same trajectories and the same frames, bit for bit.
 #[derive(Clone, Debug)]
@@ -43,9 +35,11 @@ pub struct World {
 }
 
 impl World {
-    /// Builds the city, the cars and the fleet from the scenario's seed.
+    /// Builds the city, the cars and the fleet from the scenario's seed, once the scenario is
+    /// found valid ([`Scenario::validate`]: a scenario built in code is held to the ranges of
+    /// one read from a file).
     pub fn new(scenario: &Scenario) -> Result<World, WorldBuildError> {
-        check(scenario)?;
+        scenario.validate()?;
         let mut city_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
         city_rng.set_stream(CITY_STREAM);
         let city = City::generate(scenario, &mut city_rng)?;
@@ -239,82 +233,38 @@ impl World {
     }
 }
 
-/// The values the world cannot simulate, named by key (the scenario loader checks ranges too;
-/// this keeps the world from panicking on a scenario built in code).
-fn check(s: &Scenario) -> Result<(), WorldBuildError> {
-    let bad =
-        |key: &str, range: &str| Err(WorldBuildError::Placement(format!("{key} must be {range}")));
-    let finite_pos = |v: Real| v.is_finite() && v > 0.0;
-    let finite_non_neg = |v: Real| v.is_finite() && v >= 0.0;
-    let r = &s.region;
-    if !finite_pos(r.half_extent_m) {
-        return bad("region.half_extent_m", "finite and > 0");
+#[cfg(test)]
+mod tests {
+    use protocol::scenario::ScenarioError;
+
+    use super::*;
+
+    fn key_refused(scenario: &Scenario) -> Option<String> {
+        match World::new(scenario) {
+            Err(WorldBuildError::Scenario(ScenarioError::OutOfRange { key, .. })) => Some(key),
+            _ => None,
+        }
     }
-    if !(r.building_fraction >= 0.0 && r.building_fraction < 1.0) {
-        return bad("region.building_fraction", "in [0, 1)");
+
+    #[test]
+    fn the_world_refuses_what_the_scenario_loader_refuses() {
+        let mut s = Scenario::default();
+        s.region.building_fraction = 0.5;
+        assert!(s.validate().is_err());
+        assert_eq!(key_refused(&s).as_deref(), Some("region.building_fraction"));
+        let mut s = Scenario::default();
+        s.camera.unknown_fraction = 1.0;
+        assert_eq!(key_refused(&s).as_deref(), Some("camera.unknown_fraction"));
     }
-    let [h_lo, h_hi] = r.building_height_m;
-    if !(finite_pos(h_lo) && h_hi.is_finite() && h_lo <= h_hi) {
-        return bad(
-            "region.building_height_m",
-            "[lo, hi] with 0 < lo <= hi, finite",
-        );
+
+    #[test]
+    fn the_building_fraction_range_ends_where_the_loader_says() {
+        let mut s = Scenario::default();
+        s.region.building_fraction = 0.3;
+        assert!(s.validate().is_ok());
+        let world = World::new(&s).unwrap();
+        assert!((world.scene().building_fraction() - 0.3).abs() < 1e-6);
+        s.region.building_fraction = 0.3 + 1e-9;
+        assert_eq!(key_refused(&s).as_deref(), Some("region.building_fraction"));
     }
-    let t = &s.targets;
-    if t.count as usize > TRUTH_MAX_TARGETS {
-        return bad("targets.count", &format!("at most {TRUTH_MAX_TARGETS}"));
-    }
-    if !finite_non_neg(t.max_speed_mps) {
-        return bad("targets.max_speed_mps", "finite and >= 0");
-    }
-    if !t.size_m.iter().all(|&v| finite_pos(v)) {
-        return bad("targets.size_m", "three finite lengths > 0");
-    }
-    if !(finite_non_neg(t.radius_m) && finite_non_neg(t.safety_distance_m)) {
-        return bad(
-            "targets.radius_m and targets.safety_distance_m",
-            "finite and >= 0",
-        );
-    }
-    let u = &s.uavs;
-    if u.count as usize > MAX_UAVS {
-        return bad("uavs.count", &format!("at most {MAX_UAVS}"));
-    }
-    if !(finite_non_neg(u.speed_mps) && finite_non_neg(u.max_yaw_rate_rps)) {
-        return bad(
-            "uavs.speed_mps and uavs.max_yaw_rate_rps",
-            "finite and >= 0",
-        );
-    }
-    if !u.altitudes_m.iter().all(|&z| finite_pos(z)) {
-        return bad("uavs.altitudes_m", "finite altitudes > 0");
-    }
-    let c = &s.camera;
-    let pixels = c.rows as usize * c.cols as usize;
-    if pixels == 0 || pixels > FRAME_MAX_PIXELS {
-        return bad(
-            "camera.rows x camera.cols",
-            &format!("between 1 and {FRAME_MAX_PIXELS} pixels"),
-        );
-    }
-    if !(c.aperture_rad > 0.0 && c.aperture_rad < std::f64::consts::PI) {
-        return bad("camera.aperture_rad", "in (0, pi)");
-    }
-    if !c.tilt_rad.is_finite() {
-        return bad("camera.tilt_rad", "finite");
-    }
-    let [w_lo, w_hi] = c.depth_noise;
-    if !(w_lo > -1.0 && w_lo <= w_hi && w_hi.is_finite()) {
-        return bad(
-            "camera.depth_noise",
-            "[w_lo, w_hi] with -1 < w_lo <= w_hi, finite",
-        );
-    }
-    if !(c.unknown_fraction >= 0.0 && c.unknown_fraction <= 1.0) {
-        return bad("camera.unknown_fraction", "in [0, 1]");
-    }
-    if !finite_pos(s.timing.cvs_period_s) {
-        return bad("timing.cvs_period_s", "finite and > 0");
-    }
-    Ok(())
 }

@@ -25,7 +25,7 @@ use uav_agent::occupancy::OemStatus;
 use world_server::World;
 
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use crate::cli::{ScenarioArgs, UsageError};
+use crate::usage::{ScenarioArgs, UsageError};
 
 /// Run tag stamped on the frames of the in-process simulation.
 const SIM_RUN_TAG: u64 = 1;

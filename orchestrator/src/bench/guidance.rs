@@ -23,7 +23,7 @@ use uav_agent::guidance::{self, GuidanceParams};
 
 use super::estimator::{FleetSim, PlanningState};
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use crate::cli::{ScenarioArgs, UsageError};
+use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
 
 /// Most plans of other UAVs put in the token.

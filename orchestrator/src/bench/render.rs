@@ -1,17 +1,72 @@
 //! `fleet bench render`: frames of the default city rendered per thread count.
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::time::Instant;
 
+use clap::Args;
 use protocol::frame::CvsFrame;
+use protocol::scenario::Scenario;
 use world_server::World;
 use world_server::render::rays_per_frame;
 
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use crate::cli::BenchRenderConfig;
+use crate::usage::{ScenarioArgs, UsageError};
 
 /// Frames rendered before measuring (caches, page faults, the pool's threads).
 const WARM_UP_FRAMES: u32 = 5;
+
+/// `fleet bench render`.
+#[derive(Debug, Args)]
+pub struct BenchRenderArgs {
+    /// The scenario (default: the paper's city and camera).
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// Frames measured per thread count, after warm-up.
+    #[arg(long, default_value_t = 60)]
+    pub frames: u32,
+    /// Thread counts to measure, comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1, 2])]
+    pub threads: Vec<usize>,
+    /// JSON report file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// A validated `fleet bench render`.
+#[derive(Debug, Clone)]
+pub struct BenchRenderConfig {
+    /// The scenario.
+    pub scenario: Scenario,
+    /// Frames per thread count.
+    pub frames: u32,
+    /// Thread counts.
+    pub threads: Vec<usize>,
+    /// JSON report file.
+    pub out: Option<PathBuf>,
+}
+
+impl BenchRenderArgs {
+    /// Checks the counts.
+    pub fn validate(&self) -> Result<BenchRenderConfig, UsageError> {
+        let scenario = self.scenario.load()?;
+        if self.frames == 0 {
+            return Err(UsageError("--frames must be at least 1".into()));
+        }
+        if self.threads.is_empty() || self.threads.iter().any(|&t| t == 0 || t > 256) {
+            return Err(UsageError(format!(
+                "--threads {:?}: each thread count must be 1 to 256",
+                self.threads
+            )));
+        }
+        Ok(BenchRenderConfig {
+            scenario,
+            frames: self.frames,
+            threads: self.threads.clone(),
+            out: self.out.clone(),
+        })
+    }
+}
 
 /// Renders `config.frames` frames per thread count after a warm-up, cycling through the UAVs
 /// and advancing the world between frames so the views vary, and reports the frame times.

@@ -50,8 +50,8 @@ use protocol::ipc::{
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::wire::{
-    HELLO_STEP, ObserverAck, PROTOCOL_VERSION, TargetTruth, TruthState, UavCommand, WireHeader,
-    WireKind,
+    DropReason, HELLO_STEP, ObserverAck, TargetTruth, TruthState, UavCommand, WireHeader, WireKind,
+    unix_now_ns,
 };
 use tokio::sync::mpsc::UnboundedSender;
 use uav_agent::estimator::EstimatorConfig;
@@ -125,8 +125,9 @@ pub enum ObserverEvent {
         step: u64,
         /// Its simulated time.
         time_s: f64,
-        /// Signalled once the faults are applied.
-        done: std::sync::mpsc::Sender<()>,
+        /// Signalled once the faults are applied, with the mask of the agents restarted (bit
+        /// `i` for UAV `i`): the world waits for their hellos before the next step.
+        done: std::sync::mpsc::Sender<u32>,
     },
 }
 
@@ -329,7 +330,7 @@ impl Observer<'_> {
             if self.first_truth.is_none()
                 && last_hello.is_none_or(|t| t.elapsed() >= HELLO_INTERVAL)
             {
-                self.send_ack(HELLO_STEP)?;
+                self.send_ack(HELLO_STEP, 0)?;
                 last_hello = Some(Instant::now());
             }
             self.drain();
@@ -356,12 +357,14 @@ impl Observer<'_> {
         }
     }
 
-    fn send_ack(&self, step: u64) -> anyhow::Result<()> {
+    fn send_ack(&self, step: u64, restarted: u32) -> anyhow::Result<()> {
         self.ports
             .ack
             .send_copy(ObserverAck {
                 run_tag: self.run_tag,
                 step,
+                restarted,
+                reserved: 0,
             })
             .context("cannot send the observer's ack")?;
         if let Err(e) = self
@@ -391,7 +394,7 @@ impl Observer<'_> {
                         );
                         self.truths.push_back(truth);
                     } else {
-                        self.drop_message("truth:other-run");
+                        self.drop_message("truth", DropReason::OtherRun);
                     }
                 }
                 Ok(None) => break,
@@ -407,8 +410,10 @@ impl Observer<'_> {
         self.drain_tokens();
     }
 
-    fn drop_message(&mut self, reason: &str) {
-        *self.report.dropped.entry(reason.to_owned()).or_default() += 1;
+    /// Counts a dropped message as `{what}:{reason}` (e.g. `estimate:other-run`).
+    fn drop_message(&mut self, what: &str, reason: DropReason) {
+        let key = format!("{what}:{}", reason.label());
+        *self.report.dropped.entry(key).or_default() += 1;
     }
 
     fn drain_estimates(&mut self, idx: usize) {
@@ -431,18 +436,16 @@ impl Observer<'_> {
                 header.sent_unix_ns,
                 unix_now_ns(),
             );
-            if let Err(reason) =
-                check_header(&header, len, WireKind::Estimate, self.run_tag, sender)
-            {
+            if let Err(reason) = header.check(len, WireKind::Estimate, self.run_tag, Some(sender)) {
                 drop(sample);
-                self.drop_estimate(sender, &format!("estimate:{reason}"));
+                self.drop_estimate(sender, reason);
                 continue;
             }
             let decoded = ObservedEstimate::decode(sample.payload(), &self.estimator);
             drop(sample);
             match decoded {
                 Ok((e, _)) if e.uav() != sender => {
-                    self.drop_estimate(sender, "estimate:sender");
+                    self.drop_estimate(sender, DropReason::Sender);
                     tracing::warn!(
                         uav = sender,
                         claims = e.uav(),
@@ -460,15 +463,15 @@ impl Observer<'_> {
                 }
                 Err(err) => {
                     tracing::warn!(uav = sender, error = %err, "undecodable estimate dropped");
-                    self.drop_estimate(sender, "estimate:malformed");
+                    self.drop_estimate(sender, DropReason::Malformed);
                 }
             }
         }
     }
 
-    fn drop_estimate(&mut self, uav: u32, reason: &str) {
+    fn drop_estimate(&mut self, uav: u32, reason: DropReason) {
         self.report.agents.entry(uav).or_default().estimates_dropped += 1;
-        self.drop_message(reason);
+        self.drop_message("estimate", reason);
     }
 
     fn drain_tokens(&mut self) {
@@ -484,8 +487,9 @@ impl Observer<'_> {
             let header = *sample.user_header();
             let len = sample.payload().len();
             drop(sample);
-            if header.run_tag != self.run_tag || header.version != PROTOCOL_VERSION {
-                self.drop_message("token:foreign");
+            // Any agent may send the token: the sender is not checked.
+            if let Err(reason) = header.check(len, WireKind::Token, self.run_tag, None) {
+                self.drop_message("token", reason);
                 continue;
             }
             self.report.comms.count_timed(
@@ -533,8 +537,8 @@ impl Observer<'_> {
         }
         // Faults first (a killed agent is gone before frame k + 1), then the ack, so the world
         // renders the next step while this one is measured.
-        self.apply_faults(truth);
-        self.send_ack(k)?;
+        let restarted = self.apply_faults(truth);
+        self.send_ack(k, restarted)?;
         let step = self.measure(truth, live_agents);
         self.report.steps += 1;
         if let Some(t) = self.first_truth {
@@ -621,8 +625,8 @@ impl Observer<'_> {
     }
 
     /// Lets the orchestrator apply the faults due by this step's time before the step is
-    /// acked.
-    fn apply_faults(&mut self, truth: &TruthState) {
+    /// acked; returns the mask of the agents it restarted.
+    fn apply_faults(&mut self, truth: &TruthState) -> u32 {
         let times = &self.config.fault_times;
         let mut due = false;
         // A tiny slack so that a time written as a multiple of T is reached at that step.
@@ -631,7 +635,7 @@ impl Observer<'_> {
             due = true;
         }
         if !due {
-            return;
+            return 0;
         }
         let (done, applied) = std::sync::mpsc::channel();
         let event = ObserverEvent::FaultsDue {
@@ -640,79 +644,17 @@ impl Observer<'_> {
             done,
         };
         if self.events.send(event).is_err() {
-            return;
+            return 0;
         }
         let deadline = Instant::now() + self.config.fault_wait;
         while !self.stopping() && Instant::now() < deadline {
             match applied.recv_timeout(WAIT_SLICE) {
-                Ok(()) | Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return,
+                Ok(restarted) => return restarted,
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return 0,
                 Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
             }
         }
         tracing::warn!(step = truth.step, "faults were not applied in time");
-    }
-}
-
-/// Checks a received header against what the service carries; the reason when it does not.
-fn check_header(
-    header: &WireHeader,
-    payload_len: usize,
-    kind: WireKind,
-    run_tag: u64,
-    sender: u32,
-) -> Result<(), &'static str> {
-    if header.version != PROTOCOL_VERSION {
-        Err("version")
-    } else if header.run_tag != run_tag {
-        Err("other-run")
-    } else if header.kind != kind as u32 {
-        Err("kind")
-    } else if header.sender != sender {
-        Err("sender")
-    } else if header.len as usize != payload_len {
-        Err("length")
-    } else {
-        Ok(())
-    }
-}
-
-/// Wall-clock time, nanoseconds since the Unix epoch (the clock of `WireHeader::sent_unix_ns`).
-fn unix_now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn headers_are_checked_field_by_field() {
-        let h = WireHeader {
-            version: PROTOCOL_VERSION,
-            kind: WireKind::Estimate as u32,
-            run_tag: 5,
-            sender: 2,
-            len: 10,
-            step: 0,
-            sent_unix_ns: 0,
-        };
-        assert_eq!(check_header(&h, 10, WireKind::Estimate, 5, 2), Ok(()));
-        assert_eq!(check_header(&h, 9, WireKind::Estimate, 5, 2), Err("length"));
-        assert_eq!(check_header(&h, 10, WireKind::Token, 5, 2), Err("kind"));
-        assert_eq!(
-            check_header(&h, 10, WireKind::Estimate, 6, 2),
-            Err("other-run")
-        );
-        assert_eq!(
-            check_header(&h, 10, WireKind::Estimate, 5, 1),
-            Err("sender")
-        );
-        let old = WireHeader { version: 0, ..h };
-        assert_eq!(
-            check_header(&old, 10, WireKind::Estimate, 5, 2),
-            Err("version")
-        );
+        0
     }
 }

@@ -3,11 +3,15 @@
 //! The schedule is a list of incidents, each one of:
 //! - a **kill** of an agent and its **restart** 1 to 5 s of simulated time later (two faults);
 //! - a **pause**: SIGSTOP, then SIGCONT 0.5 to 8 s of wall time later (one fault), from
-//!   shorter than the observer's wait for an estimate to close to the world's wait for an ack.
+//!   shorter than the observer's wait for an estimate to longer than the lockstep world's
+//!   wait for an ack (`protocol::timeouts`: 4 s and 7 s), after which the world skips the
+//!   agent until it answers again.
 //!
 //! Every third incident, the first included, lands on the **token holder**: at a guidance
 //! step (a multiple of `timing.guidance_period_s`) on the UAV that holds the token first in
-//! that round, the lowest UAV alive then. The others fall on a random step and UAV.
+//! that round, the lowest UAV alive then (by the schedule's own kills and restarts). The
+//! others fall on a random step and UAV, and so does a holder's incident when the holder is
+//! busy at every guidance step tried.
 //!
 //! So that the run stays meaningful, faults start after the first guidance period, end
 //! [`end_margin_s`] before the end of the run (each agent is back, and measured back, before

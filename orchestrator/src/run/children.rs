@@ -21,12 +21,6 @@ use protocol::service::RunId;
 use tokio::process::{Child, Command};
 use world_server::server::StepMode;
 
-/// Longest wait for the world to see every agent's and the observer's hello.
-const START_TIMEOUT_MS: u64 = 30_000;
-/// Longest wait for the acks of one step: generous, since a dead agent is detected at once by
-/// its node state and never waited for.
-const ACK_TIMEOUT_MS: u64 = 10_000;
-
 /// Paths of the binaries `fleet` starts.
 #[derive(Clone, Debug)]
 pub struct Binaries {
@@ -77,6 +71,7 @@ pub struct Children {
     binaries: Binaries,
     scenario: PathBuf,
     logs: PathBuf,
+    checkpoints: PathBuf,
     mode: StepMode,
     agents: BTreeMap<u32, Agent>,
     incarnations: u64,
@@ -92,12 +87,14 @@ struct Agent {
 }
 
 impl Children {
-    /// No process yet; `scenario` is the file every child reads, `logs` the log directory.
+    /// No process yet; `scenario` is the file every child reads, `logs` the log directory,
+    /// `checkpoints` the agents' checkpoint directory.
     pub fn new(
         run: RunId,
         binaries: Binaries,
         scenario: PathBuf,
         logs: PathBuf,
+        checkpoints: PathBuf,
         mode: StepMode,
     ) -> Children {
         Children {
@@ -105,6 +102,7 @@ impl Children {
             binaries,
             scenario,
             logs,
+            checkpoints,
             mode,
             agents: BTreeMap::new(),
             incarnations: 0,
@@ -155,12 +153,6 @@ impl Children {
                 speedup.to_string().into(),
             ]),
         }
-        args.extend([
-            "--start-timeout-ms".into(),
-            START_TIMEOUT_MS.to_string().into(),
-            "--ack-timeout-ms".into(),
-            ACK_TIMEOUT_MS.to_string().into(),
-        ]);
         self.spawn(&self.binaries.world, args, "world.log")
     }
 
@@ -168,6 +160,10 @@ impl Children {
     pub fn spawn_agent(&mut self, uav: u32) -> anyhow::Result<()> {
         let mut args = self.common_args();
         args.extend(["--id".into(), uav.to_string().into()]);
+        args.extend([
+            "--checkpoint-dir".into(),
+            self.checkpoints.clone().into_os_string(),
+        ]);
         let child = self.spawn(&self.binaries.agent, args, &format!("agent-{uav}.log"))?;
         self.incarnations += 1;
         let agent = Agent {

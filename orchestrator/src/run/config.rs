@@ -11,7 +11,7 @@ use protocol::service::RunId;
 use world_server::server::StepMode;
 
 use super::chaos;
-use crate::cli::{ScenarioArgs, UsageError};
+use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
 
 /// `fleet run`.

@@ -32,6 +32,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use protocol::ipc::{cleanup_stale, remove_run_files, run_files};
+use protocol::timeouts::Timeouts;
 use tokio::signal::unix::{SignalKind, signal};
 use tokio::sync::mpsc;
 
@@ -44,9 +45,6 @@ use config::{FaultKind, RunConfig};
 use faults::{DueFault, FaultPlan, PendingResume, Resumes};
 use progress::Progress;
 
-/// Longest wait for the agents' estimates of a step before the observer measures without
-/// the missing ones (an agent killed mid-step is noticed sooner by the node scan).
-const ESTIMATE_WAIT: Duration = Duration::from_secs(5);
 /// Longest wait for a fault to be applied before the observer acknowledges its step.
 const FAULT_WAIT: Duration = Duration::from_secs(10);
 /// How long the observer may go on after the world exited (it drains the last steps).
@@ -189,7 +187,8 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         ObserverConfig {
             run: run.clone(),
             scenario: config.scenario.clone(),
-            estimate_wait: ESTIMATE_WAIT,
+            // An agent killed mid-step is noticed sooner, by the node scan.
+            estimate_wait: Timeouts::default().estimate_wait(),
             fault_times: plan.times(),
             fault_wait: FAULT_WAIT,
         },
@@ -198,11 +197,14 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     )
     .context("cannot start the observer thread")?;
 
+    let checkpoints = out.join("checkpoints");
+    fresh_dir(&checkpoints)?;
     let mut children = Children::new(
         run.clone(),
         binaries,
         scenario_file,
         logs.clone(),
+        checkpoints,
         config.mode,
     );
     let mut world = children.spawn_world()?;
@@ -243,14 +245,18 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
                     if step >= latest.0 {
                         latest = (step, time_s);
                     }
+                    let mut restarted = 0;
                     for due in plan.due(time_s) {
                         let effective =
                             apply_fault(&mut children, run, due, &mut resumes).await;
                         plan.applied(due.index, step, time_s, effective);
+                        if effective && due.kind == FaultKind::Restart {
+                            restarted |= protocol::wire::uav_bit(due.uav);
+                        }
                         progress.note(&fault_note(time_s, due, effective));
                     }
                     // The observer may have given up waiting; then nobody listens.
-                    let _ = done.send(());
+                    let _ = done.send(restarted);
                 }
                 None => break,
             },
@@ -355,6 +361,17 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         started_utc,
         leftover_files,
     })
+}
+
+/// Creates `dir`, emptied of what an earlier run into the same output directory left (an
+/// agent must never resume from another run's checkpoint; it would refuse it anyway).
+fn fresh_dir(dir: &std::path::Path) -> anyhow::Result<()> {
+    match std::fs::remove_dir_all(dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(e).with_context(|| format!("cannot empty {}", dir.display())),
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
 }
 
 /// Applies one fault; whether it took effect. A pause's SIGCONT joins `resumes`.

@@ -128,6 +128,28 @@ impl ReachSet {
         set
     }
 
+    /// A set of `cells` at the clock `clock_m` that remembers nothing else: the reach of each
+    /// cell outside is its gap to the nearest of `cells`, raised by the clock, as
+    /// [`ReachSet::clear`] would set it. (I1) holds because by (I2) every target lies in the
+    /// closed square of one of `cells` at that clock. What a checkpoint restores: the set then
+    /// grows from `cells` by the motion since, without the sub-cell reach it had.
+    pub fn from_cells_at(grid: &GroundGrid, cells: CellSet, clock_m: Real) -> Self {
+        let mut set = Self::with_cells(cells);
+        set.clock_m = if clock_m.is_finite() { clock_m } else { 0.0 };
+        let whole = CellBox {
+            x0: 0,
+            y0: 0,
+            x1: set.cells.nx().saturating_sub(1),
+            y1: set.cells.ny().saturating_sub(1),
+        };
+        if set.cells.nx() > 0 && set.cells.ny() > 0 {
+            let inside = set.cells.window_flags(&whole, false);
+            set.raise_outside(grid, &whole, &inside);
+        }
+        set.rebuild_pending();
+        set
+    }
+
     /// The cells the set holds now.
     pub fn cells(&self) -> &CellSet {
         &self.cells

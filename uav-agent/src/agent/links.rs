@@ -5,17 +5,35 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::{LoanError, ReceiveError, SendError};
 use protocol::frame::CvsFrame;
 use protocol::ipc::{
-    EventService, Ipc, PubSubService, RunNode, WakeEvent, WirePublisher, WireService,
+    EventService, Ipc, IpcOpenError, PubSubService, RunNode, WakeEvent, WirePublisher, WireService,
     WireSubscriber,
 };
-use protocol::wire::{PROTOCOL_VERSION, UavCommand, WireHeader, WireKind};
+use protocol::wire::{UavCommand, WireHeader, WireKind, unix_now_ns};
 
 /// Initial sample size of estimate messages; samples grow when a message is larger.
 const ESTIMATE_INITIAL_BYTES: usize = 64 * 1024;
 /// Initial sample size of tokens.
 const TOKEN_INITIAL_BYTES: usize = 4 * 1024;
+
+/// Why a message could not be sent.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// No sample could be loaned (the publisher's samples are all out).
+    #[error("cannot loan a sample: {0}")]
+    Loan(#[from] LoanError),
+    /// The sample could not be delivered.
+    #[error("cannot send: {0}")]
+    Send(#[from] SendError),
+    /// A subscriber could not receive.
+    #[error("cannot receive: {0}")]
+    Receive(#[from] ReceiveError),
+    /// The message is longer than a header can say.
+    #[error("a message of {0} bytes is too long to send")]
+    TooLong(usize),
+}
 
 /// Keeps the services open for as long as the ports live.
 struct Services {
@@ -53,30 +71,25 @@ pub struct Links {
 
 impl Links {
     /// Opens every port of agent `uav` in a fleet of `fleet` UAVs.
-    pub fn open(node: &RunNode, uav: u32, fleet: u32) -> anyhow::Result<Links> {
+    pub fn open(node: &RunNode, uav: u32, fleet: u32) -> Result<Links, IpcOpenError> {
         let cvs = node.open_cvs(uav)?;
         let frames = cvs.subscriber_builder().create()?;
         let cmd = node.open_cmd(uav)?;
         let commands = cmd.publisher_builder().create()?;
-        let mut estimates = Vec::new();
+        let own = node.open_estimate(uav)?;
+        let estimate_out = RunNode::wire_publisher(&own, ESTIMATE_INITIAL_BYTES)?;
+        let mut estimates = vec![own];
         let mut estimates_in = Vec::new();
-        let mut estimate_out = None;
         let mut events = Vec::new();
         let mut peer_wakes = Vec::new();
-        for j in 0..fleet {
+        for j in (0..fleet).filter(|&j| j != uav) {
             let service = node.open_estimate(j)?;
-            if j == uav {
-                estimate_out = Some(RunNode::wire_publisher(&service, ESTIMATE_INITIAL_BYTES)?);
-            } else {
-                estimates_in.push((j, service.subscriber_builder().create()?));
-                let wake = node.open_agent_wake(j)?;
-                peer_wakes.push(wake.notifier_builder().create()?);
-                events.push(wake);
-            }
+            estimates_in.push((j, service.subscriber_builder().create()?));
+            let wake = node.open_agent_wake(j)?;
+            peer_wakes.push(wake.notifier_builder().create()?);
+            events.push(wake);
             estimates.push(service);
         }
-        let estimate_out = estimate_out
-            .ok_or_else(|| anyhow::anyhow!("UAV {uav} is outside a fleet of {fleet}"))?;
         let guidance = node.open_guidance()?;
         let token_out = RunNode::wire_publisher(&guidance, TOKEN_INITIAL_BYTES)?;
         let token_in = guidance.subscriber_builder().create()?;
@@ -111,7 +124,7 @@ impl Links {
     }
 
     /// Sends a command (an ack, a hello or a yaw reference) and wakes the world.
-    pub fn send_command(&self, cmd: UavCommand) -> anyhow::Result<()> {
+    pub fn send_command(&self, cmd: UavCommand) -> Result<(), LinkError> {
         self.commands.send_copy(cmd)?;
         notify(&self.world_wake, WakeEvent::Command);
         Ok(())
@@ -125,21 +138,15 @@ impl Links {
         sender: u32,
         step: u64,
         bytes: &[u8],
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), LinkError> {
         let (publisher, event) = match kind {
             WireKind::Estimate => (&self.estimate_out, WakeEvent::Estimate),
             WireKind::Token => (&self.token_out, WakeEvent::Token),
         };
         let mut sample = publisher.loan_slice_uninit(bytes.len())?;
-        *sample.user_header_mut() = WireHeader {
-            version: PROTOCOL_VERSION,
-            kind: kind as u32,
-            run_tag,
-            sender,
-            len: u32::try_from(bytes.len())?,
-            step,
-            sent_unix_ns: unix_now_ns(),
-        };
+        let len = u32::try_from(bytes.len()).map_err(|_| LinkError::TooLong(bytes.len()))?;
+        *sample.user_header_mut() =
+            WireHeader::new(kind, run_tag, sender, step, len, unix_now_ns());
         sample.write_from_slice(bytes).send()?;
         for peer in &self.peer_wakes {
             notify(peer, event);
@@ -151,61 +158,10 @@ impl Links {
     }
 }
 
-/// Wall-clock time, nanoseconds since the Unix epoch (0 if the clock is before it).
-pub fn unix_now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or(0)
-}
-
 /// Notifies, logging (not failing) when nobody listens or the event cannot be sent: a wake-up
 /// is a hint, the data is in the samples.
 pub fn notify(notifier: &Notifier<Ipc>, event: WakeEvent) {
     if let Err(e) = notifier.notify_with_custom_event_id(event.id()) {
         tracing::debug!(error = ?e, ?event, "notify failed");
     }
-}
-
-/// Why a variable-size message was dropped.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum DropReason {
-    /// Another protocol version.
-    Version,
-    /// Another run.
-    OtherRun,
-    /// Another kind of message than the service carries.
-    Kind,
-    /// The sender field does not match the service it came on.
-    Sender,
-    /// The header's length does not match the payload.
-    Length,
-    /// The payload does not decode or does not validate.
-    Malformed,
-}
-
-/// Checks a received header against what the service must carry.
-pub fn check_header(
-    header: &WireHeader,
-    payload_len: usize,
-    kind: WireKind,
-    run_tag: u64,
-    sender: Option<u32>,
-) -> Result<(), DropReason> {
-    if header.version != PROTOCOL_VERSION {
-        return Err(DropReason::Version);
-    }
-    if header.run_tag != run_tag {
-        return Err(DropReason::OtherRun);
-    }
-    if header.kind != kind as u32 {
-        return Err(DropReason::Kind);
-    }
-    if sender.is_some_and(|s| s != header.sender) {
-        return Err(DropReason::Sender);
-    }
-    if header.len as usize != payload_len {
-        return Err(DropReason::Length);
-    }
-    Ok(())
 }

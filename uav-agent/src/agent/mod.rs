@@ -10,36 +10,52 @@
 //!    `setfleet`);
 //! 5. it acks step `k` to the world with its yaw reference.
 //!
-//! Every wait is bounded. Peers are live while their iceoryx2 node is (a SIGKILLed peer shows
-//! up dead at once and its resources are cleaned); the world-server is presumed lost when no
-//! frame came for `world_timeout` and its node is gone, and the agent exits with an error.
-//! A restarted agent (same id) starts from the full region and rebuilds its sets and map from
-//! its peers' estimates; peers that see a new incarnation send it their whole map.
+//! Every wait is bounded, by the run's [`Timeouts`]. An agent awaits the peers the world
+//! serves at that step (the frame's `served` mask, the same for every agent) whose iceoryx2
+//! node is alive (a SIGKILLed peer shows up dead at once and its resources are cleaned). The
+//! world-server is presumed lost when no frame came for `world_timeout` and its node is gone,
+//! and the agent exits with an error. Only SIGINT and SIGTERM stop an agent: a stalled agent
+//! (SIGSTOP, swapped out) resumes where it was; if the world stopped serving it meanwhile,
+//! its late ack, or the hello it repeats while no frame comes, brings it back from the next
+//! frame.
+//!
+//! With a checkpoint file ([`checkpoint`]), the agent saves its estimator state after every
+//! step it acked, and a restarted agent (same id) resumes from it, grown by the motion since;
+//! without one it starts from the full region. Either way it then fuses its peers' estimates;
+//! peers that see a new incarnation send it their whole map.
 //!
 //! With a finite `comms.range_m`, an agent fuses only the estimates of peers whose camera was
 //! within range at that step (links are simulated by the receiver).
 
+pub mod checkpoint;
 mod links;
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
 use protocol::camera::CameraPose;
-use protocol::codec;
+use protocol::codec::{self, EncodeError};
 use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
-use protocol::ipc::{Ipc, NodeScanError, RunNode, scan_nodes, wait_for_wake};
+use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_for_wake};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
-use protocol::wire::{AgentStats, GuidanceToken, HELLO_STEP, UavCommand, WireKind};
+use protocol::timeouts::Timeouts;
+use protocol::wire::{
+    AgentStats, DropReason, GuidanceToken, HELLO_STEP, UavCommand, WireKind, uav_bit, unix_now_ns,
+};
 use serde::Serialize;
 
-use crate::estimator::{Estimator, EstimatorConfig, PeerEstimate, message};
+use crate::estimator::{
+    Estimator, EstimatorConfig, EstimatorStepError, PeerEstimate, StepReport, message,
+};
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use crate::occupancy::OemStatus;
-use links::{DropReason, Links, check_header};
+use checkpoint::{CheckpointFile, Owner};
+use links::{LinkError, Links};
 
 /// How an agent runs.
 #[derive(Clone, Debug)]
@@ -50,32 +66,37 @@ pub struct AgentConfig {
     pub uav: u32,
     /// The run's scenario (the same file as the world's).
     pub scenario: Scenario,
-    /// Longest wait for the live peers' estimates of a step.
-    pub peer_wait: Duration,
-    /// Longest wait for this agent's turn in the token ring.
-    pub token_wait: Duration,
+    /// The run's waits (peers, token holders, hellos), the same as the world's.
+    pub timeouts: Timeouts,
     /// No frame for this long and no live world node: the world is lost.
     pub world_timeout: Duration,
-    /// Interval of hellos until the first frame arrives.
-    pub hello_interval: Duration,
+    /// The file this agent checkpoints its state to and resumes from (none: no checkpoints).
+    pub checkpoint: Option<PathBuf>,
     /// Fault-injection hook: how long the agent sits on the token before planning, so tests
-    /// can kill a holder mid-turn (0 in normal runs).
+    /// can kill a holder mid-turn (0 in normal runs; only with the `test-hooks` feature).
+    #[cfg(feature = "test-hooks")]
     pub hold_token: Duration,
 }
 
 impl AgentConfig {
-    /// The defaults: 2 s for peers, 3 s for the token, 10 s for the world.
+    /// The default [`Timeouts`], no checkpoint.
     pub fn new(run_id: RunId, uav: u32, scenario: Scenario) -> Self {
+        let timeouts = Timeouts::default();
         Self {
             run_id,
             uav,
             scenario,
-            peer_wait: Duration::from_secs(2),
-            token_wait: Duration::from_secs(3),
-            world_timeout: Duration::from_secs(10),
-            hello_interval: Duration::from_millis(200),
+            timeouts,
+            world_timeout: timeouts.world_lost(),
+            checkpoint: None,
+            #[cfg(feature = "test-hooks")]
             hold_token: Duration::ZERO,
         }
+    }
+
+    /// The checkpoint file of agent `uav` in directory `dir`: `agent-{uav}.ckpt`.
+    pub fn checkpoint_in(dir: &std::path::Path, uav: u32) -> PathBuf {
+        dir.join(format!("agent-{uav}.ckpt"))
     }
 }
 
@@ -101,6 +122,47 @@ pub enum AgentStartError {
     /// The run's nodes could not be listed.
     #[error(transparent)]
     Scan(#[from] NodeScanError),
+}
+
+/// Why an agent stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    /// It could not join the run.
+    #[error(transparent)]
+    Start(#[from] AgentStartError),
+    /// Its node, services or ports could not be opened.
+    #[error(transparent)]
+    Open(#[from] IpcOpenError),
+    /// A message could not be sent.
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    /// A message could not be encoded.
+    #[error(transparent)]
+    Encode(#[from] EncodeError),
+    /// No frame came for a long while and the world's node is gone.
+    #[error(
+        "the world-server of run {run} is gone (no frame for {waited:?} and its node is not alive)"
+    )]
+    WorldLost {
+        /// The run.
+        run: String,
+        /// How long no frame came.
+        waited: Duration,
+    },
+    /// A guidance step came before any pose.
+    #[error("no pose to plan from at step {0}")]
+    NoPose(u64),
+}
+
+impl AgentError {
+    /// Whether the error is the caller's (an argument that cannot work), as opposed to a
+    /// failure of the run.
+    pub fn is_usage(&self) -> bool {
+        matches!(
+            self,
+            AgentError::Start(AgentStartError::OutsideFleet { .. })
+        )
+    }
 }
 
 /// How the agent's loop ended.
@@ -140,12 +202,22 @@ pub struct AgentReport {
     pub final_undetected_digest: u64,
     /// Step of the last frame.
     pub final_step: u64,
+    /// Step of the checkpoint this agent resumed from, if it did.
+    pub resumed_from_step: Option<u64>,
+    /// Why a checkpoint found at start was refused, if one was.
+    pub checkpoint_refused: Option<String>,
+    /// Checkpoints written.
+    pub checkpoints: u64,
+    /// Checkpoints that could not be written.
+    pub checkpoint_failures: u64,
+    /// Wall time spent writing checkpoints (encoding, writing, flushing), milliseconds.
+    pub checkpoint_ms: f64,
     /// How the loop ended.
     pub end: Option<EndReason>,
 }
 
 /// Runs agent `config.uav` until the run ends, the shutdown flag is set or the world is lost.
-pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentReport> {
+pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, AgentError> {
     let count = config.scenario.uavs.count;
     if config.uav >= count {
         return Err(AgentStartError::OutsideFleet {
@@ -170,17 +242,43 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentRe
     )?;
     let links = Links::open(&node, config.uav, count)?;
     let waitset = node.waitset()?;
-    let _guard = waitset.attach_notification(&links.wake)?;
+    let _guard = waitset
+        .attach_notification(&links.wake)
+        .map_err(IpcOpenError::from)?;
     let estimator_config = EstimatorConfig::from_scenario(&config.scenario);
     let incarnation = incarnation();
+    let checkpoint = config.checkpoint.clone().map(|path| {
+        CheckpointFile::new(
+            path,
+            Owner::new(config.run_id.tag(), config.uav, &config.scenario),
+        )
+    });
+    let mut report = AgentReport::default();
+    let estimator = match checkpoint.as_ref().map(|c| c.load(&estimator_config)) {
+        Some(Ok(Some(estimator))) => {
+            let step = estimator.state().step;
+            tracing::info!(step, "resuming from the checkpoint");
+            report.resumed_from_step = Some(step);
+            estimator
+        }
+        Some(Err(e)) => {
+            tracing::warn!(error = %e, "checkpoint refused: starting fresh");
+            report.checkpoint_refused = Some(e.to_string());
+            Estimator::new(estimator_config.clone())
+        }
+        Some(Ok(None)) | None => Estimator::new(estimator_config.clone()),
+    };
     let mut agent = Agent {
         run_tag: config.run_id.tag(),
+        incarnation,
         outbox: message::EstimateOutbox::new(
             config.uav,
             incarnation,
             estimator_config.oem_full_every,
         ),
-        estimator: Estimator::new(estimator_config),
+        estimator,
+        checkpoint,
+        served: u32::MAX,
         guidance: GuidanceParams::from_scenario(&config.scenario),
         ring: TokenRing::new(config.uav),
         peers: BTreeMap::new(),
@@ -191,7 +289,7 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> anyhow::Result<AgentRe
         waitset: &waitset,
         config: &config,
         shutdown,
-        report: AgentReport::default(),
+        report,
         end_of_run: false,
         interrupted: false,
         last_frame: Instant::now(),
@@ -229,9 +327,10 @@ pub fn in_comms_range(
         }
 }
 
-/// A number that differs at each start of an agent process.
+/// A number that grows at each start of an agent process (the wall clock in nanoseconds), so
+/// the world and the peers tell a restarted agent from its predecessor and ignore the latter.
 fn incarnation() -> u64 {
-    links::unix_now_ns() ^ ((std::process::id() as u64) << 32)
+    unix_now_ns()
 }
 
 #[derive(Default)]
@@ -246,9 +345,13 @@ struct PeerInfo {
 struct Agent<'a> {
     config: &'a AgentConfig,
     run_tag: u64,
+    incarnation: u64,
     links: &'a Links,
     waitset: &'a WaitSet<Ipc>,
     estimator: Estimator,
+    checkpoint: Option<CheckpointFile>,
+    /// The agents the world serves at the current step (the frame's mask).
+    served: u32,
     outbox: message::EstimateOutbox,
     /// The step from which the next estimate carries the whole map (a peer (re)joined).
     full_map_from: Option<u64>,
@@ -269,22 +372,25 @@ struct Agent<'a> {
 const WAIT_SLICE: Duration = Duration::from_millis(50);
 
 impl Agent<'_> {
-    fn main_loop(&mut self) -> anyhow::Result<EndReason> {
+    fn main_loop(&mut self) -> Result<EndReason, AgentError> {
         let mut last_hello: Option<Instant> = None;
         let mut first_frame = false;
+        let timeouts = self.config.timeouts;
         loop {
-            if !first_frame && last_hello.is_none_or(|t| t.elapsed() >= self.config.hello_interval)
-            {
-                self.links.send_command(UavCommand {
-                    run_tag: self.run_tag,
-                    step: HELLO_STEP,
-                    uav: self.config.uav,
-                    has_yaw_ref: 0,
-                    yaw_ref_rad: 0.0,
-                })?;
+            // Hello until the first frame; then again whenever frames stop coming, in case the
+            // world stopped serving this agent (it was stalled past the ack wait). A hello
+            // from an agent the world serves changes nothing.
+            let hello_due = if first_frame {
+                self.last_frame.elapsed() >= timeouts.rehello()
+                    && last_hello.is_none_or(|t| t.elapsed() >= timeouts.rehello())
+            } else {
+                last_hello.is_none_or(|t| t.elapsed() >= timeouts.hello_interval())
+            };
+            if hello_due {
+                self.links.send_command(self.command(HELLO_STEP, None))?;
                 last_hello = Some(Instant::now());
             }
-            while let Some(sample) = self.links.frames.receive()? {
+            while let Some(sample) = self.links.frames.receive().map_err(LinkError::from)? {
                 first_frame = true;
                 self.last_frame = Instant::now();
                 self.on_frame(sample.payload())?;
@@ -300,11 +406,10 @@ impl Agent<'_> {
             if self.last_frame.elapsed() >= self.config.world_timeout {
                 self.refresh_live();
                 if !self.world_live {
-                    anyhow::bail!(
-                        "the world-server of run {} is gone (no frame for {:?} and its node is not alive)",
-                        self.config.run_id,
-                        self.config.world_timeout
-                    );
+                    return Err(AgentError::WorldLost {
+                        run: self.config.run_id.to_string(),
+                        waited: self.config.world_timeout,
+                    });
                 }
             }
             self.wait(Instant::now() + WAIT_SLICE);
@@ -358,7 +463,7 @@ impl Agent<'_> {
             .or_default() += 1;
     }
 
-    fn on_frame(&mut self, frame: &CvsFrame) -> anyhow::Result<()> {
+    fn on_frame(&mut self, frame: &CvsFrame) -> Result<(), AgentError> {
         let k = frame.header.step;
         if frame.header.run_tag != self.run_tag || frame.header.uav != self.config.uav {
             self.report.frames_refused += 1;
@@ -366,9 +471,15 @@ impl Agent<'_> {
             return Ok(());
         }
         let mut yaw_ref = None;
-        match self.estimator.step(frame) {
+        let folded = self.fold(frame);
+        match &folded {
             Ok(_) => {
                 self.report.frames += 1;
+                self.served = match frame.header.served {
+                    // A world that does not say whom it serves: await every live peer.
+                    0 => u32::MAX,
+                    mask => mask,
+                };
                 self.publish_estimate(k)?;
                 self.gather(k);
                 if k.is_multiple_of(self.guidance.steps_per_period as u64) {
@@ -380,16 +491,74 @@ impl Agent<'_> {
                 tracing::warn!(step = k, error = %e, "frame refused");
             }
         }
-        self.links.send_command(UavCommand {
+        self.links.send_command(self.command(k, yaw_ref))?;
+        if folded.is_ok() {
+            self.save_checkpoint();
+        }
+        Ok(())
+    }
+
+    /// The command answering step `step` (or a hello), with a new yaw reference if any.
+    fn command(&self, step: u64, yaw_ref: Option<f64>) -> UavCommand {
+        UavCommand {
             run_tag: self.run_tag,
-            step: k,
+            step,
             uav: self.config.uav,
             has_yaw_ref: u32::from(yaw_ref.is_some()),
             yaw_ref_rad: yaw_ref.unwrap_or(0.0),
-        })
+            incarnation: self.incarnation,
+        }
     }
 
-    fn publish_estimate(&mut self, k: u64) -> anyhow::Result<()> {
+    /// Folds a frame into the estimator. A resumed agent whose checkpoint is ahead of the
+    /// run's first frame (a checkpoint of a run that was started over) drops it and starts
+    /// fresh.
+    fn fold(&mut self, frame: &CvsFrame) -> Result<StepReport, EstimatorStepError> {
+        match self.estimator.step(frame) {
+            Err(EstimatorStepError::Stale { state_step, .. })
+                if self.report.frames == 0 && self.report.resumed_from_step.is_some() =>
+            {
+                tracing::warn!(
+                    checkpoint_step = state_step,
+                    frame_step = frame.header.step,
+                    "the checkpoint is ahead of the run: starting fresh"
+                );
+                self.report.resumed_from_step = None;
+                self.estimator = Estimator::new(self.estimator.config().clone());
+                self.estimator.step(frame)
+            }
+            other => other,
+        }
+    }
+
+    /// Saves the state to the checkpoint file, if there is one (a failure is logged and
+    /// counted: the run goes on without it).
+    fn save_checkpoint(&mut self) {
+        let Some(file) = &self.checkpoint else {
+            return;
+        };
+        let started = Instant::now();
+        let saved = file.save(self.estimator.state());
+        self.report.checkpoint_ms += started.elapsed().as_secs_f64() * 1e3;
+        match saved {
+            Ok(()) => self.report.checkpoints += 1,
+            Err(e) => {
+                self.report.checkpoint_failures += 1;
+                tracing::warn!(error = %e, "cannot write the checkpoint");
+            }
+        }
+    }
+
+    /// The peers awaited at the current step: served by the world and alive.
+    fn awaited_peers(&self) -> BTreeSet<u32> {
+        self.live
+            .iter()
+            .copied()
+            .filter(|&j| self.served & uav_bit(j) != 0)
+            .collect()
+    }
+
+    fn publish_estimate(&mut self, k: u64) -> Result<(), AgentError> {
         if self.full_map_from.is_some_and(|from| k >= from) {
             self.outbox.request_full();
             self.full_map_from = None;
@@ -410,14 +579,14 @@ impl Agent<'_> {
         Ok(())
     }
 
-    /// Fuses the live peers' estimates of step `k`, waiting for them (bounded).
+    /// Fuses the awaited peers' estimates of step `k`, waiting for them (bounded).
     fn gather(&mut self, k: u64) {
         self.refresh_live();
-        let deadline = Instant::now() + self.config.peer_wait;
+        let deadline = Instant::now() + self.config.timeouts.peer_wait;
         loop {
             self.drain_estimates();
             self.fuse_pending(k);
-            let missing = self.live.iter().any(|j| {
+            let missing = self.awaited_peers().iter().any(|j| {
                 self.peers
                     .get(j)
                     .and_then(|p| p.fused_step)
@@ -452,8 +621,7 @@ impl Agent<'_> {
                     }
                 };
                 let header = *sample.user_header();
-                let checked = check_header(
-                    &header,
+                let checked = header.check(
                     sample.payload().len(),
                     WireKind::Estimate,
                     self.run_tag,
@@ -481,6 +649,11 @@ impl Agent<'_> {
 
     fn queue_peer(&mut self, p: PeerEstimate) {
         let info = self.peers.entry(p.uav).or_default();
+        if info.incarnation.is_some_and(|i| p.incarnation < i) {
+            let detail = format!("from UAV {}'s replaced process", p.uav);
+            self.drop_message(DropReason::Superseded, "estimate", &detail);
+            return;
+        }
         if info.incarnation != Some(p.incarnation) {
             if info.incarnation.is_some() {
                 tracing::info!(peer = p.uav, "peer restarted: sending it the whole map");
@@ -530,13 +703,9 @@ impl Agent<'_> {
                 }
             };
             let header = *sample.user_header();
-            if let Err(reason) = check_header(
-                &header,
-                sample.payload().len(),
-                WireKind::Token,
-                self.run_tag,
-                None,
-            ) {
+            if let Err(reason) =
+                header.check(sample.payload().len(), WireKind::Token, self.run_tag, None)
+            {
                 drop(sample);
                 self.drop_message(reason, "token", &format!("from UAV {}", header.sender));
                 continue;
@@ -552,17 +721,18 @@ impl Agent<'_> {
 
     /// Takes this agent's turn in the ring for the round starting at step `k`; returns the
     /// yaw reference to send.
-    fn decide(&mut self, k: u64) -> anyhow::Result<Option<f64>> {
+    fn decide(&mut self, k: u64) -> Result<Option<f64>, AgentError> {
         let round = k / self.guidance.steps_per_period as u64;
-        let deadline = Instant::now() + self.config.token_wait;
+        let deadline = Instant::now() + self.config.timeouts.token_wait;
         loop {
             self.drain_tokens();
-            let mut live = self.live.clone();
+            let mut live = self.awaited_peers();
             live.insert(self.config.uav);
             let waited_out = Instant::now() >= deadline;
             match self.ring.turn(round, &live, waited_out) {
                 Turn::Done => return Ok(None),
                 Turn::Decide { others } => {
+                    #[cfg(feature = "test-hooks")]
                     if !self.config.hold_token.is_zero() {
                         tracing::info!(round, hold = ?self.config.hold_token, "holding the token");
                         std::thread::sleep(self.config.hold_token);
@@ -594,10 +764,10 @@ impl Agent<'_> {
         k: u64,
         live: &BTreeSet<u32>,
         others: &[protocol::wire::PlannedView],
-    ) -> anyhow::Result<f64> {
+    ) -> Result<f64, AgentError> {
         let state = self.estimator.state();
         let Some(pose) = state.pose else {
-            anyhow::bail!("no pose to plan from at step {k}");
+            return Err(AgentError::NoPose(k));
         };
         let sets: Vec<&protocol::raster::CellSet> = std::iter::once(state.undetected.cells())
             .chain(state.targets.values().map(|s| s.cells()))

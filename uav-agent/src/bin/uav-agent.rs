@@ -6,14 +6,19 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
+use std::time::Duration;
 
 use clap::Parser;
+use protocol::process::{self, Role};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
-use uav_agent::agent::{self, AgentConfig, AgentStartError};
+use protocol::timeouts::Timeouts;
+use uav_agent::agent::{self, AgentConfig};
 
 /// Environment variable (milliseconds) that makes the agent sit on the guidance token before
-/// planning: a test hook to kill a holder mid-turn.
+/// planning: a test hook to kill a holder mid-turn. Only in builds with the `test-hooks`
+/// feature, which the `tests` crate enables; shipped builds ignore the variable.
+#[cfg(feature = "test-hooks")]
 const HOLD_TOKEN_ENV: &str = "SETFLEET_TEST_HOLD_TOKEN_MS";
 
 /// Runs one UAV's estimator, guidance and peer exchange in a setfleet run.
@@ -32,32 +37,28 @@ struct Args {
     /// Overrides a scenario key, e.g. `--set guidance.kappa=0` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
-    /// Longest wait for the peers' estimates of a step, milliseconds.
-    #[arg(long, default_value_t = 2_000)]
-    peer_wait_ms: u64,
-    /// Longest wait for this agent's turn in the token ring, milliseconds.
-    #[arg(long, default_value_t = 3_000)]
-    token_wait_ms: u64,
-    /// Without frames for this long and without a live world node, exit, milliseconds.
-    #[arg(long, default_value_t = 10_000)]
-    world_timeout_ms: u64,
+    /// Longest wait for the peers' estimates of a step, milliseconds (default: 2000; give
+    /// the world-server the same value).
+    #[arg(long)]
+    peer_wait_ms: Option<u64>,
+    /// Longest wait for one token holder, milliseconds (default: 3000; give the world-server
+    /// the same value).
+    #[arg(long)]
+    token_wait_ms: Option<u64>,
+    /// Without frames for this long and without a live world node, exit, milliseconds
+    /// (default: twice the world's ack wait).
+    #[arg(long)]
+    world_timeout_ms: Option<u64>,
+    /// Directory of the run's checkpoints: the agent saves its state to `agent-<id>.ckpt`
+    /// there after every step, and resumes from it when restarted (default: no checkpoint).
+    #[arg(long)]
+    checkpoint_dir: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
-    die_with_parent();
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
-    let args = match Args::try_parse() {
+    let args: Args = match process::start(Role::Child) {
         Ok(args) => args,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(e.exit_code().clamp(0, 255) as u8);
-        }
+        Err(code) => return code,
     };
     let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
         Ok(s) => s,
@@ -67,16 +68,15 @@ fn main() -> ExitCode {
         }
     };
     let mut config = AgentConfig::new(args.run_id, args.id, scenario);
-    config.peer_wait = std::time::Duration::from_millis(args.peer_wait_ms);
-    config.token_wait = std::time::Duration::from_millis(args.token_wait_ms);
-    config.world_timeout = std::time::Duration::from_millis(args.world_timeout_ms);
-    // Fault-injection hook for tests (inherited through `fleet run`): sit on the token.
-    if let Some(ms) = std::env::var(HOLD_TOKEN_ENV)
-        .ok()
-        .and_then(|v| v.parse::<u64>().ok())
-    {
-        config.hold_token = std::time::Duration::from_millis(ms);
-    }
+    config.timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms);
+    config.world_timeout = args
+        .world_timeout_ms
+        .map_or(config.timeouts.world_lost(), Duration::from_millis);
+    config.checkpoint = args
+        .checkpoint_dir
+        .map(|dir| AgentConfig::checkpoint_in(&dir, args.id));
+    #[cfg(feature = "test-hooks")]
+    apply_test_hooks(&mut config);
     let shutdown = AtomicBool::new(false);
     match agent::run(config, &shutdown) {
         Ok(report) => {
@@ -87,20 +87,19 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("uav-agent: {e:#}");
-            match e.downcast_ref::<AgentStartError>() {
-                Some(AgentStartError::OutsideFleet { .. }) => ExitCode::from(2),
-                _ => ExitCode::from(1),
-            }
+            eprintln!("uav-agent: {e}");
+            ExitCode::from(if e.is_usage() { 2 } else { 1 })
         }
     }
 }
 
-/// Children of `fleet` die with it (Linux), so no agent outlives an interrupted run.
-fn die_with_parent() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a process attribute; no memory is involved.
-    unsafe {
-        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+/// Fault-injection hooks for tests (inherited through `fleet run`): sit on the token.
+#[cfg(feature = "test-hooks")]
+fn apply_test_hooks(config: &mut AgentConfig) {
+    if let Some(ms) = std::env::var(HOLD_TOKEN_ENV)
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+    {
+        config.hold_token = std::time::Duration::from_millis(ms);
     }
 }

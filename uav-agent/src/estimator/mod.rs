@@ -186,8 +186,9 @@ pub enum EstimatorStepError {
         /// Step the header claims.
         step: u64,
     },
-    /// The frame is older than the state.
-    #[error("frame of step {frame_step} is older than the state's step {state_step}")]
+    /// The frame is not newer than the state: an older frame, or the last one again (a
+    /// duplicate is folded in once and counted once).
+    #[error("frame of step {frame_step} is not newer than the state's step {state_step}")]
     Stale {
         /// Step of the frame.
         frame_step: u64,
@@ -274,14 +275,23 @@ impl Estimator {
         Self { config, state }
     }
 
-    /// Resumes from a saved state, checking that it lives on the configured grids.
+    /// Resumes from a saved state, checking that it lives on the configured grids. The reach
+    /// of every set is rebuilt from its cells on the configured grid
+    /// ([`ReachSet::from_cells_at`]; a snapshot does not store it): the sets then grow from
+    /// their cells by the motion since the state's step.
     pub fn with_state(
         config: EstimatorConfig,
-        state: EstimatorState,
+        mut state: EstimatorState,
     ) -> Result<Self, EstimatorRestoreError> {
         if !state.fits(&config) {
             return Err(EstimatorRestoreError::GridMismatch);
         }
+        let grid = &config.grid;
+        let rebuild = |set: &mut ReachSet| {
+            *set = ReachSet::from_cells_at(grid, set.cells().clone(), set.clock_m());
+        };
+        rebuild(&mut state.undetected);
+        state.targets.values_mut().for_each(rebuild);
         Ok(Self { config, state })
     }
 
@@ -313,7 +323,7 @@ impl Estimator {
         if !frame.is_well_formed() {
             return Err(EstimatorStepError::Malformed { step: h.step });
         }
-        if self.state.frames > 0 && h.step < self.state.step {
+        if self.state.frames > 0 && h.step <= self.state.step {
             return Err(EstimatorStepError::Stale {
                 frame_step: h.step,
                 state_step: self.state.step,
@@ -649,6 +659,16 @@ mod tests {
         assert_eq!(e.step(&f), Err(EstimatorStepError::Malformed { step: 5 }));
         assert_eq!(e.state().frames, 0);
         e.step(&ground_frame(5)).expect("step");
+        let before = e.state().clone();
+        assert_eq!(
+            e.step(&ground_frame(5)),
+            Err(EstimatorStepError::Stale {
+                frame_step: 5,
+                state_step: 5
+            }),
+            "a duplicate frame is refused"
+        );
+        assert_eq!(e.state(), &before, "and leaves the state as it was");
         assert_eq!(
             e.step(&ground_frame(4)),
             Err(EstimatorStepError::Stale {
@@ -707,7 +727,12 @@ mod tests {
         e.step(&ground_frame(0)).expect("step");
         let bytes = protocol::codec::encode(e.state()).expect("serialise");
         let back: EstimatorState = protocol::codec::decode(&bytes).expect("deserialise");
-        assert_eq!(&back, e.state());
+        let cells = |s: &EstimatorState| (s.undetected.cells().clone(), s.undetected.clock_m());
+        assert_eq!(cells(&back), cells(e.state()));
+        let restored = Estimator::with_state(cfg.clone(), back.clone()).expect("restore");
+        assert_eq!(cells(restored.state()), cells(e.state()));
+        assert_eq!(restored.state().explored, e.state().explored);
+        assert_eq!(restored.state().oem, e.state().oem);
         let other = EstimatorConfig {
             grid: GroundGrid::new(10.0, 0.5),
             ..cfg

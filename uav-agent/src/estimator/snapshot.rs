@@ -1,8 +1,7 @@
 //! Serde adapters that store a [`CellSet`] as its compact [`EncodedSet`] and a [`ReachSet`]
-//! as its cells plus its reach, row-wise differences run-length coded (the reach is a
-//! distance field, mostly constant or linear along a row), so an [`super::EstimatorState`]
-//! serialises to a compact snapshot and a corrupt snapshot is refused with an error instead
-//! of a malformed set.
+//! as its cells and clock (its reach is rebuilt when the state is restored), so an
+//! [`super::EstimatorState`] serialises to a compact snapshot and a corrupt snapshot is
+//! refused with an error instead of a malformed set.
 
 use std::collections::BTreeMap;
 
@@ -91,57 +90,29 @@ pub(crate) mod cell_set_map {
     }
 }
 
-/// A [`ReachSet`] as stored: cells, clock, base and the reach above the base as runs of equal
-/// row-major differences `(difference, run length)`.
+/// A [`ReachSet`] as stored: its cells and its clock. The reach is not stored (a distance
+/// field as large as the grid, hard to compress). A loaded set has reach 0 everywhere, which
+/// keeps the guarantee but lets every cell join at the next advance;
+/// [`super::Estimator::with_state`] rebuilds the reach from the cells' gaps on the
+/// estimator's grid ([`ReachSet::from_cells_at`]), after which the set grows from its cells
+/// by the motion since, without the sub-cell reach it had.
 #[derive(Serialize, Deserialize)]
 struct StoredReach {
     cells: EncodedSet,
     clock_m: f64,
-    base: u32,
-    runs: Vec<(i64, u32)>,
 }
 
 fn store_reach(set: &ReachSet) -> StoredReach {
-    let (cells, base, relative) = set.to_parts();
-    let mut runs: Vec<(i64, u32)> = Vec::new();
-    let mut previous = 0i64;
-    for &v in &relative {
-        let diff = i64::from(v) - previous;
-        previous = i64::from(v);
-        match runs.last_mut() {
-            Some((d, n)) if *d == diff && *n < u32::MAX => *n += 1,
-            _ => runs.push((diff, 1)),
-        }
-    }
     StoredReach {
-        cells: cells.encode(),
+        cells: set.cells().encode(),
         clock_m: set.clock_m(),
-        base,
-        runs,
     }
 }
 
 fn load_reach(stored: &StoredReach) -> Result<ReachSet, String> {
     let cells = decode_self_sized(&stored.cells)?;
-    let expected = stored.cells.nx as usize * stored.cells.ny as usize;
-    let total: u64 = stored.runs.iter().map(|&(_, n)| u64::from(n)).sum();
-    if total != expected as u64 {
-        return Err(format!(
-            "reach runs cover {total} cells, the grid has {expected}"
-        ));
-    }
-    let mut relative = Vec::with_capacity(expected);
-    let mut value = 0i64;
-    for &(diff, n) in &stored.runs {
-        for _ in 0..n {
-            value = value
-                .checked_add(diff)
-                .filter(|v| (0..=i64::from(u32::MAX)).contains(v))
-                .ok_or("reach out of range")?;
-            relative.push(value as u32);
-        }
-    }
-    ReachSet::from_parts(cells, stored.base, &relative, stored.clock_m)
+    let zeros = vec![0; stored.cells.nx as usize * stored.cells.ny as usize];
+    ReachSet::from_parts(cells, 0, &zeros, stored.clock_m)
         .ok_or_else(|| "reach does not fit its cells".to_owned())
 }
 

@@ -9,9 +9,10 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use clap::{Parser, ValueEnum};
+use protocol::process::{self, Role};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
-use world_server::World;
+use protocol::timeouts::Timeouts;
 use world_server::server::{self, ServerConfig, StepMode};
 
 /// Publishes every UAV's camera frames and the ground truth of one setfleet run.
@@ -39,12 +40,21 @@ struct Args {
     /// Wait for an observer's hello and acks (lockstep).
     #[arg(long)]
     wait_observer: bool,
-    /// Longest wait for the agents' hellos, milliseconds.
-    #[arg(long, default_value_t = 10_000)]
-    start_timeout_ms: u64,
-    /// Longest wait for the acks of one step, milliseconds.
-    #[arg(long, default_value_t = 5_000)]
-    ack_timeout_ms: u64,
+    /// The agents' longest wait for their peers' estimates of a step, milliseconds (default:
+    /// the agents' default). The ack wait is derived from it.
+    #[arg(long)]
+    peer_wait_ms: Option<u64>,
+    /// The agents' longest wait for one token holder, milliseconds (default: the agents'
+    /// default). The ack wait is derived from it.
+    #[arg(long)]
+    token_wait_ms: Option<u64>,
+    /// Longest wait for the agents' hellos, milliseconds (default: 30 s).
+    #[arg(long)]
+    start_timeout_ms: Option<u64>,
+    /// Longest wait for the acks of one step, milliseconds (default: derived from the
+    /// agents' waits, so that a healthy agent is never timed out).
+    #[arg(long)]
+    ack_timeout_ms: Option<u64>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -54,21 +64,9 @@ enum Mode {
 }
 
 fn main() -> ExitCode {
-    die_with_parent();
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
-    let args = match Args::try_parse() {
+    let args: Args = match process::start(Role::Child) {
         Ok(args) => args,
-        // clap prints help/version with code 0 and usage errors with code 2.
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(e.exit_code().clamp(0, 255) as u8);
-        }
+        Err(code) => return code,
     };
     let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
         Ok(s) => s,
@@ -83,31 +81,22 @@ fn main() -> ExitCode {
             speedup: args.speedup,
         },
     };
-    let config = ServerConfig {
-        run_id: args.run_id,
-        expected_agents: args
-            .agents
-            .unwrap_or_else(|| (0..scenario.uavs.count).collect()),
-        mode,
-        wait_for_observer: args.wait_observer,
-        start_timeout: Duration::from_millis(args.start_timeout_ms),
-        ack_timeout: Duration::from_millis(args.ack_timeout_ms),
-        scenario,
-    };
-    if let Err(e) = config.validate() {
-        eprintln!("world-server: {e}");
-        return ExitCode::from(2);
+    let timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms);
+    let mut config = ServerConfig::new(args.run_id, scenario, &timeouts);
+    if let Some(agents) = args.agents {
+        config.expected_agents = agents;
     }
-    let world = match World::new(&config.scenario) {
-        Ok(w) => w,
-        Err(e) => {
-            eprintln!("world-server: bad scenario: {e}");
-            return ExitCode::from(2);
-        }
-    };
+    config.mode = mode;
+    config.wait_for_observer = args.wait_observer;
+    if let Some(ms) = args.start_timeout_ms {
+        config.start_timeout = Duration::from_millis(ms);
+    }
+    if let Some(ms) = args.ack_timeout_ms {
+        config.ack_timeout = Duration::from_millis(ms);
+    }
     // SIGTERM/SIGINT are handled by iceoryx2's wait set; nothing else sets this flag.
     let shutdown = AtomicBool::new(false);
-    match server::run_with_world(config, world, &shutdown) {
+    match server::run(config, &shutdown) {
         Ok(report) => {
             for a in &report.agents {
                 tracing::info!(
@@ -121,19 +110,13 @@ fn main() -> ExitCode {
             }
             ExitCode::SUCCESS
         }
+        Err(e) if e.is_usage() => {
+            eprintln!("world-server: {e}");
+            ExitCode::from(2)
+        }
         Err(e) => {
-            eprintln!("world-server: run failed: {e:#}");
+            eprintln!("world-server: run failed: {e}");
             ExitCode::from(1)
         }
-    }
-}
-
-/// Asks the kernel to send SIGTERM when the parent (`fleet`, a test) dies, so no world-server
-/// outlives the run that started it.
-fn die_with_parent() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a process attribute; no memory is involved.
-    unsafe {
-        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
     }
 }

@@ -6,7 +6,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 use super::roads::RoadGrid;
-use crate::world::WorldBuildError;
+use crate::error::WorldBuildError;
 
 /// Target size of the lots a block is cut into (one building at most per lot).
 const LOT_SIZE_M: Real = 21.0;

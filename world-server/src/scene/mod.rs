@@ -17,7 +17,7 @@ use rand_chacha::ChaCha8Rng;
 pub use buildings::Building;
 pub use roads::{Axis, Lane, RoadGrid, RoadProfile};
 
-use crate::world::WorldBuildError;
+use crate::error::WorldBuildError;
 
 /// The road grid and the buildings of a run.
 #[derive(Clone, Debug, PartialEq)]

@@ -6,7 +6,7 @@ use protocol::scenario::Scenario;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::world::WorldBuildError;
+use crate::error::WorldBuildError;
 
 /// Typical distance between neighbouring parallel roads (a block of about 50 m plus a road).
 const TYPICAL_ROAD_SPACING_M: Real = 58.0;

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
 
-use super::ChildReport;
+use super::message::ChildReport;
 
 /// The line a child prints once its ports are open.
 pub const READY: &str = "ready";

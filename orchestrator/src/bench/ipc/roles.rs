@@ -22,16 +22,16 @@ use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, RunNode, WakeEvent};
 use protocol::math::Point3;
 use protocol::service::RunId;
-use protocol::wire::{GuidanceToken, PROTOCOL_VERSION, PlannedView, WireHeader, WireKind};
+use protocol::wire::{GuidanceToken, PlannedView, WireHeader, WireKind, unix_now_ns};
 use uav_agent::guidance::ring::ROUND_COMPLETE;
 use uav_agent::guidance::{TokenRing, Turn};
 
 use super::children::{GO, READY, RESULT};
-use super::socket::{self, SocketFrame};
-use super::{
-    Ack, BenchServices, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame,
-    monotonic_ns,
+use super::message::{
+    Ack, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame, monotonic_ns,
 };
+use super::services::BenchServices;
+use super::socket::{self, SocketFrame};
 
 /// Longest wait for a peer's message, an ack or the parent's `go`.
 pub const IDLE: Duration = Duration::from_secs(10);
@@ -562,12 +562,6 @@ fn estimates(run: &RunId, args: &BenchChildArgs) -> anyhow::Result<ChildReport> 
     Ok(report)
 }
 
-fn unix_now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
-
 fn token(run: &RunId, args: &BenchChildArgs) -> anyhow::Result<ChildReport> {
     let me = args.index;
     let node = RunNode::new(
@@ -602,10 +596,8 @@ fn token(run: &RunId, args: &BenchChildArgs) -> anyhow::Result<ChildReport> {
         while let Some(sample) = subscriber.receive()? {
             let at = monotonic_ns();
             let h = *sample.user_header();
-            if h.version != PROTOCOL_VERSION
-                || h.kind != WireKind::Token as u32
-                || h.run_tag != run_tag
-                || h.len as usize != sample.payload().len()
+            if h.check(sample.payload().len(), WireKind::Token, run_tag, None)
+                .is_err()
             {
                 report.corrupt += 1;
                 continue;
@@ -638,15 +630,9 @@ fn token(run: &RunId, args: &BenchChildArgs) -> anyhow::Result<ChildReport> {
         let token = ring.pass(round, round, &live, view.clone());
         let bytes = codec::encode(&token)?;
         let mut sample = publisher.loan_slice_uninit(bytes.len())?;
-        *sample.user_header_mut() = WireHeader {
-            version: PROTOCOL_VERSION,
-            kind: WireKind::Token as u32,
-            run_tag,
-            sender: me,
-            len: u32::try_from(bytes.len())?,
-            step: round,
-            sent_unix_ns: unix_now_ns(),
-        };
+        let len = u32::try_from(bytes.len())?;
+        *sample.user_header_mut() =
+            WireHeader::new(WireKind::Token, run_tag, me, round, len, unix_now_ns());
         sample.write_from_slice(&bytes).send()?;
         wakes.notify_others(WakeEvent::Token)?;
         report.messages += 1;

@@ -1,0 +1,126 @@
+//! What the pictures' tests share: where they write, a small scenario flown for a while, and
+//! reading a painted picture back at a ground point.
+
+use std::path::{Path, PathBuf};
+
+use plotters::prelude::*;
+use protocol::scenario::Scenario;
+use protocol::wire::TargetTruth;
+use world_server::World;
+
+use super::chart::{Area, SIZE};
+use super::raster::PlotRaster;
+
+/// Where a test writes its pictures: `$SETFLEET_KEEP_MAPS` (kept) or a fresh temp dir
+/// (removed when the guard drops).
+pub(super) struct OutDir {
+    pub(super) path: PathBuf,
+    keep: bool,
+}
+
+impl OutDir {
+    pub(super) fn new(name: &str) -> OutDir {
+        let (path, keep) = match std::env::var_os("SETFLEET_KEEP_MAPS") {
+            Some(dir) => (PathBuf::from(dir).join(name), true),
+            None => (
+                std::env::temp_dir().join(format!(
+                    "setfleet-maps-{}-{name}-{}",
+                    std::process::id(),
+                    std::time::SystemTime::now()
+                        .duration_since(std::time::UNIX_EPOCH)
+                        .unwrap()
+                        .as_nanos()
+                )),
+                false,
+            ),
+        };
+        std::fs::create_dir_all(&path).unwrap();
+        OutDir { path, keep }
+    }
+}
+
+impl Drop for OutDir {
+    fn drop(&mut self) {
+        if self.keep {
+            eprintln!("pictures kept in {}", self.path.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.path);
+        }
+    }
+}
+
+pub(super) fn small_scenario() -> Scenario {
+    Scenario::load(
+        None,
+        &[
+            "region.half_extent_m=40".into(),
+            "targets.count=3".into(),
+            "uavs.count=2".into(),
+        ],
+    )
+    .unwrap()
+}
+
+pub(super) fn assert_png(path: &Path) {
+    let bytes = std::fs::read(path).unwrap();
+    assert!(
+        bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+        "{} is not a PNG",
+        path.display()
+    );
+    assert!(
+        bytes.len() > 10_000,
+        "{} is only {} bytes",
+        path.display(),
+        bytes.len()
+    );
+}
+
+/// Paints with `paint` into memory; returns the picture's RGB bytes and the plot raster.
+pub(super) fn paint_in_memory(
+    paint: impl FnOnce(&Area<'_>) -> anyhow::Result<PlotRaster>,
+) -> (Vec<u8>, PlotRaster) {
+    let mut buf = vec![0u8; SIZE.0 as usize * SIZE.1 as usize * 3];
+    let raster = {
+        let root = BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area();
+        let raster = paint(&root).unwrap();
+        root.present().unwrap();
+        raster
+    };
+    (buf, raster)
+}
+
+/// The picture's colour at ground point `(x, y)`.
+pub(super) fn colour_at(buf: &[u8], raster: &PlotRaster, x: f64, y: f64) -> [u8; 3] {
+    let (px, py) = raster.pixel_of(x, y).unwrap();
+    let (col, row) = (raster.left + px as i32, raster.top + py as i32);
+    let i = (row as usize * SIZE.0 as usize + col as usize) * 3;
+    [buf[i], buf[i + 1], buf[i + 2]]
+}
+
+/// The world of `scenario` after `steps` steps, with each UAV's track.
+pub(super) fn flown(scenario: &Scenario, steps: u32) -> (World, Vec<Vec<[f64; 2]>>) {
+    let mut world = World::new(scenario).unwrap();
+    let mut tracks = vec![Vec::new(); world.uav_count()];
+    for _ in 0..steps {
+        for (track, uav) in tracks.iter_mut().zip(world.uavs()) {
+            track.push([uav.state.position.x, uav.state.position.y]);
+        }
+        world.advance();
+    }
+    (world, tracks)
+}
+
+pub(super) fn truth_of(world: &World) -> Vec<TargetTruth> {
+    world
+        .targets()
+        .iter()
+        .map(|car| TargetTruth {
+            id: car.id,
+            reserved: 0,
+            ground: [car.position.x, car.position.y],
+            heading: car.heading,
+            speed: car.speed_mps,
+        })
+        .collect()
+}

@@ -1,0 +1,476 @@
+//! `sets.png`: one agent's final fused sets over the city (the lowest id measured at the last
+//! step; with perfect links every agent holds the same sets but `H̄`): explored ground,
+//! `S^o`, `H̄`, `X̄`, each `X_j`, the true targets and the UAV tracks. A set is drawn at a
+//! pixel when any cell the pixel touches belongs to it, so sets smaller than a pixel still
+//! show.
+
+use std::path::Path;
+
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use protocol::math::Point2;
+use protocol::raster::CellSet;
+use protocol::scenario::Scenario;
+use world_server::scene::Building;
+
+use super::chart::{
+    Area, OPEN, OUTSIDE, PANEL, TITLE_PX, build_chart, draw_axes, draw_frame, draw_outlines,
+    draw_title, percent, write_picture,
+};
+use super::legend::{Hatch, Legend, Swatch, Symbol, target_marker, thick_path, uav_marker};
+use super::raster::{Pixels, PlotRaster, blend, blend_rgb, is_edge, mask, rgb};
+use crate::observe::FinalState;
+use crate::pictures::topview::building_shade;
+use crate::pictures::{FONT, palette};
+
+/// Explored ground: colour and opacity.
+const EXPLORED: (RGBColor, f64) = (RGBColor(150, 205, 150), 0.3);
+/// `S^o`: colour and opacity.
+const OBSTACLE_NEIGHBOURHOOD: (RGBColor, f64) = (RGBColor(55, 65, 120), 0.4);
+/// `X̄`: colour and opacity.
+const UNDETECTED: (RGBColor, f64) = (RGBColor(255, 185, 0), 0.45);
+/// Opacity of a target set `X_j` (its colour is the target's palette colour).
+const TARGET_ALPHA: f64 = 0.45;
+/// Hatch lines of `H̄`.
+const UNSEEN_HATCH: Hatch = Hatch {
+    ink: RGBColor(40, 40, 40),
+    alpha: 0.75,
+    period: 7,
+};
+/// Legend rows listed per kind (target sets, UAVs) before the rest are summarised.
+const LEGEND_MAX_ROWS: usize = 10;
+
+/// Draws one agent's final fused sets over the city into `path` (PNG): building footprints, explored
+/// ground, `S^o`, `H̄` (hatched), `X̄`, each `X_j` in its target's colour, the true targets
+/// and each UAV's track (`tracks[i]`: UAV `i`'s ground positions) with its final position.
+/// Fails when the sets do not live on the scenario's grid.
+pub fn draw_sets(
+    state: &FinalState,
+    tracks: &[Vec<[f64; 2]>],
+    scenario: &Scenario,
+    path: &Path,
+) -> anyhow::Result<()> {
+    check_grid(state, scenario)?;
+    write_picture(path, "sets.png", scenario, |root, buildings| {
+        paint_sets(root, state, tracks, scenario, buildings).map(drop)
+    })
+}
+
+/// The sets picture on `root`; returns where the plotting area lies.
+pub(super) fn paint_sets(
+    root: &Area<'_>,
+    state: &FinalState,
+    tracks: &[Vec<[f64; 2]>],
+    scenario: &Scenario,
+    buildings: &[Building],
+) -> anyhow::Result<PlotRaster> {
+    let grid = scenario.grid();
+    let sets = &state.sets;
+    root.fill(&WHITE)?;
+    let cells = grid.cell_count() as u64;
+    let truth_ids: Vec<u32> = state.targets.iter().map(|t| t.id).collect();
+    let found = truth_ids
+        .iter()
+        .filter(|id| sets.targets.contains_key(id))
+        .count();
+    let title = format!(
+        "UAV {}'s final sets at t = {:.1} s (step {}): {found} of {} targets identified, \
+         areas in % of the region",
+        state.uav,
+        state.time_s,
+        state.step,
+        truth_ids.len()
+    );
+    let (title_area, body) = root.split_vertically(TITLE_PX);
+    draw_title(&title_area, &title)?;
+    let (panel, legend) = body.split_horizontally(PANEL.0);
+
+    // The view holds the region and anything drawn outside it.
+    let reach = tracks
+        .iter()
+        .flatten()
+        .copied()
+        .chain(state.targets.iter().map(|t| t.ground))
+        .flat_map(|[x, y]| [x.abs(), y.abs()])
+        .filter(|v| v.is_finite())
+        .fold(0.0_f64, f64::max);
+    let h = scenario.region.half_extent_m;
+    let half = if reach > h { reach * 1.03 } else { h };
+    let mut chart = build_chart(&panel, half)?;
+    let raster = PlotRaster::of(&chart, half)?;
+
+    let [lo, hi] = scenario.region.building_height_m;
+    let mut pixels = Pixels::new(&raster);
+    let bounds = grid.bounds();
+    for py in 0..raster.height {
+        let y = raster.y_centre(py);
+        for px in 0..raster.width {
+            let p = Point2::new(raster.x_centre(px), y);
+            let colour = if bounds.contains(&p) { OPEN } else { OUTSIDE };
+            pixels.put(px, py, rgb(colour));
+        }
+    }
+    for b in buildings {
+        pixels.fill_rect(&raster, b, rgb(building_shade(b.height, lo, hi)));
+    }
+
+    let cols = raster.cell_columns(&grid);
+    let rows = raster.cell_rows(&grid);
+    let explored = mask(&sets.explored, &cols, &rows);
+    let neighbourhood = mask(&sets.obstacle_free, &cols, &rows);
+    let undetected = mask(&sets.undetected, &cols, &rows);
+    let unseen = mask(&sets.unseen, &cols, &rows);
+    let targets: Vec<(RGBColor, Vec<bool>)> = sets
+        .targets
+        .iter()
+        .map(|(&id, set)| (target_colour(id), mask(set, &cols, &rows)))
+        .collect();
+    let (w, h_px) = (raster.width as usize, raster.height as usize);
+    for py in 0..h_px {
+        for px in 0..w {
+            let i = py * w + px;
+            let mut c = pixels.get(px as u32, py as u32);
+            if explored[i] {
+                c = blend(c, EXPLORED.0, EXPLORED.1);
+            }
+            if neighbourhood[i] {
+                c = blend(c, OBSTACLE_NEIGHBOURHOOD.0, OBSTACLE_NEIGHBOURHOOD.1);
+            }
+            if undetected[i] {
+                c = blend(c, UNDETECTED.0, UNDETECTED.1);
+            }
+            for (colour, m) in &targets {
+                if m[i] {
+                    c = if is_edge(m, w, h_px, px, py) {
+                        rgb(*colour)
+                    } else {
+                        blend(c, *colour, TARGET_ALPHA)
+                    };
+                }
+            }
+            if unseen[i] && (px + py) % UNSEEN_HATCH.period as usize == 0 {
+                c = blend(c, UNSEEN_HATCH.ink, UNSEEN_HATCH.alpha);
+            }
+            pixels.put(px as u32, py as u32, c);
+        }
+    }
+    raster.blit(root, pixels)?;
+    draw_axes(&mut chart)?;
+    draw_outlines(&mut chart, buildings)?;
+
+    let label = |text: String, at: (i32, i32), pos: Pos| {
+        let style = (FONT, 14).into_font().color(&BLACK).pos(pos);
+        root.draw(&Text::new(text, at, style))
+    };
+    for (i, track) in tracks.iter().enumerate() {
+        let colour = palette(i);
+        let points: Vec<(i32, i32)> = track
+            .iter()
+            .filter(|[x, y]| x.is_finite() && y.is_finite())
+            .map(|&[x, y]| chart.backend_coord(&(x, y)))
+            .collect();
+        let Some(&(x, y)) = points.last() else {
+            continue;
+        };
+        thick_path(root, &points, colour)?;
+        uav_marker(root, (x, y), colour)?;
+        label(
+            format!("UAV {i}"),
+            (x + 8, y - 4),
+            Pos::new(HPos::Left, VPos::Bottom),
+        )?;
+    }
+    for t in &state.targets {
+        let [x, y] = t.ground;
+        if !(x.is_finite() && y.is_finite()) {
+            continue;
+        }
+        let (x, y) = chart.backend_coord(&(x, y));
+        target_marker(root, (x, y), target_colour(t.id))?;
+        label(
+            format!("T{}", t.id),
+            (x + 7, y - 5),
+            Pos::new(HPos::Left, VPos::Bottom),
+        )?;
+    }
+    draw_frame(&mut chart, half)?;
+
+    let share = |set: &CellSet| format!("{:.1} %", percent(set.count(), cells));
+    let mut keys = Legend::new(&legend);
+    keys.heading("Layers")?;
+    keys.entry(
+        &Swatch::Building(building_shade(0.5 * (lo + hi), lo, hi)),
+        None,
+        "building",
+    )?;
+    keys.entry(
+        &Swatch::Fill(blend_rgb(OPEN, EXPLORED.0, EXPLORED.1)),
+        None,
+        &format!("explored ground, {}", share(&sets.explored)),
+    )?;
+    keys.entry(
+        &Swatch::Fill(blend_rgb(
+            OPEN,
+            OBSTACLE_NEIGHBOURHOOD.0,
+            OBSTACLE_NEIGHBOURHOOD.1,
+        )),
+        Some(Symbol::Sup("S", "o")),
+        &format!("obstacle neighbourhoods, {}", share(&sets.obstacle_free)),
+    )?;
+    keys.entry(
+        &Swatch::Hatch(UNSEEN_HATCH),
+        Some(Symbol::Bar("H")),
+        &format!("unseen ground, {}", share(&sets.unseen)),
+    )?;
+    keys.entry(
+        &Swatch::Fill(blend_rgb(OPEN, UNDETECTED.0, UNDETECTED.1)),
+        Some(Symbol::Bar("X")),
+        &format!("undetected set, {}", share(&sets.undetected)),
+    )?;
+    keys.gap();
+    keys.heading("Targets")?;
+    if sets.targets.is_empty() {
+        keys.text("no target identified")?;
+    }
+    for (&id, set) in sets.targets.iter().take(LEGEND_MAX_ROWS) {
+        let colour = target_colour(id);
+        let sub = id.to_string();
+        keys.entry(
+            &Swatch::Edged(blend_rgb(OPEN, colour, TARGET_ALPHA), colour),
+            Some(Symbol::Sub("X", &sub)),
+            &format!("set of T{id}, {:.0} m\u{b2}", set.area(&grid)),
+        )?;
+    }
+    if sets.targets.len() > LEGEND_MAX_ROWS {
+        keys.text(&format!(
+            "and {} more",
+            sets.targets.len() - LEGEND_MAX_ROWS
+        ))?;
+    }
+    keys.entry(&Swatch::Target, None, "true target T<id>")?;
+    keys.gap();
+    keys.heading("UAVs")?;
+    for i in 0..tracks.len().min(LEGEND_MAX_ROWS) {
+        keys.entry(
+            &Swatch::Track(palette(i)),
+            None,
+            &format!("UAV {i}: track, last position"),
+        )?;
+    }
+    if tracks.len() > LEGEND_MAX_ROWS {
+        keys.text(&format!("and {} more", tracks.len() - LEGEND_MAX_ROWS))?;
+    }
+    Ok(raster)
+}
+
+/// Fails unless every set of `state` lives on the scenario's grid.
+fn check_grid(state: &FinalState, scenario: &Scenario) -> anyhow::Result<()> {
+    let grid = scenario.grid();
+    let sets = &state.sets;
+    let named = [
+        ("X\u{304}", &sets.undetected),
+        ("S^o", &sets.obstacle_free),
+        ("explored", &sets.explored),
+        ("H\u{304}", &sets.unseen),
+    ];
+    let targets = sets.targets.values().map(|s| ("X_j", s));
+    for (name, set) in named.into_iter().chain(targets) {
+        anyhow::ensure!(
+            set.nx() == grid.nx && set.ny() == grid.ny,
+            "the {name} set is on a {}x{} grid, the scenario's grid is {}x{}",
+            set.nx(),
+            set.ny(),
+            grid.nx,
+            grid.ny
+        );
+    }
+    Ok(())
+}
+
+/// The colour of target `id` (its set and its marker).
+fn target_colour(id: u32) -> RGBColor {
+    palette(id as usize)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use protocol::raster::Coverage;
+    use uav_agent::occupancy::OccupancyMap;
+    use world_server::World;
+
+    use super::super::fixtures::{
+        OutDir, assert_png, colour_at, flown, paint_in_memory, small_scenario, truth_of,
+    };
+    use super::super::map::draw_map;
+    use super::*;
+    use crate::observe::metrics::FusedSets;
+    use crate::pictures::register_fonts;
+
+    fn synthetic_state(scenario: &Scenario, world: &World) -> FinalState {
+        let grid = scenario.grid();
+        let targets = truth_of(world);
+        let mut obstacle_free = CellSet::empty(&grid);
+        for b in &world.scene().buildings {
+            let r = scenario.targets.safety_distance_m;
+            for iy in 0..grid.ny {
+                for ix in 0..grid.nx {
+                    let c = grid.cell_centre((ix, iy));
+                    if c.x > b.min.x - r
+                        && c.x < b.max.x + r
+                        && c.y > b.min.y - r
+                        && c.y < b.max.y + r
+                    {
+                        obstacle_free.set((ix, iy), true);
+                    }
+                }
+            }
+        }
+        let mut explored = CellSet::empty(&grid);
+        explored.fill_disc(&grid, Point2::new(-15.0, -15.0), 18.0, Coverage::Inner);
+        explored.and_not_assign(&obstacle_free);
+        let mut undetected = CellSet::full(&grid);
+        undetected.and_not_assign(&explored);
+        undetected.and_not_assign(&obstacle_free);
+        let mut unseen = CellSet::empty(&grid);
+        unseen.fill_disc(&grid, Point2::new(20.0, 20.0), 10.0, Coverage::Outer);
+        let mut sets = BTreeMap::new();
+        for t in targets.iter().take(2) {
+            let mut s = CellSet::empty(&grid);
+            s.fill_disc(
+                &grid,
+                Point2::new(t.ground[0], t.ground[1]),
+                4.0,
+                Coverage::Outer,
+            );
+            sets.insert(t.id, s);
+        }
+        FinalState {
+            step: 40,
+            time_s: 20.0,
+            uav: 0,
+            sets: FusedSets {
+                undetected,
+                targets: sets,
+                obstacle_free,
+                explored,
+                unseen,
+            },
+            targets,
+        }
+    }
+
+    #[test]
+    fn the_sets_show_every_layer_over_the_city() {
+        register_fonts().unwrap();
+        let scenario = small_scenario();
+        let (world, tracks) = flown(&scenario, 40);
+        let state = synthetic_state(&scenario, &world);
+        let buildings = &world.scene().buildings;
+
+        let (buf, raster) =
+            paint_in_memory(|root| paint_sets(root, &state, &tracks, &scenario, buildings));
+        // A building, under S^o.
+        if let Some(b) = buildings.first() {
+            let (x, y) = (0.5 * (b.min.x + b.max.x), 0.5 * (b.min.y + b.max.y));
+            let c = colour_at(&buf, &raster, x, y);
+            assert_ne!(c, rgb(OPEN));
+            assert_ne!(c, [255, 255, 255]);
+        }
+        // Inside target 0's set, south of its marker: tinted with its colour.
+        let t = &state.targets[0];
+        let inside = colour_at(&buf, &raster, t.ground[0], t.ground[1] - 2.5);
+        let expected = target_colour(t.id);
+        let tinted_alone = blend(rgb(OPEN), expected, TARGET_ALPHA);
+        assert_ne!(inside, rgb(OPEN));
+        let distance = |a: [u8; 3], b: [u8; 3]| {
+            (0..3)
+                .map(|k| (i32::from(a[k]) - i32::from(b[k])).abs())
+                .sum::<i32>()
+        };
+        assert!(
+            distance(inside, tinted_alone) < distance(rgb(OPEN), tinted_alone),
+            "{inside:?} is not tinted towards {expected:?}"
+        );
+
+        let dir = OutDir::new("sets");
+        let path = dir.path.join("sets.png");
+        draw_sets(&state, &tracks, &scenario, &path).unwrap();
+        assert_png(&path);
+    }
+
+    #[test]
+    fn sets_on_another_grid_are_refused() {
+        register_fonts().unwrap();
+        let scenario = small_scenario();
+        let (world, tracks) = flown(&scenario, 2);
+        let state = synthetic_state(&scenario, &world);
+        let bigger = Scenario::load(None, &["region.half_extent_m=60".into()]).unwrap();
+        let dir = OutDir::new("refused");
+        let err = draw_sets(&state, &tracks, &bigger, &dir.path.join("sets.png")).unwrap_err();
+        assert!(err.to_string().contains("grid"), "{err}");
+    }
+
+    /// A real case, the estimators of a small fleet run in-process: writes `map.png` and
+    /// `sets.png` to `$SETFLEET_KEEP_MAPS/real` for a look.
+    #[test]
+    #[ignore = "slow (renders frames); run with SETFLEET_KEEP_MAPS=DIR to look at the pictures"]
+    fn real_case_pictures() {
+        use crate::bench::estimator::FleetSim;
+        use crate::observe::metrics::ObservedEstimate;
+        use uav_agent::estimator::EstimatorConfig;
+
+        register_fonts().unwrap();
+        let scenario = Scenario::load(
+            None,
+            &[
+                "region.half_extent_m=100".into(),
+                "targets.count=5".into(),
+                "uavs.count=3".into(),
+            ],
+        )
+        .unwrap();
+        let steps = 120;
+        let mut sim = FleetSim::new(&scenario).unwrap();
+        let mut tracks = vec![Vec::new(); sim.uav_count()];
+        for _ in 0..steps {
+            sim.step().unwrap();
+            for (track, est) in tracks.iter_mut().zip(sim.estimators()) {
+                if let Some(pose) = est.state().pose {
+                    track.push([pose.position.x, pose.position.y]);
+                }
+            }
+        }
+        let config = EstimatorConfig::from_scenario(&scenario);
+        let mut oem = OccupancyMap::new(config.oem_grid);
+        let mut observed = Vec::new();
+        for bytes in sim.last_messages() {
+            let (estimate, _) = ObservedEstimate::decode(bytes, &config).unwrap();
+            observed.push(estimate);
+        }
+        for est in sim.estimators() {
+            oem.merge(&est.state().oem);
+        }
+        let sets = FusedSets::of_agent(&observed[0], &observed, &config, f64::INFINITY);
+        // Traffic does not depend on the UAVs: a second world gives the cars of the last frame.
+        let mut shadow = World::new(&scenario).unwrap();
+        for _ in 0..steps - 1 {
+            shadow.advance();
+        }
+        let state = FinalState {
+            step: shadow.step(),
+            time_s: shadow.time_s(),
+            uav: 0,
+            sets,
+            targets: truth_of(&shadow),
+        };
+        let dir = OutDir::new("real");
+        let start = std::time::Instant::now();
+        draw_map(&oem, &scenario, &dir.path.join("map.png")).unwrap();
+        draw_sets(&state, &tracks, &scenario, &dir.path.join("sets.png")).unwrap();
+        eprintln!("both pictures drawn in {:?}", start.elapsed());
+        assert_png(&dir.path.join("map.png"));
+        assert_png(&dir.path.join("sets.png"));
+    }
+}

@@ -1,0 +1,91 @@
+//! How every setfleet binary starts: its log on stderr, its arguments, and, for a process that
+//! `fleet` or a test started, dying with its parent.
+//!
+//! ```no_run
+//! use std::process::ExitCode;
+//! use clap::Parser;
+//! use protocol::process::{self, Role};
+//!
+//! #[derive(Parser)]
+//! struct Args {
+//!     #[arg(long)]
+//!     id: u32,
+//! }
+//!
+//! fn main() -> ExitCode {
+//!     let args: Args = match process::start(Role::Child) {
+//!         Ok(args) => args,
+//!         Err(code) => return code,
+//!     };
+//!     println!("agent {}", args.id);
+//!     ExitCode::SUCCESS
+//! }
+//! ```
+
+use std::process::ExitCode;
+
+use clap::Parser;
+use tracing_subscriber::EnvFilter;
+
+/// What kind of setfleet process is starting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// `fleet`, the command a user types: logs warnings and errors unless `RUST_LOG` says
+    /// otherwise.
+    Command,
+    /// A process `fleet` or a test starts (world-server, agent): logs from `info` unless
+    /// `RUST_LOG` says otherwise, and dies with its parent.
+    Child,
+}
+
+impl Role {
+    /// The log filter when `RUST_LOG` is unset or invalid.
+    pub fn default_log_filter(self) -> &'static str {
+        match self {
+            Role::Command => "warn",
+            Role::Child => "info",
+        }
+    }
+}
+
+/// Starts a binary: a [`Role::Child`] first asks to die with its parent ([`die_with_parent`]),
+/// then the log goes to stderr ([`init_tracing`]) and the arguments are parsed
+/// ([`parse_args`]). `Err` holds the code to exit with once help, the version or a usage error
+/// was printed.
+pub fn start<A: Parser>(role: Role) -> Result<A, ExitCode> {
+    if role == Role::Child {
+        die_with_parent();
+    }
+    init_tracing(role.default_log_filter());
+    parse_args()
+}
+
+/// Asks the kernel to send SIGTERM when the parent (`fleet`, a test) dies, so no child
+/// outlives the run that started it (Linux; elsewhere nothing happens).
+pub fn die_with_parent() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a process attribute; no memory is involved.
+    unsafe {
+        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+    }
+}
+
+/// Sends the `tracing` log to stderr (stdout is left to reports), filtered by `RUST_LOG`, or
+/// by `default_filter` when it is unset or invalid.
+pub fn init_tracing(default_filter: &str) {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_filter)),
+        )
+        .init();
+}
+
+/// Parses the process's arguments; on `--help`, `--version` or a usage error, prints what clap
+/// says and returns the exit code (0 for help and version, 2 for a usage error).
+pub fn parse_args<A: Parser>() -> Result<A, ExitCode> {
+    A::try_parse().map_err(|e| {
+        let _ = e.print();
+        ExitCode::from(e.exit_code().clamp(0, 255) as u8)
+    })
+}

@@ -1,0 +1,304 @@
+//! Crash-safe checkpoints of an agent's estimator state.
+//!
+//! An agent with a checkpoint file writes its [`EstimatorState`] there after each step it
+//! acked. A restarted agent reads it back before its first frame and resumes from it: the
+//! first frame's prediction grows every set by the motion since the checkpoint's step, so the
+//! sets hold the targets as surely as if the agent had never stopped, and nothing the agent
+//! had learned (explored ground, identified targets, the map) is lost even when no peer is
+//! left to resend it.
+//!
+//! **Atomic.** A checkpoint is written to `<file>.tmp`, flushed to disk (`fsync`), renamed
+//! over `<file>`, and the directory is flushed: a crash at any point leaves either the old
+//! checkpoint or the new one, never a mix.
+//!
+//! **Checked.** The file is `MAGIC`, the body's length and CRC-32, then the body (through
+//! [`protocol::codec`], size-limited). The body names the run (its tag), the UAV and a
+//! fingerprint of the scenario. A file that is truncated, corrupt, of another format, run,
+//! UAV or scenario, or whose sets do not fit the estimator's grids is refused with a
+//! [`CheckpointError`]: the caller logs it and starts fresh.
+
+use std::fs::{self, File};
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use protocol::codec::{self, DecodeError, EncodeError};
+use protocol::scenario::Scenario;
+use serde::{Deserialize, Serialize};
+
+use crate::estimator::{Estimator, EstimatorConfig, EstimatorState};
+
+/// First bytes of every checkpoint file (format version included).
+const MAGIC: &[u8; 8] = b"SFCKPT01";
+/// Magic, body length (u64 LE), body CRC-32 (u32 LE).
+const HEADER_BYTES: usize = 8 + 8 + 4;
+
+/// Whose checkpoint a file is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Owner {
+    /// The run's tag ([`protocol::service::RunId::tag`]).
+    pub run_tag: u64,
+    /// The UAV.
+    pub uav: u32,
+    /// CRC-32 of the scenario's TOML: a checkpoint of another scenario is refused.
+    pub scenario: u32,
+}
+
+impl Owner {
+    /// The owner of UAV `uav`'s checkpoints in the run tagged `run_tag` of `scenario`.
+    pub fn new(run_tag: u64, uav: u32, scenario: &Scenario) -> Owner {
+        Owner {
+            run_tag,
+            uav,
+            scenario: crc32fast::hash(scenario.to_toml_string().as_bytes()),
+        }
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+struct Body {
+    owner: Owner,
+    state: EstimatorState,
+}
+
+/// Why a checkpoint could not be written or was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    /// Reading or writing the file failed.
+    #[error("checkpoint {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The reason.
+        source: std::io::Error,
+    },
+    /// The state could not be encoded.
+    #[error("checkpoint: {0}")]
+    Encode(#[from] EncodeError),
+    /// The file is not a whole, intact checkpoint.
+    #[error("checkpoint {path} is corrupt: {why}")]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
+    /// The file is intact but belongs to another run, UAV or scenario.
+    #[error("checkpoint {path} is foreign: it is {found:?}, this agent is {expected:?}")]
+    Foreign {
+        /// The file.
+        path: PathBuf,
+        /// Whose it is.
+        found: Owner,
+        /// Whose it should be.
+        expected: Owner,
+    },
+    /// The state's sets do not fit this agent's grids.
+    #[error("checkpoint {path} holds sets of other grids")]
+    Grids {
+        /// The file.
+        path: PathBuf,
+    },
+}
+
+/// One agent's checkpoint file.
+#[derive(Clone, Debug)]
+pub struct CheckpointFile {
+    path: PathBuf,
+    owner: Owner,
+}
+
+impl CheckpointFile {
+    /// The checkpoint of `owner` at `path` (nothing is read or written yet).
+    pub fn new(path: PathBuf, owner: Owner) -> CheckpointFile {
+        CheckpointFile { path, owner }
+    }
+
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Replaces the checkpoint with `state`, atomically and durably.
+    pub fn save(&self, state: &EstimatorState) -> Result<(), CheckpointError> {
+        let body = codec::encode(&BodyRef {
+            owner: self.owner,
+            state,
+        })?;
+        let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
+        bytes.extend_from_slice(MAGIC);
+        bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(&crc32fast::hash(&body).to_le_bytes());
+        bytes.extend_from_slice(&body);
+        let io = |path: &Path| {
+            let path = path.to_owned();
+            move |source| CheckpointError::Io { path, source }
+        };
+        let tmp = self.path.with_extension("tmp");
+        let mut file = File::create(&tmp).map_err(io(&tmp))?;
+        file.write_all(&bytes).map_err(io(&tmp))?;
+        file.sync_all().map_err(io(&tmp))?;
+        drop(file);
+        fs::rename(&tmp, &self.path).map_err(io(&self.path))?;
+        // The rename itself is durable once the directory is flushed.
+        if let Some(dir) = self.path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            File::open(dir)
+                .and_then(|d| d.sync_all())
+                .map_err(io(dir))?;
+        }
+        Ok(())
+    }
+
+    /// The estimator resumed from the saved state ([`Estimator::with_state`]), if there is a
+    /// checkpoint (`Ok(None)` when there is no file), checked against this agent's owner and
+    /// grids.
+    pub fn load(&self, config: &EstimatorConfig) -> Result<Option<Estimator>, CheckpointError> {
+        let bytes = match fs::read(&self.path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(source) => {
+                return Err(CheckpointError::Io {
+                    path: self.path.clone(),
+                    source,
+                });
+            }
+        };
+        let corrupt = |why: String| CheckpointError::Corrupt {
+            path: self.path.clone(),
+            why,
+        };
+        if bytes.len() < HEADER_BYTES || &bytes[..8] != MAGIC {
+            return Err(corrupt("not a setfleet checkpoint".into()));
+        }
+        let len = u64::from_le_bytes(bytes[8..16].try_into().unwrap_or_default());
+        let crc = u32::from_le_bytes(bytes[16..20].try_into().unwrap_or_default());
+        let body = &bytes[HEADER_BYTES..];
+        if len != body.len() as u64 {
+            return Err(corrupt(format!(
+                "{} body bytes, the header says {len}",
+                body.len()
+            )));
+        }
+        if crc32fast::hash(body) != crc {
+            return Err(corrupt("checksum mismatch".into()));
+        }
+        let body: Body = codec::decode(body).map_err(|e: DecodeError| corrupt(e.to_string()))?;
+        if body.owner != self.owner {
+            return Err(CheckpointError::Foreign {
+                path: self.path.clone(),
+                found: body.owner,
+                expected: self.owner,
+            });
+        }
+        Estimator::with_state(config.clone(), body.state)
+            .map(Some)
+            .map_err(|_| CheckpointError::Grids {
+                path: self.path.clone(),
+            })
+    }
+}
+
+/// [`Body`] by reference, so saving does not clone the state.
+#[derive(Serialize)]
+struct BodyRef<'a> {
+    owner: Owner,
+    state: &'a EstimatorState,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn small() -> Scenario {
+        let mut s = Scenario::default();
+        s.region.half_extent_m = 60.0;
+        s
+    }
+
+    fn state(config: &EstimatorConfig) -> EstimatorState {
+        let mut state = Estimator::new(config.clone()).into_state();
+        state.step = 42;
+        state.frames = 7;
+        state.explored.set((3, 2), true);
+        state
+    }
+
+    fn dir(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("setfleet-ckpt-{name}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn a_saved_state_comes_back_whole_and_no_temporary_file_is_left() {
+        let scenario = small();
+        let config = EstimatorConfig::from_scenario(&scenario);
+        let dir = dir("roundtrip");
+        let file = CheckpointFile::new(dir.join("agent-1.ckpt"), Owner::new(9, 1, &scenario));
+        assert!(file.load(&config).unwrap().is_none());
+        let saved = state(&config);
+        file.save(&saved).unwrap();
+        file.save(&saved).unwrap();
+        let back = file.load(&config).unwrap().expect("a checkpoint");
+        let back = back.state();
+        assert_eq!((back.step, back.frames), (42, 7));
+        assert_eq!(back.explored, saved.explored);
+        assert_eq!(back.undetected.cells(), saved.undetected.cells());
+        let names: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["agent-1.ckpt"]);
+        fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn corrupt_truncated_and_foreign_checkpoints_are_refused() {
+        let scenario = small();
+        let config = EstimatorConfig::from_scenario(&scenario);
+        let dir = dir("refused");
+        let path = dir.join("agent-0.ckpt");
+        let mine = CheckpointFile::new(path.clone(), Owner::new(9, 0, &scenario));
+        mine.save(&state(&config)).unwrap();
+        let good = fs::read(&path).unwrap();
+
+        let mut flipped = good.clone();
+        let last = flipped.len() - 1;
+        flipped[last] ^= 0x40;
+        fs::write(&path, &flipped).unwrap();
+        assert!(matches!(
+            mine.load(&config),
+            Err(CheckpointError::Corrupt { .. })
+        ));
+        fs::write(&path, &good[..good.len() / 2]).unwrap();
+        assert!(matches!(
+            mine.load(&config),
+            Err(CheckpointError::Corrupt { .. })
+        ));
+        fs::write(&path, b"not a checkpoint at all").unwrap();
+        assert!(matches!(
+            mine.load(&config),
+            Err(CheckpointError::Corrupt { .. })
+        ));
+
+        fs::write(&path, &good).unwrap();
+        for other in [
+            Owner::new(10, 0, &scenario),
+            Owner::new(9, 1, &scenario),
+            Owner::new(9, 0, &Scenario::default()),
+        ] {
+            let theirs = CheckpointFile::new(path.clone(), other);
+            assert!(matches!(
+                theirs.load(&config),
+                Err(CheckpointError::Foreign { .. })
+            ));
+        }
+        let other_grids = EstimatorConfig::from_scenario(&Scenario::default());
+        assert!(matches!(
+            mine.load(&other_grids),
+            Err(CheckpointError::Grids { .. })
+        ));
+        assert!(mine.load(&config).unwrap().is_some());
+        fs::remove_dir_all(dir).unwrap();
+    }
+}

@@ -1,0 +1,17 @@
+//! Why a world could not be built: the one error of [`World::new`](crate::World::new) and of
+//! the generators it calls (city, traffic, fleet).
+
+use protocol::scenario::ScenarioError;
+
+/// Why a world could not be built from a scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum WorldBuildError {
+    /// A value is out of its range ([`protocol::scenario::Scenario::validate`], the loader's
+    /// own check, so a scenario built in code is held to the ranges of one read from a file).
+    #[error("cannot build the world: {0}")]
+    Scenario(#[from] ScenarioError),
+    /// The scenario asks for something the generator cannot place (e.g. more cars than the
+    /// roads hold with their safety distances).
+    #[error("cannot build the world: {0}")]
+    Placement(String),
+}
