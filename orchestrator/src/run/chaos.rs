@@ -13,12 +13,15 @@
 //! others fall on a random step and UAV, and so does a holder's incident when the holder is
 //! busy at every guidance step tried.
 //!
-//! So that the run stays meaningful, faults start after the first guidance period, end
-//! [`end_margin_s`] before the end of the run (each agent is back, and measured back, before
-//! it), and never overlap on one UAV: after a restart or a pause its agent is left alone for
-//! [`SETTLE_STEPS`] steps (a pause counts as its duration in simulated time, which is longer
-//! than it lasts in lockstep, where the world waits for the stopped agent). Several UAVs may
-//! be down at once, the whole fleet included, but rarely: every kill is short.
+//! So that the run stays meaningful, faults start after the first guidance period, every
+//! incident is over [`end_margin_s`] before the end of the run (each agent is back, and
+//! measured back, before it), and incidents never overlap on one UAV: after a restart or a
+//! pause its agent is left alone for [`SETTLE_STEPS`] steps. A pause is reckoned to last its
+//! duration in simulated time (as in realtime at speedup 1; a lockstep world waits for the
+//! stopped agent, so there it lasts less), and a pause longer than the world's ack wait
+//! longer still: the world then goes on without the agent, up to [`RUN_ON_RATE`] times
+//! faster than real time. Several UAVs may be down at once, the whole fleet included, but
+//! rarely: every kill is short.
 //!
 //! The schedule depends only on the seed, the number of faults asked for, the scenario's
 //! duration, periods and fleet size, and the explicit `--fault`s it is laid around.
@@ -27,6 +30,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use protocol::scenario::Scenario;
+use protocol::timeouts::Timeouts;
 
 use super::config::{Fault, FaultKind, FaultOrigin};
 
@@ -38,6 +42,9 @@ pub const RESTART_DELAY_S: (f64, f64) = (1.0, 5.0);
 pub const PAUSE_S: (f64, f64) = (0.5, 8.0);
 /// Steps a UAV is left alone after a restart or the end of a pause.
 pub const SETTLE_STEPS: u64 = 10;
+/// Simulated seconds per wall second a lockstep world may run at once it stopped waiting for
+/// a stopped agent (small scenarios run at several times real time).
+pub const RUN_ON_RATE: f64 = 10.0;
 /// One incident in this many lands on the token holder at a guidance step.
 const TOKEN_EVERY: usize = 3;
 /// Placement attempts per incident before it is given up.
@@ -90,6 +97,8 @@ struct Busy {
 /// The schedule being drawn.
 struct Chaos {
     period_s: f64,
+    /// The lockstep world's wait for an agent's ack, seconds.
+    ack_wait_s: f64,
     guidance_steps: u64,
     uavs: u32,
     /// First and last step a fault may fall on (`first > last`: none).
@@ -110,6 +119,7 @@ impl Chaos {
         let uavs = scenario.uavs.count;
         let mut chaos = Chaos {
             period_s,
+            ack_wait_s: Timeouts::default().ack().as_secs_f64(),
             guidance_steps,
             uavs,
             first: guidance_steps.max(1),
@@ -133,7 +143,7 @@ impl Chaos {
                     chaos.down[f.uav as usize].push((from, step));
                 }
                 FaultKind::Pause => {
-                    let to = step + chaos.pause_steps(f.pause_s.unwrap_or(0.0)) + SETTLE_STEPS;
+                    let to = step + chaos.pause_span(f.pause_s.unwrap_or(0.0)) + SETTLE_STEPS;
                     chaos.block(f.uav, step, to);
                 }
             }
@@ -152,9 +162,11 @@ impl Chaos {
         (at_s / self.period_s - 1e-9).ceil().max(0.0) as u64
     }
 
-    /// Steps of simulated time a pause of `pause_s` wall seconds would last in real time.
-    fn pause_steps(&self, pause_s: f64) -> u64 {
-        (pause_s / self.period_s).ceil() as u64
+    /// Steps of simulated time a pause of `pause_s` wall seconds is reckoned to last (see
+    /// the module docs).
+    fn pause_span(&self, pause_s: f64) -> u64 {
+        let run_on = (pause_s - self.ack_wait_s).max(0.0) * RUN_ON_RATE;
+        ((pause_s + run_on) / self.period_s).ceil() as u64
     }
 
     fn block(&mut self, uav: u32, from: u64, to: u64) {
@@ -185,16 +197,18 @@ impl Chaos {
         if self.first > self.last || self.uavs == 0 {
             return false;
         }
-        let (restart_steps, pause_s) = if kill {
+        // The incident's steps: to the restart, or the pause's reckoned span.
+        let (span, pause_s) = if kill {
             let least = (RESTART_DELAY_S.0 / self.period_s).ceil().max(1.0) as u64;
             let most = ((RESTART_DELAY_S.1 / self.period_s).floor() as u64).max(least);
             (rng.random_range(least..=most), 0.0)
         } else {
             let tenths = rng.random_range((PAUSE_S.0 * 10.0) as u32..=(PAUSE_S.1 * 10.0) as u32);
-            (0, f64::from(tenths) / 10.0)
+            let pause_s = f64::from(tenths) / 10.0;
+            (self.pause_span(pause_s), pause_s)
         };
-        // A kill's restart falls inside the window too.
-        let Some(latest) = self.last.checked_sub(restart_steps) else {
+        // The incident is over inside the window.
+        let Some(latest) = self.last.checked_sub(span) else {
             return false;
         };
         if latest < self.first {
@@ -210,12 +224,7 @@ impl Chaos {
         } else {
             rng.random_range(self.first..=latest)
         };
-        let end =
-            step + if kill {
-                restart_steps
-            } else {
-                self.pause_steps(pause_s)
-            } + SETTLE_STEPS;
+        let end = step + span + SETTLE_STEPS;
         let uav = if on_holder {
             match self.holder(step) {
                 Some(u) if self.is_free(u, step, end) => u,
@@ -240,7 +249,7 @@ impl Chaos {
             origin: FaultOrigin::Chaos,
         };
         if kill {
-            let restart = step + restart_steps;
+            let restart = step + span;
             self.down[uav as usize].push((step, restart));
             self.faults.push(fault(FaultKind::Kill, at(step), None));
             self.faults
@@ -321,6 +330,9 @@ mod tests {
                     FaultKind::Pause => {
                         let p = f.pause_s.expect("a pause duration");
                         assert!((0.5..=8.0).contains(&p), "{f}");
+                        // Over before the end, even when the world runs on without the agent.
+                        let run_on = (p - Timeouts::default().ack().as_secs_f64()).max(0.0);
+                        assert!(f.at_s + p + run_on * RUN_ON_RATE <= last + 1e-9, "{f}");
                     }
                 }
                 let guidance_step = (f.at_s / s.timing.guidance_period_s).fract() == 0.0;
