@@ -32,7 +32,7 @@ pub mod tally;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -73,6 +73,10 @@ pub struct ObserverConfig {
     pub fault_times: Vec<f64>,
     /// Longest wait for the orchestrator to apply due faults.
     pub fault_wait: Duration,
+    /// Agents the orchestrator continued (SIGCONT) since the last ack, bit `i` for UAV `i`.
+    /// The next ack announces them to the world as it does restarts, so a lockstep world
+    /// that skipped a stopped agent waits for it before its next frame instead of running on.
+    pub resumed: Arc<AtomicU32>,
 }
 
 /// The metrics of one step.
@@ -537,7 +541,7 @@ impl Observer<'_> {
         }
         // Faults first (a killed agent is gone before frame k + 1), then the ack, so the world
         // renders the next step while this one is measured.
-        let restarted = self.apply_faults(truth);
+        let restarted = self.apply_faults(truth) | self.config.resumed.swap(0, Ordering::AcqRel);
         self.send_ack(k, restarted)?;
         let step = self.measure(truth, live_agents);
         self.report.steps += 1;

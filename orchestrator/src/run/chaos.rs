@@ -19,8 +19,8 @@
 //! pause its agent is left alone for [`SETTLE_STEPS`] steps. A pause is reckoned to last its
 //! duration in simulated time (as in realtime at speedup 1; a lockstep world waits for the
 //! stopped agent, so there it lasts less), and a pause longer than the world's ack wait
-//! longer still: the world then goes on without the agent, up to [`RUN_ON_RATE`] times
-//! faster than real time. Several UAVs may be down at once, the whole fleet included, but
+//! longer still: the world then goes on without the agent until its SIGCONT, up to
+//! [`RUN_ON_RATE`] times faster than real time. Several UAVs may be down at once, the whole fleet included, but
 //! rarely: every kill is short.
 //!
 //! The schedule depends only on the seed, the number of faults asked for, the scenario's

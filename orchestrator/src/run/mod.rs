@@ -9,7 +9,8 @@
 //! - faults due at a step ([`faults`]: `--fault`s and the [`chaos`] schedule) are applied
 //!   before the observer acknowledges that step, so a kill or restart is as reproducible as
 //!   any lockstep run; a pause (SIGSTOP) is continued (SIGCONT) by a timer after its wall-clock
-//!   duration, while the loop goes on serving events;
+//!   duration, while the loop goes on serving events, and the continued agent is announced
+//!   in the observer's next ack like a restart (the world waits for it);
 //! - an agent that exits on its own is noted (the world and its peers go on without it);
 //! - the world-server exiting early fails the run; Ctrl-C or SIGTERM interrupts it.
 //!
@@ -27,7 +28,7 @@ pub mod stale;
 
 use std::process::ExitStatus;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
@@ -181,6 +182,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     let mut sigterm = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
 
     let mut plan = FaultPlan::new(&config.faults);
+    let resumed = Arc::new(AtomicU32::new(0));
     let stop = Arc::new(AtomicBool::new(false));
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let observer = observe::spawn(
@@ -191,6 +193,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
             estimate_wait: Timeouts::default().estimate_wait(),
             fault_times: plan.times(),
             fault_wait: FAULT_WAIT,
+            resumed: resumed.clone(),
         },
         stop.clone(),
         events_tx,
@@ -262,7 +265,10 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
             },
             _ = tokio::time::sleep_until(resume_at), if next_resume.is_some() => {
                 for due in resumes.take_due(tokio::time::Instant::now()) {
-                    resume(&mut children, &mut plan, &progress, due, latest);
+                    if resume(&mut children, &mut plan, &progress, due, latest) {
+                        // Announced in the observer's next ack, so the world waits for it.
+                        resumed.fetch_or(protocol::wire::uav_bit(due.uav), Ordering::AcqRel);
+                    }
                 }
             }
             status = world.wait(), if world_exit.is_none() => {
@@ -432,24 +438,26 @@ fn fault_note(time_s: f64, due: DueFault, effective: bool) -> String {
 }
 
 /// Sends a pause's SIGCONT and notes it in the plan, with the newest step the observer
-/// handed over (`latest`: step and time).
+/// handed over (`latest`: step and time); whether the agent was still there to continue.
 fn resume(
     children: &mut Children,
     plan: &mut FaultPlan,
     progress: &Progress,
     due: PendingResume,
     latest: (u64, f64),
-) {
+) -> bool {
     let (step, time_s) = latest;
     if children.resume_agent(due.uav, due.incarnation) {
         plan.resumed(due.index, step);
         progress.note(&format!("t={time_s:.1}s: agent {} continued", due.uav));
+        true
     } else {
         tracing::warn!(uav = due.uav, "the paused agent ended before its SIGCONT");
         progress.note(&format!(
             "t={time_s:.1}s: agent {} ended while paused",
             due.uav
         ));
+        false
     }
 }
 
