@@ -108,3 +108,57 @@ fn chaos_runs_complete_with_agents_back_and_nothing_left() {
         assert!(kinds.contains(kind), "no {kind} in {kinds:?}");
     }
 }
+
+#[test]
+fn a_pause_ends_with_its_agent_or_with_the_run() {
+    let t = TestRun::new("chaos-pauses");
+    let out_dir = t.dir.join("out");
+    let mut small = SMALL.to_vec();
+    small[1] = "10";
+    small[3] = "2";
+    // Agent 1 is stopped for 30 s, killed while stopped and restarted; agent 0 is stopped for
+    // a minute, past the end of the run.
+    let faults = ["pause:1@2+30", "kill:1@3", "restart:1@5", "pause:0@6+60"];
+    let mut cmd = Command::new(binary("fleet"));
+    cmd.args(["run", "--run-id", t.run.as_str(), "--strict"])
+        .args(small)
+        .arg("--out")
+        .arg(&out_dir);
+    for f in faults {
+        cmd.args(["--fault", f]);
+    }
+    let mut fleet = ChildGuard::spawn(&mut cmd);
+    let out = fleet
+        .wait_timeout(CHAOS_RUN_TIMEOUT)
+        .expect("the run did not end in time");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let left = processes_mentioning(t.run.as_str());
+    assert!(left.is_empty(), "processes left: {left:?}");
+    assert!(t.ipc_files().is_empty(), "files left: {:?}", t.ipc_files());
+    assert!(out.status.success(), "{stderr}");
+    let text = std::fs::read_to_string(out_dir.join("summary.json")).expect("summary.json");
+    let s: Value = serde_json::from_str(&text).expect("summary.json is JSON");
+    assert_eq!(s["interrupted"], false, "{stderr}");
+    assert_eq!(s["steps"], 20, "{stderr}");
+    assert_eq!(s["violations"], 0);
+    assert_eq!(s["chaos_seed"], Value::Null);
+    let f = s["faults"].as_array().expect("faults");
+    let kinds: Vec<&str> = f
+        .iter()
+        .map(|f| f["kind"].as_str().expect("kind"))
+        .collect();
+    assert_eq!(kinds, ["pause", "kill", "restart", "pause"], "{s}");
+    assert!(f.iter().all(|f| f["effective"] == true), "{s}");
+    assert!(f.iter().all(|f| f["origin"] == "explicit"), "{s}");
+    // The killed process never got its SIGCONT; its successor was not sent one.
+    assert_eq!(f[0]["resumed_at_step"], Value::Null, "{s}");
+    assert_eq!(f[0]["resync_steps"], Value::Null, "{s}");
+    let back = f[2]["resync_steps"]
+        .as_u64()
+        .expect("the restarted agent came back");
+    assert!(back <= MAX_RESYNC_STEPS, "{s}");
+    // The long pause was ended by the end of the run, at its last step.
+    assert_eq!(f[3]["pause_s"], 60.0, "{s}");
+    assert_eq!(f[3]["resumed_at_step"], 19, "{s}\n{stderr}");
+    assert!(stderr.contains("agent 1 ended while paused"), "{stderr}");
+}

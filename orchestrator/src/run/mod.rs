@@ -16,8 +16,9 @@
 //!
 //! Whatever the ending, every paused agent is continued, every child is stopped (SIGTERM,
 //! then SIGKILL after a bounded grace), the run's iceoryx2 files are removed, and the
-//! [`RunRecord`] holds what was measured, with each restarted or resumed agent's resync. [`run`] is the command: it executes, then writes `summary.json`,
-//! `timeseries.csv` and the pictures, and prints the summary table.
+//! [`RunRecord`] holds what was measured, with each restarted or resumed agent's resync.
+//! [`run`] is the command: it executes, then writes `summary.json`, `timeseries.csv` and the
+//! pictures, and prints the summary table.
 
 pub mod chaos;
 pub mod children;
