@@ -122,6 +122,7 @@ impl SweepArgs {
                         run_id: new_run_id(sequence),
                         progress_bar,
                         variant,
+                        chaos_seed: None,
                     },
                 ));
             }

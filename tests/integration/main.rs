@@ -3,6 +3,7 @@
 
 mod agents;
 mod bench;
+mod chaos;
 mod cli;
 mod frames;
 mod recovery;

@@ -32,7 +32,7 @@ pub mod tally;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -73,6 +73,10 @@ pub struct ObserverConfig {
     pub fault_times: Vec<f64>,
     /// Longest wait for the orchestrator to apply due faults.
     pub fault_wait: Duration,
+    /// Agents the orchestrator continued (SIGCONT) since the last ack, bit `i` for UAV `i`.
+    /// The next ack announces them to the world as it does restarts, so a lockstep world
+    /// that skipped a stopped agent waits for it before its next frame instead of running on.
+    pub resumed: Arc<AtomicU32>,
 }
 
 /// The metrics of one step.
@@ -97,6 +101,20 @@ pub struct StepMetrics {
     pub identified_any: u32,
     /// Truth-outside-set events this step.
     pub violations: u32,
+}
+
+impl StepMetrics {
+    /// Whether the estimate of `uav` of this step arrived in time to be measured: the
+    /// agents of [`StepMetrics::agents`] are exactly those whose estimate of the step the
+    /// observer received before it measured the step (a late one is dropped).
+    pub fn estimated_by(&self, uav: u32) -> bool {
+        self.agents.contains_key(&uav)
+    }
+
+    /// The agents whose estimate of this step arrived in time, ascending.
+    pub fn estimated(&self) -> impl Iterator<Item = u32> + '_ {
+        self.agents.keys().copied()
+    }
 }
 
 /// What the observer tells the tokio side.
@@ -523,7 +541,7 @@ impl Observer<'_> {
         }
         // Faults first (a killed agent is gone before frame k + 1), then the ack, so the world
         // renders the next step while this one is measured.
-        let restarted = self.apply_faults(truth);
+        let restarted = self.apply_faults(truth) | self.config.resumed.swap(0, Ordering::AcqRel);
         self.send_ack(k, restarted)?;
         let step = self.measure(truth, live_agents);
         self.report.steps += 1;

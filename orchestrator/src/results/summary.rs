@@ -94,8 +94,15 @@ pub struct Summary {
     pub identified_any_final: u32,
     /// First time every target was identified by some agent, seconds (fleet-wide).
     pub time_all_identified_any_s: Option<f64>,
-    /// Faults injected.
+    /// Faults injected (`--fault`s and the `--chaos` schedule), in the order they applied.
     pub faults: Vec<FaultRecord>,
+    /// The `--chaos` seed (`null` without `--chaos`).
+    pub chaos_seed: Option<u64>,
+    /// The largest resync of a restarted or resumed agent, steps (`null` when none was
+    /// measured; see [`crate::run::faults`]).
+    pub resync_steps_max: Option<u64>,
+    /// The mean resync over the restarts and pauses that have one, steps.
+    pub resync_steps_mean: Option<f64>,
     /// Per agent.
     pub agents: Vec<AgentSummary>,
     /// Traffic per service kind.
@@ -279,6 +286,7 @@ impl Summary {
             .iter()
             .find(|m| all > 0 && m.identified_any >= all)
             .map(|m| m.time_s);
+        let (resync_steps_max, resync_steps_mean) = record.faults.resync_max_mean();
         let steps = series.len() as u64;
         let sim_s = steps as f64 * scenario.timing.cvs_period_s;
         let observer = record.observer.as_ref();
@@ -360,6 +368,9 @@ impl Summary {
             identified_any_final: last.map_or(0, |m| m.identified_any),
             time_all_identified_any_s,
             faults: record.faults.records().to_vec(),
+            chaos_seed: record.config.chaos_seed,
+            resync_steps_max,
+            resync_steps_mean,
             agents,
             comms,
             observer: ObserverSummary {
@@ -391,7 +402,7 @@ impl Summary {
         let spread = |mean: Option<f64>, worst: Option<f64>, digits: usize| {
             format!("{}  ({})", opt(mean, digits), opt(worst, digits))
         };
-        let rows: Vec<(&str, String)> = vec![
+        let mut rows: Vec<(&str, String)> = vec![
             ("seed", self.seed.to_string()),
             ("variant", self.variant.to_owned()),
             (
@@ -445,6 +456,22 @@ impl Summary {
             ),
             ("interrupted", self.interrupted.to_string()),
         ];
+        if !self.faults.is_empty() {
+            let effective = self.faults.iter().filter(|f| f.effective).count();
+            rows.push((
+                "faults (effective)",
+                format!("{} ({effective})", self.faults.len()),
+            ));
+            rows.push((
+                "resync, steps (mean, worst)",
+                format!(
+                    "{}  ({})",
+                    opt(self.resync_steps_mean, 1),
+                    self.resync_steps_max
+                        .map_or_else(|| "-".to_owned(), |v| v.to_string())
+                ),
+            ));
+        }
         let width = rows.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
         for (k, v) in &rows {
             writeln!(out, "  {k:<width$}  {v}")?;

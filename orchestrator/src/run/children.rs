@@ -3,6 +3,11 @@
 //! `logs/agent-<i>.log` (a restarted agent appends to its predecessor's log). Every child is
 //! killed when its handle is dropped, and dies with `fleet` (the children set
 //! `PR_SET_PDEATHSIG`).
+//!
+//! An agent can be paused (SIGSTOP) and continued (SIGCONT). Each agent process is an
+//! *incarnation* with its own number, so a SIGCONT meant for a process that was killed
+//! meanwhile never reaches its restarted successor; and an agent is always continued before
+//! it is asked to terminate, so that no process of a run is left stopped.
 
 use std::collections::BTreeMap;
 use std::ffi::OsString;
@@ -68,7 +73,17 @@ pub struct Children {
     logs: PathBuf,
     checkpoints: PathBuf,
     mode: StepMode,
-    agents: BTreeMap<u32, Child>,
+    agents: BTreeMap<u32, Agent>,
+    incarnations: u64,
+}
+
+/// One running agent process.
+struct Agent {
+    child: Child,
+    /// Its number among the run's agent processes.
+    incarnation: u64,
+    /// Whether it was sent SIGSTOP and not SIGCONT since.
+    stopped: bool,
 }
 
 impl Children {
@@ -90,6 +105,7 @@ impl Children {
             checkpoints,
             mode,
             agents: BTreeMap::new(),
+            incarnations: 0,
         }
     }
 
@@ -149,15 +165,49 @@ impl Children {
             self.checkpoints.clone().into_os_string(),
         ]);
         let child = self.spawn(&self.binaries.agent, args, &format!("agent-{uav}.log"))?;
-        self.agents.insert(uav, child);
+        self.incarnations += 1;
+        let agent = Agent {
+            child,
+            incarnation: self.incarnations,
+            stopped: false,
+        };
+        // A predecessor not reaped yet is killed as its handle drops.
+        if self.agents.insert(uav, agent).is_some() {
+            tracing::warn!(uav, "agent replaced while its predecessor was running");
+        }
         Ok(())
+    }
+
+    /// Stops agent `uav` with SIGSTOP; the incarnation stopped, `None` if the agent is not
+    /// running or already stopped.
+    pub fn pause_agent(&mut self, uav: u32) -> Option<u64> {
+        let agent = self.agents.get_mut(&uav)?;
+        if agent.stopped || !matches!(agent.child.try_wait(), Ok(None)) {
+            return None;
+        }
+        send_signal(agent.child.id()?, libc::SIGSTOP);
+        agent.stopped = true;
+        Some(agent.incarnation)
+    }
+
+    /// Continues incarnation `incarnation` of agent `uav` with SIGCONT; false if that process
+    /// is no longer running (it died or was killed while stopped) or was not stopped.
+    pub fn resume_agent(&mut self, uav: u32, incarnation: u64) -> bool {
+        let Some(agent) = self.agents.get_mut(&uav) else {
+            return false;
+        };
+        if agent.incarnation != incarnation || !agent.stopped {
+            return false;
+        }
+        continue_agent(uav, agent)
     }
 
     /// Kills agent `uav` with SIGKILL and reaps it (bounded); false if it was not running.
     pub async fn kill_agent(&mut self, uav: u32) -> bool {
-        let Some(mut child) = self.agents.remove(&uav) else {
+        let Some(Agent { mut child, .. }) = self.agents.remove(&uav) else {
             return false;
         };
+        // SIGKILL ends a stopped process too.
         if let Err(e) = child.start_kill() {
             tracing::warn!(uav, error = %e, "cannot kill the agent");
         }
@@ -171,17 +221,18 @@ impl Children {
     /// Agents that exited since the last call (removed from the set).
     pub fn reap_agents(&mut self) -> Vec<AgentExit> {
         let mut exits = Vec::new();
-        self.agents.retain(|&uav, child| match child.try_wait() {
-            Ok(Some(status)) => {
-                exits.push(AgentExit { uav, status });
-                false
-            }
-            Ok(None) => true,
-            Err(e) => {
-                tracing::warn!(uav, error = %e, "cannot poll the agent");
-                true
-            }
-        });
+        self.agents
+            .retain(|&uav, agent| match agent.child.try_wait() {
+                Ok(Some(status)) => {
+                    exits.push(AgentExit { uav, status });
+                    false
+                }
+                Ok(None) => true,
+                Err(e) => {
+                    tracing::warn!(uav, error = %e, "cannot poll the agent");
+                    true
+                }
+            });
         exits
     }
 
@@ -198,12 +249,16 @@ impl Children {
         }
     }
 
-    /// Sends SIGTERM to every running agent.
-    pub fn terminate_agents(&self) {
-        for (uav, child) in &self.agents {
-            if let Some(pid) = child.id() {
+    /// Sends SIGTERM to every running agent (and SIGCONT to a stopped one, which would
+    /// otherwise hold the SIGTERM pending).
+    pub fn terminate_agents(&mut self) {
+        for (&uav, agent) in &mut self.agents {
+            if let Some(pid) = agent.child.id() {
                 send_signal(pid, libc::SIGTERM);
                 tracing::debug!(uav, pid, "SIGTERM sent");
+            }
+            if agent.stopped {
+                continue_agent(uav, agent);
             }
         }
     }
@@ -217,6 +272,17 @@ impl Children {
         }
         uavs.len()
     }
+}
+
+/// Sends SIGCONT to a stopped agent; whether it was still running.
+fn continue_agent(uav: u32, agent: &mut Agent) -> bool {
+    agent.stopped = false;
+    let running = matches!(agent.child.try_wait(), Ok(None));
+    if let Some(pid) = agent.child.id().filter(|_| running) {
+        send_signal(pid, libc::SIGCONT);
+        tracing::debug!(uav, pid, "SIGCONT sent");
+    }
+    running
 }
 
 /// Sends `signal` to process `pid`.

@@ -10,6 +10,7 @@ use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use world_server::server::StepMode;
 
+use super::chaos;
 use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
 
@@ -38,9 +39,20 @@ pub struct RunArgs {
     /// Simulated seconds per wall second in realtime mode.
     #[arg(long, default_value_t = 1.0)]
     pub speedup: f64,
-    /// A fault to inject: `kill:UAV@SECONDS` or `restart:UAV@SECONDS` (repeatable).
-    #[arg(long = "fault", value_name = "KIND:UAV@SECONDS")]
+    /// A fault to inject (repeatable): `kill:UAV@S` (SIGKILL at S seconds of simulated
+    /// time), `restart:UAV@S` (start it again), `pause:UAV@S+D` (SIGSTOP at S, SIGCONT D
+    /// seconds of wall time later).
+    #[arg(long = "fault", value_name = "KIND:UAV@S[+D]")]
     pub faults: Vec<Fault>,
+    /// Injects a random schedule of kills (each restarted 1 to 5 s later), restarts and
+    /// pauses drawn from this seed, some of them on the token holder at guidance steps; on
+    /// top of any `--fault`.
+    #[arg(long, value_name = "SEED")]
+    pub chaos: Option<u64>,
+    /// How many faults `--chaos` injects (a kill and its restart are two; default: 6 per
+    /// minute of simulated time).
+    #[arg(long, value_name = "N", requires = "chaos")]
+    pub chaos_faults: Option<u32>,
     /// Output directory (default: `runs/<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -70,6 +82,29 @@ pub enum FaultKind {
     Kill,
     /// Start the agent again (same id).
     Restart,
+    /// SIGSTOP the agent's process, and SIGCONT it after a wall-clock delay.
+    Pause,
+}
+
+impl FaultKind {
+    /// The name on the command line and in `summary.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultKind::Kill => "kill",
+            FaultKind::Restart => "restart",
+            FaultKind::Pause => "pause",
+        }
+    }
+}
+
+/// Where a fault comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FaultOrigin {
+    /// A `--fault` of the command line.
+    Explicit,
+    /// The `--chaos` schedule.
+    Chaos,
 }
 
 /// A fault to inject: `kind` on UAV `uav` once simulated time reaches `at_s`.
@@ -81,11 +116,19 @@ pub struct Fault {
     pub uav: u32,
     /// Simulated time, seconds.
     pub at_s: f64,
+    /// How long a pause lasts, seconds of wall time (`Some` exactly for a pause): the world
+    /// is simulated, but a stopped process is stopped in real time.
+    pub pause_s: Option<f64>,
+    /// A `--fault` or the `--chaos` schedule.
+    pub origin: FaultOrigin,
 }
 
 /// Why a `--fault` value could not be read.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
-#[error("{0:?}: expected kill:UAV@SECONDS or restart:UAV@SECONDS, e.g. kill:1@30")]
+#[error(
+    "{0:?}: expected kill:UAV@S, restart:UAV@S or pause:UAV@S+D (S seconds of simulated time, \
+     D seconds of wall time), e.g. kill:1@30 or pause:1@30+8"
+)]
 pub struct FaultParseError(String);
 
 impl FromStr for Fault {
@@ -97,25 +140,49 @@ impl FromStr for Fault {
         let kind = match kind.trim() {
             "kill" => FaultKind::Kill,
             "restart" => FaultKind::Restart,
+            "pause" => FaultKind::Pause,
             _ => return Err(bad()),
         };
-        let (uav, at) = rest.split_once('@').ok_or_else(bad)?;
+        let (uav, when) = rest.split_once('@').ok_or_else(bad)?;
         let uav = uav.trim().parse().map_err(|_| bad())?;
+        let (at, pause) = match kind {
+            FaultKind::Pause => {
+                let (at, pause) = when.split_once('+').ok_or_else(bad)?;
+                (at, Some(pause))
+            }
+            FaultKind::Kill | FaultKind::Restart => (when, None),
+        };
         let at_s: f64 = at.trim().parse().map_err(|_| bad())?;
         if !at_s.is_finite() {
             return Err(bad());
         }
-        Ok(Fault { kind, uav, at_s })
+        let pause_s = match pause {
+            Some(p) => {
+                let p: f64 = p.trim().parse().map_err(|_| bad())?;
+                if !(p.is_finite() && p > 0.0) {
+                    return Err(bad());
+                }
+                Some(p)
+            }
+            None => None,
+        };
+        Ok(Fault {
+            kind,
+            uav,
+            at_s,
+            pause_s,
+            origin: FaultOrigin::Explicit,
+        })
     }
 }
 
 impl fmt::Display for Fault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let kind = match self.kind {
-            FaultKind::Kill => "kill",
-            FaultKind::Restart => "restart",
-        };
-        write!(f, "{kind}:{}@{}", self.uav, self.at_s)
+        write!(f, "{}:{}@{}", self.kind.name(), self.uav, self.at_s)?;
+        if let Some(p) = self.pause_s {
+            write!(f, "+{p}")?;
+        }
+        Ok(())
     }
 }
 
@@ -126,7 +193,8 @@ pub struct RunConfig {
     pub scenario: Scenario,
     /// How the world steps.
     pub mode: StepMode,
-    /// Faults in the order they apply (by time; a kill before a restart at the same time).
+    /// Faults in the order they apply (by time; at the same time a kill, then a restart,
+    /// then a pause): the `--fault`s and the `--chaos` schedule.
     pub faults: Vec<Fault>,
     /// Output directory.
     pub out: PathBuf,
@@ -138,6 +206,8 @@ pub struct RunConfig {
     pub progress_bar: bool,
     /// The guidance variant the scenario was built with.
     pub variant: Variant,
+    /// The `--chaos` seed, if the faults include a chaos schedule.
+    pub chaos_seed: Option<u64>,
 }
 
 impl RunArgs {
@@ -172,7 +242,28 @@ impl RunArgs {
                 }
             }
         };
-        let faults = check_faults(&self.faults, &scenario)?;
+        let mut faults = check_faults(&self.faults, &scenario)?;
+        if let Some(seed) = self.chaos {
+            let asked = self.chaos_faults;
+            let count = asked.unwrap_or_else(|| chaos::default_count(&scenario));
+            let drawn = chaos::schedule(seed, count, &scenario, &faults);
+            if let Some(asked) = asked
+                && (drawn.len() as u32) < asked
+            {
+                return Err(UsageError(format!(
+                    "--chaos-faults {asked}: only {} fit in this run (seed {seed}, duration_s = \
+                     {}, {} UAVs; faults start after the first guidance period, end {} s before \
+                     the end and do not overlap on a UAV)",
+                    drawn.len(),
+                    scenario.duration_s,
+                    scenario.uavs.count,
+                    chaos::end_margin_s(&scenario)
+                )));
+            }
+            faults.extend(drawn);
+            // The schedule is built around the explicit faults; this checks it is consistent.
+            faults = check_faults(&faults, &scenario)?;
+        }
         Ok(RunConfig {
             scenario,
             mode,
@@ -182,12 +273,14 @@ impl RunArgs {
             run_id: self.run_id.clone().unwrap_or_else(|| new_run_id(0)),
             progress_bar: std::io::IsTerminal::is_terminal(&std::io::stderr()),
             variant: self.variant,
+            chaos_seed: self.chaos,
         })
     }
 }
 
-/// Checks every fault against the fleet and the run, and that a restart follows a kill of
-/// the same UAV; returns them in the order they apply.
+/// Checks every fault against the fleet and the run, that a restart follows a kill of the
+/// same UAV and that a paused UAV is running; returns them in the order they apply (by time;
+/// at the same time a kill, then a restart, then a pause).
 pub fn check_faults(faults: &[Fault], scenario: &Scenario) -> Result<Vec<Fault>, UsageError> {
     let count = scenario.uavs.count;
     let duration = scenario.duration_s;
@@ -223,6 +316,13 @@ pub fn check_faults(faults: &[Fault], scenario: &Scenario) -> Result<Vec<Fault>,
             (FaultKind::Restart, true) => {
                 return Err(UsageError(format!(
                     "--fault {f}: UAV {} is running then; a restart must follow a kill",
+                    f.uav
+                )));
+            }
+            (FaultKind::Pause, true) => {}
+            (FaultKind::Pause, false) => {
+                return Err(UsageError(format!(
+                    "--fault {f}: UAV {} is killed then; only a running agent can be paused",
                     f.uav
                 )));
             }
@@ -268,11 +368,23 @@ mod tests {
             Fault {
                 kind: FaultKind::Kill,
                 uav: 1,
-                at_s: 30.0
+                at_s: 30.0,
+                pause_s: None,
+                origin: FaultOrigin::Explicit,
             }
         );
         assert_eq!(f.to_string(), "kill:1@30");
         assert_eq!("restart:0@2.5".parse::<Fault>().unwrap().at_s, 2.5);
+        let p: Fault = "pause:2@12.5+8".parse().unwrap();
+        assert_eq!(
+            (p.kind, p.uav, p.at_s, p.pause_s),
+            (FaultKind::Pause, 2, 12.5, Some(8.0))
+        );
+        assert_eq!(p.to_string(), "pause:2@12.5+8");
+        assert_eq!(
+            " pause : 0 @ 1 + 0.5 ".parse::<Fault>().unwrap().pause_s,
+            Some(0.5)
+        );
         for bad in [
             "kill",
             "kill:1",
@@ -280,8 +392,20 @@ mod tests {
             "kill:x@3",
             "kill:1@nan",
             "kill:-1@3",
+            "kill:1@3+2",
+            "restart:1@3+2",
+            "pause:1@3",
+            "pause:1@3+",
+            "pause:1@+2",
+            "pause:1@3+0",
+            "pause:1@3+-1",
+            "pause:1@3+inf",
+            "pause:1@3+2+1",
         ] {
-            assert!(bad.parse::<Fault>().is_err(), "{bad}");
+            let e = bad.parse::<Fault>().unwrap_err().to_string();
+            for form in ["kill:UAV@S", "restart:UAV@S", "pause:UAV@S+D"] {
+                assert!(e.contains(form), "{bad}: {e}");
+            }
         }
     }
 
@@ -297,6 +421,32 @@ mod tests {
         assert!(e.0.contains("must follow a kill"), "{e}");
         let ok = check_faults(&[f("restart:1@20"), f("kill:1@20"), f("kill:0@5")], &s).unwrap();
         assert_eq!(ok, vec![f("kill:0@5"), f("kill:1@20"), f("restart:1@20")]);
+        let e = check_faults(&[f("kill:1@10"), f("pause:1@12+3")], &s).unwrap_err();
+        assert!(
+            e.0.contains("--fault pause:1@12+3: UAV 1 is killed then"),
+            "{e}"
+        );
+        let e = check_faults(&[f("pause:0@60+1")], &s).unwrap_err();
+        assert!(e.0.contains("outside the run"), "{e}");
+        let ok = check_faults(
+            &[
+                f("pause:1@20+2"),
+                f("restart:1@20"),
+                f("kill:1@10"),
+                f("pause:0@3+30"),
+            ],
+            &s,
+        )
+        .unwrap();
+        assert_eq!(
+            ok,
+            vec![
+                f("pause:0@3+30"),
+                f("kill:1@10"),
+                f("restart:1@20"),
+                f("pause:1@20+2")
+            ]
+        );
     }
 
     #[test]
@@ -344,6 +494,60 @@ mod tests {
             .validate()
             .unwrap_err();
         assert!(e.0.contains("--fault kill:3@1"), "{e}");
+    }
+
+    #[test]
+    fn chaos_adds_its_schedule_to_the_explicit_faults() {
+        use clap::Parser;
+        #[derive(Parser)]
+        struct Wrap {
+            #[command(flatten)]
+            run: RunArgs,
+        }
+        let args = |extra: &[&str]| {
+            let mut argv = vec!["fleet", "--duration", "60", "--uavs", "3"];
+            argv.extend_from_slice(extra);
+            Wrap::try_parse_from(argv).map(|w| w.run)
+        };
+        let plain = args(&["--fault", "pause:1@10+2"])
+            .unwrap()
+            .validate()
+            .unwrap();
+        assert_eq!(plain.faults.len(), 1);
+        assert_eq!(plain.chaos_seed, None);
+        let c = args(&["--fault", "pause:1@10+2", "--chaos", "4"])
+            .unwrap()
+            .validate()
+            .unwrap();
+        assert_eq!(c.chaos_seed, Some(4));
+        // 6 per minute by default, besides the explicit one.
+        assert_eq!(c.faults.len(), 7, "{:?}", c.faults);
+        let chaos: Vec<&Fault> = c
+            .faults
+            .iter()
+            .filter(|f| f.origin == FaultOrigin::Chaos)
+            .collect();
+        assert_eq!(chaos.len(), 6);
+        assert!(c.faults.windows(2).all(|w| w[0].at_s <= w[1].at_s));
+        let again = args(&["--fault", "pause:1@10+2", "--chaos", "4"])
+            .unwrap()
+            .validate()
+            .unwrap();
+        assert_eq!(c.faults, again.faults, "the same seed, the same schedule");
+        let n = args(&["--chaos", "4", "--chaos-faults", "11"])
+            .unwrap()
+            .validate()
+            .unwrap();
+        assert_eq!(n.faults.len(), 11);
+        let e = args(&["--chaos", "4", "--chaos-faults", "500"])
+            .unwrap()
+            .validate()
+            .unwrap_err();
+        assert!(e.0.contains("--chaos-faults 500: only"), "{e}");
+        assert!(
+            args(&["--chaos-faults", "3"]).is_err(),
+            "--chaos-faults needs --chaos"
+        );
     }
 
     #[test]

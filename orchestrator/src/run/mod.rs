@@ -6,16 +6,21 @@
 //! ([`children`]), then reacts to what happens until the world ends the run:
 //!
 //! - each measured step moves the progress display ([`progress`]);
-//! - faults due at a step ([`faults`]) are applied before the observer acknowledges that step,
-//!   so a fault run is as reproducible as any lockstep run;
+//! - faults due at a step ([`faults`]: `--fault`s and the [`chaos`] schedule) are applied
+//!   before the observer acknowledges that step, so a kill or restart is as reproducible as
+//!   any lockstep run; a pause (SIGSTOP) is continued (SIGCONT) by a timer after its wall-clock
+//!   duration, while the loop goes on serving events, and the continued agent is announced
+//!   in the observer's next ack like a restart (the world waits for it);
 //! - an agent that exits on its own is noted (the world and its peers go on without it);
 //! - the world-server exiting early fails the run; Ctrl-C or SIGTERM interrupts it.
 //!
-//! Whatever the ending, every child is stopped (SIGTERM, then SIGKILL after a bounded
-//! grace), the run's iceoryx2 files are removed, and the [`RunRecord`] holds what was
-//! measured. [`run`] is the command: it executes, then writes `summary.json`,
-//! `timeseries.csv` and the pictures, and prints the summary table.
+//! Whatever the ending, every paused agent is continued, every child is stopped (SIGTERM,
+//! then SIGKILL after a bounded grace), the run's iceoryx2 files are removed, and the
+//! [`RunRecord`] holds what was measured, with each restarted or resumed agent's resync.
+//! [`run`] is the command: it executes, then writes `summary.json`, `timeseries.csv` and the
+//! pictures, and prints the summary table.
 
+pub mod chaos;
 pub mod children;
 pub mod config;
 pub mod faults;
@@ -24,7 +29,7 @@ pub mod stale;
 
 use std::process::ExitStatus;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
@@ -39,7 +44,7 @@ use crate::results::summary::Summary;
 use crate::results::{curves, maps, timeseries};
 use children::{Binaries, Children, stop_world};
 use config::{FaultKind, RunConfig};
-use faults::FaultPlan;
+use faults::{DueFault, FaultPlan, PendingResume, Resumes};
 use progress::Progress;
 
 /// Longest wait for a fault to be applied before the observer acknowledges its step.
@@ -178,6 +183,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     let mut sigterm = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
 
     let mut plan = FaultPlan::new(&config.faults);
+    let resumed = Arc::new(AtomicU32::new(0));
     let stop = Arc::new(AtomicBool::new(false));
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let observer = observe::spawn(
@@ -188,6 +194,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
             estimate_wait: Timeouts::default().estimate_wait(),
             fault_times: plan.times(),
             fault_wait: FAULT_WAIT,
+            resumed: resumed.clone(),
         },
         stop.clone(),
         events_tx,
@@ -218,36 +225,53 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     let mut world_exit: Option<(ExitStatus, Instant)> = None;
     let mut tick = tokio::time::interval(TICK);
     let mut ending = Ending::ObserverDone;
+    let mut resumes = Resumes::default();
+    // The newest step the observer handed over (faults due, or measured), and its time.
+    let mut latest = (0, 0.0);
     if failure.is_some() {
         stop.store(true, Ordering::Relaxed);
     }
 
     loop {
+        let next_resume = resumes.next_due();
+        // Evaluated even when disabled: any instant will do then.
+        let resume_at = next_resume.unwrap_or_else(|| tokio::time::Instant::now() + TICK);
         tokio::select! {
             event = events.recv() => match event {
                 Some(ObserverEvent::Step(m)) => {
+                    if m.step >= latest.0 {
+                        latest = (m.step, m.time_s);
+                    }
                     progress.step(&m);
                     series.push(m);
                 }
                 Some(ObserverEvent::FaultsDue { step, time_s, done }) => {
+                    if step >= latest.0 {
+                        latest = (step, time_s);
+                    }
                     let mut restarted = 0;
-                    for (index, kind, uav) in plan.due(time_s) {
-                        let effective = apply_fault(&mut children, run, kind, uav).await;
-                        plan.applied(index, step, time_s, effective);
-                        if effective && kind == FaultKind::Restart {
-                            restarted |= protocol::wire::uav_bit(uav);
+                    for due in plan.due(time_s) {
+                        let effective =
+                            apply_fault(&mut children, run, due, &mut resumes).await;
+                        plan.applied(due.index, step, time_s, effective);
+                        if effective && due.kind == FaultKind::Restart {
+                            restarted |= protocol::wire::uav_bit(due.uav);
                         }
-                        let verb = match kind {
-                            FaultKind::Kill => "killed",
-                            FaultKind::Restart => "restarted",
-                        };
-                        progress.note(&format!("t={time_s:.1}s: agent {uav} {verb}"));
+                        progress.note(&fault_note(time_s, due, effective));
                     }
                     // The observer may have given up waiting; then nobody listens.
                     let _ = done.send(restarted);
                 }
                 None => break,
             },
+            _ = tokio::time::sleep_until(resume_at), if next_resume.is_some() => {
+                for due in resumes.take_due(tokio::time::Instant::now()) {
+                    if resume(&mut children, &mut plan, &progress, due, latest) {
+                        // Announced in the observer's next ack, so the world waits for it.
+                        resumed.fetch_or(protocol::wire::uav_bit(due.uav), Ordering::AcqRel);
+                    }
+                }
+            }
             status = world.wait(), if world_exit.is_none() => {
                 let status = status.context("cannot wait for the world-server")?;
                 if !status.success() {
@@ -272,6 +296,10 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
                 }
             }
         }
+    }
+    // No process is left stopped: a pause still running ends with the run.
+    for due in resumes.take_all() {
+        resume(&mut children, &mut plan, &progress, due, latest);
     }
     progress.finish();
     let interrupted = matches!(ending, Ending::Signal(_));
@@ -328,6 +356,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
             )
         });
     }
+    plan.measure_resync(&series);
     Ok(RunRecord {
         config: config.clone(),
         series,
@@ -352,14 +381,15 @@ fn fresh_dir(dir: &std::path::Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
 }
 
-/// Applies one fault; whether it took effect.
+/// Applies one fault; whether it took effect. A pause's SIGCONT joins `resumes`.
 async fn apply_fault(
     children: &mut Children,
     run: &protocol::service::RunId,
-    kind: FaultKind,
-    uav: u32,
+    due: DueFault,
+    resumes: &mut Resumes,
 ) -> bool {
-    match kind {
+    let uav = due.uav;
+    match due.kind {
         FaultKind::Kill => {
             let killed = children.kill_agent(uav).await;
             // The dead node's resources go at once, not at the next scan of a peer.
@@ -375,6 +405,60 @@ async fn apply_fault(
                 false
             }
         },
+        FaultKind::Pause => {
+            let Some(incarnation) = children.pause_agent(uav) else {
+                return false;
+            };
+            let wall = Duration::try_from_secs_f64(due.pause_s.unwrap_or(0.0)).unwrap_or_default();
+            resumes.push(PendingResume {
+                index: due.index,
+                uav,
+                incarnation,
+                due: tokio::time::Instant::now() + wall,
+            });
+            true
+        }
+    }
+}
+
+/// The progress line of an applied fault.
+fn fault_note(time_s: f64, due: DueFault, effective: bool) -> String {
+    let uav = due.uav;
+    match (due.kind, effective) {
+        (FaultKind::Kill, true) => format!("t={time_s:.1}s: agent {uav} killed"),
+        (FaultKind::Restart, true) => format!("t={time_s:.1}s: agent {uav} restarted"),
+        (FaultKind::Pause, true) => format!(
+            "t={time_s:.1}s: agent {uav} paused for {} s",
+            due.pause_s.unwrap_or(0.0)
+        ),
+        (kind, false) => format!(
+            "t={time_s:.1}s: {} of agent {uav} not applied (no running agent)",
+            kind.name()
+        ),
+    }
+}
+
+/// Sends a pause's SIGCONT and notes it in the plan, with the newest step the observer
+/// handed over (`latest`: step and time); whether the agent was still there to continue.
+fn resume(
+    children: &mut Children,
+    plan: &mut FaultPlan,
+    progress: &Progress,
+    due: PendingResume,
+    latest: (u64, f64),
+) -> bool {
+    let (step, time_s) = latest;
+    if children.resume_agent(due.uav, due.incarnation) {
+        plan.resumed(due.index, step);
+        progress.note(&format!("t={time_s:.1}s: agent {} continued", due.uav));
+        true
+    } else {
+        tracing::warn!(uav = due.uav, "the paused agent ended before its SIGCONT");
+        progress.note(&format!(
+            "t={time_s:.1}s: agent {} ended while paused",
+            due.uav
+        ));
+        false
     }
 }
 
