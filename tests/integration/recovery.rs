@@ -86,7 +86,7 @@ fn a_stalled_agent_resumes_and_runs_to_the_end() {
     let (r0, r1) = (report(&r0), report(&r1));
     assert_eq!(r1["end"], "EndOfRun", "the stalled agent stopped: {r1}");
     assert_eq!(
-        r1["final_step"], 119,
+        r1["final_step"], 1199,
         "the stalled agent did not catch up: {r1}"
     );
     assert_eq!(r0["frames"], 1200, "the other agent missed steps: {r0}");
