@@ -134,8 +134,13 @@ impl ReachSet {
     /// closed square of one of `cells` at that clock. What a checkpoint restores: the set then
     /// grows from `cells` by the motion since, without the sub-cell reach it had.
     pub fn from_cells_at(grid: &GroundGrid, cells: CellSet, clock_m: Real) -> Self {
-        let mut set = Self::with_cells(cells);
-        set.clock_m = if clock_m.is_finite() { clock_m } else { 0.0 };
+        let n = cells.nx() as usize * cells.ny() as usize;
+        let mut set = Self {
+            pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
+            reach: vec![0; n],
+            cells,
+            clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
+        };
         let whole = CellBox {
             x0: 0,
             y0: 0,
