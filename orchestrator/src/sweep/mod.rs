@@ -1,0 +1,411 @@
+//! `fleet sweep`: every variant on seeds 1..=N, one full run each (as separate processes,
+//! like `fleet run`), then the paper's Table I layout: one row per final metric, one column
+//! per variant, mean ± sample standard deviation over the seeds ([`table`]).
+//!
+//! Writes into `--out`: each run's results under `<variant>/seed-<n>/`, `table.json`,
+//! `table.md` and `metrics.png` (UA and OA over time per variant, mean ± 1 sd).
+//!
+//! A sweep spreads over cores and machines three ways, all giving the same table:
+//!
+//! - `--jobs N` runs N runs at once ([`jobs`]), each isolated by its own run id;
+//! - `--shard K/N` runs only the K-th of N shares of the runs ([`shard`]: run `i` of the
+//!   variant-major list goes to shard `i mod N`, K counted from 0), so that a batch system
+//!   (a Slurm job array, a Kubernetes indexed Job) runs one shard per task;
+//! - `fleet sweep --merge DIR... --out DIR` builds the table and picture from the runs of
+//!   several sweeps or shards ([`collect`]), read back from their `summary.json` and
+//!   `timeseries.csv`. Every run depends only on its variant and seed, so the merged table
+//!   is the one a single sweep of all of them writes. A run found twice is an error.
+//!
+//! A sweep builds its own table the same way, from its runs' files as written, so its values
+//! are those a merge reads.
+//!
+//! The variants are those of [`crate::variant`]: `nomap`, `kappa0`, `paper` (the paper's
+//! Table I columns) and `setfleet` (the project's planner).
+
+pub mod collect;
+pub mod jobs;
+pub mod shard;
+pub mod table;
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::Args;
+
+use crate::Outcome;
+use crate::run::config::{RunConfig, new_run_id};
+use crate::run::runtime;
+use crate::usage::{ScenarioArgs, UsageError};
+pub use crate::variant::Variant;
+use collect::{FoundRuns, assemble, read_run, write_table};
+pub use collect::{MergeConfig, merge};
+use jobs::RunEnd;
+pub use shard::Shard;
+pub use table::{Cell, Table, row_values};
+use world_server::server::StepMode;
+
+/// Most runs `--jobs` runs at once.
+pub const MAX_JOBS: u32 = 256;
+
+/// `fleet sweep`.
+#[derive(Debug, Clone, Args)]
+pub struct SweepArgs {
+    /// The scenario (its seed is replaced by 1..=N).
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// Number of seeds: runs use seeds 1..=N.
+    #[arg(long, required_unless_present = "merge")]
+    pub seeds: Option<u32>,
+    /// Variants to run, comma-separated, in the table's column order (each is a named set of
+    /// scenario settings; `--set` overrides apply after them).
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = Variant::ALL.to_vec())]
+    pub variants: Vec<Variant>,
+    /// Overrides the scenario's `duration_s`, seconds of simulated time.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Runs this many runs at once (each with its own processes, run id and shared memory).
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub jobs: u32,
+    /// Runs only shard K of N (K counted from 0): run i of the sweep's list (variant-major,
+    /// seeds in order) belongs to shard i mod N. Give every shard the same --seeds,
+    /// --variants and scenario, then `--merge` their output directories.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<Shard>,
+    /// Output directory (default: `runs/sweep-<UTC timestamp>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Runs nothing: builds the table and picture from the runs of these sweep directories.
+    #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration", "variants", "scenario", "overrides", "jobs", "shard"])]
+    pub merge: Vec<PathBuf>,
+}
+
+/// One run of a sweep.
+#[derive(Debug, Clone)]
+pub struct PlannedRun {
+    /// Its variant.
+    pub variant: Variant,
+    /// Its seed.
+    pub seed: u64,
+    /// Its place in the whole sweep's list (variant-major), from 0: its shard is this
+    /// modulo the number of shards.
+    pub index: usize,
+    /// How it is shown in the progress lines.
+    pub label: String,
+    /// The run.
+    pub config: RunConfig,
+}
+
+/// A validated `fleet sweep`: one run configuration per (variant, seed) of its shard.
+#[derive(Debug, Clone)]
+pub struct SweepConfig {
+    /// The shard's runs in order: variant-major.
+    pub runs: Vec<PlannedRun>,
+    /// Variants in column order.
+    pub variants: Vec<Variant>,
+    /// Runs at once.
+    pub jobs: usize,
+    /// The share of the sweep to run (`None`: all of it).
+    pub shard: Option<Shard>,
+    /// Runs in the whole sweep, every shard's.
+    pub total_runs: usize,
+    /// Output directory.
+    pub out: PathBuf,
+}
+
+impl SweepArgs {
+    /// Checks the counts, the shard and every variant's scenario.
+    pub fn validate(&self) -> Result<SweepConfig, UsageError> {
+        let seeds = self
+            .seeds
+            .ok_or_else(|| UsageError("--seeds: give the number of seeds".into()))?;
+        if seeds == 0 || seeds > 1000 {
+            return Err(UsageError(format!("--seeds {seeds}: must be 1 to 1000")));
+        }
+        if self.jobs == 0 || self.jobs > MAX_JOBS {
+            return Err(UsageError(format!(
+                "--jobs {}: must be 1 to {MAX_JOBS}",
+                self.jobs
+            )));
+        }
+        let mut variants = Vec::new();
+        for &v in &self.variants {
+            if !variants.contains(&v) {
+                variants.push(v);
+            }
+        }
+        if variants.is_empty() {
+            return Err(UsageError("--variants: name at least one variant".into()));
+        }
+        let shard = self.shard.unwrap_or(Shard::WHOLE);
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| crate::run::config::default_out_dir("sweep-"));
+        // Bars of several runs at once would overwrite each other: log lines then.
+        let progress_bar = self.jobs == 1 && std::io::IsTerminal::is_terminal(&std::io::stderr());
+        let mut all = Vec::new();
+        for &variant in &variants {
+            for seed in 1..=u64::from(seeds) {
+                all.push((variant, seed));
+            }
+        }
+        let total_runs = all.len();
+        let mine: Vec<(usize, Variant, u64)> = all
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| shard.holds(*i))
+            .map(|(i, (v, s))| (i, v, s))
+            .collect();
+        let mut runs = Vec::with_capacity(mine.len());
+        for (n, &(index, variant, seed)) in mine.iter().enumerate() {
+            let mut overrides = variant.with_user_overrides(&self.scenario.overrides);
+            overrides.push(format!("seed={seed}"));
+            if let Some(d) = self.duration {
+                overrides.push(format!("duration_s={d:?}"));
+            }
+            let scenario = ScenarioArgs {
+                scenario: self.scenario.scenario.clone(),
+                overrides,
+            }
+            .load()?;
+            // The run's place in the whole sweep: distinct across shards too.
+            let sequence = u32::try_from(index).unwrap_or(u32::MAX);
+            runs.push(PlannedRun {
+                variant,
+                seed,
+                index,
+                label: format!("{}/{} {} seed {seed}", n + 1, mine.len(), variant.name()),
+                config: RunConfig {
+                    scenario,
+                    mode: StepMode::Lockstep,
+                    faults: Vec::new(),
+                    out: out.join(variant.name()).join(format!("seed-{seed}")),
+                    strict: false,
+                    run_id: new_run_id(sequence),
+                    progress_bar,
+                    variant,
+                    chaos_seed: None,
+                },
+            });
+        }
+        Ok(SweepConfig {
+            runs,
+            variants,
+            jobs: self.jobs as usize,
+            shard: self.shard,
+            total_runs,
+            out,
+        })
+    }
+
+    /// The merge this command asks for, `None` when it asks for runs.
+    pub fn merge_config(&self) -> Option<MergeConfig> {
+        (!self.merge.is_empty()).then(|| MergeConfig {
+            sources: self.merge.clone(),
+            out: self
+                .out
+                .clone()
+                .unwrap_or_else(|| crate::run::config::default_out_dir("sweep-")),
+        })
+    }
+}
+
+/// `fleet sweep`: runs the shard's runs (`--jobs` at once), writes the table of those that
+/// ran and the band plot, prints the table. A run that fails is listed in the table's
+/// `failed_runs` and does not stop the others; a signal stops the sweep (the runs that
+/// completed stay in the table).
+pub fn run(config: &SweepConfig) -> anyhow::Result<Outcome> {
+    std::fs::create_dir_all(&config.out)
+        .with_context(|| format!("cannot create {}", config.out.display()))?;
+    if let Some(shard) = config.shard {
+        eprintln!(
+            "fleet: shard {shard}: {} of the sweep's {} runs",
+            config.runs.len(),
+            config.total_runs
+        );
+    }
+    let mut found = FoundRuns::new();
+    let mut failed: Vec<(usize, String)> = Vec::new();
+    let interrupted = runtime()?.block_on(jobs::run_all(&config.runs, config.jobs, |i, end| {
+        let run = &config.runs[i];
+        let name = format!("{}/seed-{}", run.variant.name(), run.seed);
+        let ok = match end {
+            RunEnd::Done {
+                summary,
+                interrupted,
+                failed,
+            } => {
+                eprintln!(
+                    "[{}] UA {} OA {} violations {} ({:.0} s wall){}",
+                    run.label,
+                    percent(summary.ua_final),
+                    percent(summary.oa_final),
+                    summary.violations,
+                    summary.wall_s,
+                    if interrupted { ", interrupted" } else { "" }
+                );
+                match read_run(&run.config.out, run.variant, run.seed) {
+                    Ok(r) => {
+                        found.insert((run.variant, run.seed), r);
+                        !failed
+                    }
+                    Err(e) => {
+                        eprintln!("fleet: [{}] {e:#}", run.label);
+                        false
+                    }
+                }
+            }
+            RunEnd::Error(e) => {
+                eprintln!("fleet: [{}] the run failed: {e:#}", run.label);
+                false
+            }
+        };
+        if !ok {
+            failed.push((i, name));
+        }
+    }))?;
+    failed.sort();
+    let code = if failed.is_empty() && !interrupted {
+        Outcome::Success
+    } else {
+        Outcome::Failed
+    };
+    let failed = failed.into_iter().map(|f| f.1).collect();
+    let (mut table, curves) = assemble(found, &config.variants, failed, false);
+    table.shard = config.shard.map(|s| s.to_string());
+    write_table(&table, &curves, &config.out)?;
+    Ok(code)
+}
+
+fn percent(v: Option<f64>) -> String {
+    v.map_or_else(|| "-".into(), |v| format!("{:.1} %", v * 100.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[test]
+    fn variants_are_parsed_and_checked() {
+        #[derive(Parser)]
+        struct Wrap {
+            #[command(flatten)]
+            sweep: SweepArgs,
+        }
+        let w = Wrap::try_parse_from([
+            "x",
+            "--seeds",
+            "2",
+            "--variants",
+            "paper,nomap",
+            "--out",
+            "o",
+        ])
+        .unwrap();
+        let c = w.sweep.validate().unwrap();
+        assert_eq!(c.runs.len(), 4);
+        assert_eq!(c.runs[2].variant, Variant::Nomap);
+        assert_eq!(c.runs[2].config.scenario.seed, 1);
+        assert!(!c.runs[2].config.scenario.guidance.use_map);
+        assert_eq!(c.runs[0].config.scenario.guidance.kappa, 1.0);
+        assert_eq!(c.runs[3].config.out, PathBuf::from("o/nomap/seed-2"));
+        assert_eq!((c.jobs, c.shard, c.total_runs), (1, None, 4));
+        let ids: std::collections::BTreeSet<_> =
+            c.runs.iter().map(|r| r.config.run_id.to_string()).collect();
+        assert_eq!(ids.len(), 4, "every run has its own id");
+        // A merge runs nothing, so it takes no run settings.
+        for extra in [
+            ["--seeds", "2"],
+            ["--variants", "paper"],
+            ["--set", "seed=3"],
+            ["--jobs", "2"],
+            ["--shard", "0/2"],
+        ] {
+            let args = ["x", "--merge", "a", extra[0], extra[1]];
+            assert!(Wrap::try_parse_from(args).is_err(), "{extra:?}");
+        }
+        let w = Wrap::try_parse_from(["x", "--merge", "a", "b"]).unwrap();
+        assert_eq!(w.sweep.merge_config().unwrap().sources.len(), 2);
+        let w = Wrap::try_parse_from(["x", "--seeds", "0"]).unwrap();
+        assert!(w.sweep.validate().unwrap_err().0.contains("--seeds"));
+        assert!(Wrap::try_parse_from(["x", "--seeds", "1", "--variants", "best"]).is_err());
+    }
+
+    #[derive(Parser)]
+    struct Wrap {
+        #[command(flatten)]
+        sweep: SweepArgs,
+    }
+
+    /// The (variant, seed, index) of every run of `fleet sweep ARGS`.
+    fn planned(args: &[&str]) -> Vec<(Variant, u64, usize)> {
+        let w = Wrap::try_parse_from(["x"].iter().chain(args)).unwrap();
+        let c = w.sweep.validate().unwrap();
+        c.runs
+            .iter()
+            .map(|r| (r.variant, r.seed, r.index))
+            .collect()
+    }
+
+    #[test]
+    fn shards_split_the_variant_major_list_round_robin() {
+        let base = ["--seeds", "3", "--variants", "setfleet,nomap", "--out", "o"];
+        let whole = planned(&base);
+        assert_eq!(whole.len(), 6);
+        assert_eq!(whole[3], (Variant::Nomap, 1, 3));
+        let mut union = Vec::new();
+        for k in 0..4 {
+            let shard = format!("{k}/4");
+            let mine = planned(&[&base[..], &["--shard", &shard]].concat());
+            assert!(mine.iter().all(|r| r.2 % 4 == k), "{shard}: {mine:?}");
+            union.extend(mine);
+        }
+        union.sort_by_key(|r| r.2);
+        assert_eq!(union, whole, "the shards hold every run once");
+        // Shard 1 of 4: runs 1 and 5, setfleet seed 2 and nomap seed 3.
+        let one = planned(&[&base[..], &["--shard", "1/4"]].concat());
+        assert_eq!(one, vec![(Variant::Setfleet, 2, 1), (Variant::Nomap, 3, 5)]);
+        // More shards than runs: the last ones are empty, which is fine.
+        assert!(planned(&[&base[..], &["--shard", "9/10"]].concat()).is_empty());
+        // A run's id is distinct across shards and its label counts within the shard.
+        let w = Wrap::try_parse_from(["x", "--seeds", "3", "--shard", "1/5"]).unwrap();
+        let c = w.sweep.validate().unwrap();
+        assert_eq!(c.total_runs, 12);
+        assert_eq!(c.runs.len(), 3);
+        assert!(c.runs[2].config.run_id.as_str().ends_with("-11"));
+        assert!(c.runs[1].label.starts_with("2/3 "), "{}", c.runs[1].label);
+    }
+
+    #[test]
+    fn jobs_and_shards_are_checked() {
+        let parse = |extra: &[&str]| {
+            Wrap::try_parse_from([&["x", "--seeds", "2"][..], extra].concat())
+                .map_err(|e| e.to_string())
+                .and_then(|w| w.sweep.validate().map_err(|e| e.0))
+        };
+        assert_eq!(parse(&["--jobs", "3"]).unwrap().jobs, 3);
+        assert!(
+            parse(&["--jobs", "0"])
+                .unwrap_err()
+                .contains("--jobs 0: must be 1")
+        );
+        assert!(parse(&["--jobs", "100000"]).is_err());
+        assert!(parse(&["--jobs", "-1"]).is_err());
+        for (shard, says) in [
+            ("4/4", "shard 4 does not exist"),
+            ("1/0", "must be at least 1"),
+            ("1-4", "expected K/N"),
+            ("one/4", "expected K/N"),
+        ] {
+            let err = parse(&["--shard", shard]).unwrap_err();
+            assert!(
+                err.contains("--shard") && err.contains(says),
+                "{shard}: {err}"
+            );
+        }
+        let c = parse(&["--shard", "3/4", "--jobs", "2"]).unwrap();
+        assert_eq!(c.shard, Shard::new(3, 4));
+        assert_eq!(c.runs.len(), 2);
+    }
+}
