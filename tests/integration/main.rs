@@ -9,3 +9,4 @@ mod frames;
 mod recovery;
 mod render;
 mod run;
+mod sweep;

@@ -2,9 +2,21 @@
 //!
 //! Which run a file belongs to is read from its name by [`protocol::ipc::run_of_file`]
 //! ([`runs_with_files`] lists them).
+//!
+//! A run being started has files before iceoryx2 lists any node of it: a node writes its
+//! details file before its monitor token, and a token still starting is not listed. So a run
+//! without a live node counts as left over only if one of its nodes is listed dead (a killed
+//! run: its processes died with it) or none of its files was touched for
+//! [`STARTING_GRACE`]; otherwise a run started next to another (`fleet sweep --jobs`, two
+//! sweeps side by side) could remove the other's files while its first node is created.
 
-use protocol::ipc::{remove_run_files, runs_with_files, scan_nodes};
+use std::time::{Duration, SystemTime};
+
+use protocol::ipc::{remove_run_files, run_files, runs_with_files, scan_nodes};
 use protocol::service::RunId;
+
+/// How long a run's files may go untouched with no node listed before they are left over.
+pub const STARTING_GRACE: Duration = Duration::from_secs(60);
 
 /// Removes the files of every run none of whose nodes is alive (dead nodes' resources are
 /// released first); returns (runs cleaned, files removed). `keep` is never touched.
@@ -22,19 +34,38 @@ pub fn remove_stale_runs(keep: &RunId) -> (usize, usize) {
             continue;
         }
         match scan_nodes(&run, true) {
-            Ok(scan) if scan.alive.is_empty() => match remove_run_files(&run) {
-                Ok(n) => {
-                    runs += 1;
-                    files += n;
-                    tracing::debug!(run = %run, files = n, "removed a dead run's files");
+            Ok(scan) if scan.alive.is_empty() && (!scan.dead.is_empty() || !starting(&run)) => {
+                match remove_run_files(&run) {
+                    Ok(n) => {
+                        runs += 1;
+                        files += n;
+                        tracing::debug!(run = %run, files = n, "removed a dead run's files");
+                    }
+                    Err(e) => {
+                        tracing::warn!(run = %run, error = %e, "cannot remove a dead run's files")
+                    }
                 }
-                Err(e) => {
-                    tracing::warn!(run = %run, error = %e, "cannot remove a dead run's files")
-                }
-            },
+            }
             Ok(_) => {}
             Err(e) => tracing::debug!(run = %run, error = %e, "cannot list a run's nodes"),
         }
     }
     (runs, files)
+}
+
+/// Whether a file of `run` was modified within [`STARTING_GRACE`] (or cannot be read: then
+/// the run is left alone too).
+fn starting(run: &RunId) -> bool {
+    let Ok(files) = run_files(run) else {
+        return true;
+    };
+    let now = SystemTime::now();
+    files.iter().any(|f| {
+        std::fs::metadata(f)
+            .and_then(|m| m.modified())
+            .map_or(true, |t| {
+                now.duration_since(t)
+                    .map_or(true, |age| age < STARTING_GRACE)
+            })
+    })
 }

@@ -1,0 +1,207 @@
+//! `fleet sweep` end to end: a sweep, the same sweep split into shards and merged, and the
+//! same sweep with `--jobs 2` give the same table and the same runs; an interrupted
+//! `--jobs` sweep stops every run and leaves nothing.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::Duration;
+
+use serde_json::Value;
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, processes_mentioning, wait_until};
+
+/// The small scenario of the run tests: 2 UAVs, 4 cars, a 200 m region.
+const SCENARIO: &str = "seed = 3\nduration_s = 10.0\n\n[region]\nhalf_extent_m = 100.0\n\n\
+                        [targets]\ncount = 4\n\n[uavs]\ncount = 2\n\n[camera]\nrows = 120\n\
+                        cols = 160\n";
+
+/// Two variants (their planners differ) on two seeds, 4 s each.
+const SWEEP: [&str; 6] = [
+    "--seeds",
+    "2",
+    "--variants",
+    "paper,setfleet",
+    "--duration",
+    "4",
+];
+const RUNS: [(&str, u64); 4] = [("paper", 1), ("paper", 2), ("setfleet", 1), ("setfleet", 2)];
+
+/// `fleet sweep` of the test scenario into `out` with `extra` arguments, run to its end; no
+/// process of it is left after.
+fn sweep(t: &TestRun, out: &Path, extra: &[&str]) -> Output {
+    let mut cmd = Command::new(binary("fleet"));
+    cmd.arg("sweep")
+        .arg("--scenario")
+        .arg(t.dir.join("scenario.toml"))
+        .args(SWEEP)
+        .arg("--out")
+        .arg(out)
+        .args(extra);
+    let out = ChildGuard::spawn(&mut cmd)
+        .wait_timeout(EXIT_TIMEOUT * 3)
+        .unwrap_or_else(|| panic!("{cmd:?} did not end in time"));
+    assert_nothing_left(t);
+    out
+}
+
+/// No process started for the test's directory is left (each run's summary counts its
+/// iceoryx2 files left, checked with the results).
+fn assert_nothing_left(t: &TestRun) {
+    let needle = t.dir.to_string_lossy().into_owned();
+    wait_until(
+        "the sweep's processes to exit",
+        Duration::from_secs(10),
+        || processes_mentioning(&needle).is_empty(),
+    );
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn json(path: &Path) -> Value {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// `value` without what depends on the wall clock: `wall_s`, `real_time_factor` (a key, or
+/// a row of the table) and everything under `timing`.
+fn without_wall_clock(mut value: Value) -> Value {
+    fn strip(v: &mut Value) {
+        match v {
+            Value::Object(map) => {
+                for key in ["wall_s", "real_time_factor", "timing"] {
+                    map.remove(key);
+                }
+                map.values_mut().for_each(strip);
+            }
+            Value::Array(items) => items.iter_mut().for_each(strip),
+            _ => {}
+        }
+    }
+    strip(&mut value);
+    value
+}
+
+/// The sweep's table without wall-clock rows, and every run's summary (without wall-clock
+/// fields) and time series.
+fn results(dirs: &[PathBuf], table: &Path) -> (Value, Vec<(Value, String)>) {
+    let runs = RUNS
+        .iter()
+        .map(|(variant, seed)| {
+            let found: Vec<PathBuf> = dirs
+                .iter()
+                .map(|d| d.join(variant).join(format!("seed-{seed}")))
+                .filter(|d| d.is_dir())
+                .collect();
+            assert_eq!(found.len(), 1, "{variant} seed {seed} in {found:?}");
+            let csv = std::fs::read_to_string(found[0].join("timeseries.csv")).expect("csv");
+            let s = json(&found[0].join("summary.json"));
+            assert_eq!(s["timing"]["leftover_ipc_files"], 0, "{s}");
+            let s = without_wall_clock(s);
+            assert_eq!(s["violations"], 0, "{s}");
+            assert_eq!(s["steps"], 8, "{s}");
+            (s, csv)
+        })
+        .collect();
+    (without_wall_clock(json(&table.join("table.json"))), runs)
+}
+
+#[test]
+fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
+    let t = TestRun::new("sweep-split");
+    t.write("scenario.toml", SCENARIO);
+
+    let single = t.dir.join("single");
+    let out = sweep(&t, &single, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let whole = results(std::slice::from_ref(&single), &single);
+    assert_eq!(whole.0["seeds"], serde_json::json!([1, 2]));
+    assert_eq!(
+        whole.0["variants"],
+        serde_json::json!(["paper", "setfleet"])
+    );
+    assert_eq!(whole.0["failed_runs"], serde_json::json!([]));
+
+    // Five shards of four runs: run i in shard i mod 5, so shard 4 has none.
+    let shards: Vec<PathBuf> = (0..5).map(|k| t.dir.join(format!("shard-{k}"))).collect();
+    for (k, dir) in shards.iter().enumerate() {
+        let out = sweep(&t, dir, &["--shard", &format!("{k}/5")]);
+        assert!(out.status.success(), "shard {k}: {}", stderr(&out));
+        assert_eq!(json(&dir.join("table.json"))["shard"], format!("{k}/5"));
+        let runs: Vec<_> = RUNS
+            .iter()
+            .filter(|(v, s)| dir.join(v).join(format!("seed-{s}")).is_dir())
+            .collect();
+        assert_eq!(runs.len(), usize::from(k < 4), "shard {k}: {runs:?}");
+    }
+    let merged = t.dir.join("merged");
+    let mut cmd = Command::new(binary("fleet"));
+    cmd.args(["sweep", "--merge"])
+        .args(&shards)
+        .arg("--out")
+        .arg(&merged);
+    let out = tests::run_to_end(&mut cmd);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let from_shards = results(&shards, &merged);
+    assert_eq!(
+        from_shards.1, whole.1,
+        "the shards' runs differ from the sweep's"
+    );
+    assert_eq!(
+        from_shards.0, whole.0,
+        "the merged table differs from the sweep's"
+    );
+
+    let jobs = t.dir.join("jobs");
+    let out = sweep(&t, &jobs, &["--jobs", "2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let parallel = results(std::slice::from_ref(&jobs), &jobs);
+    assert_eq!(
+        parallel.1, whole.1,
+        "the --jobs 2 runs differ from the sweep's"
+    );
+    assert_eq!(
+        parallel.0, whole.0,
+        "the --jobs 2 table differs from the sweep's"
+    );
+}
+
+#[test]
+fn an_interrupted_jobs_sweep_stops_every_run_and_leaves_nothing() {
+    let t = TestRun::new("sweep-interrupt");
+    t.write("scenario.toml", SCENARIO);
+    let out_dir = t.dir.join("out");
+    let mut cmd = Command::new(binary("fleet"));
+    cmd.arg("sweep")
+        .arg("--scenario")
+        .arg(t.dir.join("scenario.toml"))
+        .args(["--seeds", "2", "--variants", "paper", "--duration", "300"])
+        .args(["--jobs", "2", "--out"])
+        .arg(&out_dir);
+    let mut fleet = ChildGuard::spawn(&mut cmd);
+    let needle = t.dir.to_string_lossy().into_owned();
+    // Two runs: each a world-server and two agents.
+    wait_until("both runs to start", Duration::from_secs(60), || {
+        processes_mentioning(&needle).len() >= 6
+    });
+    std::thread::sleep(Duration::from_secs(2));
+    fleet.signal(libc::SIGINT);
+    let out = fleet
+        .wait_timeout(EXIT_TIMEOUT)
+        .expect("the interrupted sweep did not end in time");
+    assert_nothing_left(&t);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let table = json(&out_dir.join("table.json"));
+    assert_eq!(
+        table["failed_runs"],
+        serde_json::json!(["paper/seed-1", "paper/seed-2"]),
+        "{}",
+        stderr(&out)
+    );
+    for seed in [1, 2] {
+        let s = json(&out_dir.join(format!("paper/seed-{seed}/summary.json")));
+        assert_eq!(s["interrupted"], true, "{s}");
+        assert_eq!(s["timing"]["leftover_ipc_files"], 0, "{s}");
+    }
+}
