@@ -270,7 +270,10 @@ mod tests {
         for clock in [CpuClock::Thread, CpuClock::Process] {
             let before = clock.now();
             spin(Duration::from_millis(5));
-            assert!(clock.now() >= before + Duration::from_millis(5), "{clock:?}");
+            assert!(
+                clock.now() >= before + Duration::from_millis(5),
+                "{clock:?}"
+            );
         }
     }
 
