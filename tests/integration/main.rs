@@ -8,4 +8,5 @@ mod cli;
 mod frames;
 mod recovery;
 mod render;
+mod resources;
 mod run;

@@ -8,11 +8,18 @@
 //! 4. on a guidance step it takes its turn in the token ring ([`crate::guidance::ring`]) and
 //!    runs the planner the scenario names ([`crate::guidance::decide`]: the paper's MPC or
 //!    `setfleet`);
-//! 5. it acks step `k` to the world with its yaw reference.
+//! 5. it acks step `k` to the world: with its yaw reference after deciding on a guidance
+//!    step; on any other step as soon as its estimate is out (before 3), since nothing it
+//!    does after that changes what the world does, so the world renders frame `k + 1` while
+//!    the agents exchange and fuse step `k`. The next frame waits in the agent's buffer
+//!    until the step is done, so every estimator step still folds the same fused state.
 //!
 //! Every wait is bounded, by the run's [`Timeouts`]. An agent awaits the peers the world
 //! serves at that step (the frame's `served` mask, the same for every agent) whose iceoryx2
-//! node is alive (a SIGKILLed peer shows up dead at once and its resources are cleaned). The
+//! node is alive (a SIGKILLed peer shows up dead at once and its resources are cleaned).
+//! Listing the nodes costs milliseconds of CPU, so it is done when the served mask names a
+//! peer not known alive, and while waiting at most once per wait slice, not at every step
+//! and every wake-up (the world drops a peer that died before the step from the mask). The
 //! world-server is presumed lost when no frame came for `world_timeout` and its node is gone,
 //! and the agent exits with an error. Only SIGINT and SIGTERM stop an agent: a stalled agent
 //! (SIGSTOP, swapped out) resumes where it was; if the world stopped serving it meanwhile,
@@ -325,6 +332,7 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         interrupted: false,
         last_frame: Instant::now(),
         clock: PhaseClock::new(CpuClock::Thread, phase::OTHER),
+        last_scan: Instant::now(),
     };
     agent.refresh_live();
     tracing::info!(uav = config.uav, run = %config.run_id, incarnation, "agent started");
@@ -402,6 +410,8 @@ struct Agent<'a> {
     last_frame: Instant,
     /// Where the time goes ([`phase`]).
     clock: PhaseClock,
+    /// When the run's nodes were last listed.
+    last_scan: Instant,
 }
 
 /// Longest single wait, so the shutdown flag and dead processes are noticed promptly.
@@ -476,6 +486,14 @@ impl Agent<'_> {
         }
     }
 
+    /// Lists the run's nodes if the last listing is a wait slice old: while waiting, a peer
+    /// that died is noticed within a slice.
+    fn refresh_live_if_stale(&mut self) {
+        if self.last_scan.elapsed() >= WAIT_SLICE {
+            self.refresh_live();
+        }
+    }
+
     fn stopping(&self) -> bool {
         self.interrupted || self.shutdown.load(Ordering::Relaxed)
     }
@@ -485,6 +503,7 @@ impl Agent<'_> {
         let before = self.clock.enter(phase::SCAN);
         let scanned = scan_nodes(&self.config.run_id, true);
         self.clock.enter(before);
+        self.last_scan = Instant::now();
         match scanned {
             Ok(scan) => {
                 self.world_live = scan.is_alive(RunNode::WORLD);
@@ -516,6 +535,8 @@ impl Agent<'_> {
             return Ok(());
         }
         let mut yaw_ref = None;
+        let mut acked = false;
+        let guidance_step = k.is_multiple_of(self.guidance.steps_per_period as u64);
         let before = self.clock.enter(phase::ESTIMATE);
         let folded = self.fold(frame);
         self.clock.enter(before);
@@ -531,8 +552,13 @@ impl Agent<'_> {
                 let published = self.publish_estimate(k);
                 self.clock.enter(before);
                 published?;
+                if !guidance_step {
+                    // Nothing left to tell the world: it may render the next frame now.
+                    self.links.send_command(self.command(k, None))?;
+                    acked = true;
+                }
                 self.gather(k);
-                if k.is_multiple_of(self.guidance.steps_per_period as u64) {
+                if guidance_step {
                     yaw_ref = self.decide(k)?;
                 }
             }
@@ -541,7 +567,9 @@ impl Agent<'_> {
                 tracing::warn!(step = k, error = %e, "frame refused");
             }
         }
-        self.links.send_command(self.command(k, yaw_ref))?;
+        if !acked {
+            self.links.send_command(self.command(k, yaw_ref))?;
+        }
         if folded.is_ok() {
             self.save_checkpoint();
         }
@@ -633,7 +661,14 @@ impl Agent<'_> {
 
     /// Fuses the awaited peers' estimates of step `k`, waiting for them (bounded).
     fn gather(&mut self, k: u64) {
-        self.refresh_live();
+        // The world lists the nodes before every step: a peer it serves is alive unless it
+        // died since, which the waits below notice. Only a peer that (re)joined needs a look.
+        let newcomer = (0..self.config.scenario.uavs.count).any(|j| {
+            j != self.config.uav && self.served & uav_bit(j) != 0 && !self.live.contains(&j)
+        });
+        if newcomer {
+            self.refresh_live();
+        }
         let deadline = Instant::now() + self.config.timeouts.peer_wait;
         loop {
             let before = self.clock.enter(phase::FUSE);
@@ -656,7 +691,7 @@ impl Agent<'_> {
             }
             self.wait(deadline.min(Instant::now() + WAIT_SLICE), phase::WAIT_PEERS);
             // A peer that died meanwhile is no longer awaited.
-            self.refresh_live();
+            self.refresh_live_if_stale();
         }
     }
 
@@ -824,10 +859,10 @@ impl Agent<'_> {
                         continue;
                     }
                     self.wait(deadline.min(Instant::now() + WAIT_SLICE), phase::WAIT_TOKEN);
-                    // The holder may have died meanwhile: a dead holder is skipped at once.
-                    // Listing the run's nodes is a directory read, cheap beside a wait slice.
+                    // The holder may have died meanwhile: a dead holder is skipped within a
+                    // wait slice (a listing costs milliseconds: not at every token hop).
                     if self.live.contains(&holder) {
-                        self.refresh_live();
+                        self.refresh_live_if_stale();
                     }
                 }
             }
