@@ -26,8 +26,7 @@
 //! its late ack, or the hello it repeats while no frame comes, brings it back from the next
 //! frame.
 //!
-//! With a checkpoint file ([`checkpoint`]), the agent saves its estimator state (on a thread
-//! of its own, [`saver`], so the disk's flushes stay off the step's critical path) after every
+//! With a checkpoint file ([`checkpoint`]), the agent saves its estimator state after every
 //! step it acked, and a restarted agent (same id) resumes from it, grown by the motion since;
 //! without one it starts from the full region. Either way it then fuses its peers' estimates;
 //! peers that see a new incarnation send it their whole map.
@@ -37,7 +36,6 @@
 
 pub mod checkpoint;
 mod links;
-pub mod saver;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
@@ -66,7 +64,6 @@ use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRi
 use crate::occupancy::OemStatus;
 use checkpoint::{CheckpointFile, Owner};
 use links::{LinkError, Links};
-use saver::CheckpointSaver;
 
 /// How an agent runs.
 #[derive(Clone, Debug)]
@@ -163,9 +160,6 @@ pub enum AgentError {
     /// A guidance step came before any pose.
     #[error("no pose to plan from at step {0}")]
     NoPose(u64),
-    /// The thread that writes the checkpoints could not start.
-    #[error("cannot start the checkpoint thread: {0}")]
-    CheckpointThread(std::io::Error),
 }
 
 impl AgentError {
@@ -224,12 +218,8 @@ pub struct AgentReport {
     pub checkpoints: u64,
     /// Checkpoints that could not be written.
     pub checkpoint_failures: u64,
-    /// Wall time spent writing checkpoints (encoding, writing, flushing, on the checkpoint
-    /// thread), milliseconds.
+    /// Wall time spent writing checkpoints (encoding, writing, flushing), milliseconds.
     pub checkpoint_ms: f64,
-    /// Checkpoints skipped because a newer state came while the previous one was being
-    /// written ([`saver`]).
-    pub checkpoints_superseded: u64,
     /// How the loop ended.
     pub end: Option<EndReason>,
     /// This process's id, so that whoever started it can join this report to the kernel's
@@ -250,10 +240,8 @@ pub mod phase {
     pub const FUSE: &str = "fuse";
     /// The planner's decision and passing the token.
     pub const PLAN: &str = "plan";
-    /// Copying the state for the checkpoint thread.
+    /// Writing the checkpoint.
     pub const CHECKPOINT: &str = "checkpoint";
-    /// Encoding, writing and flushing checkpoints, on the checkpoint thread ([`super::saver`]).
-    pub const CHECKPOINT_WRITE: &str = "checkpoint_write";
     /// Listing the run's nodes (who is alive).
     pub const SCAN: &str = "scan";
     /// Waiting for the next frame.
@@ -318,10 +306,6 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         }
         Some(Ok(None)) | None => Estimator::new(estimator_config.clone()),
     };
-    let saver = checkpoint
-        .map(CheckpointSaver::start)
-        .transpose()
-        .map_err(AgentError::CheckpointThread)?;
     let mut agent = Agent {
         run_tag: config.run_id.tag(),
         incarnation,
@@ -331,7 +315,7 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
             estimator_config.oem_full_every,
         ),
         estimator,
-        saver,
+        checkpoint,
         served: u32::MAX,
         guidance: GuidanceParams::from_scenario(&config.scenario),
         ring: TokenRing::new(config.uav),
@@ -353,19 +337,10 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
     agent.refresh_live();
     tracing::info!(uav = config.uav, run = %config.run_id, incarnation, "agent started");
     let result = agent.main_loop();
-    let mut phases = agent.clock.times();
-    if let Some(saver) = agent.saver.take() {
-        let saved = saver.finish();
-        agent.report.checkpoints += saved.saved;
-        agent.report.checkpoint_failures += saved.failed;
-        agent.report.checkpoints_superseded += saved.superseded;
-        agent.report.checkpoint_ms += saved.writing.wall_s * 1e3;
-        phases.insert(phase::CHECKPOINT_WRITE.to_owned(), saved.writing);
-    }
     let state = agent.estimator.state();
     let report = AgentReport {
         pid: std::process::id(),
-        phases,
+        phases: agent.clock.times(),
         final_undetected_cells: state.undetected.cells().count(),
         final_undetected_digest: state.undetected.cells().digest(),
         final_step: state.step,
@@ -416,8 +391,7 @@ struct Agent<'a> {
     links: &'a Links,
     waitset: &'a WaitSet<Ipc>,
     estimator: Estimator,
-    /// Writes the checkpoints, if there is a file for them.
-    saver: Option<CheckpointSaver>,
+    checkpoint: Option<CheckpointFile>,
     /// The agents the world serves at the current step (the frame's mask).
     served: u32,
     outbox: message::EstimateOutbox,
@@ -635,15 +609,24 @@ impl Agent<'_> {
         }
     }
 
-    /// Hands a copy of the state to the checkpoint thread, if there is a checkpoint file (a
-    /// write that fails is logged and counted: the run goes on without it).
+    /// Saves the state to the checkpoint file, if there is one (a failure is logged and
+    /// counted: the run goes on without it).
     fn save_checkpoint(&mut self) {
-        let Some(saver) = &self.saver else {
+        let Some(file) = &self.checkpoint else {
             return;
         };
+        let started = Instant::now();
         let before = self.clock.enter(phase::CHECKPOINT);
-        saver.save(self.estimator.state().clone());
+        let saved = file.save(self.estimator.state());
         self.clock.enter(before);
+        self.report.checkpoint_ms += started.elapsed().as_secs_f64() * 1e3;
+        match saved {
+            Ok(()) => self.report.checkpoints += 1,
+            Err(e) => {
+                self.report.checkpoint_failures += 1;
+                tracing::warn!(error = %e, "cannot write the checkpoint");
+            }
+        }
     }
 
     /// The peers awaited at the current step: served by the world and alive.
