@@ -14,6 +14,8 @@
 //!   cleanup after dead processes.
 //! - [`codec`]: the one place that encodes and decodes variable-size messages.
 //! - [`timeouts`]: every bounded wait of a run, derived from one place.
+//! - [`resources`]: where a process's time and memory go: CPU clocks, the phase clock, the
+//!   kernel's account of a process (CPU time, peak resident memory).
 //! - [`process`]: how every setfleet binary starts (logging, arguments, dying with its
 //!   parent).
 
@@ -28,6 +30,7 @@ pub mod ipc;
 pub mod math;
 pub mod process;
 pub mod raster;
+pub mod resources;
 pub mod scenario;
 pub mod service;
 pub mod timeouts;

@@ -8,5 +8,6 @@ mod cli;
 mod frames;
 mod recovery;
 mod render;
+mod resources;
 mod run;
 mod sweep;

@@ -110,8 +110,8 @@ fn a_small_fleet_runs_end_to_end_as_processes() {
     );
 }
 
-/// The summary without what depends on the wall clock (`wall_s`, `real_time_factor` and
-/// everything under a `timing` key).
+/// The summary without what depends on the wall clock or the load (`wall_s`,
+/// `real_time_factor` and everything under a `timing` or `resources` key).
 fn without_wall_clock(mut v: Value) -> Value {
     fn strip(v: &mut Value) {
         match v {
@@ -119,6 +119,7 @@ fn without_wall_clock(mut v: Value) -> Value {
                 map.remove("wall_s");
                 map.remove("real_time_factor");
                 map.remove("timing");
+                map.remove("resources");
                 map.values_mut().for_each(strip);
             }
             Value::Array(items) => items.iter_mut().for_each(strip),

@@ -14,6 +14,10 @@
 //!
 //! The waits come from [`protocol::timeouts::Timeouts`], like the agents'.
 //!
+//! Where the process's time goes is in [`ServerReport::phases`] ([`phase`]): CPU time of the
+//! whole process (rendering runs on a pool of threads that the stepping thread waits for) and
+//! wall time, per phase.
+//!
 //! **Realtime**: the world advances every `T / speedup` of wall time and applies the commands
 //! that arrived meanwhile; nobody is waited for.
 //!
@@ -28,6 +32,7 @@ use std::time::{Duration, Instant};
 use iceoryx2::prelude::*;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{self, EventService, Ipc, IpcOpenError, PubSubService, RunNode, WakeEvent};
+use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
@@ -182,11 +187,34 @@ pub struct ServerReport {
     pub observer_acks: u64,
     /// Steps the observer missed (when waited for).
     pub observer_misses: u64,
+    /// This process's id, so that whoever started it can join this report to the kernel's
+    /// account of the process.
+    pub pid: u32,
+    /// Where the process's time went ([`phase`]): process CPU time and wall time per phase,
+    /// from opening the world to the end of the run.
+    pub phases: PhaseTimes,
+}
+
+/// The phases of the world-server's time ([`ServerReport::phases`]).
+pub mod phase {
+    /// Rendering the frames into their samples and sending them.
+    pub const RENDER: &str = "render";
+    /// Publishing the truth and waking the processes.
+    pub const PUBLISH: &str = "publish";
+    /// Waiting for hellos and acks (lockstep) or for the next tick (realtime).
+    pub const WAIT: &str = "wait";
+    /// Listing the run's nodes (who is alive).
+    pub const SCAN: &str = "scan";
+    /// Advancing the world by a step (cars, UAVs).
+    pub const ADVANCE: &str = "advance";
+    /// Everything else (building the world, commands, acks).
+    pub const OTHER: &str = "other";
 }
 
 /// Runs the world of `config` until the last step or `shutdown`.
 pub fn run(config: ServerConfig, shutdown: &AtomicBool) -> Result<ServerReport, ServerError> {
     config.validate()?;
+    let clock = PhaseClock::new(CpuClock::Process, phase::OTHER);
     let world = World::new(&config.scenario)?;
     let run = config.run_id.clone();
     if let Ok(dead) = ipc::cleanup_stale(&run)
@@ -229,6 +257,7 @@ pub fn run(config: ServerConfig, shutdown: &AtomicBool) -> Result<ServerReport, 
         start_timeout: config.start_timeout,
         interrupted: false,
         shutdown,
+        clock,
     };
     let started = Instant::now();
     server.start(config.start_timeout);
@@ -254,6 +283,8 @@ pub fn run(config: ServerConfig, shutdown: &AtomicBool) -> Result<ServerReport, 
             .collect(),
         observer_acks: server.observer.acks,
         observer_misses: server.observer.misses,
+        pid: std::process::id(),
+        phases: server.clock.times(),
     };
     tracing::info!(
         steps = report.steps,
@@ -367,6 +398,8 @@ struct Server<'a> {
     start_timeout: Duration,
     interrupted: bool,
     shutdown: &'a AtomicBool,
+    /// Where the time goes ([`phase`]).
+    clock: PhaseClock,
 }
 
 /// Longest single wait, so the shutdown flag and dead processes are noticed promptly.
@@ -443,7 +476,7 @@ impl Server<'_> {
                     break;
                 }
             }
-            self.world.advance();
+            self.advance();
         }
         steps
     }
@@ -477,9 +510,15 @@ impl Server<'_> {
                 return k;
             }
             self.drain_commands(Some(k));
-            self.world.advance();
+            self.advance();
         }
         steps
+    }
+
+    fn advance(&mut self) {
+        let before = self.clock.enter(phase::ADVANCE);
+        self.world.advance();
+        self.clock.enter(before);
     }
 
     fn stop_requested(&mut self) -> bool {
@@ -500,7 +539,10 @@ impl Server<'_> {
             return false;
         }
         let slice = (deadline - now).min(WAIT_SLICE);
-        let woken = match ipc::wait_for_wake(self.waitset, &self.ports.wake, slice) {
+        let before = self.clock.enter(phase::WAIT);
+        let waited = ipc::wait_for_wake(self.waitset, &self.ports.wake, slice);
+        self.clock.enter(before);
+        let woken = match waited {
             Ok(wake) if wake.interrupted => {
                 tracing::info!("termination requested");
                 self.interrupted = true;
@@ -546,7 +588,10 @@ impl Server<'_> {
 
     /// Marks agents whose process died as not live (and cleans their resources).
     fn check_liveness(&mut self) {
-        let scan = match ipc::scan_nodes(&self.run, true) {
+        let before = self.clock.enter(phase::SCAN);
+        let scanned = ipc::scan_nodes(&self.run, true);
+        self.clock.enter(before);
+        let scan = match scanned {
             Ok(scan) => scan,
             Err(e) => {
                 tracing::warn!(error = %e, "cannot list the run's nodes");
@@ -711,6 +756,7 @@ impl Server<'_> {
     /// Renders and sends frame `k` to every live agent, then truth `k`.
     fn publish(&mut self, k: u64) {
         debug_assert_eq!(self.world.step(), k);
+        let before = self.clock.enter(phase::PUBLISH);
         self.published = Some(k);
         let served = (0..self.uavs() as u32)
             .filter(|&u| self.agents[u as usize].live)
@@ -719,7 +765,10 @@ impl Server<'_> {
             if !self.agents[uav].live {
                 continue;
             }
-            if let Err(e) = self.send_frame(uav, served) {
+            let before = self.clock.enter(phase::RENDER);
+            let sent = self.send_frame(uav, served);
+            self.clock.enter(before);
+            if let Err(e) = sent {
                 tracing::warn!(uav, step = k, error = %e, "cannot send frame");
                 self.agents[uav].report.send_failures += 1;
                 continue;
@@ -743,6 +792,7 @@ impl Server<'_> {
             Err(e) => tracing::warn!(step = k, error = %e, "cannot loan truth"),
         }
         notify(&self.ports.observer_wake, WakeEvent::Truth);
+        self.clock.enter(before);
     }
 
     fn send_frame(&self, uav: usize, served: u32) -> Result<(), FrameSendError> {

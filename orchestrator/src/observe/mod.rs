@@ -47,6 +47,7 @@ use protocol::ipc::{
     EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, WireSubscriber, scan_nodes,
     wait_for_wake,
 };
+use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::wire::{
@@ -180,6 +181,18 @@ pub struct ObserverReport {
     pub tracks: Vec<Vec<[f64; 2]>>,
     /// Wall time from the first truth to the last step's ack.
     pub stepping: Option<Duration>,
+    /// Where the observer thread's time went ([`phase`]): thread CPU and wall time.
+    pub phases: PhaseTimes,
+}
+
+/// The phases of the observer thread's time ([`ObserverReport::phases`]).
+pub mod phase {
+    /// Receiving and decoding estimates, measuring the steps.
+    pub const OBSERVE: &str = "observe";
+    /// Waiting for truths and estimates, and for faults to be applied.
+    pub const WAIT: &str = "observe_wait";
+    /// Everything else on the observer thread (acks, node scans, start-up).
+    pub const OTHER: &str = "observe_other";
 }
 
 /// Starts the observer thread. Events go to `events`; it ends at the world's end of run or
@@ -264,6 +277,7 @@ fn observe(
     stop: &AtomicBool,
     events: &UnboundedSender<ObserverEvent>,
 ) -> anyhow::Result<ObserverReport> {
+    let clock = PhaseClock::new(CpuClock::Thread, phase::OTHER);
     let uavs = config.scenario.uavs.count;
     let node = RunNode::new(&config.run, RunNode::OBSERVER, SignalHandlingMode::Disabled)
         .context("cannot create the observer's iceoryx2 node")?;
@@ -290,6 +304,7 @@ fn observe(
             oem: OccupancyMap::new(estimator.oem_grid),
             tracks: vec![Vec::new(); uavs as usize],
             stepping: None,
+            phases: PhaseTimes::new(),
         },
         estimator,
         truths: VecDeque::new(),
@@ -297,8 +312,10 @@ fn observe(
         next_fault: 0,
         end_of_run: false,
         first_truth: None,
+        clock,
     };
     observer.main_loop()?;
+    observer.report.phases = observer.clock.times();
     Ok(observer.report)
 }
 
@@ -317,6 +334,7 @@ struct Observer<'a> {
     next_fault: usize,
     end_of_run: bool,
     first_truth: Option<Instant>,
+    clock: PhaseClock,
 }
 
 impl Observer<'_> {
@@ -352,7 +370,10 @@ impl Observer<'_> {
 
     /// Waits for a wake-up at most `timeout`; notes the end of the run.
     fn wait(&mut self, timeout: Duration) {
-        match wait_for_wake(self.waitset, &self.ports.wake, timeout) {
+        let before = self.clock.enter(phase::WAIT);
+        let woken = wait_for_wake(self.waitset, &self.ports.wake, timeout);
+        self.clock.enter(before);
+        match woken {
             Ok(wake) => self.end_of_run |= wake.end_of_run,
             Err(e) => {
                 tracing::warn!(error = ?e, "observer wait failed");
@@ -384,6 +405,12 @@ impl Observer<'_> {
     /// Reads everything pending: truths into the queue, estimates decoded into the store,
     /// tokens counted.
     fn drain(&mut self) {
+        let before = self.clock.enter(phase::OBSERVE);
+        self.drain_all();
+        self.clock.enter(before);
+    }
+
+    fn drain_all(&mut self) {
         loop {
             match self.ports.truth.receive() {
                 Ok(Some(sample)) => {
@@ -543,7 +570,9 @@ impl Observer<'_> {
         // renders the next step while this one is measured.
         let restarted = self.apply_faults(truth) | self.config.resumed.swap(0, Ordering::AcqRel);
         self.send_ack(k, restarted)?;
+        let before = self.clock.enter(phase::OBSERVE);
         let step = self.measure(truth, live_agents);
+        self.clock.enter(before);
         self.report.steps += 1;
         if let Some(t) = self.first_truth {
             self.report.stepping = Some(t.elapsed());
@@ -652,7 +681,10 @@ impl Observer<'_> {
         }
         let deadline = Instant::now() + self.config.fault_wait;
         while !self.stopping() && Instant::now() < deadline {
-            match applied.recv_timeout(WAIT_SLICE) {
+            let before = self.clock.enter(phase::WAIT);
+            let received = applied.recv_timeout(WAIT_SLICE);
+            self.clock.enter(before);
+            match received {
                 Ok(restarted) => return restarted,
                 Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return 0,
                 Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}

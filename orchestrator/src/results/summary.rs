@@ -14,10 +14,13 @@
 //! (or worst agent). `time_all_identified_s` is the mean over the agents measured at the last
 //! step of the time each first held every target, `null` if one of them never did.
 //!
+//! `resources` holds where the run's time and memory went: CPU time, peak resident memory
+//! and the phases of every process, and the totals ([`crate::run::resources`]).
+//!
 //! Two runs of the same scenario and seed in lockstep give byte-identical summaries except
-//! for what depends on the wall clock, which lives only under keys named `wall_s`,
-//! `real_time_factor` and `timing` (at any depth), so a comparison can drop them. Maps are
-//! ordered; floats are written as computed.
+//! for what depends on the wall clock or the machine's load, which lives only under keys
+//! named `wall_s`, `real_time_factor`, `timing` and `resources` (at any depth), so a
+//! comparison can drop them. Maps are ordered; floats are written as computed.
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -30,6 +33,7 @@ use crate::observe::metrics::SetMetrics;
 use crate::observe::tally::ServiceKind;
 use crate::run::RunRecord;
 use crate::run::faults::FaultRecord;
+use crate::run::resources::Resources;
 
 /// The summary of a run.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -109,6 +113,8 @@ pub struct Summary {
     pub comms: BTreeMap<&'static str, CommsSummary>,
     /// What the observer could not use.
     pub observer: ObserverSummary,
+    /// CPU time, peak memory and phases per process, and totals.
+    pub resources: Resources,
     /// Values that differ between two runs of the same scenario and seed.
     pub timing: RunTiming,
 }
@@ -377,6 +383,7 @@ impl Summary {
                 steps_without_estimates: series.iter().filter(|m| m.mean.is_none()).count() as u64,
                 dropped: observer.map(|o| o.dropped.clone()).unwrap_or_default(),
             },
+            resources: record.resources.clone(),
             timing: RunTiming {
                 run_id: record.config.run_id.to_string(),
                 started_utc: record.started_utc.clone(),
@@ -496,6 +503,66 @@ impl Summary {
                 )?;
             }
         }
-        Ok(())
+        print_resources(&self.resources, out)
     }
+}
+
+/// The resources table: one line per process (CPU, peak memory, phases by CPU time, the
+/// waits by wall time), then the totals.
+fn print_resources(r: &Resources, out: &mut impl Write) -> std::io::Result<()> {
+    if r.processes.is_empty() {
+        return Ok(());
+    }
+    let opt = |v: Option<f64>, digits: usize| {
+        v.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"))
+    };
+    writeln!(out)?;
+    writeln!(
+        out,
+        "  {:<14} {:>7} {:>7}  phases, CPU s  | waits, wall s",
+        "process", "CPU s", "peak MB"
+    )?;
+    for p in &r.processes {
+        let name = match (p.uav, p.incarnation) {
+            (Some(uav), Some(n)) if n > 1 => format!("agent {uav} #{n}"),
+            (Some(uav), _) => format!("agent {uav}"),
+            _ => p.role.to_owned(),
+        };
+        let is_wait = |name: &str| name.contains("wait");
+        let mut busy: Vec<(&String, &f64)> = p.phases.iter().filter(|(n, _)| !is_wait(n)).collect();
+        busy.sort_by(|a, b| b.1.total_cmp(a.1));
+        let busy: Vec<String> = busy
+            .iter()
+            .filter(|(_, s)| **s >= 0.005)
+            .map(|(n, s)| format!("{n} {s:.2}"))
+            .collect();
+        let waits: Vec<String> = p
+            .phases_wall_s
+            .iter()
+            .filter(|(n, _)| is_wait(n))
+            .map(|(n, s)| format!("{n} {s:.1}"))
+            .collect();
+        let phases = if busy.is_empty() && waits.is_empty() {
+            "-".to_owned()
+        } else {
+            format!("{}  | {}", busy.join(", "), waits.join(", "))
+        };
+        writeln!(
+            out,
+            "  {:<14} {:>7} {:>7}  {phases}",
+            name,
+            opt(p.cpu_s, 2),
+            opt(p.peak_rss_mb, 0),
+        )?;
+    }
+    let t = &r.totals;
+    writeln!(
+        out,
+        "  CPU {:.1} s in all ({:.1} s world and agents, {} ms per UAV step); {} wall s per \
+         simulated s",
+        t.cpu_s,
+        t.world_and_agents_cpu_s,
+        opt(t.cpu_ms_per_uav_step, 1),
+        opt(t.wall_s_per_sim_s, 3),
+    )
 }

@@ -8,6 +8,12 @@
 //! *incarnation* with its own number, so a SIGCONT meant for a process that was killed
 //! meanwhile never reaches its restarted successor; and an agent is always continued before
 //! it is asked to terminate, so that no process of a run is left stopped.
+//!
+//! Every child is reaped here and nowhere else, after the kernel's account of the exited
+//! process was read ([`protocol::resources::exited_child_usage`]: exact CPU time and peak
+//! resident memory, a SIGKILLed agent's too). [`Children::exited`] lists every process that
+//! ended, with that account ([`super::resources`] joins it to the phases the process
+//! reported).
 
 use std::collections::BTreeMap;
 use std::ffi::OsString;
@@ -17,6 +23,7 @@ use std::process::{ExitStatus, Stdio};
 use std::time::Duration;
 
 use anyhow::Context as _;
+use protocol::resources::{ProcessUsage, exited_child_usage};
 use protocol::service::RunId;
 use tokio::process::{Child, Command};
 use world_server::server::StepMode;
@@ -65,6 +72,21 @@ pub struct AgentExit {
     pub status: ExitStatus,
 }
 
+/// A child process that ended, with the kernel's account of it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExitedProcess {
+    /// The UAV of an agent, `None` for the world-server.
+    pub uav: Option<u32>,
+    /// An agent's process number among its UAV's (1 for the first, 2 after a restart, ...).
+    pub incarnation: Option<u32>,
+    /// Its pid.
+    pub pid: Option<u32>,
+    /// How it ended (`None` if it could not be reaped).
+    pub status: Option<ExitStatus>,
+    /// CPU time and peak memory (`None` if they could not be read).
+    pub usage: Option<ProcessUsage>,
+}
+
 /// The world-server and agent processes of one run.
 pub struct Children {
     run: RunId,
@@ -73,8 +95,12 @@ pub struct Children {
     logs: PathBuf,
     checkpoints: PathBuf,
     mode: StepMode,
+    world: Option<Child>,
     agents: BTreeMap<u32, Agent>,
     incarnations: u64,
+    /// Agent processes started per UAV.
+    uav_incarnations: BTreeMap<u32, u32>,
+    exited: Vec<ExitedProcess>,
 }
 
 /// One running agent process.
@@ -82,9 +108,49 @@ struct Agent {
     child: Child,
     /// Its number among the run's agent processes.
     incarnation: u64,
+    /// Its number among its UAV's processes, from 1.
+    uav_incarnation: u32,
     /// Whether it was sent SIGSTOP and not SIGCONT since.
     stopped: bool,
 }
+
+/// Reaps `child` if it has exited, reading the kernel's account of it first; `None` while
+/// it runs.
+fn try_reap(child: &mut Child) -> std::io::Result<Option<(ExitStatus, Option<ProcessUsage>)>> {
+    let usage = match child.id().map(exited_child_usage) {
+        Some(Ok(None)) => return Ok(None),
+        Some(Ok(Some(usage))) => Some(usage),
+        Some(Err(e)) => {
+            tracing::debug!(error = %e, "cannot read the child's usage");
+            None
+        }
+        // Already reaped.
+        None => None,
+    };
+    Ok(child.try_wait()?.map(|status| (status, usage)))
+}
+
+/// Waits at most `timeout` for `child` to exit and reaps it ([`try_reap`]).
+async fn reap(child: &mut Child, timeout: Duration) -> Option<(ExitStatus, Option<ProcessUsage>)> {
+    let deadline = tokio::time::Instant::now() + timeout;
+    loop {
+        match try_reap(child) {
+            Ok(Some(exit)) => return Some(exit),
+            Ok(None) => {}
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot poll a child");
+                return None;
+            }
+        }
+        if tokio::time::Instant::now() >= deadline {
+            return None;
+        }
+        tokio::time::sleep(REAP_POLL).await;
+    }
+}
+
+/// Interval of polls for a child's exit while waiting for it.
+const REAP_POLL: Duration = Duration::from_millis(10);
 
 impl Children {
     /// No process yet; `scenario` is the file every child reads, `logs` the log directory,
@@ -104,9 +170,47 @@ impl Children {
             logs,
             checkpoints,
             mode,
+            world: None,
             agents: BTreeMap::new(),
             incarnations: 0,
+            uav_incarnations: BTreeMap::new(),
+            exited: Vec::new(),
         }
+    }
+
+    /// Every child process that ended so far, in the order they were reaped.
+    pub fn exited(&self) -> &[ExitedProcess] {
+        &self.exited
+    }
+
+    fn note_world_exit(
+        &mut self,
+        pid: Option<u32>,
+        exit: Option<(ExitStatus, Option<ProcessUsage>)>,
+    ) {
+        self.exited.push(ExitedProcess {
+            uav: None,
+            incarnation: None,
+            pid,
+            status: exit.map(|(s, _)| s),
+            usage: exit.and_then(|(_, u)| u),
+        });
+    }
+
+    fn note_agent_exit(
+        &mut self,
+        uav: u32,
+        agent: &Agent,
+        pid: Option<u32>,
+        exit: Option<(ExitStatus, Option<ProcessUsage>)>,
+    ) {
+        self.exited.push(ExitedProcess {
+            uav: Some(uav),
+            incarnation: Some(agent.uav_incarnation),
+            pid,
+            status: exit.map(|(s, _)| s),
+            usage: exit.and_then(|(_, u)| u),
+        });
     }
 
     fn spawn(&self, program: &Path, args: Vec<OsString>, log: &str) -> anyhow::Result<Child> {
@@ -141,7 +245,7 @@ impl Children {
     }
 
     /// Starts the world-server, which waits for the agents' and the observer's hellos.
-    pub fn spawn_world(&self) -> anyhow::Result<Child> {
+    pub fn spawn_world(&mut self) -> anyhow::Result<()> {
         let mut args = self.common_args();
         args.push("--wait-observer".into());
         match self.mode {
@@ -153,7 +257,58 @@ impl Children {
                 speedup.to_string().into(),
             ]),
         }
-        self.spawn(&self.binaries.world, args, "world.log")
+        self.world = Some(self.spawn(&self.binaries.world, args, "world.log")?);
+        Ok(())
+    }
+
+    /// The world-server's exit status once it exited (reaped, with its usage), `None` while
+    /// it runs or when it was already reaped.
+    pub fn poll_world(&mut self) -> Option<ExitStatus> {
+        let world = self.world.as_mut()?;
+        let pid = world.id();
+        match try_reap(world) {
+            Ok(Some(exit)) => {
+                self.world = None;
+                self.note_world_exit(pid, Some(exit));
+                Some(exit.0)
+            }
+            Ok(None) => None,
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot poll the world-server");
+                None
+            }
+        }
+    }
+
+    /// Waits at most `timeout` for the world-server to exit; its status if it did (`None`
+    /// also when it was already reaped).
+    pub async fn wait_world(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        let world = self.world.as_mut()?;
+        let pid = world.id();
+        let exit = reap(world, timeout).await?;
+        self.world = None;
+        self.note_world_exit(pid, Some(exit));
+        Some(exit.0)
+    }
+
+    /// Stops the world: SIGTERM, then SIGKILL after `grace`; returns its status if it exited.
+    pub async fn stop_world(&mut self, grace: Duration) -> Option<ExitStatus> {
+        if let Some(status) = self.poll_world() {
+            return Some(status);
+        }
+        let pid = self.world.as_ref()?.id();
+        if let Some(pid) = pid {
+            send_signal(pid, libc::SIGTERM);
+        }
+        if let Some(status) = self.wait_world(grace).await {
+            return Some(status);
+        }
+        tracing::warn!("world-server did not stop on SIGTERM: killed");
+        let mut world = self.world.take()?;
+        let _ = world.start_kill();
+        let exit = reap(&mut world, Duration::from_secs(5)).await;
+        self.note_world_exit(pid, exit);
+        exit.map(|(s, _)| s)
     }
 
     /// Starts (or restarts) agent `uav`.
@@ -166,14 +321,19 @@ impl Children {
         ]);
         let child = self.spawn(&self.binaries.agent, args, &format!("agent-{uav}.log"))?;
         self.incarnations += 1;
+        let uav_incarnation = self.uav_incarnations.entry(uav).or_default();
+        *uav_incarnation += 1;
         let agent = Agent {
             child,
             incarnation: self.incarnations,
+            uav_incarnation: *uav_incarnation,
             stopped: false,
         };
-        // A predecessor not reaped yet is killed as its handle drops.
-        if self.agents.insert(uav, agent).is_some() {
+        // A predecessor not reaped yet is killed as its handle drops (its usage is lost).
+        if let Some(old) = self.agents.insert(uav, agent) {
             tracing::warn!(uav, "agent replaced while its predecessor was running");
+            let pid = old.child.id();
+            self.note_agent_exit(uav, &old, pid, None);
         }
         Ok(())
     }
@@ -204,35 +364,43 @@ impl Children {
 
     /// Kills agent `uav` with SIGKILL and reaps it (bounded); false if it was not running.
     pub async fn kill_agent(&mut self, uav: u32) -> bool {
-        let Some(Agent { mut child, .. }) = self.agents.remove(&uav) else {
+        let Some(mut agent) = self.agents.remove(&uav) else {
             return false;
         };
+        let pid = agent.child.id();
         // SIGKILL ends a stopped process too.
-        if let Err(e) = child.start_kill() {
+        if let Err(e) = agent.child.start_kill() {
             tracing::warn!(uav, error = %e, "cannot kill the agent");
         }
-        let reaped = tokio::time::timeout(Duration::from_secs(5), child.wait()).await;
-        if !matches!(reaped, Ok(Ok(_))) {
+        let exit = reap(&mut agent.child, Duration::from_secs(5)).await;
+        if exit.is_none() {
             tracing::warn!(uav, "the killed agent was not reaped in time");
         }
+        self.note_agent_exit(uav, &agent, pid, exit);
         true
     }
 
     /// Agents that exited since the last call (removed from the set).
     pub fn reap_agents(&mut self) -> Vec<AgentExit> {
+        let mut reaped = Vec::new();
+        for (&uav, agent) in &mut self.agents {
+            let pid = agent.child.id();
+            match try_reap(&mut agent.child) {
+                Ok(Some(exit)) => reaped.push((uav, pid, exit)),
+                Ok(None) => {}
+                Err(e) => tracing::warn!(uav, error = %e, "cannot poll the agent"),
+            }
+        }
         let mut exits = Vec::new();
-        self.agents
-            .retain(|&uav, agent| match agent.child.try_wait() {
-                Ok(Some(status)) => {
-                    exits.push(AgentExit { uav, status });
-                    false
-                }
-                Ok(None) => true,
-                Err(e) => {
-                    tracing::warn!(uav, error = %e, "cannot poll the agent");
-                    true
-                }
+        for (uav, pid, exit) in reaped {
+            if let Some(agent) = self.agents.remove(&uav) {
+                self.note_agent_exit(uav, &agent, pid, Some(exit));
+            }
+            exits.push(AgentExit {
+                uav,
+                status: exit.0,
             });
+        }
         exits
     }
 
@@ -296,23 +464,4 @@ pub fn send_signal(pid: u32, signal: i32) {
             libc::kill(pid, signal);
         }
     }
-}
-
-/// Stops the world: SIGTERM, then SIGKILL after `grace`; returns its status if it exited.
-pub async fn stop_world(world: &mut Child, grace: Duration) -> Option<ExitStatus> {
-    if let Ok(Some(status)) = world.try_wait() {
-        return Some(status);
-    }
-    if let Some(pid) = world.id() {
-        send_signal(pid, libc::SIGTERM);
-    }
-    if let Ok(Ok(status)) = tokio::time::timeout(grace, world.wait()).await {
-        return Some(status);
-    }
-    tracing::warn!("world-server did not stop on SIGTERM: killed");
-    let _ = world.start_kill();
-    tokio::time::timeout(Duration::from_secs(5), world.wait())
-        .await
-        .ok()
-        .and_then(Result::ok)
 }

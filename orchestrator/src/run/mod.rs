@@ -16,7 +16,8 @@
 //!
 //! Whatever the ending, every paused agent is continued, every child is stopped (SIGTERM,
 //! then SIGKILL after a bounded grace), the run's iceoryx2 files are removed, and the
-//! [`RunRecord`] holds what was measured, with each restarted or resumed agent's resync.
+//! [`RunRecord`] holds what was measured, with each restarted or resumed agent's resync and
+//! where every process's time went ([`resources`]).
 //! [`run`] is the command: it executes, then writes `summary.json`, `timeseries.csv` and the
 //! pictures, and prints the summary table.
 
@@ -25,6 +26,7 @@ pub mod children;
 pub mod config;
 pub mod faults;
 pub mod progress;
+pub mod resources;
 pub mod stale;
 
 use std::process::ExitStatus;
@@ -42,10 +44,11 @@ use crate::Outcome;
 use crate::observe::{self, ObserverConfig, ObserverEvent, ObserverReport, StepMetrics};
 use crate::results::summary::Summary;
 use crate::results::{curves, maps, timeseries};
-use children::{Binaries, Children, stop_world};
+use children::{Binaries, Children};
 use config::{FaultKind, RunConfig};
 use faults::{DueFault, FaultPlan, PendingResume, Resumes};
 use progress::Progress;
+use resources::{OwnUsage, Resources, RunSize};
 
 /// Longest wait for a fault to be applied before the observer acknowledges its step.
 const FAULT_WAIT: Duration = Duration::from_secs(10);
@@ -76,6 +79,8 @@ pub struct RunRecord {
     pub started_utc: String,
     /// The run's iceoryx2 files still present after cleanup (0 unless something is wrong).
     pub leftover_files: usize,
+    /// CPU time, peak memory and phases per process.
+    pub resources: Resources,
 }
 
 impl RunRecord {
@@ -160,6 +165,7 @@ enum Ending {
 /// Runs the fleet once; `label` prefixes the progress lines (a sweep's variant and seed).
 pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecord> {
     let started = Instant::now();
+    let own_at_start = protocol::resources::own_usage().ok();
     let started_utc = crate::bench::utc_now_rfc3339();
     let run = &config.run_id;
     let out = &config.out;
@@ -211,7 +217,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         checkpoints,
         config.mode,
     );
-    let mut world = children.spawn_world()?;
+    children.spawn_world()?;
     let mut failure = None;
     for uav in 0..config.scenario.uavs.count {
         if let Err(e) = children.spawn_agent(uav) {
@@ -272,19 +278,20 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
                     }
                 }
             }
-            status = world.wait(), if world_exit.is_none() => {
-                let status = status.context("cannot wait for the world-server")?;
-                if !status.success() {
-                    failure.get_or_insert_with(|| format!(
-                        "the world-server exited with {status}; see {}",
-                        logs.join("world.log").display()
-                    ));
-                }
-                world_exit = Some((status, Instant::now()));
-            }
             _ = sigint.recv() => { ending = Ending::Signal("SIGINT"); break; }
             _ = sigterm.recv() => { ending = Ending::Signal("SIGTERM"); break; }
             _ = tick.tick() => {
+                if world_exit.is_none()
+                    && let Some(status) = children.poll_world()
+                {
+                    if !status.success() {
+                        failure.get_or_insert_with(|| format!(
+                            "the world-server exited with {status}; see {}",
+                            logs.join("world.log").display()
+                        ));
+                    }
+                    world_exit = Some((status, Instant::now()));
+                }
                 for exit in children.reap_agents() {
                     progress.note(&format!("agent {} exited with {}", exit.uav, exit.status));
                     tracing::warn!(uav = exit.uav, status = %exit.status, "agent exited");
@@ -330,13 +337,13 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         } else {
             EXIT_GRACE
         };
-        match tokio::time::timeout(grace, world.wait()).await {
-            Ok(Ok(status)) if !status.success() && !interrupted => {
+        match children.wait_world(grace).await {
+            Some(status) if !status.success() && !interrupted => {
                 failure.get_or_insert_with(|| format!("the world-server exited with {status}"));
             }
-            Ok(_) => {}
-            Err(_) => {
-                stop_world(&mut world, EXIT_GRACE).await;
+            Some(_) => {}
+            None => {
+                children.stop_world(EXIT_GRACE).await;
             }
         }
     }
@@ -357,16 +364,33 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         });
     }
     plan.measure_resync(&series);
+    let wall_s = started.elapsed().as_secs_f64();
+    let own = OwnUsage {
+        usage: own_usage_since(own_at_start),
+        observer: observer
+            .as_ref()
+            .map(|o| o.phases.clone())
+            .unwrap_or_default(),
+    };
+    let steps = series.len() as u64;
+    let size = RunSize {
+        uavs: config.scenario.uavs.count,
+        steps,
+        sim_s: steps as f64 * config.scenario.timing.cvs_period_s,
+        wall_s,
+    };
+    let resources = Resources::gather(&own, children.exited(), &logs, size);
     Ok(RunRecord {
         config: config.clone(),
         series,
         observer,
         faults: plan,
-        wall_s: started.elapsed().as_secs_f64(),
+        wall_s,
         interrupted,
         failure,
         started_utc,
         leftover_files,
+        resources,
     })
 }
 
@@ -379,6 +403,19 @@ fn fresh_dir(dir: &std::path::Path) -> anyhow::Result<()> {
         Err(e) => return Err(e).with_context(|| format!("cannot empty {}", dir.display())),
     }
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
+}
+
+/// This process's CPU since `start` (its usage then), with its peak memory so far.
+fn own_usage_since(
+    start: Option<protocol::resources::ProcessUsage>,
+) -> Option<protocol::resources::ProcessUsage> {
+    let now = protocol::resources::own_usage().ok()?;
+    let start = start?;
+    Some(protocol::resources::ProcessUsage {
+        user_s: (now.user_s - start.user_s).max(0.0),
+        system_s: (now.system_s - start.system_s).max(0.0),
+        peak_rss_kb: now.peak_rss_kb,
+    })
 }
 
 /// Applies one fault; whether it took effect. A pause's SIGCONT joins `resumes`.

@@ -8,11 +8,18 @@
 //! 4. on a guidance step it takes its turn in the token ring ([`crate::guidance::ring`]) and
 //!    runs the planner the scenario names ([`crate::guidance::decide`]: the paper's MPC or
 //!    `setfleet`);
-//! 5. it acks step `k` to the world with its yaw reference.
+//! 5. it acks step `k` to the world: with its yaw reference after deciding on a guidance
+//!    step; on any other step as soon as its estimate is out (before 3), since nothing it
+//!    does after that changes what the world does, so the world renders frame `k + 1` while
+//!    the agents exchange and fuse step `k`. The next frame waits in the agent's buffer
+//!    until the step is done, so every estimator step still folds the same fused state.
 //!
 //! Every wait is bounded, by the run's [`Timeouts`]. An agent awaits the peers the world
 //! serves at that step (the frame's `served` mask, the same for every agent) whose iceoryx2
-//! node is alive (a SIGKILLed peer shows up dead at once and its resources are cleaned). The
+//! node is alive (a SIGKILLed peer shows up dead at once and its resources are cleaned).
+//! Listing the nodes costs milliseconds of CPU, so it is done when the served mask names a
+//! peer not known alive, and while waiting at most once per wait slice, not at every step
+//! and every wake-up (the world drops a peer that died before the step from the mask). The
 //! world-server is presumed lost when no frame came for `world_timeout` and its node is gone,
 //! and the agent exits with an error. Only SIGINT and SIGTERM stop an agent: a stalled agent
 //! (SIGSTOP, swapped out) resumes where it was; if the world stopped serving it meanwhile,
@@ -41,6 +48,7 @@ use protocol::codec::{self, EncodeError};
 use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_for_wake};
+use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
@@ -214,6 +222,36 @@ pub struct AgentReport {
     pub checkpoint_ms: f64,
     /// How the loop ended.
     pub end: Option<EndReason>,
+    /// This process's id, so that whoever started it can join this report to the kernel's
+    /// account of the process.
+    pub pid: u32,
+    /// Where the agent's thread spent its time ([`phase`]): CPU time of the thread and wall
+    /// time per phase, from the start of the loop to its end.
+    pub phases: PhaseTimes,
+}
+
+/// The phases of an agent's time ([`AgentReport::phases`]).
+pub mod phase {
+    /// Folding a frame into the estimator (predict, correct, the OEM).
+    pub const ESTIMATE: &str = "estimate";
+    /// Composing, encoding and sending the agent's estimate.
+    pub const PUBLISH: &str = "publish";
+    /// Receiving, decoding and fusing the peers' estimates.
+    pub const FUSE: &str = "fuse";
+    /// The planner's decision and passing the token.
+    pub const PLAN: &str = "plan";
+    /// Writing the checkpoint.
+    pub const CHECKPOINT: &str = "checkpoint";
+    /// Listing the run's nodes (who is alive).
+    pub const SCAN: &str = "scan";
+    /// Waiting for the next frame.
+    pub const WAIT_FRAME: &str = "wait_frame";
+    /// Waiting for the peers' estimates of the step.
+    pub const WAIT_PEERS: &str = "wait_peers";
+    /// Waiting for the token.
+    pub const WAIT_TOKEN: &str = "wait_token";
+    /// Everything else (commands, tokens read, start-up after the clock started).
+    pub const OTHER: &str = "other";
 }
 
 /// Runs agent `config.uav` until the run ends, the shutdown flag is set or the world is lost.
@@ -293,12 +331,16 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         end_of_run: false,
         interrupted: false,
         last_frame: Instant::now(),
+        clock: PhaseClock::new(CpuClock::Thread, phase::OTHER),
+        last_scan: Instant::now(),
     };
     agent.refresh_live();
     tracing::info!(uav = config.uav, run = %config.run_id, incarnation, "agent started");
     let result = agent.main_loop();
     let state = agent.estimator.state();
     let report = AgentReport {
+        pid: std::process::id(),
+        phases: agent.clock.times(),
         final_undetected_cells: state.undetected.cells().count(),
         final_undetected_digest: state.undetected.cells().digest(),
         final_step: state.step,
@@ -366,6 +408,10 @@ struct Agent<'a> {
     end_of_run: bool,
     interrupted: bool,
     last_frame: Instant,
+    /// Where the time goes ([`phase`]).
+    clock: PhaseClock,
+    /// When the run's nodes were last listed.
+    last_scan: Instant,
 }
 
 /// Longest single wait, so the shutdown flag and dead processes are noticed promptly.
@@ -395,7 +441,9 @@ impl Agent<'_> {
                 self.last_frame = Instant::now();
                 self.on_frame(sample.payload())?;
             }
+            let before = self.clock.enter(phase::FUSE);
             self.drain_estimates();
+            self.clock.enter(before);
             self.drain_tokens();
             if self.end_of_run {
                 return Ok(EndReason::EndOfRun);
@@ -412,17 +460,21 @@ impl Agent<'_> {
                     });
                 }
             }
-            self.wait(Instant::now() + WAIT_SLICE);
+            self.wait(Instant::now() + WAIT_SLICE, phase::WAIT_FRAME);
         }
     }
 
-    /// Waits for a wake-up until `deadline` at most; notes end-of-run and interrupts.
-    fn wait(&mut self, deadline: Instant) {
+    /// Waits for a wake-up until `deadline` at most, counting the time to `phase`; notes
+    /// end-of-run and interrupts.
+    fn wait(&mut self, deadline: Instant, phase: &'static str) {
         let timeout = deadline.saturating_duration_since(Instant::now());
         if timeout.is_zero() {
             return;
         }
-        match wait_for_wake(self.waitset, &self.links.wake, timeout) {
+        let before = self.clock.enter(phase);
+        let woken = wait_for_wake(self.waitset, &self.links.wake, timeout);
+        self.clock.enter(before);
+        match woken {
             Ok(wake) => {
                 self.end_of_run |= wake.end_of_run;
                 self.interrupted |= wake.interrupted;
@@ -434,13 +486,25 @@ impl Agent<'_> {
         }
     }
 
+    /// Lists the run's nodes if the last listing is a wait slice old: while waiting, a peer
+    /// that died is noticed within a slice.
+    fn refresh_live_if_stale(&mut self) {
+        if self.last_scan.elapsed() >= WAIT_SLICE {
+            self.refresh_live();
+        }
+    }
+
     fn stopping(&self) -> bool {
         self.interrupted || self.shutdown.load(Ordering::Relaxed)
     }
 
     /// Re-reads which peers and whether the world are alive (and cleans dead nodes).
     fn refresh_live(&mut self) {
-        match scan_nodes(&self.config.run_id, true) {
+        let before = self.clock.enter(phase::SCAN);
+        let scanned = scan_nodes(&self.config.run_id, true);
+        self.clock.enter(before);
+        self.last_scan = Instant::now();
+        match scanned {
             Ok(scan) => {
                 self.world_live = scan.is_alive(RunNode::WORLD);
                 self.live = (0..self.config.scenario.uavs.count)
@@ -471,7 +535,11 @@ impl Agent<'_> {
             return Ok(());
         }
         let mut yaw_ref = None;
+        let mut acked = false;
+        let guidance_step = k.is_multiple_of(self.guidance.steps_per_period as u64);
+        let before = self.clock.enter(phase::ESTIMATE);
         let folded = self.fold(frame);
+        self.clock.enter(before);
         match &folded {
             Ok(_) => {
                 self.report.frames += 1;
@@ -480,9 +548,17 @@ impl Agent<'_> {
                     0 => u32::MAX,
                     mask => mask,
                 };
-                self.publish_estimate(k)?;
+                let before = self.clock.enter(phase::PUBLISH);
+                let published = self.publish_estimate(k);
+                self.clock.enter(before);
+                published?;
+                if !guidance_step {
+                    // Nothing left to tell the world: it may render the next frame now.
+                    self.links.send_command(self.command(k, None))?;
+                    acked = true;
+                }
                 self.gather(k);
-                if k.is_multiple_of(self.guidance.steps_per_period as u64) {
+                if guidance_step {
                     yaw_ref = self.decide(k)?;
                 }
             }
@@ -491,7 +567,9 @@ impl Agent<'_> {
                 tracing::warn!(step = k, error = %e, "frame refused");
             }
         }
-        self.links.send_command(self.command(k, yaw_ref))?;
+        if !acked {
+            self.links.send_command(self.command(k, yaw_ref))?;
+        }
         if folded.is_ok() {
             self.save_checkpoint();
         }
@@ -538,7 +616,9 @@ impl Agent<'_> {
             return;
         };
         let started = Instant::now();
+        let before = self.clock.enter(phase::CHECKPOINT);
         let saved = file.save(self.estimator.state());
+        self.clock.enter(before);
         self.report.checkpoint_ms += started.elapsed().as_secs_f64() * 1e3;
         match saved {
             Ok(()) => self.report.checkpoints += 1,
@@ -581,11 +661,20 @@ impl Agent<'_> {
 
     /// Fuses the awaited peers' estimates of step `k`, waiting for them (bounded).
     fn gather(&mut self, k: u64) {
-        self.refresh_live();
+        // The world lists the nodes before every step: a peer it serves is alive unless it
+        // died since, which the waits below notice. Only a peer that (re)joined needs a look.
+        let newcomer = (0..self.config.scenario.uavs.count).any(|j| {
+            j != self.config.uav && self.served & uav_bit(j) != 0 && !self.live.contains(&j)
+        });
+        if newcomer {
+            self.refresh_live();
+        }
         let deadline = Instant::now() + self.config.timeouts.peer_wait;
         loop {
+            let before = self.clock.enter(phase::FUSE);
             self.drain_estimates();
             self.fuse_pending(k);
+            self.clock.enter(before);
             let missing = self.awaited_peers().iter().any(|j| {
                 self.peers
                     .get(j)
@@ -600,9 +689,9 @@ impl Agent<'_> {
                 tracing::debug!(step = k, "some peers' estimates did not arrive in time");
                 return;
             }
-            self.wait(deadline.min(Instant::now() + WAIT_SLICE));
+            self.wait(deadline.min(Instant::now() + WAIT_SLICE), phase::WAIT_PEERS);
             // A peer that died meanwhile is no longer awaited.
-            self.refresh_live();
+            self.refresh_live_if_stale();
         }
     }
 
@@ -742,7 +831,10 @@ impl Agent<'_> {
                     if waited_out {
                         self.report.token_timeouts += 1;
                     }
-                    return self.plan_and_pass(round, k, &live, &others).map(Some);
+                    let before = self.clock.enter(phase::PLAN);
+                    let planned = self.plan_and_pass(round, k, &live, &others);
+                    self.clock.enter(before);
+                    return planned.map(Some);
                 }
                 Turn::Wait { holder } => {
                     if self.stopping() || self.end_of_run {
@@ -766,11 +858,11 @@ impl Agent<'_> {
                         self.ring.holder_silent(round, holder);
                         continue;
                     }
-                    self.wait(deadline.min(Instant::now() + WAIT_SLICE));
-                    // The holder may have died meanwhile: a dead holder is skipped at once.
-                    // Listing the run's nodes is a directory read, cheap beside a wait slice.
+                    self.wait(deadline.min(Instant::now() + WAIT_SLICE), phase::WAIT_TOKEN);
+                    // The holder may have died meanwhile: a dead holder is skipped within a
+                    // wait slice (a listing costs milliseconds: not at every token hop).
                     if self.live.contains(&holder) {
-                        self.refresh_live();
+                        self.refresh_live_if_stale();
                     }
                 }
             }

@@ -1,5 +1,8 @@
 //! `world-server`: publishes the world of one run over iceoryx2 (usually started by `fleet`).
 //!
+//! At exit it prints its report (steps, agents, the phases of its time) as one line of JSON
+//! on stdout.
+//!
 //! Exit codes: 0 the run ended (or was stopped by SIGTERM/SIGINT), 1 the run failed, 2 bad
 //! arguments or scenario.
 
@@ -107,6 +110,11 @@ fn main() -> ExitCode {
                     deaths = a.deaths,
                     "agent"
                 );
+            }
+            // The report on stdout, as the agents print theirs: `fleet` reads the phases.
+            match serde_json::to_string(&report) {
+                Ok(json) => println!("{json}"),
+                Err(e) => eprintln!("world-server: cannot print the report: {e}"),
             }
             ExitCode::SUCCESS
         }

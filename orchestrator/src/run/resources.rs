@@ -1,0 +1,327 @@
+//! Where a run's time and memory went, per process (`summary.json` `resources`).
+//!
+//! - **CPU time and peak resident memory** of every child (the world-server, every agent
+//!   process, restarted ones included) are the kernel's account of the exited process, read
+//!   just before it is reaped ([`super::children`]): exact, user plus system time of every
+//!   thread, and a SIGKILLed agent's too (what it used up to the kill). A child that could
+//!   not be reaped has none. The orchestrator's own are `getrusage(RUSAGE_SELF)`: its CPU
+//!   from the start of the run to its end (a sweep runs several runs in one process), its
+//!   peak memory since the process started.
+//! - **Phases** are what each process measured itself ([`protocol::resources::PhaseClock`])
+//!   and printed in its report at exit (one line of JSON on stdout, which goes to its log):
+//!   the world-server's process CPU per phase, each agent's thread CPU per phase, the
+//!   observer thread's. A process that was killed prints no report, so it has no phases.
+//!   The orchestrator's `other` phase is its CPU less the observer thread's phases.
+//!
+//! Every value here depends on the machine and its load: the whole section is left out when
+//! two runs are compared for determinism.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use protocol::resources::{PhaseTimes, ProcessUsage};
+use serde::Serialize;
+
+use super::children::ExitedProcess;
+
+/// One process of the run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ProcessResources {
+    /// `orchestrator`, `world` or `agent`.
+    pub role: &'static str,
+    /// An agent's UAV.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uav: Option<u32>,
+    /// An agent's process number among its UAV's (1, then 2 after a restart, ...).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub incarnation: Option<u32>,
+    /// How it ended: `exit N`, `signal N` (an agent killed by a fault: `signal 9`), or
+    /// `running` for the orchestrator.
+    pub end: String,
+    /// User plus system CPU time, seconds (`null` when it could not be read).
+    pub cpu_s: Option<f64>,
+    /// User CPU time, seconds.
+    pub user_s: Option<f64>,
+    /// System CPU time, seconds.
+    pub system_s: Option<f64>,
+    /// Peak resident memory, MiB.
+    pub peak_rss_mb: Option<f64>,
+    /// CPU seconds per phase, as the process measured it (empty if it reported none).
+    pub phases: BTreeMap<String, f64>,
+    /// Wall seconds per phase (the waits' length is here).
+    pub phases_wall_s: BTreeMap<String, f64>,
+}
+
+/// Every process of the run and the totals.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Resources {
+    /// The orchestrator, the world-server, then the agents by UAV and incarnation.
+    pub processes: Vec<ProcessResources>,
+    /// Sums over the processes.
+    pub totals: ResourceTotals,
+}
+
+/// Sums over a run's processes.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ResourceTotals {
+    /// CPU seconds of every process whose usage was read.
+    pub cpu_s: f64,
+    /// CPU seconds of the world-server and the agents.
+    pub world_and_agents_cpu_s: f64,
+    /// `world_and_agents_cpu_s` in milliseconds per UAV and step (`null` without steps).
+    pub cpu_ms_per_uav_step: Option<f64>,
+    /// Wall seconds per simulated second (`null` without steps).
+    pub wall_s_per_sim_s: Option<f64>,
+    /// The agents' CPU seconds per phase, summed over agents.
+    pub agent_phases: BTreeMap<String, f64>,
+    /// The agents' wall seconds per phase, summed over agents.
+    pub agent_phases_wall_s: BTreeMap<String, f64>,
+}
+
+/// What the orchestrator knows of its own process over a run.
+#[derive(Clone, Debug, Default)]
+pub struct OwnUsage {
+    /// CPU over the run (the process's at the end less at the start).
+    pub usage: Option<ProcessUsage>,
+    /// The observer thread's phases.
+    pub observer: PhaseTimes,
+}
+
+impl Resources {
+    /// The resources of a run: the orchestrator's `own`, the children that `exited` (their
+    /// phases read from the reports in the logs in `logs`), over `uavs` UAVs, `steps` steps
+    /// of `sim_s` simulated seconds in `wall_s`.
+    pub fn gather(
+        own: &OwnUsage,
+        exited: &[ExitedProcess],
+        logs: &Path,
+        run: RunSize,
+    ) -> Resources {
+        let reports = reported_phases(logs);
+        let mut processes = vec![orchestrator(own)];
+        let mut children: Vec<ProcessResources> = exited
+            .iter()
+            .map(|p| {
+                let phases = p.pid.and_then(|pid| reports.get(&pid));
+                child(p, phases)
+            })
+            .collect();
+        // The world first, then the agents in order.
+        children.sort_by_key(|p| (p.uav.is_some(), p.uav, p.incarnation));
+        processes.extend(children);
+        let totals = ResourceTotals::of(&processes, run);
+        Resources { processes, totals }
+    }
+}
+
+/// The size of a run, for the totals.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunSize {
+    /// UAVs in the fleet.
+    pub uavs: u32,
+    /// Steps measured.
+    pub steps: u64,
+    /// Simulated seconds.
+    pub sim_s: f64,
+    /// Wall seconds.
+    pub wall_s: f64,
+}
+
+impl ResourceTotals {
+    fn of(processes: &[ProcessResources], run: RunSize) -> ResourceTotals {
+        let cpu = |p: &&ProcessResources| p.cpu_s.unwrap_or(0.0);
+        let cpu_s = processes.iter().map(|p| cpu(&p)).sum();
+        let world_and_agents_cpu_s: f64 = processes
+            .iter()
+            .filter(|p| p.role != "orchestrator")
+            .map(|p| cpu(&p))
+            .sum();
+        let uav_steps = f64::from(run.uavs) * run.steps as f64;
+        let mut agent_phases = BTreeMap::new();
+        let mut agent_phases_wall_s = BTreeMap::new();
+        for p in processes.iter().filter(|p| p.role == "agent") {
+            for (name, s) in &p.phases {
+                *agent_phases.entry(name.clone()).or_insert(0.0) += s;
+            }
+            for (name, s) in &p.phases_wall_s {
+                *agent_phases_wall_s.entry(name.clone()).or_insert(0.0) += s;
+            }
+        }
+        ResourceTotals {
+            cpu_s,
+            world_and_agents_cpu_s,
+            cpu_ms_per_uav_step: (uav_steps > 0.0)
+                .then(|| world_and_agents_cpu_s * 1e3 / uav_steps),
+            wall_s_per_sim_s: (run.sim_s > 0.0).then(|| run.wall_s / run.sim_s),
+            agent_phases,
+            agent_phases_wall_s,
+        }
+    }
+}
+
+fn orchestrator(own: &OwnUsage) -> ProcessResources {
+    let mut phases: BTreeMap<String, f64> = own
+        .observer
+        .iter()
+        .map(|(name, t)| (name.clone(), t.cpu_s))
+        .collect();
+    let phases_wall_s = own
+        .observer
+        .iter()
+        .map(|(name, t)| (name.clone(), t.wall_s))
+        .collect();
+    if let Some(usage) = own.usage {
+        let observed: f64 = phases.values().sum();
+        // The rest of the process: the event loop, faults, progress, the runtime.
+        let rest = (usage.cpu_s() - observed).max(0.0);
+        *phases.entry("other".to_owned()).or_insert(0.0) += rest;
+    }
+    ProcessResources {
+        role: "orchestrator",
+        end: "running".to_owned(),
+        cpu_s: own.usage.map(|u| u.cpu_s()),
+        user_s: own.usage.map(|u| u.user_s),
+        system_s: own.usage.map(|u| u.system_s),
+        peak_rss_mb: own.usage.map(|u| u.peak_rss_mb()),
+        phases,
+        phases_wall_s,
+        ..ProcessResources::default()
+    }
+}
+
+fn child(p: &ExitedProcess, phases: Option<&PhaseTimes>) -> ProcessResources {
+    use std::os::unix::process::ExitStatusExt as _;
+    let end = match p.status {
+        Some(s) => match (s.code(), s.signal()) {
+            (Some(code), _) => format!("exit {code}"),
+            (None, Some(signal)) => format!("signal {signal}"),
+            (None, None) => s.to_string(),
+        },
+        None => "not reaped".to_owned(),
+    };
+    let phases = phases.cloned().unwrap_or_default();
+    ProcessResources {
+        role: if p.uav.is_some() { "agent" } else { "world" },
+        uav: p.uav,
+        incarnation: p.incarnation,
+        end,
+        cpu_s: p.usage.map(|u| u.cpu_s()),
+        user_s: p.usage.map(|u| u.user_s),
+        system_s: p.usage.map(|u| u.system_s),
+        peak_rss_mb: p.usage.map(|u| u.peak_rss_mb()),
+        phases: phases.iter().map(|(n, t)| (n.clone(), t.cpu_s)).collect(),
+        phases_wall_s: phases.iter().map(|(n, t)| (n.clone(), t.wall_s)).collect(),
+    }
+}
+
+/// The phases every process printed in its report, by pid: the JSON lines of the logs in
+/// `logs` that carry a `pid` and `phases` (a line that is not such a report is skipped).
+fn reported_phases(logs: &Path) -> BTreeMap<u32, PhaseTimes> {
+    let mut out = BTreeMap::new();
+    let Ok(dir) = std::fs::read_dir(logs) else {
+        return out;
+    };
+    for entry in dir.flatten() {
+        let path = entry.path();
+        if path.extension().and_then(|e| e.to_str()) != Some("log") {
+            continue;
+        }
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            tracing::debug!(log = %path.display(), "cannot read a log");
+            continue;
+        };
+        out.extend(phases_in(&text));
+    }
+    out
+}
+
+/// The reports (`{"pid": .., "phases": {..}, ..}` lines) in a log's text, by pid.
+fn phases_in(text: &str) -> impl Iterator<Item = (u32, PhaseTimes)> + '_ {
+    #[derive(serde::Deserialize)]
+    struct Report {
+        pid: u32,
+        phases: PhaseTimes,
+    }
+    text.lines()
+        .filter(|line| line.starts_with('{'))
+        .filter_map(|line| serde_json::from_str::<Report>(line).ok())
+        .map(|r| (r.pid, r.phases))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::resources::PhaseTime;
+
+    #[test]
+    fn reports_are_found_among_log_lines_by_pid() {
+        let text = "2026-01-01T00:00:00Z  INFO agent started\n\
+                    {\"frames\":3,\"pid\":42,\"phases\":{\"estimate\":{\"cpu_s\":1.5,\"wall_s\":2.0}}}\n\
+                    {not json\n\
+                    {\"pid\":7}\n\
+                    {\"pid\":43,\"phases\":{}}\n";
+        let found: BTreeMap<u32, PhaseTimes> = phases_in(text).collect();
+        assert_eq!(found.len(), 2);
+        assert_eq!(
+            found[&42]["estimate"],
+            PhaseTime {
+                cpu_s: 1.5,
+                wall_s: 2.0
+            }
+        );
+        assert!(found[&43].is_empty());
+    }
+
+    #[test]
+    fn totals_add_the_processes_and_the_orchestrator_keeps_the_rest_as_other() {
+        let usage = |cpu: f64| ProcessUsage {
+            user_s: cpu,
+            system_s: 0.0,
+            peak_rss_kb: 2048,
+        };
+        let mut observer = PhaseTimes::new();
+        observer.insert(
+            "observe".into(),
+            PhaseTime {
+                cpu_s: 0.5,
+                wall_s: 0.6,
+            },
+        );
+        let own = OwnUsage {
+            usage: Some(usage(2.0)),
+            observer,
+        };
+        let exited = [
+            ExitedProcess {
+                uav: Some(0),
+                incarnation: Some(1),
+                pid: Some(10),
+                status: None,
+                usage: Some(usage(3.0)),
+            },
+            ExitedProcess {
+                uav: None,
+                incarnation: None,
+                pid: Some(11),
+                status: None,
+                usage: Some(usage(5.0)),
+            },
+        ];
+        let run = RunSize {
+            uavs: 1,
+            steps: 100,
+            sim_s: 50.0,
+            wall_s: 25.0,
+        };
+        let r = Resources::gather(&own, &exited, Path::new("/nonexistent"), run);
+        let roles: Vec<&str> = r.processes.iter().map(|p| p.role).collect();
+        assert_eq!(roles, ["orchestrator", "world", "agent"]);
+        let orchestrator = &r.processes[0];
+        assert_eq!(orchestrator.phases["other"], 1.5);
+        assert_eq!(orchestrator.peak_rss_mb, Some(2.0));
+        assert_eq!(r.totals.cpu_s, 10.0);
+        assert_eq!(r.totals.world_and_agents_cpu_s, 8.0);
+        assert_eq!(r.totals.cpu_ms_per_uav_step, Some(80.0));
+        assert_eq!(r.totals.wall_s_per_sim_s, Some(0.5));
+    }
+}
