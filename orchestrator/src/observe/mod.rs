@@ -452,7 +452,8 @@ impl Observer<'_> {
                 self.drop_estimate(sender, reason);
                 continue;
             }
-            let decoded = ObservedEstimate::read(&mut self.inbox, sample.payload(), &self.estimator);
+            let decoded =
+                ObservedEstimate::read(&mut self.inbox, sample.payload(), &self.estimator);
             drop(sample);
             match decoded {
                 Ok((e, _)) if e.uav() != sender => {

@@ -241,9 +241,6 @@ mod tests {
             CellSet::apply_delta(&a, &other, &d),
             Err(DeltaError::Decode(SetDecodeError::GridMismatch { .. }))
         ));
-        assert_eq!(
-            SetCode::Delta(d).decode(&g, None),
-            Err(DeltaError::NoBase)
-        );
+        assert_eq!(SetCode::Delta(d).decode(&g, None), Err(DeltaError::NoBase));
     }
 }

@@ -595,11 +595,21 @@ mod tests {
         // The second message is lost: the third one's base is not held.
         let third = outbox.compose(&mut moving_state(2));
         let e = inbox.read(&third, &cfg).unwrap_err();
-        assert!(matches!(e, EstimateReadError::MissingBase { uav: 3, base_seq: 1 }));
+        assert!(matches!(
+            e,
+            EstimateReadError::MissingBase {
+                uav: 3,
+                base_seq: 1
+            }
+        ));
         assert_eq!(e.drop_reason(), DropReason::NoBase);
         assert_eq!(inbox.wanted(), uav_bit(3));
         // Deltas keep failing until the sender, asked, sends whole sets.
-        assert!(inbox.read(&outbox.compose(&mut moving_state(3)), &cfg).is_err());
+        assert!(
+            inbox
+                .read(&outbox.compose(&mut moving_state(3)), &cfg)
+                .is_err()
+        );
         outbox.request_full();
         let whole = outbox.compose(&mut moving_state(4));
         assert_eq!(whole.base_seq, None);
@@ -623,8 +633,12 @@ mod tests {
         let cfg = config();
         let mut old = EstimateOutbox::new(1, 5, 100).with_set_deltas();
         let mut inbox = EstimateInbox::new();
-        inbox.read(&old.compose(&mut moving_state(0)), &cfg).unwrap();
-        inbox.read(&old.compose(&mut moving_state(1)), &cfg).unwrap();
+        inbox
+            .read(&old.compose(&mut moving_state(0)), &cfg)
+            .unwrap();
+        inbox
+            .read(&old.compose(&mut moving_state(1)), &cfg)
+            .unwrap();
         // Restarted: a new incarnation whose seq starts over. Its deltas are not against
         // what is held of the old process.
         let mut new = EstimateOutbox::new(1, 6, 100).with_set_deltas();
