@@ -32,6 +32,7 @@
 //! assert_eq!(back, grown);
 //! ```
 
+pub mod delta;
 mod dilate;
 mod disc;
 pub mod distance;

@@ -9,10 +9,10 @@ use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::CameraPose;
-use crate::raster::EncodedSet;
+use crate::raster::delta::SetCode;
 
 /// Version of every message layout in this module and in [`crate::frame`].
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 /// Targets a truth message can hold.
 pub const TRUTH_MAX_TARGETS: usize = 64;
 /// UAVs a truth message can hold, and the largest fleet.
@@ -261,11 +261,15 @@ pub enum DropReason {
     /// The sender's process was replaced by a newer one (a restart) since.
     #[error("a sender whose process was replaced since")]
     Superseded,
+    /// Sets sent as changes against a message the receiver does not hold (it missed one, or
+    /// joined late): the receiver asks for whole sets ([`EstimateMsg::want_whole`]).
+    #[error("changes against a message the receiver does not hold")]
+    NoBase,
 }
 
 impl DropReason {
     /// A short name for counters: `version`, `other-run`, `kind`, `sender`, `length`,
-    /// `malformed`, `superseded`.
+    /// `malformed`, `superseded`, `no-base`.
     pub fn label(self) -> &'static str {
         match self {
             DropReason::Version => "version",
@@ -275,6 +279,7 @@ impl DropReason {
             DropReason::Length => "length",
             DropReason::Superseded => "superseded",
             DropReason::Malformed => "malformed",
+            DropReason::NoBase => "no-base",
         }
     }
 }
@@ -292,8 +297,8 @@ pub fn unix_now_ns() -> u64 {
 pub struct TargetSetMsg {
     /// Target id.
     pub id: u32,
-    /// Outer set `X_j`.
-    pub set: EncodedSet,
+    /// Outer set `X_j` (a delta against the base message's `X_j` of this id).
+    pub set: SetCode,
 }
 
 /// One occupancy elevation map cell that changed.
@@ -327,6 +332,11 @@ pub struct AgentStats {
 }
 
 /// Agent -> peers and observers: the agent's sets after correction at a step.
+///
+/// Each set is whole or a delta ([`SetCode`]) against the set of the same role in the
+/// sender's message `base_seq` of the same incarnation; a receiver that does not hold that
+/// message rebuilds nothing from this one and asks for whole sets in its own estimates
+/// (`want_whole`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EstimateMsg {
     /// Sender's UAV index.
@@ -339,20 +349,26 @@ pub struct EstimateMsg {
     pub seq: u64,
     /// Changes each time the agent (re)starts, so peers can tell a restart.
     pub incarnation: u64,
+    /// The `seq` of the message (same sender and incarnation) the deltas are against; `None`
+    /// when every set is whole.
+    pub base_seq: Option<u64>,
+    /// Peers whose sets the sender could not rebuild, bit `i` for UAV `i`
+    /// ([`uav_bit`]): each of them sends whole sets in its next estimate.
+    pub want_whole: u32,
     /// The camera pose of the frame.
     pub pose: CameraPose,
     /// Outer set `X̄` of targets not yet identified.
-    pub undetected: EncodedSet,
+    pub undetected: SetCode,
     /// Outer sets `X_j` of identified targets.
     pub targets: Vec<TargetSetMsg>,
     /// Inner set `S^o` of ground near obstacles, accumulated.
-    pub obstacle_free: EncodedSet,
+    pub obstacle_free: SetCode,
     /// Ground proven free at some frame so far (union of `P^g`), for the explored metric.
-    pub explored: EncodedSet,
+    pub explored: SetCode,
     /// Ground hidden in this frame, `H^CVS`.
-    pub hidden: EncodedSet,
+    pub hidden: SetCode,
     /// `H̄`: ground hidden at some earlier frame and not proven free since (for the OA metric).
-    pub unseen: EncodedSet,
+    pub unseen: SetCode,
     /// The sender's counters, so observers see them even if the agent is killed.
     pub stats: AgentStats,
     /// OEM cells changed since the last message, or the whole known map when `oem_full`.
@@ -485,6 +501,7 @@ mod tests {
             DropReason::Length,
             DropReason::Malformed,
             DropReason::Superseded,
+            DropReason::NoBase,
         ];
         let labels: std::collections::BTreeSet<_> = all.iter().map(|r| r.label()).collect();
         assert_eq!(labels.len(), all.len());

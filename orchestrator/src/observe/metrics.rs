@@ -29,10 +29,11 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
-use protocol::raster::{CellSet, SetDecodeError};
+use protocol::raster::CellSet;
 use protocol::wire::{AgentStats, TargetTruth};
 use uav_agent::agent::in_comms_range;
-use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate, message};
+use uav_agent::estimator::message::{self, EstimateInbox};
+use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate};
 use uav_agent::occupancy::OccupancyMap;
 
 /// What the observer keeps of one agent's estimate of one step.
@@ -50,23 +51,36 @@ pub struct ObservedEstimate {
 /// Why an estimate could not be read by the observer.
 #[derive(Debug, thiserror::Error)]
 pub enum EstimateObserveError {
-    /// The message does not decode or validate as an estimate.
+    /// The message does not decode, validate or rebuild as an estimate.
     #[error(transparent)]
     Read(#[from] EstimateReadError),
-    /// Its `H̄` set is malformed or on another grid.
-    #[error("bad unseen set: {0}")]
-    Unseen(#[from] SetDecodeError),
 }
 
 impl ObservedEstimate {
-    /// Decodes and validates an estimate's bytes; also returns the map cells it carries.
+    /// Decodes and validates an estimate's bytes that carry whole sets (a message of deltas
+    /// needs [`ObservedEstimate::read`]); also returns the map cells it carries.
     pub fn decode(
         bytes: &[u8],
         config: &EstimatorConfig,
     ) -> Result<(ObservedEstimate, OccupancyMap), EstimateObserveError> {
+        Self::read(&mut EstimateInbox::new(), bytes, config)
+    }
+
+    /// Decodes, validates and rebuilds an estimate's bytes as an agent does: its sets may be
+    /// deltas against the sender's previous message, which `inbox` holds if it read it (the
+    /// observer is a receiver like the agents: one that missed a message waits for the
+    /// sender's next whole one). Also returns the map cells it carries.
+    pub fn read(
+        inbox: &mut EstimateInbox,
+        bytes: &[u8],
+        config: &EstimatorConfig,
+    ) -> Result<(ObservedEstimate, OccupancyMap), EstimateObserveError> {
         let msg = message::from_bytes(bytes).map_err(EstimateReadError::from)?;
-        let mut estimate = PeerEstimate::from_msg(&msg, config)?;
-        let unseen = CellSet::decode(&config.grid, &msg.unseen)?;
+        let mut estimate = inbox.read(&msg, config)?;
+        let unseen = inbox
+            .unseen(msg.uav)
+            .cloned()
+            .unwrap_or_else(|| CellSet::empty(&config.grid));
         let oem = std::mem::replace(&mut estimate.oem, OccupancyMap::new(config.oem_grid));
         let observed = ObservedEstimate {
             estimate,

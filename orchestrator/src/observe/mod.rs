@@ -56,9 +56,13 @@ use protocol::wire::{
 };
 use tokio::sync::mpsc::UnboundedSender;
 use uav_agent::estimator::EstimatorConfig;
+use uav_agent::estimator::message::EstimateInbox;
 use uav_agent::occupancy::OccupancyMap;
 
-use metrics::{AgentSpread, FusedSets, ObservedEstimate, SetMetrics, identified_ids, violations};
+use metrics::{
+    AgentSpread, EstimateObserveError, FusedSets, ObservedEstimate, SetMetrics, identified_ids,
+    violations,
+};
 use tally::{AgentTally, Comms, ServiceKind};
 
 /// What the observer needs to know about the run.
@@ -309,6 +313,7 @@ fn observe(
         estimator,
         truths: VecDeque::new(),
         store: BTreeMap::new(),
+        inbox: EstimateInbox::new(),
         next_fault: 0,
         end_of_run: false,
         first_truth: None,
@@ -331,6 +336,8 @@ struct Observer<'a> {
     truths: VecDeque<TruthState>,
     /// Decoded estimates per agent, by step, not yet measured.
     store: BTreeMap<u32, BTreeMap<u64, ObservedEstimate>>,
+    /// The agents' last sets, the bases of their deltas.
+    inbox: EstimateInbox,
     next_fault: usize,
     end_of_run: bool,
     first_truth: Option<Instant>,
@@ -472,7 +479,8 @@ impl Observer<'_> {
                 self.drop_estimate(sender, reason);
                 continue;
             }
-            let decoded = ObservedEstimate::decode(sample.payload(), &self.estimator);
+            let decoded =
+                ObservedEstimate::read(&mut self.inbox, sample.payload(), &self.estimator);
             drop(sample);
             match decoded {
                 Ok((e, _)) if e.uav() != sender => {
@@ -492,9 +500,9 @@ impl Observer<'_> {
                         steps.pop_first();
                     }
                 }
-                Err(err) => {
-                    tracing::warn!(uav = sender, error = %err, "undecodable estimate dropped");
-                    self.drop_estimate(sender, DropReason::Malformed);
+                Err(EstimateObserveError::Read(err)) => {
+                    tracing::warn!(uav = sender, error = %err, "unreadable estimate dropped");
+                    self.drop_estimate(sender, err.drop_reason());
                 }
             }
         }

@@ -29,7 +29,9 @@
 //! With a checkpoint file ([`checkpoint`]), the agent saves its estimator state after every
 //! step it acked, and a restarted agent (same id) resumes from it, grown by the motion since;
 //! without one it starts from the full region. Either way it then fuses its peers' estimates;
-//! peers that see a new incarnation send it their whole map.
+//! peers that see a new incarnation send it their whole map and whole sets. Sets travel as
+//! deltas against the previous message ([`message`]); a peer's estimate that cannot be
+//! rebuilt (a missed message) is dropped, not awaited, and whole sets are asked of its sender.
 //!
 //! With a finite `comms.range_m`, an agent fuses only the estimates of peers whose camera was
 //! within range at that step (links are simulated by the receiver).
@@ -53,7 +55,8 @@ use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
 use protocol::wire::{
-    AgentStats, DropReason, GuidanceToken, HELLO_STEP, UavCommand, WireKind, uav_bit, unix_now_ns,
+    AgentStats, DropReason, EstimateMsg, GuidanceToken, HELLO_STEP, UavCommand, WireKind, uav_bit,
+    unix_now_ns,
 };
 use serde::Serialize;
 
@@ -313,7 +316,9 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
             config.uav,
             incarnation,
             estimator_config.oem_full_every,
-        ),
+        )
+        .with_set_deltas(),
+        inbox: message::EstimateInbox::new(),
         estimator,
         checkpoint,
         served: u32::MAX,
@@ -395,6 +400,8 @@ struct Agent<'a> {
     /// The agents the world serves at the current step (the frame's mask).
     served: u32,
     outbox: message::EstimateOutbox,
+    /// The peers' sets, the bases of their deltas.
+    inbox: message::EstimateInbox,
     /// The step from which the next estimate carries the whole map (a peer (re)joined).
     full_map_from: Option<u64>,
     guidance: GuidanceParams,
@@ -652,6 +659,7 @@ impl Agent<'_> {
             decisions: self.report.decisions,
             token_timeouts: self.report.token_timeouts,
         };
+        msg.want_whole = self.inbox.wanted();
         let bytes = message::to_bytes(&msg)?;
         self.links
             .send_wire(WireKind::Estimate, self.run_tag, self.config.uav, k, &bytes)?;
@@ -721,17 +729,39 @@ impl Agent<'_> {
                     self.drop_message(reason, "estimate", &format!("from UAV {sender}"));
                     continue;
                 }
-                let parsed = PeerEstimate::from_bytes(sample.payload(), self.estimator.config());
+                let parsed = message::from_bytes(sample.payload());
                 drop(sample);
                 match parsed {
-                    Ok(p) if p.uav == sender => self.queue_peer(p),
-                    Ok(p) => self.drop_message(
+                    Ok(m) if m.uav == sender => self.read_peer(&m),
+                    Ok(m) => self.drop_message(
                         DropReason::Sender,
                         "estimate",
-                        &format!("claims UAV {} on UAV {sender}'s service", p.uav),
+                        &format!("claims UAV {} on UAV {sender}'s service", m.uav),
                     ),
                     Err(e) => self.drop_message(DropReason::Malformed, "estimate", &e.to_string()),
                 }
+            }
+        }
+    }
+
+    /// Rebuilds a peer's estimate and queues it. One that cannot be rebuilt for want of its
+    /// base is not awaited any longer (this agent keeps its own sets for that step) and makes
+    /// this agent ask for whole sets; a peer that asks them of this agent gets them next.
+    fn read_peer(&mut self, m: &EstimateMsg) {
+        if m.want_whole & uav_bit(self.config.uav) != 0 {
+            self.outbox.request_full();
+        }
+        match self.inbox.read(m, self.estimator.config()) {
+            Ok(p) => self.queue_peer(p),
+            Err(e) => {
+                let reason = e.drop_reason();
+                if reason == DropReason::NoBase {
+                    let info = self.peers.entry(m.uav).or_default();
+                    if info.incarnation.is_none_or(|i| i == m.incarnation) {
+                        info.fused_step = Some(info.fused_step.map_or(m.step, |s| s.max(m.step)));
+                    }
+                }
+                self.drop_message(reason, "estimate", &e.to_string());
             }
         }
     }

@@ -1,12 +1,26 @@
 //! Estimates on the wire: [`EstimatorState`] -> [`EstimateMsg`] -> bytes, and back to a
 //! validated [`PeerEstimate`].
 //!
-//! Sets travel as [`CellSet::encode`] encodings. The map travels as the cells changed since the
-//! previous message, and as the whole known map every `oem_full_every` messages or when asked
-//! ([`EstimateOutbox::request_full`], e.g. after a peer restarted), so a peer that missed
-//! messages or restarted rebuilds it. Whatever a peer sends is validated: a set on another
-//! grid, a malformed set, a map cell out of range, a duplicated target are typed errors, never
-//! a panic.
+//! The map travels as the cells changed since the previous message, and as the whole known
+//! map every `oem_full_every` messages or when asked ([`EstimateOutbox::request_full`], e.g.
+//! after a peer restarted), so a peer that missed messages or restarted rebuilds it.
+//!
+//! Sets travel the same way when the outbox sends deltas ([`EstimateOutbox::with_set_deltas`],
+//! as agents do): in a whole message (the first one, every `oem_full_every`-th, and the next
+//! one after a request) every set is whole ([`SetCode::Whole`]); in the others each set is a
+//! delta against the same set of the previous message ([`SetCode::Delta`], the cells that
+//! changed) whenever that is smaller. An [`EstimateInbox`] keeps, per sender, the sets of the
+//! last message it rebuilt, and applies a delta message only to exactly its base (same
+//! incarnation, `base_seq`): a receiver that missed a message, joined late or restarted
+//! rebuilds nothing from the deltas it cannot place ([`EstimateReadError::MissingBase`],
+//! counted and dropped), asks for whole sets in its own estimates
+//! ([`EstimateInbox::wanted`] -> [`EstimateMsg::want_whole`]) and is back in step with the
+//! next whole message. Every rebuilt set is compared with the sender's digest, so a set
+//! rebuilt from a wrong base is refused, never fused: the fused sets are exactly those a
+//! receiver of whole sets fuses.
+//!
+//! Whatever a peer sends is validated: a set on another grid, a malformed set or delta, a map
+//! cell out of range, a duplicated target are typed errors, never a panic.
 
 use std::collections::BTreeMap;
 
@@ -14,11 +28,48 @@ use protocol::camera::CameraPose;
 use protocol::codec::{self, DecodeError, EncodeError};
 use protocol::grid::GroundGrid;
 use protocol::math::Point3;
-use protocol::raster::{CellSet, SetDecodeError};
-use protocol::wire::{EstimateMsg, TargetSetMsg};
+use protocol::raster::CellSet;
+use protocol::raster::delta::{DeltaError, SetCode};
+use protocol::wire::{DropReason, EstimateMsg, TargetSetMsg, uav_bit};
 
 use super::{EstimatorConfig, EstimatorState, PeerEstimate};
 use crate::occupancy::{OccupancyMap, OemUpdateError};
+
+/// The sets of one estimate: what a sender keeps as the base of its next deltas and a
+/// receiver rebuilds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EstimateSets {
+    /// `X̄`.
+    pub undetected: CellSet,
+    /// `X_j` per identified id.
+    pub targets: BTreeMap<u32, CellSet>,
+    /// `S^o`.
+    pub obstacle_free: CellSet,
+    /// The explored ground.
+    pub explored: CellSet,
+    /// `H^CVS`.
+    pub hidden: CellSet,
+    /// `H̄`.
+    pub unseen: CellSet,
+}
+
+impl EstimateSets {
+    /// The exchanged sets of a state.
+    pub fn of_state(state: &EstimatorState) -> Self {
+        Self {
+            undetected: state.undetected.cells().clone(),
+            targets: state
+                .targets
+                .iter()
+                .map(|(&id, set)| (id, set.cells().clone()))
+                .collect(),
+            obstacle_free: state.obstacle_free.clone(),
+            explored: state.explored.clone(),
+            hidden: state.hidden.clone(),
+            unseen: state.hidden_history.unseen().clone(),
+        }
+    }
+}
 
 /// Builds this agent's outgoing estimates and numbers them.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,11 +79,15 @@ pub struct EstimateOutbox {
     seq: u64,
     full_every: u64,
     full_requested: bool,
+    set_deltas: bool,
+    /// The sets of the last message, when sets go as deltas.
+    last: Option<EstimateSets>,
 }
 
 impl EstimateOutbox {
     /// The outbox of UAV `uav` in its `incarnation` (a value that changes at each start),
-    /// sending the whole map every `full_every` messages (and in the first one).
+    /// sending the whole map every `full_every` messages (and in the first one). Sets go whole
+    /// in every message unless [`EstimateOutbox::with_set_deltas`].
     pub fn new(uav: u32, incarnation: u64, full_every: u64) -> Self {
         Self {
             uav,
@@ -40,10 +95,20 @@ impl EstimateOutbox {
             seq: 0,
             full_every: full_every.max(1),
             full_requested: true,
+            set_deltas: false,
+            last: None,
         }
     }
 
-    /// Makes the next message carry the whole known map.
+    /// Sends sets as deltas against the previous message, except in whole messages (the
+    /// first, every `full_every`-th and the one after [`EstimateOutbox::request_full`]); its
+    /// receivers must read with an [`EstimateInbox`].
+    pub fn with_set_deltas(mut self) -> Self {
+        self.set_deltas = true;
+        self
+    }
+
+    /// Makes the next message carry the whole known map and whole sets.
     pub fn request_full(&mut self) {
         self.full_requested = true;
     }
@@ -62,33 +127,52 @@ impl EstimateOutbox {
         } else {
             state.oem.take_changes()
         };
+        let sets = EstimateSets::of_state(state);
+        let base = if full { None } else { self.last.as_ref() };
+        let code = |set: &CellSet, base: Option<&CellSet>| SetCode::choose(set, base);
+        let undetected = code(&sets.undetected, base.map(|b| &b.undetected));
+        let targets: Vec<TargetSetMsg> = sets
+            .targets
+            .iter()
+            .map(|(&id, set)| TargetSetMsg {
+                id,
+                set: code(set, base.and_then(|b| b.targets.get(&id))),
+            })
+            .collect();
+        let obstacle_free = code(&sets.obstacle_free, base.map(|b| &b.obstacle_free));
+        let explored = code(&sets.explored, base.map(|b| &b.explored));
+        let hidden = code(&sets.hidden, base.map(|b| &b.hidden));
+        let unseen = code(&sets.unseen, base.map(|b| &b.unseen));
+        let any_delta = [&undetected, &obstacle_free, &explored, &hidden, &unseen]
+            .into_iter()
+            .chain(targets.iter().map(|t| &t.set))
+            .any(SetCode::is_delta);
         let msg = EstimateMsg {
             uav: self.uav,
             step: state.step,
             time_s: state.time_s,
             seq: self.seq,
             incarnation: self.incarnation,
+            // The base is the previous message: `last` is only kept between consecutive ones.
+            base_seq: any_delta.then(|| self.seq.saturating_sub(1)),
+            want_whole: 0,
             pose: state.pose.unwrap_or(CameraPose {
                 position: Point3::origin(),
                 yaw: 0.0,
             }),
-            undetected: state.undetected.cells().encode(),
-            targets: state
-                .targets
-                .iter()
-                .map(|(&id, set)| TargetSetMsg {
-                    id,
-                    set: set.cells().encode(),
-                })
-                .collect(),
-            obstacle_free: state.obstacle_free.encode(),
-            explored: state.explored.encode(),
-            hidden: state.hidden.encode(),
-            unseen: state.hidden_history.unseen().encode(),
+            undetected,
+            targets,
+            obstacle_free,
+            explored,
+            hidden,
+            unseen,
             stats: protocol::wire::AgentStats::default(),
             oem,
             oem_full: full,
         };
+        if self.set_deltas {
+            self.last = Some(sets);
+        }
         self.seq += 1;
         msg
     }
@@ -107,6 +191,8 @@ pub enum SetRole {
     Explored,
     /// `H^CVS`.
     Hidden,
+    /// `H̄`.
+    Unseen,
 }
 
 /// Why a peer's estimate was refused.
@@ -115,13 +201,22 @@ pub enum EstimateReadError {
     /// The bytes are not an estimate message (truncated, corrupted, too large, trailing bytes).
     #[error("undecodable estimate: {0}")]
     Bytes(#[from] DecodeError),
-    /// A set is malformed or lives on another grid.
+    /// A set is malformed, lives on another grid, or its delta does not rebuild the sender's
+    /// set.
     #[error("bad {role:?} set: {source}")]
     Set {
         /// Which set.
         role: SetRole,
         /// What is wrong with it.
-        source: SetDecodeError,
+        source: DeltaError,
+    },
+    /// The sets are deltas against a message this receiver does not hold.
+    #[error("deltas against message {base_seq} of UAV {uav}, which is not held here")]
+    MissingBase {
+        /// The sender.
+        uav: u32,
+        /// The message the deltas are against.
+        base_seq: u64,
     },
     /// Two target sets share an id.
     #[error("target {0} appears twice")]
@@ -132,6 +227,22 @@ pub enum EstimateReadError {
     /// The time stamp is not a finite number.
     #[error("time stamp {0} is not finite")]
     BadTime(f64),
+}
+
+impl EstimateReadError {
+    /// The reason to count the message as dropped under: [`DropReason::NoBase`] when it could
+    /// not be rebuilt for want of the right base (a resync mends it), else
+    /// [`DropReason::Malformed`].
+    pub fn drop_reason(&self) -> DropReason {
+        match self {
+            EstimateReadError::MissingBase { .. }
+            | EstimateReadError::Set {
+                source: DeltaError::NoBase | DeltaError::WrongBase { .. },
+                ..
+            } => DropReason::NoBase,
+            _ => DropReason::Malformed,
+        }
+    }
 }
 
 /// Encodes a message to bytes.
@@ -147,47 +258,172 @@ pub fn from_bytes(bytes: &[u8]) -> Result<EstimateMsg, DecodeError> {
 fn decode_set(
     grid: &GroundGrid,
     role: SetRole,
-    e: &protocol::raster::EncodedSet,
+    code: &SetCode,
+    base: Option<&CellSet>,
 ) -> Result<CellSet, EstimateReadError> {
-    CellSet::decode(grid, e).map_err(|source| EstimateReadError::Set { role, source })
+    code.decode(grid, base)
+        .map_err(|source| EstimateReadError::Set { role, source })
+}
+
+/// Validates a message and rebuilds its sets, its deltas against `base` (the sets of message
+/// `msg.base_seq`, or `None` when the receiver holds no base).
+fn rebuild(
+    msg: &EstimateMsg,
+    config: &EstimatorConfig,
+    base: Option<&EstimateSets>,
+) -> Result<(PeerEstimate, EstimateSets), EstimateReadError> {
+    let grid = &config.grid;
+    if !msg.time_s.is_finite() {
+        return Err(EstimateReadError::BadTime(msg.time_s));
+    }
+    if let (Some(base_seq), None) = (msg.base_seq, base) {
+        return Err(EstimateReadError::MissingBase {
+            uav: msg.uav,
+            base_seq,
+        });
+    }
+    let mut targets = BTreeMap::new();
+    for t in &msg.targets {
+        let b = base.and_then(|b| b.targets.get(&t.id));
+        let set = decode_set(grid, SetRole::Target(t.id), &t.set, b)?;
+        if targets.insert(t.id, set).is_some() {
+            return Err(EstimateReadError::DuplicateTarget(t.id));
+        }
+    }
+    let sets = EstimateSets {
+        undetected: decode_set(
+            grid,
+            SetRole::Undetected,
+            &msg.undetected,
+            base.map(|b| &b.undetected),
+        )?,
+        targets,
+        obstacle_free: decode_set(
+            grid,
+            SetRole::ObstacleFree,
+            &msg.obstacle_free,
+            base.map(|b| &b.obstacle_free),
+        )?,
+        explored: decode_set(
+            grid,
+            SetRole::Explored,
+            &msg.explored,
+            base.map(|b| &b.explored),
+        )?,
+        hidden: decode_set(grid, SetRole::Hidden, &msg.hidden, base.map(|b| &b.hidden))?,
+        unseen: decode_set(grid, SetRole::Unseen, &msg.unseen, base.map(|b| &b.unseen))?,
+    };
+    let pose_ok = msg.pose.position.iter().all(|v| v.is_finite()) && msg.pose.yaw.is_finite();
+    let estimate = PeerEstimate {
+        uav: msg.uav,
+        step: msg.step,
+        time_s: msg.time_s,
+        seq: msg.seq,
+        incarnation: msg.incarnation,
+        pose: pose_ok.then_some(msg.pose),
+        undetected: sets.undetected.clone(),
+        targets: sets.targets.clone(),
+        obstacle_free: sets.obstacle_free.clone(),
+        explored: sets.explored.clone(),
+        hidden: sets.hidden.clone(),
+        oem: OccupancyMap::from_updates(config.oem_grid, &msg.oem)?,
+        oem_full: msg.oem_full,
+    };
+    Ok((estimate, sets))
+}
+
+/// What a receiver holds of one sender: the sets of its last rebuilt message.
+#[derive(Clone, Debug, PartialEq)]
+struct Held {
+    incarnation: u64,
+    seq: u64,
+    sets: EstimateSets,
+}
+
+/// The receiving side of estimates whose sets may be deltas: per sender, the sets of the last
+/// message rebuilt, the base of the next delta.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EstimateInbox {
+    held: BTreeMap<u32, Held>,
+    wanted: u32,
+}
+
+impl EstimateInbox {
+    /// An inbox that holds nothing (a newcomer: it needs a whole message from each sender).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Validates a received message and rebuilds its sets, applying its deltas to the sets
+    /// held from the same sender's message `base_seq` of the same incarnation. A message that
+    /// cannot be rebuilt is an error (its sender is then in [`EstimateInbox::wanted`] until a
+    /// message of it is rebuilt); the held sets change only with a rebuilt message that is not
+    /// of an older incarnation than them.
+    pub fn read(
+        &mut self,
+        msg: &EstimateMsg,
+        config: &EstimatorConfig,
+    ) -> Result<PeerEstimate, EstimateReadError> {
+        let held = self.held.get(&msg.uav);
+        let base = held
+            .filter(|h| h.incarnation == msg.incarnation && Some(h.seq) == msg.base_seq)
+            .map(|h| &h.sets);
+        match rebuild(msg, config, base) {
+            Ok((estimate, sets)) => {
+                if held.is_none_or(|h| h.incarnation <= msg.incarnation) {
+                    self.held.insert(
+                        msg.uav,
+                        Held {
+                            incarnation: msg.incarnation,
+                            seq: msg.seq,
+                            sets,
+                        },
+                    );
+                    self.wanted &= !uav_bit(msg.uav);
+                }
+                Ok(estimate)
+            }
+            Err(e) => {
+                if e.drop_reason() == DropReason::NoBase {
+                    self.wanted |= uav_bit(msg.uav);
+                }
+                Err(e)
+            }
+        }
+    }
+
+    /// Decodes, validates and rebuilds a received message ([`EstimateInbox::read`]).
+    pub fn read_bytes(
+        &mut self,
+        bytes: &[u8],
+        config: &EstimatorConfig,
+    ) -> Result<PeerEstimate, EstimateReadError> {
+        self.read(&from_bytes(bytes)?, config)
+    }
+
+    /// The senders whose deltas could not be placed since their last rebuilt message, bit `i`
+    /// for UAV `i`: what to ask whole sets of ([`EstimateMsg::want_whole`]).
+    pub fn wanted(&self) -> u32 {
+        self.wanted
+    }
+
+    /// `H̄` of the last message rebuilt from `uav`.
+    pub fn unseen(&self, uav: u32) -> Option<&CellSet> {
+        self.held.get(&uav).map(|h| &h.sets.unseen)
+    }
 }
 
 impl PeerEstimate {
-    /// Validates a received message against this agent's configuration.
+    /// Validates a received message against this agent's configuration; a message whose sets
+    /// are deltas needs an [`EstimateInbox`] (here it is [`EstimateReadError::MissingBase`]).
     pub fn from_msg(
         msg: &EstimateMsg,
         config: &EstimatorConfig,
     ) -> Result<Self, EstimateReadError> {
-        let grid = &config.grid;
-        if !msg.time_s.is_finite() {
-            return Err(EstimateReadError::BadTime(msg.time_s));
-        }
-        let mut targets = BTreeMap::new();
-        for t in &msg.targets {
-            let set = decode_set(grid, SetRole::Target(t.id), &t.set)?;
-            if targets.insert(t.id, set).is_some() {
-                return Err(EstimateReadError::DuplicateTarget(t.id));
-            }
-        }
-        let pose_ok = msg.pose.position.iter().all(|v| v.is_finite()) && msg.pose.yaw.is_finite();
-        Ok(Self {
-            uav: msg.uav,
-            step: msg.step,
-            time_s: msg.time_s,
-            seq: msg.seq,
-            incarnation: msg.incarnation,
-            pose: pose_ok.then_some(msg.pose),
-            undetected: decode_set(grid, SetRole::Undetected, &msg.undetected)?,
-            targets,
-            obstacle_free: decode_set(grid, SetRole::ObstacleFree, &msg.obstacle_free)?,
-            explored: decode_set(grid, SetRole::Explored, &msg.explored)?,
-            hidden: decode_set(grid, SetRole::Hidden, &msg.hidden)?,
-            oem: OccupancyMap::from_updates(config.oem_grid, &msg.oem)?,
-            oem_full: msg.oem_full,
-        })
+        rebuild(msg, config, None).map(|(estimate, _)| estimate)
     }
 
-    /// Decodes and validates a received message.
+    /// Decodes and validates a received message ([`PeerEstimate::from_msg`]).
     pub fn from_bytes(bytes: &[u8], config: &EstimatorConfig) -> Result<Self, EstimateReadError> {
         Self::from_msg(&from_bytes(bytes)?, config)
     }
@@ -258,6 +494,29 @@ mod tests {
         }
 
         #[test]
+        fn deltas_rebuild_every_message_exactly(
+            a in peer_strategy(5), b in peer_strategy(6), c in peer_strategy(7)
+        ) {
+            let cfg = config();
+            let mut outbox = EstimateOutbox::new(2, 9, 10).with_set_deltas();
+            let mut inbox = EstimateInbox::new();
+            for (i, p) in [&a, &b, &c, &a].into_iter().enumerate() {
+                let mut s = state_from(p);
+                let msg = outbox.compose(&mut s);
+                prop_assert_eq!(msg.base_seq.is_some(), i > 0 && msg.base_seq == Some(i as u64 - 1));
+                let bytes = to_bytes(&msg).unwrap();
+                let back = inbox.read_bytes(&bytes, &cfg).unwrap();
+                prop_assert_eq!(&back.undetected, &p.undetected);
+                prop_assert_eq!(&back.targets, &p.targets);
+                prop_assert_eq!(&back.obstacle_free, &p.obstacle_free);
+                prop_assert_eq!(&back.explored, &p.explored);
+                prop_assert_eq!(&back.hidden, &p.hidden);
+                prop_assert_eq!(inbox.unseen(2), Some(s.hidden_history.unseen()));
+                prop_assert_eq!(inbox.wanted(), 0);
+            }
+        }
+
+        #[test]
         fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
             let _ = PeerEstimate::from_bytes(&bytes, &config());
         }
@@ -302,6 +561,112 @@ mod tests {
         assert_eq!(outbox.sent(), 5);
     }
 
+    /// A state whose sets change a little at each step, as a real one's do (the seen ground
+    /// grows by a column).
+    fn moving_state(step: u64) -> EstimatorState {
+        let cfg = config();
+        let mut s = EstimatorState::new(&cfg);
+        s.step = step;
+        s.time_s = step as f64 * 0.5;
+        let g = cfg.grid;
+        let mut seen = CellSet::empty(&g);
+        for iy in 2..10 {
+            seen.fill_row_span(iy, 0, step as u32 + 5);
+        }
+        let mut undetected = CellSet::full(&g);
+        undetected.and_not_assign(&seen);
+        s.undetected = ReachSet::with_cells(undetected);
+        s.explored = seen.clone();
+        s.hidden = CellSet::from_cells(&g, [(1, step as u32 % 30)]);
+        s
+    }
+
+    #[test]
+    fn a_receiver_that_missed_a_message_asks_for_whole_sets_and_resyncs() {
+        let cfg = config();
+        let mut outbox = EstimateOutbox::new(3, 7, 100).with_set_deltas();
+        let mut inbox = EstimateInbox::new();
+        let first = outbox.compose(&mut moving_state(0));
+        assert_eq!(first.base_seq, None);
+        inbox.read(&first, &cfg).unwrap();
+        let second = outbox.compose(&mut moving_state(1));
+        assert_eq!(second.base_seq, Some(0));
+        assert!(second.undetected.is_delta());
+        // The second message is lost: the third one's base is not held.
+        let third = outbox.compose(&mut moving_state(2));
+        let e = inbox.read(&third, &cfg).unwrap_err();
+        assert!(matches!(
+            e,
+            EstimateReadError::MissingBase {
+                uav: 3,
+                base_seq: 1
+            }
+        ));
+        assert_eq!(e.drop_reason(), DropReason::NoBase);
+        assert_eq!(inbox.wanted(), uav_bit(3));
+        // Deltas keep failing until the sender, asked, sends whole sets.
+        assert!(
+            inbox
+                .read(&outbox.compose(&mut moving_state(3)), &cfg)
+                .is_err()
+        );
+        outbox.request_full();
+        let whole = outbox.compose(&mut moving_state(4));
+        assert_eq!(whole.base_seq, None);
+        let back = inbox.read(&whole, &cfg).unwrap();
+        assert_eq!(back.undetected, moving_state(4).undetected.cells().clone());
+        assert_eq!(inbox.wanted(), 0);
+        let next = outbox.compose(&mut moving_state(5));
+        assert_eq!(next.base_seq, Some(4));
+        let back = inbox.read(&next, &cfg).unwrap();
+        assert_eq!(back.explored, moving_state(5).explored);
+        // A stateless reader (or a newcomer) cannot use a delta message.
+        assert!(matches!(
+            PeerEstimate::from_msg(&next, &cfg),
+            Err(EstimateReadError::MissingBase { .. })
+        ));
+        assert!(EstimateInbox::new().read(&next, &cfg).is_err());
+    }
+
+    #[test]
+    fn a_restarted_sender_is_read_from_its_first_message_and_a_wrong_base_is_refused() {
+        let cfg = config();
+        let mut old = EstimateOutbox::new(1, 5, 100).with_set_deltas();
+        let mut inbox = EstimateInbox::new();
+        inbox
+            .read(&old.compose(&mut moving_state(0)), &cfg)
+            .unwrap();
+        inbox
+            .read(&old.compose(&mut moving_state(1)), &cfg)
+            .unwrap();
+        // Restarted: a new incarnation whose seq starts over. Its deltas are not against
+        // what is held of the old process.
+        let mut new = EstimateOutbox::new(1, 6, 100).with_set_deltas();
+        let mut first = new.compose(&mut moving_state(8));
+        inbox.read(&first, &cfg).unwrap();
+        let mut d = new.compose(&mut moving_state(9));
+        d.incarnation = 5; // claims the old process: base seq 0 of it is not held
+        assert!(inbox.read(&d, &cfg).is_err());
+        // A delta whose base_seq names the held message but whose flips were made against
+        // another set: the digest refuses it.
+        first.seq = 1;
+        inbox.read(&first, &cfg).unwrap();
+        let mut forged = new.compose(&mut moving_state(10));
+        forged.base_seq = Some(1);
+        let e = inbox.read(&forged, &cfg).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                EstimateReadError::Set {
+                    source: DeltaError::WrongBase { .. },
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert_eq!(inbox.wanted(), uav_bit(1));
+    }
+
     #[test]
     fn invalid_content_is_a_typed_error() {
         let cfg = config();
@@ -310,10 +675,10 @@ mod tests {
         assert!(PeerEstimate::from_msg(&good, &cfg).is_ok());
 
         let mut m = good.clone();
-        m.undetected = EncodedSet {
-            nx: 7,
-            ..m.undetected.clone()
+        let SetCode::Whole(e) = &good.undetected else {
+            panic!("a first message is whole")
         };
+        m.undetected = SetCode::Whole(EncodedSet { nx: 7, ..e.clone() });
         assert!(matches!(
             PeerEstimate::from_msg(&m, &cfg),
             Err(EstimateReadError::Set {
