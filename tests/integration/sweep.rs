@@ -65,12 +65,12 @@ fn json(path: &Path) -> Value {
 }
 
 /// `value` without what depends on the wall clock: `wall_s`, `real_time_factor` (a key, or
-/// a row of the table) and everything under `timing`.
+/// a row of the table) and everything under `timing` and `resources` (CPU times and memory).
 fn without_wall_clock(mut value: Value) -> Value {
     fn strip(v: &mut Value) {
         match v {
             Value::Object(map) => {
-                for key in ["wall_s", "real_time_factor", "timing"] {
+                for key in ["wall_s", "real_time_factor", "timing", "resources"] {
                     map.remove(key);
                 }
                 map.values_mut().for_each(strip);

@@ -199,16 +199,30 @@ pub mod phase {
     pub const OTHER: &str = "observe_other";
 }
 
-/// Starts the observer thread. Events go to `events`; it ends at the world's end of run or
+/// Starts the observer thread and returns once its iceoryx2 node exists, so the run has a
+/// node listed before any child starts: if the fleet is then killed, the node is listed dead
+/// and the next run cleans the run's files at once (a run with files but no node listed
+/// counts as starting). Events go to `events`; the thread ends at the world's end of run or
 /// once `stop` is raised (checked every few tens of milliseconds).
 pub fn spawn(
     config: ObserverConfig,
     stop: Arc<AtomicBool>,
     events: UnboundedSender<ObserverEvent>,
-) -> std::io::Result<JoinHandle<anyhow::Result<ObserverReport>>> {
-    std::thread::Builder::new()
+) -> anyhow::Result<JoinHandle<anyhow::Result<ObserverReport>>> {
+    let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel(1);
+    let thread = std::thread::Builder::new()
         .name("observer".into())
-        .spawn(move || observe(&config, &stop, &events))
+        .spawn(move || observe(&config, &stop, &events, &ready_tx))
+        .context("cannot start the observer thread")?;
+    if ready_rx.recv().is_err() {
+        // The thread ended before its node existed: its result says why.
+        return match thread.join() {
+            Ok(Err(e)) => Err(e),
+            Ok(Ok(_)) => Err(anyhow::anyhow!("the observer ended before it started")),
+            Err(_) => Err(anyhow::anyhow!("the observer thread panicked")),
+        };
+    }
+    Ok(thread)
 }
 
 /// Longest single wait, so the stop flag is noticed promptly.
@@ -280,11 +294,14 @@ fn observe(
     config: &ObserverConfig,
     stop: &AtomicBool,
     events: &UnboundedSender<ObserverEvent>,
+    ready: &std::sync::mpsc::SyncSender<()>,
 ) -> anyhow::Result<ObserverReport> {
     let clock = PhaseClock::new(CpuClock::Thread, phase::OTHER);
     let uavs = config.scenario.uavs.count;
     let node = RunNode::new(&config.run, RunNode::OBSERVER, SignalHandlingMode::Disabled)
         .context("cannot create the observer's iceoryx2 node")?;
+    // The spawner waits for this; it is gone only if the spawner is.
+    let _ = ready.send(());
     let ports = Ports::open(&node, uavs).context("cannot open the observer's ports")?;
     let waitset = node.waitset()?;
     let _guard = waitset

@@ -204,8 +204,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         },
         stop.clone(),
         events_tx,
-    )
-    .context("cannot start the observer thread")?;
+    )?;
 
     let checkpoints = out.join("checkpoints");
     fresh_dir(&checkpoints)?;

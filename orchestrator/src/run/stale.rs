@@ -9,6 +9,8 @@
 //! run: its processes died with it) or none of its files was touched for
 //! [`STARTING_GRACE`]; otherwise a run started next to another (`fleet sweep --jobs`, two
 //! sweeps side by side) could remove the other's files while its first node is created.
+//! `fleet run` creates its observer's node before it starts any child, so a killed fleet's run
+//! always has a node listed dead, however early it was killed.
 
 use std::time::{Duration, SystemTime};
 
