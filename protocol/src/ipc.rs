@@ -106,7 +106,9 @@ use crate::frame::CvsFrame;
 use crate::service::{self, RunId};
 use crate::wire::{MAX_UAVS, ObserverAck, TruthState, UavCommand, WireHeader};
 
-pub use run_files::{belongs_to_run, remove_run_files, run_files, run_of_file, runs_with_files};
+pub use run_files::{
+    belongs_to_run, is_global_segment, remove_run_files, run_files, run_of_file, runs_with_files,
+};
 
 /// The iceoryx2 service flavour every setfleet process uses (inter-process, single-threaded
 /// ports).

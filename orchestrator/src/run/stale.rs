@@ -9,12 +9,16 @@
 //! run: its processes died with it) or none of its files was touched for
 //! [`STARTING_GRACE`]; otherwise a run started next to another (`fleet sweep --jobs`, two
 //! sweeps side by side) could remove the other's files while its first node is created.
-//! `fleet run` creates its observer's node before it starts any child, so a killed fleet's run
-//! always has a node listed dead, however early it was killed.
+//! The global management segment, which iceoryx2 creates with a domain's first node and never
+//! removes, does not count as touched: a run whose processes all ended (the last ones clean
+//! the dead nodes of the others) leaves only that file, and a starting run lists its first
+//! node milliseconds after creating it. `fleet run` creates its observer's node before it
+//! starts any child, so a starting run is listed from then on.
 
+use std::path::PathBuf;
 use std::time::{Duration, SystemTime};
 
-use protocol::ipc::{remove_run_files, run_files, runs_with_files, scan_nodes};
+use protocol::ipc::{is_global_segment, remove_run_files, run_files, runs_with_files, scan_nodes};
 use protocol::service::RunId;
 
 /// How long a run's files may go untouched with no node listed before they are left over.
@@ -55,14 +59,18 @@ pub fn remove_stale_runs(keep: &RunId) -> (usize, usize) {
     (runs, files)
 }
 
-/// Whether a file of `run` was modified within [`STARTING_GRACE`] (or cannot be read: then
-/// the run is left alone too).
+/// Whether a file of `run` other than the global management segment was modified within
+/// [`STARTING_GRACE`] (or cannot be read: then the run is left alone too).
 fn starting(run: &RunId) -> bool {
     let Ok(files) = run_files(run) else {
         return true;
     };
     let now = SystemTime::now();
-    files.iter().any(|f| {
+    let global = |f: &&PathBuf| {
+        f.file_name()
+            .is_some_and(|n| is_global_segment(&n.to_string_lossy()))
+    };
+    files.iter().filter(|f| !global(f)).any(|f| {
         std::fs::metadata(f)
             .and_then(|m| m.modified())
             .map_or(true, |t| {

@@ -33,6 +33,15 @@ pub fn belongs_to_run(file_name: &str, run: &RunId) -> bool {
         .is_some_and(iceoryx_name_follows)
 }
 
+/// Whether `file_name` is iceoryx2's global management segment of a domain (created with a
+/// domain's first node and never removed by iceoryx2 itself; it holds a node counter that
+/// node ids combine with the process id and the time, so removing it is harmless: the next
+/// node creates it again).
+pub fn is_global_segment(file_name: &str) -> bool {
+    let suffix = Config::default().global.node.global_mgmt_suffix.to_string();
+    file_name.ends_with(&suffix)
+}
+
 /// The run a setfleet iceoryx2 file belongs to: the shortest run id after whose prefix
 /// iceoryx2's own naming follows. `None` for a file that is not setfleet's.
 pub fn run_of_file(file_name: &str) -> Option<RunId> {
@@ -142,6 +151,10 @@ mod tests {
             &a
         ));
         assert!(belongs_to_run("iox2_sf_a_node.details", &a));
+        let global = format!("iox2_sf_a_{HASH}_node.0_10_0.global_mgmt");
+        assert!(belongs_to_run(&global, &a));
+        assert!(is_global_segment(&global));
+        assert!(!is_global_segment(&format!("iox2_sf_a_{HASH}.service")));
         assert!(!belongs_to_run(&format!("iox2_sf_a_b_{HASH}.service"), &a));
         assert!(!belongs_to_run("iox2_other.service", &a));
         assert!(belongs_to_run(
