@@ -201,12 +201,13 @@ pub fn run(config: &ScaleConfig) -> anyhow::Result<Outcome> {
     let total = config.points.len();
     let mut rows = Vec::with_capacity(total);
     for (i, point) in config.points.iter().enumerate() {
+        let side = 2.0 * point.half_extent_m();
         eprintln!(
-            "fleet: scale {}/{total}: {} UAVs, {} cars, region {:.0} x {0:.0} m, {} s simulated",
+            "fleet: scale {}/{total}: {} UAVs, {} cars, region {side:.0} x {side:.0} m, {} s \
+             simulated",
             i + 1,
             point.uavs,
             point.cars(),
-            2.0 * point.half_extent_m(),
             config.duration_s,
         );
         let label = format!("{} UAVs", point.uavs);
@@ -335,7 +336,7 @@ mod tests {
             (&["--uavs", "0"][..], "--uavs 0: every fleet size must be 1"),
             (&["--uavs", "2,33"], "--uavs 33"),
             (&["--duration", "0"], "--duration 0: must be a positive"),
-            (&["--duration", "-3"], "--duration -3"),
+            (&["--duration=-3"], "--duration -3"),
             (&["--duration", "NaN"], "--duration NaN"),
             (&["--uavs", ""], "--uavs"),
             (&["--set", "region.half_extent_m=1"], "half_extent_m"),

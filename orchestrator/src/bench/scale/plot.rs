@@ -181,7 +181,11 @@ fn draw_panel(
         panel
             .points
             .iter()
-            .map(|&(n, v)| Text::new(short(v), (x(n), y(v)), (FONT, 12).into_font().color(&BLACK))),
+            // Each value beside its point, up and to the right of the marker.
+            .map(|&(n, v)| {
+                EmptyElement::at((x(n), y(v)))
+                    + Text::new(short(v), (7, -17), (FONT, 12).into_font().color(&BLACK))
+            }),
     )?;
     if !panel.marks.is_empty() {
         chart
