@@ -163,11 +163,11 @@ fn bad_scale_flags_exit_2_naming_the_flag() {
         (&["--duration", "0"], "--duration 0"),
         (&["--duration=-1"], "--duration -1"),
     ] {
-        let args = args
+        let with_out = args
             .iter()
             .map(OsStr::new)
             .chain([OsStr::new("--out"), out_dir.as_os_str()]);
-        let out = scale(&t, args);
+        let out = scale(&t, with_out);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
         assert!(stderr.contains(flag), "{args:?}: {stderr}");
