@@ -50,6 +50,9 @@ pub enum BenchKind {
     Estimator(crate::bench::estimator::BenchEstimatorArgs),
     /// One MPC guidance decision.
     Guidance(crate::bench::guidance::BenchGuidanceArgs),
+    /// Whole runs of 1 to 16 UAVs, the region scaled with the fleet: speed, CPU, traffic
+    /// and memory per fleet size.
+    Scale(crate::bench::scale::BenchScaleArgs),
 }
 
 #[cfg(test)]
@@ -66,5 +69,10 @@ mod tests {
         let cli = Cli::try_parse_from(["fleet", "bench", "render", "--out", "x.json"]).unwrap();
         assert!(matches!(cli.command, FleetCommand::Bench(_)));
         assert!(Cli::try_parse_from(["fleet", "render", "--frobnicate"]).is_err());
+        let cli = Cli::try_parse_from(["fleet", "bench", "scale", "--uavs", "1,2"]).unwrap();
+        assert!(matches!(
+            cli.command,
+            FleetCommand::Bench(BenchArgs { kind: BenchKind::Scale(ref s) }) if s.uavs == [1, 2]
+        ));
     }
 }

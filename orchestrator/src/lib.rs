@@ -104,6 +104,10 @@ pub fn run(cli: Cli) -> Outcome {
                 Ok(c) => bench::guidance::run(&c).and_then(|r| r.publish(c.out.as_deref())),
                 Err(e) => return bad_input(e),
             },
+            BenchKind::Scale(args) => match args.validate() {
+                Ok(config) => return finish(bench::scale::run(&config)),
+                Err(e) => return bad_input(e),
+            },
         },
     };
     match result {

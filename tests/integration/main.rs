@@ -10,4 +10,5 @@ mod recovery;
 mod render;
 mod resources;
 mod run;
+mod scale;
 mod sweep;

@@ -1,6 +1,6 @@
 //! `fleet bench`: whole-system measurements, each written as a [`BenchReport`] (JSON) and
 //! printed as a table. The report type is shared by every kind (`render`, `ipc`,
-//! `estimator`, `guidance`): a headline `summary` (the keys docs/design.md names, flattened at
+//! `estimator`, `guidance`, `scale`): a headline `summary` (the keys docs/design.md names, flattened at
 //! the top level of the JSON), one [`BenchCase`] per configuration measured, the machine, the
 //! command line and the date.
 
@@ -8,6 +8,7 @@ pub mod estimator;
 pub mod guidance;
 pub mod ipc;
 pub mod render;
+pub mod scale;
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -140,7 +141,7 @@ pub struct BenchCase {
 /// A benchmark's report: what `fleet bench KIND --out FILE.json` writes.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BenchReport {
-    /// `render`, `ipc`, `estimator`, `guidance`.
+    /// `render`, `ipc`, `estimator`, `guidance`, `scale`.
     pub kind: String,
     /// The command line that produced it.
     pub command: String,

@@ -1,0 +1,348 @@
+//! `fleet bench scale`: how the whole system scales with the fleet. It runs real fleets, the
+//! same code path as `fleet run` ([`execute`], lockstep, one seed), of 1, 2, 4, 8 and 16 UAVs
+//! (`--uavs`), each over a region scaled so that the **area per UAV** and the **cars per
+//! area** stay those of the scenario's, read as a fleet of [`REFERENCE_UAVS`] UAVs (the
+//! default scenario: 4 UAVs, 8 cars, 500 x 500 m): the region's side scales with
+//! `sqrt(n / 4)`, the cars with `n / 4` (rounded, at least 1 if the scenario has any).
+//!
+//! Per fleet size ([`report::ScaleRow`]): wall time per simulated second and the real-time
+//! factor, CPU per UAV-step (every process's CPU over UAVs x steps), the estimates' and the
+//! token's messages and bytes per simulated second in total and per UAV, peak resident memory
+//! per process (world, largest agent, all agents, orchestrator), violations, and the bytes per
+//! UAV per second against the 4-UAV figure. Writes `scale.json` (a [`BenchReport`]) and
+//! `scale.png` ([`plot`]) into `--out`, each run's own results under `--runs`.
+//!
+//! The fleet sizes run one after another, smallest first: a run needs the machine to itself
+//! for its real-time factor to mean anything. A run that fails is a row with its status, the
+//! next sizes still run (a signal stops the bench), and the exit code is 1.
+//!
+//! [`BenchReport`]: super::BenchReport
+
+pub mod plot;
+pub mod report;
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::Args;
+use protocol::scenario::Scenario;
+use protocol::wire::MAX_UAVS;
+use world_server::server::StepMode;
+
+use crate::Outcome;
+use crate::results::summary::Summary;
+use crate::run::config::{RunConfig, default_out_dir, new_run_id};
+use crate::run::{execute, runtime, write_results};
+use crate::usage::{ScenarioArgs, UsageError};
+use crate::variant::Variant;
+use report::{RowStatus, ScaleRow};
+
+/// The fleet size the scenario's region and cars are for.
+pub const REFERENCE_UAVS: u32 = 4;
+
+/// The fleet sizes measured by default.
+pub const DEFAULT_UAVS: [u32; 5] = [1, 2, 4, 8, 16];
+
+/// `fleet bench scale`.
+#[derive(Debug, Clone, Args)]
+pub struct BenchScaleArgs {
+    /// The scenario: its region and cars are those of a 4-UAV fleet (default: the paper's).
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// The guidance variant (applied after the scenario file and before `--set`).
+    #[arg(long, value_enum, default_value_t = Variant::Paper)]
+    pub variant: Variant,
+    /// The seed of every run.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Seconds of simulated time per run.
+    #[arg(long, default_value_t = 20.0)]
+    pub duration: f64,
+    /// Fleet sizes, comma-separated (run smallest first).
+    #[arg(long, value_delimiter = ',', default_values_t = DEFAULT_UAVS.to_vec())]
+    pub uavs: Vec<u32>,
+    /// Where `scale.json` and `scale.png` go (default: `runs/scale-<UTC timestamp>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Where each run's directory (`uavs-<N>`) goes (default: `<out>/runs`).
+    #[arg(long)]
+    pub runs: Option<PathBuf>,
+}
+
+/// One fleet size of the bench, its scenario resolved.
+#[derive(Debug, Clone)]
+pub struct ScalePoint {
+    /// UAVs.
+    pub uavs: u32,
+    /// The run.
+    pub config: RunConfig,
+}
+
+impl ScalePoint {
+    /// Half the side of the region, metres.
+    pub fn half_extent_m(&self) -> f64 {
+        self.config.scenario.region.half_extent_m
+    }
+
+    /// Cars.
+    pub fn cars(&self) -> u32 {
+        self.config.scenario.targets.count
+    }
+}
+
+/// A validated `fleet bench scale`.
+#[derive(Debug, Clone)]
+pub struct ScaleConfig {
+    /// The fleet sizes in the order they run (increasing).
+    pub points: Vec<ScalePoint>,
+    /// The seed of every run.
+    pub seed: u64,
+    /// Simulated seconds per run.
+    pub duration_s: f64,
+    /// The variant.
+    pub variant: Variant,
+    /// Where `scale.json` and `scale.png` go.
+    pub out: PathBuf,
+    /// Where the runs' directories go.
+    pub runs: PathBuf,
+}
+
+/// The region's half side and the cars of a fleet of `uavs` for a scenario whose
+/// `half_extent_m` and `cars` are those of [`REFERENCE_UAVS`] UAVs: the same area per UAV
+/// (the side scales with `sqrt(uavs / 4)`) and the same cars per area (`cars x uavs / 4`,
+/// rounded, at least 1 when the scenario has cars).
+pub fn scaled_region(half_extent_m: f64, cars: u32, uavs: u32) -> (f64, u32) {
+    let share = f64::from(uavs) / f64::from(REFERENCE_UAVS);
+    let half = half_extent_m * share.sqrt();
+    let scaled_cars = if cars == 0 {
+        0
+    } else {
+        // At most MAX_UAVS / 4 times the scenario's cars: no overflow.
+        ((f64::from(cars) * share).round() as u32).max(1)
+    };
+    (half, scaled_cars)
+}
+
+impl BenchScaleArgs {
+    /// Checks the flags and resolves every fleet size's scenario.
+    pub fn validate(&self) -> Result<ScaleConfig, UsageError> {
+        if self.uavs.is_empty() {
+            return Err(UsageError("--uavs: give at least one fleet size".into()));
+        }
+        if let Some(&bad) = self.uavs.iter().find(|&&n| n == 0 || n as usize > MAX_UAVS) {
+            return Err(UsageError(format!(
+                "--uavs {bad}: every fleet size must be 1 to {MAX_UAVS}"
+            )));
+        }
+        if !(self.duration.is_finite() && self.duration > 0.0) {
+            return Err(UsageError(format!(
+                "--duration {}: must be a positive number of seconds",
+                self.duration
+            )));
+        }
+        let mut sizes = self.uavs.clone();
+        sizes.sort_unstable();
+        sizes.dedup();
+        let mut base_overrides = self.variant.with_user_overrides(&self.scenario.overrides);
+        base_overrides.push(format!("seed={}", self.seed));
+        base_overrides.push(format!("duration_s={:?}", self.duration));
+        let base = ScenarioArgs {
+            scenario: self.scenario.scenario.clone(),
+            overrides: base_overrides.clone(),
+        }
+        .load()?;
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| default_out_dir("scale-"));
+        let runs = self.runs.clone().unwrap_or_else(|| out.join("runs"));
+        let mut points = Vec::with_capacity(sizes.len());
+        for (i, &uavs) in sizes.iter().enumerate() {
+            let (half, cars) = scaled_region(base.region.half_extent_m, base.targets.count, uavs);
+            let mut overrides = base_overrides.clone();
+            overrides.push(format!("uavs.count={uavs}"));
+            overrides.push(format!("region.half_extent_m={half:?}"));
+            overrides.push(format!("targets.count={cars}"));
+            let scenario = Scenario::load(self.scenario.scenario.as_deref(), &overrides)
+                .map_err(|e| UsageError(format!("--uavs {uavs}: bad scenario: {e}")))?;
+            points.push(ScalePoint {
+                uavs,
+                config: RunConfig {
+                    scenario,
+                    mode: StepMode::Lockstep,
+                    faults: Vec::new(),
+                    out: runs.join(format!("uavs-{uavs}")),
+                    strict: false,
+                    run_id: new_run_id(u32::try_from(i).unwrap_or(u32::MAX)),
+                    // One line per tenth of a run: the bench's own lines stay readable.
+                    progress_bar: false,
+                    variant: self.variant,
+                    chaos_seed: None,
+                },
+            });
+        }
+        Ok(ScaleConfig {
+            points,
+            seed: self.seed,
+            duration_s: self.duration,
+            variant: self.variant,
+            out,
+            runs,
+        })
+    }
+}
+
+/// `fleet bench scale`: runs every fleet size in turn, writes `scale.json` and `scale.png`,
+/// prints the table. Exit code 1 if a run failed, was interrupted or saw a violation.
+pub fn run(config: &ScaleConfig) -> anyhow::Result<Outcome> {
+    std::fs::create_dir_all(&config.out)
+        .with_context(|| format!("cannot create {}", config.out.display()))?;
+    let rt = runtime()?;
+    let total = config.points.len();
+    let mut rows = Vec::with_capacity(total);
+    for (i, point) in config.points.iter().enumerate() {
+        let side = 2.0 * point.half_extent_m();
+        eprintln!(
+            "fleet: scale {}/{total}: {} UAVs, {} cars, region {side:.0} x {side:.0} m, {} s \
+             simulated",
+            i + 1,
+            point.uavs,
+            point.cars(),
+            config.duration_s,
+        );
+        let label = format!("{} UAVs", point.uavs);
+        let row = match rt.block_on(execute(&point.config, &label)) {
+            Ok(record) => {
+                // The row is the record's, whether or not the run's files could be written.
+                let written = write_results(&record).map(|_| ());
+                if let Err(e) = &written {
+                    eprintln!("fleet: [{label}] cannot write the run's results: {e:#}");
+                }
+                ScaleRow::of_run(point, &record, &Summary::build(&record), written.is_ok())
+            }
+            Err(e) => {
+                eprintln!("fleet: [{label}] the run failed: {e:#}");
+                ScaleRow::failed(point, format!("{e:#}"))
+            }
+        };
+        eprintln!("fleet: scale {}/{total}: {}", i + 1, row.progress_line());
+        let stop = row.status == RowStatus::Interrupted;
+        rows.push(row);
+        if stop {
+            eprintln!("fleet: interrupted: the remaining fleet sizes do not run");
+            break;
+        }
+    }
+    report::set_ratios(&mut rows);
+    let report = report::build(config, &rows);
+    let json = config.out.join("scale.json");
+    report.write_json(&json)?;
+    let png = config.out.join("scale.png");
+    plot::draw(&rows, config, &png)?;
+    let mut stdout = std::io::stdout().lock();
+    report::print_table(&rows, &mut stdout)?;
+    use std::io::Write as _;
+    writeln!(
+        stdout,
+        "\nreport in {} and {}, runs in {}",
+        json.display(),
+        png.display(),
+        config.runs.display()
+    )?;
+    let bad = rows.iter().filter(|r| !r.is_clean()).count();
+    if bad > 0 {
+        eprintln!(
+            "fleet: {bad} of {} fleet sizes failed (see scale.json)",
+            rows.len()
+        );
+        return Ok(Outcome::Failed);
+    }
+    if rows.len() < total {
+        return Ok(Outcome::Failed);
+    }
+    Ok(Outcome::Success)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Wrap {
+        #[command(flatten)]
+        scale: BenchScaleArgs,
+    }
+
+    fn parse(args: &[&str]) -> Result<ScaleConfig, String> {
+        Wrap::try_parse_from(["x"].iter().chain(args))
+            .map_err(|e| e.to_string())
+            .and_then(|w| w.scale.validate().map_err(|e| e.0))
+    }
+
+    #[test]
+    fn the_region_keeps_the_area_per_uav_and_the_cars_per_area() {
+        for (uavs, half, cars) in [
+            (1, 125.0, 2),
+            (2, 250.0 * 0.5_f64.sqrt(), 4),
+            (4, 250.0, 8),
+            (8, 250.0 * 2.0_f64.sqrt(), 16),
+            (16, 500.0, 32),
+        ] {
+            let (h, c) = scaled_region(250.0, 8, uavs);
+            assert!((h - half).abs() < 1e-9, "{uavs}: {h}");
+            assert_eq!(c, cars, "{uavs}");
+            let area_per_uav = (2.0 * h).powi(2) / f64::from(uavs);
+            assert!((area_per_uav - 62_500.0).abs() < 1e-6);
+        }
+        // Rounded, at least one car; none stays none.
+        assert_eq!(scaled_region(100.0, 3, 1).1, 1);
+        assert_eq!(scaled_region(100.0, 1, 1).1, 1);
+        assert_eq!(scaled_region(100.0, 3, 2).1, 2);
+        assert_eq!(scaled_region(100.0, 0, 16).1, 0);
+    }
+
+    #[test]
+    fn fleet_sizes_are_sorted_and_each_gets_its_scenario_and_directory() {
+        let c = parse(&["--uavs", "8,1,4,1", "--duration", "5", "--out", "o"]).unwrap();
+        let sizes: Vec<u32> = c.points.iter().map(|p| p.uavs).collect();
+        assert_eq!(sizes, vec![1, 4, 8]);
+        let four = &c.points[1];
+        assert_eq!(four.config.scenario.uavs.count, 4);
+        assert_eq!(four.cars(), 8);
+        assert_eq!(four.half_extent_m(), 250.0);
+        assert_eq!(four.config.scenario.duration_s, 5.0);
+        assert_eq!(four.config.scenario.seed, 1);
+        assert_eq!(four.config.mode, StepMode::Lockstep);
+        assert_eq!(c.points[2].cars(), 16);
+        assert_eq!(c.runs, PathBuf::from("o/runs"));
+        assert_eq!(c.points[0].config.out, PathBuf::from("o/runs/uavs-1"));
+        let ids: std::collections::BTreeSet<_> = c
+            .points
+            .iter()
+            .map(|p| p.config.run_id.to_string())
+            .collect();
+        assert_eq!(ids.len(), 3, "every run has its own id");
+        let c = parse(&["--seed", "5", "--runs", "r", "--set", "targets.count=2"]).unwrap();
+        assert_eq!(c.points.len(), DEFAULT_UAVS.len());
+        assert_eq!(c.points[0].config.scenario.seed, 5);
+        assert_eq!(c.points[0].config.out, PathBuf::from("r/uavs-1"));
+        assert_eq!(c.points[4].cars(), 8);
+    }
+
+    #[test]
+    fn bad_flags_are_named() {
+        for (args, says) in [
+            (&["--uavs", "0"][..], "--uavs 0: every fleet size must be 1"),
+            (&["--uavs", "2,33"], "--uavs 33"),
+            (&["--duration", "0"], "--duration 0: must be a positive"),
+            (&["--duration=-3"], "--duration -3"),
+            (&["--duration", "NaN"], "--duration NaN"),
+            (&["--uavs", ""], "--uavs"),
+            (&["--set", "region.half_extent_m=1"], "half_extent_m"),
+        ] {
+            let e = parse(args).unwrap_err();
+            assert!(e.contains(says), "{args:?}: {e}");
+        }
+    }
+}
