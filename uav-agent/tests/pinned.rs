@@ -108,7 +108,7 @@ fn run(scenario: &Scenario, steps: u64, every: u64) -> Digests {
     for k in 0..steps {
         for (i, &y) in yaw0.iter().enumerate() {
             // Whole radians per 12 steps: exact in binary, the same everywhere.
-            let swing = if (k / 12 + i as u64) % 3 == 0 {
+            let swing = if (k / 12 + i as u64).is_multiple_of(3) {
                 -1.0
             } else {
                 ((k / 12 + i as u64) % 3) as f64 * 0.5
@@ -137,7 +137,7 @@ fn run(scenario: &Scenario, steps: u64, every: u64) -> Digests {
             }
             chain.word(state_digest(est.state()));
         }
-        if (k + 1) % every == 0 {
+        if (k + 1).is_multiple_of(every) {
             out.push(chain.0);
         }
         world.advance();
