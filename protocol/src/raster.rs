@@ -47,6 +47,7 @@ use serde::{Deserialize, Serialize};
 use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
 
+pub use dilate::WordDilation;
 pub use polygon::polygon_is_finite;
 pub use reach::{REACH_UNIT_M, ReachSet};
 

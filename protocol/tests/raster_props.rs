@@ -282,6 +282,36 @@ proptest! {
         }
     }
 
+    /// Every word read through [`CellSet::word_dilation`] is that word of the whole dilation:
+    /// across word boundaries and grid edges, for empty sets, radii from negative to past the
+    /// grid and radii no cell size bounds.
+    #[test]
+    fn a_dilation_read_word_by_word_is_the_dilation(
+        (ox, oy, cell_m) in (-100.0..100.0, -100.0..100.0, 0.1..3.0),
+        (nx, ny) in (1u32..260, 1u32..40),
+        cells in prop::collection::vec((0.0..1.0, 0.0..1.0), 0..40),
+        radius_cells in prop_oneof![
+            6 => -1.0..8.0,
+            2 => 8.0..200.0,
+            1 => Just(Real::NAN),
+            1 => Just(Real::INFINITY),
+        ],
+    ) {
+        let grid = GroundGrid { origin: Point2::new(ox, oy), cell_m, nx, ny };
+        let set = random_set(&grid, &cells);
+        let r = radius_cells * cell_m;
+        let whole = set.dilate(&grid, r);
+        let mut words = set.word_dilation(&grid, r);
+        for iy in 0..ny {
+            for w in 0..set.words_per_row() {
+                prop_assert_eq!(
+                    words.word(&set, iy, w), whole.row(iy)[w],
+                    "row {} word {} radius {}", iy, w, r
+                );
+            }
+        }
+    }
+
     #[test]
     fn dilation_reaches_every_point_within_the_radius_and_no_further(
         grid in grids(),

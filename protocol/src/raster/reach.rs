@@ -219,6 +219,65 @@ impl ReachSet {
         }
     }
 
+    /// [`ReachSet::advance`], then [`ReachSet::intersect`] with an outer raster `bound` of the
+    /// set's targets that holds every cell of the set (a dilation of its cells by the motion
+    /// since the last clock), given word by word: `bound(cells, iy, w)` is word `w` of row `iy`
+    /// of the raster, and `cells` are the set's cells before the advance. Only the words the
+    /// clock adds cells to are asked for, so a bound that is costly over the whole grid (a
+    /// dilation, through [`super::WordDilation`]) costs only where the set grows.
+    pub fn advance_within(
+        &mut self,
+        clock_m: Real,
+        mut bound: impl FnMut(&CellSet, u32, usize) -> u64,
+    ) {
+        if clock_m.is_nan() || clock_m <= self.clock_m {
+            return;
+        }
+        self.clock_m = clock_m;
+        let reached = reached_units(clock_m);
+        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        // Every word's new cells first, from the cells before the advance, then the bound of
+        // those words, read on the same unchanged cells.
+        let mut grown: Vec<(u32, usize, u64)> = Vec::new();
+        for iy in 0..self.cells.ny() {
+            for w in 0..wpr {
+                let slot = iy as usize * wpr + w;
+                if self.pending[slot] > reached {
+                    continue;
+                }
+                let x0 = w * 64;
+                let x1 = (x0 + 64).min(nx);
+                let base = iy as usize * nx;
+                let mut bits = 0u64;
+                let mut next = u32::MAX;
+                for (b, &tau) in self.reach[base + x0..base + x1].iter().enumerate() {
+                    if tau <= reached {
+                        bits |= 1 << b;
+                    } else {
+                        next = next.min(tau);
+                    }
+                }
+                self.pending[slot] = next;
+                let fresh = bits & !self.cells.row(iy)[w];
+                if fresh != 0 {
+                    grown.push((iy, w, fresh));
+                }
+            }
+        }
+        for &mut (iy, w, ref mut fresh) in &mut grown {
+            let keep = *fresh & bound(&self.cells, iy, w);
+            if keep != *fresh {
+                // Cells reached but outside the bound stay out: the pending bound drops to 0
+                // so that the next advance settles the word, as `intersect` does.
+                self.pending[iy as usize * wpr + w] = 0;
+            }
+            *fresh = keep;
+        }
+        for (iy, w, fresh) in grown {
+            self.cells.row_mut(iy)[w] |= fresh;
+        }
+    }
+
     /// `cells ← cells ∩ outer`, for an outer raster of the set's targets (a peer's set, a
     /// conservative dilation of an earlier set). The reach is unchanged.
     pub fn intersect(&mut self, outer: &CellSet) {
