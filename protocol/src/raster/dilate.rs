@@ -86,8 +86,9 @@ impl CellSet {
         } else {
             Element::Runs(row_runs(reach, self.nx, self.ny))
         };
+        // Bits of a source row more than the widest run away from a word cannot reach it.
         let pad = match &element {
-            Element::Runs(run) => (run[0] as usize).div_ceil(64) + 1,
+            Element::Runs(run) => (run[0] as usize).div_ceil(64),
             _ => 0,
         };
         WordDilation {
@@ -154,6 +155,13 @@ impl WordDilation {
             let down = iy.checked_sub(k).filter(|_| k > 0);
             for y in [up, down].into_iter().flatten() {
                 let row = set.row(y);
+                if pad <= 1 {
+                    // Runs of at most one word: shift the word and its two neighbours.
+                    let lo = w.checked_sub(1).map_or(0, |i| row[i]);
+                    let hi = row.get(w + 1).copied().unwrap_or(0);
+                    out |= smear_word(lo, row[w], hi, half_width);
+                    continue;
+                }
                 // The words `w - pad ..= w + pad` of the source row, 0 past its ends.
                 let mut any = false;
                 for (j, slot) in self.buffer.iter_mut().enumerate() {
@@ -169,6 +177,22 @@ impl WordDilation {
         }
         out & tail
     }
+}
+
+/// The middle word of the three words `lo, mid, hi` (in increasing bit order) after every run
+/// of set bits grew by `by <= 64` on both sides.
+fn smear_word(lo: u64, mid: u64, hi: u64, by: u32) -> u64 {
+    if lo | mid | hi == 0 {
+        return 0;
+    }
+    let mut out = mid;
+    for s in 1..=by.min(63) {
+        out |= mid << s | lo >> (64 - s) | mid >> s | hi << (64 - s);
+    }
+    if by >= 64 {
+        out |= lo | hi;
+    }
+    out
 }
 
 /// The bits of word `w` of a row that lie on the grid.

@@ -204,15 +204,7 @@ impl ReachSet {
                 let x0 = w * 64;
                 let x1 = (x0 + 64).min(nx);
                 let base = iy as usize * nx;
-                let mut bits = 0u64;
-                let mut next = u32::MAX;
-                for (b, &tau) in self.reach[base + x0..base + x1].iter().enumerate() {
-                    if tau <= reached {
-                        bits |= 1 << b;
-                    } else {
-                        next = next.min(tau);
-                    }
-                }
+                let (bits, next) = reached_bits(&self.reach[base + x0..base + x1], reached);
                 self.cells.row_mut(iy)[w] |= bits;
                 self.pending[slot] = next;
             }
@@ -248,15 +240,7 @@ impl ReachSet {
                 let x0 = w * 64;
                 let x1 = (x0 + 64).min(nx);
                 let base = iy as usize * nx;
-                let mut bits = 0u64;
-                let mut next = u32::MAX;
-                for (b, &tau) in self.reach[base + x0..base + x1].iter().enumerate() {
-                    if tau <= reached {
-                        bits |= 1 << b;
-                    } else {
-                        next = next.min(tau);
-                    }
-                }
+                let (bits, next) = reached_bits(&self.reach[base + x0..base + x1], reached);
                 self.pending[slot] = next;
                 let fresh = bits & !self.cells.row(iy)[w];
                 if fresh != 0 {
@@ -526,6 +510,19 @@ impl ReachSet {
             }
         }
     }
+}
+
+/// The cells of a word (at most 64 reach values) the clock `reached` reaches, as bits, and the
+/// least reach of the others (`u32::MAX` when none), without branches so that it vectorises.
+fn reached_bits(reach: &[u32], reached: u32) -> (u64, u32) {
+    let mut bits = 0u64;
+    let mut next = u32::MAX;
+    for (b, &tau) in reach.iter().enumerate() {
+        let hit = tau <= reached;
+        bits |= u64::from(hit) << b;
+        next = next.min(if hit { u32::MAX } else { tau });
+    }
+    (bits, next)
 }
 
 /// Whole cells strictly between index `i` and the span `lo..=hi` (0 inside or next to it).
