@@ -145,7 +145,8 @@ proptest! {
     /// Advancing within a dilation read word by word ([`ReachSet::advance_within`] with a
     /// [`protocol::raster::WordDilation`]) leaves the set, its reach and its clock exactly as
     /// advancing and then intersecting with the whole dilation does, through any history, on
-    /// a grid several words wide.
+    /// a grid several words wide; and advancing with the scans a set remembers gives what a
+    /// set without them (rebuilt from its parts) gives.
     #[test]
     fn advancing_within_a_dilation_read_word_by_word_is_the_whole_grid_way(
         events in proptest::collection::vec(wide_event(), 1..24),
@@ -157,10 +158,17 @@ proptest! {
         for e in &events {
             match e {
                 Event::Move(r) => {
+                    // A set rebuilt from its parts has no cached scans: it reads every word.
+                    let (cells, base, relative) = whole.to_parts();
+                    let mut uncached = ReachSet::from_parts(cells, base, &relative, clock)
+                        .expect("parts of the same grid");
                     clock += r;
                     let previous = whole.cells().dilate(&g, *r);
                     whole.advance(clock);
                     whole.intersect(&previous);
+                    uncached.advance(clock);
+                    uncached.intersect(&previous);
+                    prop_assert!(whole == uncached, "cached scans changed the set");
                     let mut words = local.cells().word_dilation(&g, *r);
                     local.advance_within(clock, |old, iy, w| words.word(old, iy, w));
                 }
