@@ -47,6 +47,7 @@ use serde::{Deserialize, Serialize};
 use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
 
+pub use dilate::WordDilation;
 pub use polygon::polygon_is_finite;
 pub use reach::{REACH_UNIT_M, ReachSet};
 
@@ -264,6 +265,23 @@ impl CellSet {
             let mask = (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
             *word |= mask;
         }
+    }
+
+    /// Whether row `iy` holds every cell of columns `x0..=x1` (clamped to the grid; `false`
+    /// for a row outside the grid or an empty span).
+    pub fn row_span_is_full(&self, iy: u32, x0: u32, x1: u32) -> bool {
+        if iy >= self.ny || x0 > x1 || x0 >= self.nx {
+            return false;
+        }
+        let x1 = x1.min(self.nx - 1);
+        let row = self.row(iy);
+        let (w0, w1) = (x0 as usize / 64, x1 as usize / 64);
+        (w0..=w1).all(|w| {
+            let lo = if w == w0 { x0 % 64 } else { 0 };
+            let hi = if w == w1 { x1 % 64 } else { 63 };
+            let mask = (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
+            row[w] & mask == mask
+        })
     }
 
     /// Whether the set has no cell.

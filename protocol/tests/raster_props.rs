@@ -282,6 +282,64 @@ proptest! {
         }
     }
 
+    /// Filling discs into a set that already holds cells (where a disc whose square is
+    /// already full is skipped) gives the union of those cells and the discs filled alone.
+    #[test]
+    fn discs_filled_into_a_full_region_add_what_they_add_alone(
+        grid in grids(),
+        blocks in prop::collection::vec((0.0..1.0, 0.0..1.0, 1u32..20, 1u32..20), 0..4),
+        discs in prop::collection::vec(((-0.2..1.2, -0.2..1.2), 0.0..6.0, any::<bool>()), 1..8),
+    ) {
+        let mut held = CellSet::empty(&grid);
+        for &(u, v, w, h) in &blocks {
+            let x0 = ((u * grid.nx as Real) as u32).min(grid.nx - 1);
+            let y0 = ((v * grid.ny as Real) as u32).min(grid.ny - 1);
+            for iy in y0..(y0 + h).min(grid.ny) {
+                held.fill_row_span(iy, x0, x0 + w - 1);
+            }
+        }
+        let mut filled = held.clone();
+        let mut alone = CellSet::empty(&grid);
+        for &(centre, radius_cells, outer) in &discs {
+            let c = to_world(&grid, centre);
+            let coverage = if outer { Coverage::Outer } else { Coverage::Inner };
+            filled.fill_disc(&grid, c, radius_cells * grid.cell_m, coverage);
+            alone.fill_disc(&grid, c, radius_cells * grid.cell_m, coverage);
+        }
+        alone.or_assign(&held);
+        prop_assert_eq!(filled, alone);
+    }
+
+    /// Every word read through [`CellSet::word_dilation`] is that word of the whole dilation:
+    /// across word boundaries and grid edges, for empty sets, radii from negative to past the
+    /// grid and radii no cell size bounds.
+    #[test]
+    fn a_dilation_read_word_by_word_is_the_dilation(
+        (ox, oy, cell_m) in (-100.0..100.0, -100.0..100.0, 0.1..3.0),
+        (nx, ny) in (1u32..260, 1u32..40),
+        cells in prop::collection::vec((0.0..1.0, 0.0..1.0), 0..40),
+        radius_cells in prop_oneof![
+            6 => -1.0..8.0,
+            2 => 8.0..200.0,
+            1 => Just(Real::NAN),
+            1 => Just(Real::INFINITY),
+        ],
+    ) {
+        let grid = GroundGrid { origin: Point2::new(ox, oy), cell_m, nx, ny };
+        let set = random_set(&grid, &cells);
+        let r = radius_cells * cell_m;
+        let whole = set.dilate(&grid, r);
+        let mut words = set.word_dilation(&grid, r);
+        for iy in 0..ny {
+            for w in 0..set.words_per_row() {
+                prop_assert_eq!(
+                    words.word(&set, iy, w), whole.row(iy)[w],
+                    "row {} word {} radius {}", iy, w, r
+                );
+            }
+        }
+    }
+
     #[test]
     fn dilation_reaches_every_point_within_the_radius_and_no_further(
         grid in grids(),

@@ -67,6 +67,16 @@ fn event(n: u32) -> impl Strategy<Value = Event> {
     ]
 }
 
+/// Events on the 160 x 160 grid: larger boxes, moves of up to three metres.
+fn wide_event() -> impl Strategy<Value = Event> {
+    prop_oneof![
+        4 => (0.1f64..3.0).prop_map(Event::Move),
+        4 => cell_box(160, 60).prop_map(Event::Free),
+        1 => cell_box(160, 30).prop_map(Event::Measure),
+        1 => Just(Event::Restore),
+    ]
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
@@ -129,6 +139,55 @@ proptest! {
                 );
             }
             prop_assert!(set.cells().is_subset_of(&dilated));
+        }
+    }
+
+    /// Advancing within a dilation read word by word ([`ReachSet::advance_within`] with a
+    /// [`protocol::raster::WordDilation`]) leaves the set, its reach and its clock exactly as
+    /// advancing and then intersecting with the whole dilation does, through any history, on
+    /// a grid several words wide; and advancing with the scans a set remembers gives what a
+    /// set without them (rebuilt from its parts) gives.
+    #[test]
+    fn advancing_within_a_dilation_read_word_by_word_is_the_whole_grid_way(
+        events in proptest::collection::vec(wide_event(), 1..24),
+    ) {
+        let g = GroundGrid::new(40.0, 0.5); // 160 x 160 cells, 3 words a row
+        let mut whole = ReachSet::full(&g);
+        let mut local = ReachSet::full(&g);
+        let mut clock = 0.0;
+        for e in &events {
+            match e {
+                Event::Move(r) => {
+                    // A set rebuilt from its parts has no cached scans: it reads every word.
+                    let (cells, base, relative) = whole.to_parts();
+                    let mut uncached = ReachSet::from_parts(cells, base, &relative, clock)
+                        .expect("parts of the same grid");
+                    clock += r;
+                    let previous = whole.cells().dilate(&g, *r);
+                    whole.advance(clock);
+                    whole.intersect(&previous);
+                    uncached.advance(clock);
+                    uncached.intersect(&previous);
+                    prop_assert!(whole == uncached, "cached scans changed the set");
+                    let mut words = local.cells().word_dilation(&g, *r);
+                    local.advance_within(clock, |old, iy, w| words.word(old, iy, w));
+                }
+                Event::Free(b) => {
+                    let free = box_set(&g, b);
+                    whole.clear(&g, &free, b);
+                    local.clear(&g, &free, b);
+                }
+                Event::Measure(b) => {
+                    let m = box_set(&g, b);
+                    whole.restrict(&g, &m, 8);
+                    local.restrict(&g, &m, 8);
+                }
+                Event::Restore => {
+                    whole = ReachSet::from_cells_at(&g, whole.cells().clone(), clock);
+                    local = ReachSet::from_cells_at(&g, local.cells().clone(), clock);
+                }
+            }
+            prop_assert!(whole == local, "the sets differ after {:?}", e);
         }
     }
 

@@ -74,6 +74,31 @@ impl CellSet {
         out
     }
 
+    /// The disc element of [`CellSet::dilate`] by `radius` metres, for reading single words
+    /// of a dilation without building it ([`WordDilation::word`]).
+    pub fn word_dilation(&self, grid: &GroundGrid, radius: Real) -> WordDilation {
+        let d = grid.cell_m;
+        let reach = (radius + margin(radius + d)) / d;
+        let element = if radius < 0.0 || self.is_empty() {
+            Element::Identity
+        } else if !(reach.is_finite() && d > 0.0) {
+            Element::Everything
+        } else {
+            Element::Runs(row_runs(reach, self.nx, self.ny))
+        };
+        // Bits of a source row more than the widest run away from a word cannot reach it.
+        let pad = match &element {
+            Element::Runs(run) => (run[0] as usize).div_ceil(64),
+            _ => 0,
+        };
+        WordDilation {
+            element,
+            pad,
+            buffer: vec![0; 2 * pad + 1],
+            scratch: vec![0; 2 * pad + 1],
+        }
+    }
+
     /// Clears the bits past `nx` in the last word of every row.
     fn clear_tails(&mut self) {
         let used = self.nx % 64;
@@ -85,6 +110,98 @@ impl CellSet {
         for row in self.words.chunks_exact_mut(wpr) {
             row[wpr - 1] &= mask;
         }
+    }
+}
+
+/// One word at a time of the dilation of a set by a disc ([`CellSet::word_dilation`]): what
+/// [`CellSet::dilate`] would put in that word, computed from the rows and words within the
+/// disc's reach only, so that a caller who needs a few words of a dilation of a large set
+/// does not pay for the whole grid. It keeps its scratch buffers between words.
+#[derive(Clone, Debug)]
+pub struct WordDilation {
+    element: Element,
+    /// Words on each side of the word read: the reach of the widest run, plus one.
+    pad: usize,
+    buffer: Vec<u64>,
+    scratch: Vec<u64>,
+}
+
+#[derive(Clone, Debug)]
+enum Element {
+    /// A negative radius or an empty set: the set itself.
+    Identity,
+    /// A radius no cell size bounds, around a non-empty set: the whole grid.
+    Everything,
+    /// Half-widths by row offset ([`row_runs`]).
+    Runs(Vec<u32>),
+}
+
+impl WordDilation {
+    /// Word `w` of row `iy` of `set.dilate(grid, radius)`, for the `grid` and `radius` this
+    /// was made with and the `set` it was made from, unchanged since (row and word inside it).
+    pub fn word(&mut self, set: &CellSet, iy: u32, w: usize) -> u64 {
+        let tail = tail_mask(set, w);
+        let run = match &self.element {
+            Element::Identity => return set.row(iy)[w],
+            Element::Everything => return tail,
+            Element::Runs(run) => run,
+        };
+        let pad = self.pad;
+        let wpr = set.words_per_row;
+        let mut out = 0;
+        for (k, &half_width) in run.iter().enumerate() {
+            let k = k as u32;
+            let up = iy.checked_add(k).filter(|&t| t < set.ny);
+            let down = iy.checked_sub(k).filter(|_| k > 0);
+            for y in [up, down].into_iter().flatten() {
+                let row = set.row(y);
+                if pad <= 1 {
+                    // Runs of at most one word: shift the word and its two neighbours.
+                    let lo = w.checked_sub(1).map_or(0, |i| row[i]);
+                    let hi = row.get(w + 1).copied().unwrap_or(0);
+                    out |= smear_word(lo, row[w], hi, half_width);
+                    continue;
+                }
+                // The words `w - pad ..= w + pad` of the source row, 0 past its ends.
+                let mut any = false;
+                for (j, slot) in self.buffer.iter_mut().enumerate() {
+                    let src = (w + j).checked_sub(pad).filter(|&i| i < wpr);
+                    *slot = src.map_or(0, |i| row[i]);
+                    any |= *slot != 0;
+                }
+                if any {
+                    widen(&mut self.buffer, &mut self.scratch, half_width);
+                    out |= self.buffer[pad];
+                }
+            }
+        }
+        out & tail
+    }
+}
+
+/// The middle word of the three words `lo, mid, hi` (in increasing bit order) after every run
+/// of set bits grew by `by <= 64` on both sides.
+fn smear_word(lo: u64, mid: u64, hi: u64, by: u32) -> u64 {
+    if lo | mid | hi == 0 {
+        return 0;
+    }
+    let mut out = mid;
+    for s in 1..=by.min(63) {
+        out |= mid << s | lo >> (64 - s) | mid >> s | hi << (64 - s);
+    }
+    if by >= 64 {
+        out |= lo | hi;
+    }
+    out
+}
+
+/// The bits of word `w` of a row that lie on the grid.
+fn tail_mask(set: &CellSet, w: usize) -> u64 {
+    let used = set.nx as usize - (w * 64).min(set.nx as usize);
+    if used >= 64 {
+        u64::MAX
+    } else {
+        (1u64 << used) - 1
     }
 }
 

@@ -69,6 +69,14 @@ impl CellSet {
         let Some((r0, r1)) = grid.rows_touching(c.y - r, c.y + r) else {
             return;
         };
+        // Every cell filled below lies inside the disc's bounding square, so touches it: when
+        // the set already holds every cell touching the square, nothing would change (the
+        // many overlapping discs of one obstacle mostly end here).
+        if let Some((c0, c1)) = grid.columns_touching(c.x - r, c.x + r)
+            && (r0..=r1).all(|iy| self.row_span_is_full(iy, c0, c1))
+        {
+            return;
+        }
         for iy in r0..=r1 {
             let y_lo = grid.origin.y + iy as Real * grid.cell_m;
             let y_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m;

@@ -24,31 +24,24 @@ pub fn square_gap_field(window: &CellBox, seeds: &[bool]) -> Vec<u64> {
     let w = (window.x1 - window.x0 + 1) as usize;
     let h = (window.y1 - window.y0 + 1) as usize;
     assert_eq!(seeds.len(), w * h, "one seed flag per cell of the window");
-    // The seeds grown by their 8 neighbours, inside the window.
+    // The seeds grown by their horizontal neighbours, inside the window; the vertical part of
+    // the 8-neighbour growth is taken in the column distances below.
     let mut across = vec![false; w * h];
     for (src, row) in seeds.chunks_exact(w).zip(across.chunks_exact_mut(w)) {
         for x in 0..w {
             row[x] = src[x] || (x > 0 && src[x - 1]) || (x + 1 < w && src[x + 1]);
         }
     }
-    let mut grown = across.clone();
-    for y in 0..h {
-        let (row, above) = (y * w, y.checked_sub(1).map(|a| a * w));
-        let below = (y + 1 < h).then_some((y + 1) * w);
-        for x in 0..w {
-            grown[row + x] |=
-                above.is_some_and(|a| across[a + x]) || below.is_some_and(|b| across[b + x]);
-        }
-    }
-    drop(across);
 
-    // Vertical distance to the nearest grown seed in the same column, in cells: down the
-    // window, then up it.
+    // Vertical distance to the nearest grown seed in the same column, in cells: the distance
+    // `d` to the nearest `across` cell, down the window then up it, is `d - 1` (0 at most) to
+    // that cell grown by its vertical neighbours, which lie between the two rows and so in
+    // the window. A column without seeds keeps values of at least `far`.
     let far = u32::MAX / 4;
     let mut vertical = vec![far; w * h];
     for y in 0..h {
         for x in 0..w {
-            vertical[y * w + x] = if grown[y * w + x] {
+            vertical[y * w + x] = if across[y * w + x] {
                 0
             } else if y > 0 {
                 vertical[(y - 1) * w + x].saturating_add(1)
@@ -57,11 +50,17 @@ pub fn square_gap_field(window: &CellBox, seeds: &[bool]) -> Vec<u64> {
             };
         }
     }
+    drop(across);
     for y in (0..h.saturating_sub(1)).rev() {
         for x in 0..w {
             let from_below = vertical[(y + 1) * w + x].saturating_add(1);
             let v = &mut vertical[y * w + x];
             *v = (*v).min(from_below);
+        }
+    }
+    for v in &mut vertical {
+        if *v < far {
+            *v = v.saturating_sub(1);
         }
     }
 

@@ -84,11 +84,25 @@ pub struct ReachSet {
     /// (`u32::MAX` when it has none), so that [`ReachSet::advance`] visits only the words the
     /// clock can change.
     pending: Vec<u32>,
+    /// Per word of `cells`: its last scan of the reach ([`Scan`]), valid until a reach of the
+    /// word changes, so that a word the clock keeps reaching (cells held out by a bound) is not
+    /// read again while nothing in it changed.
+    scanned: Vec<Scan>,
     /// The motion clock `b` of the last [`ReachSet::advance`], metres.
     clock_m: Real,
 }
 
-/// Equal cells, reach and clock (the pending bounds are a cache).
+/// One word's last scan: the cells whose reach was at most the clock then (`hits`) and the
+/// least reach above it (`next`). While `next` is above the clock, no reach of the word lies
+/// between the two clocks, so `hits` are still the cells reached. `next == 0` marks a stale
+/// scan (no clock is below 0).
+#[derive(Clone, Copy, Debug, Default)]
+struct Scan {
+    hits: u64,
+    next: u32,
+}
+
+/// Equal cells, reach and clock (the pending bounds and the scans are caches).
 impl PartialEq for ReachSet {
     fn eq(&self, other: &Self) -> bool {
         self.cells == other.cells && self.reach == other.reach && self.clock_m == other.clock_m
@@ -109,6 +123,7 @@ impl ReachSet {
         Self {
             reach: vec![0; grid.cell_count()],
             pending: vec![u32::MAX; cells.words_per_row() * grid.ny as usize],
+            scanned: vec![Scan::default(); cells.words_per_row() * grid.ny as usize],
             cells,
             clock_m: 0.0,
         }
@@ -120,6 +135,7 @@ impl ReachSet {
         let n = cells.nx() as usize * cells.ny() as usize;
         let mut set = Self {
             pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
+            scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
             reach: vec![0; n],
             cells,
             clock_m: 0.0,
@@ -137,6 +153,7 @@ impl ReachSet {
         let n = cells.nx() as usize * cells.ny() as usize;
         let mut set = Self {
             pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
+            scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
             reach: vec![0; n],
             cells,
             clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
@@ -204,18 +221,61 @@ impl ReachSet {
                 let x0 = w * 64;
                 let x1 = (x0 + 64).min(nx);
                 let base = iy as usize * nx;
-                let mut bits = 0u64;
-                let mut next = u32::MAX;
-                for (b, &tau) in self.reach[base + x0..base + x1].iter().enumerate() {
-                    if tau <= reached {
-                        bits |= 1 << b;
-                    } else {
-                        next = next.min(tau);
-                    }
-                }
+                let (bits, next) = self.scan(slot, base + x0..base + x1, reached);
                 self.cells.row_mut(iy)[w] |= bits;
                 self.pending[slot] = next;
             }
+        }
+    }
+
+    /// [`ReachSet::advance`], then [`ReachSet::intersect`] with an outer raster `bound` of the
+    /// set's targets that holds every cell of the set (a dilation of its cells by the motion
+    /// since the last clock), given word by word: `bound(cells, iy, w)` is word `w` of row `iy`
+    /// of the raster, and `cells` are the set's cells before the advance. Only the words the
+    /// clock adds cells to are asked for, so a bound that is costly over the whole grid (a
+    /// dilation, through [`super::WordDilation`]) costs only where the set grows.
+    pub fn advance_within(
+        &mut self,
+        clock_m: Real,
+        mut bound: impl FnMut(&CellSet, u32, usize) -> u64,
+    ) {
+        if clock_m.is_nan() || clock_m <= self.clock_m {
+            return;
+        }
+        self.clock_m = clock_m;
+        let reached = reached_units(clock_m);
+        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        // Every word's new cells first, from the cells before the advance, then the bound of
+        // those words, read on the same unchanged cells.
+        let mut grown: Vec<(u32, usize, u64)> = Vec::new();
+        for iy in 0..self.cells.ny() {
+            for w in 0..wpr {
+                let slot = iy as usize * wpr + w;
+                if self.pending[slot] > reached {
+                    continue;
+                }
+                let x0 = w * 64;
+                let x1 = (x0 + 64).min(nx);
+                let base = iy as usize * nx;
+                let (bits, next) = self.scan(slot, base + x0..base + x1, reached);
+                self.pending[slot] = next;
+                let fresh = bits & !self.cells.row(iy)[w];
+                if fresh != 0 {
+                    grown.push((iy, w, fresh));
+                }
+            }
+        }
+        for &mut (iy, w, ref mut fresh) in &mut grown {
+            let keep = *fresh & bound(&self.cells, iy, w);
+            if keep != *fresh {
+                // Cells reached but outside the bound stay out: the pending bound drops to 0
+                // so that the next advance settles the word, as `intersect` does.
+                self.pending[iy as usize * wpr + w] = 0;
+            }
+            *fresh = keep;
+        }
+        for (iy, w, fresh) in grown {
+            self.cells.row_mut(iy)[w] |= fresh;
         }
     }
 
@@ -239,9 +299,11 @@ impl ReachSet {
     pub fn join(&mut self, extra: &CellSet) {
         debug_assert!(self.cells.same_shape(extra));
         let nx = self.cells.nx() as usize;
+        let wpr = self.cells.words_per_row();
         for (ix, iy) in extra.iter() {
             if !self.cells.contains((ix, iy)) {
                 self.reach[iy as usize * nx + ix as usize] = 0;
+                self.scanned[iy as usize * wpr + ix as usize / 64] = Scan::default();
             }
         }
         self.cells.or_assign(extra);
@@ -296,13 +358,14 @@ impl ReachSet {
         let mut seeds = free.window_flags(&w, false);
         let width = (w.x1 - w.x0 + 1) as usize;
         let height = seeds.len() / width;
-        for (k, seed) in seeds.iter_mut().enumerate() {
-            let (x, y) = (k % width, k / width);
-            *seed = !*seed
-                || (x == 0 && w.x0 > 0)
-                || (x + 1 == width && w.x1 + 1 < nx)
-                || (y == 0 && w.y0 > 0)
-                || (y + 1 == height && w.y1 + 1 < ny);
+        let (left, right) = (w.x0 > 0, w.x1 + 1 < nx);
+        for (y, row) in seeds.chunks_exact_mut(width).enumerate() {
+            let edge_row = (y == 0 && w.y0 > 0) || (y + 1 == height && w.y1 + 1 < ny);
+            for seed in row.iter_mut() {
+                *seed = !*seed || edge_row;
+            }
+            row[0] |= left;
+            row[width - 1] |= right;
         }
         Some((w, seeds))
     }
@@ -318,6 +381,7 @@ impl ReachSet {
         blocked: &[bool],
         field: &[u32],
     ) {
+        self.forget_scans(window);
         let nx = self.cells.nx() as usize;
         let w = (window.x1 - window.x0 + 1) as usize;
         let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
@@ -374,6 +438,7 @@ impl ReachSet {
         // f32 keeps the loop vectorised; its rounding (below 1e-6 relative) and the float to
         // integer truncation are covered by taking two units off.
         let cap = (u32::MAX - 1) as f32;
+        self.scanned.fill(Scan::default());
         for iy in 0..self.cells.ny() {
             let gy = gap_cells(iy, b.y0, b.y1);
             let gy2 = (gy * gy) as f32;
@@ -391,23 +456,50 @@ impl ReachSet {
     /// between its square and the nearest square of `inside` within the window (the caller
     /// makes sure no cell of `inside` outside the window is nearer).
     fn raise_outside(&mut self, grid: &GroundGrid, window: &CellBox, inside: &[bool]) {
+        self.forget_scans(window);
         let gaps = square_gap_field(window, inside);
         let nx = self.cells.nx() as usize;
         let w = (window.x1 - window.x0 + 1) as usize;
         let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
-        for (k, (&gap2, &seed)) in gaps.iter().zip(inside).enumerate() {
-            if seed {
-                continue;
+        let rows = gaps.chunks_exact(w).zip(inside.chunks_exact(w));
+        for (iy, (gap_row, seed_row)) in (window.y0 as usize..).zip(rows) {
+            let start = iy * nx + window.x0 as usize;
+            let reach = &mut self.reach[start..start + w];
+            for ((slot, &gap2), &seed) in reach.iter_mut().zip(gap_row).zip(seed_row) {
+                if seed {
+                    continue;
+                }
+                let tau = if gap2 == UNREACHED {
+                    u32::MAX - 1
+                } else {
+                    // Truncation is the floor here (non-negative); `as` saturates.
+                    ((gap2 as Real).sqrt() * unit + clock - UNIT_MARGIN).max(0.0) as u32
+                };
+                *slot = (*slot).max(tau.min(u32::MAX - 1));
             }
-            let tau = if gap2 == UNREACHED {
-                u32::MAX - 1
-            } else {
-                // Truncation is the floor here (non-negative); `as` saturates.
-                ((gap2 as Real).sqrt() * unit + clock - UNIT_MARGIN).max(0.0) as u32
-            };
-            let (ix, iy) = (window.x0 as usize + k % w, window.y0 as usize + k / w);
-            let slot = &mut self.reach[iy * nx + ix];
-            *slot = (*slot).max(tau.min(u32::MAX - 1));
+        }
+    }
+
+    /// The reach of the cells of word `slot` (at `range` of the reach) the clock `reached`
+    /// reaches, as bits, and the least reach above it: from the word's last scan while that
+    /// still holds, else read and remembered.
+    fn scan(&mut self, slot: usize, range: std::ops::Range<usize>, reached: u32) -> (u64, u32) {
+        let last = self.scanned[slot];
+        if last.next > reached {
+            return (last.hits, last.next);
+        }
+        let (hits, next) = reached_bits(&self.reach[range], reached);
+        self.scanned[slot] = Scan { hits, next };
+        (hits, next)
+    }
+
+    /// Marks the scans of the words of `window` stale (their reach is about to change).
+    fn forget_scans(&mut self, window: &CellBox) {
+        let wpr = self.cells.words_per_row();
+        let (w0, w1) = (window.x0 as usize / 64, window.x1 as usize / 64);
+        for iy in window.y0..=window.y1.min(self.cells.ny().saturating_sub(1)) {
+            let row = iy as usize * wpr;
+            self.scanned[row + w0..=row + w1.min(wpr - 1)].fill(Scan::default());
         }
     }
 
@@ -443,6 +535,7 @@ impl ReachSet {
         let reach: Vec<u32> = relative.iter().map(|&d| d.saturating_add(base)).collect();
         let mut set = Self {
             pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
+            scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
             cells,
             reach,
             clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
@@ -467,6 +560,19 @@ impl ReachSet {
             }
         }
     }
+}
+
+/// The cells of a word (at most 64 reach values) the clock `reached` reaches, as bits, and the
+/// least reach of the others (`u32::MAX` when none), without branches so that it vectorises.
+fn reached_bits(reach: &[u32], reached: u32) -> (u64, u32) {
+    let mut bits = 0u64;
+    let mut next = u32::MAX;
+    for (b, &tau) in reach.iter().enumerate() {
+        let hit = tau <= reached;
+        bits |= u64::from(hit) << b;
+        next = next.min(if hit { u32::MAX } else { tau });
+    }
+    (bits, next)
 }
 
 /// Whole cells strictly between index `i` and the span `lo..=hi` (0 inside or next to it).

@@ -13,10 +13,24 @@ use protocol::raster::{CellSet, ReachSet};
 /// then. Both hold the targets, so their intersection does: the reach brings the exact growth
 /// of what this UAV observed, the dilation keeps what fusion with peers removed from growing
 /// back faster than the targets can move.
+///
+/// The dilation is read only in the words the clock adds cells to ([`ReachSet::advance_within`]
+/// with a [`protocol::raster::WordDilation`]): the same sets as dilating the whole grid, at the
+/// cost of the few words where the set grows.
 pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: Real) {
-    let bound = grow(set.cells(), grid, radius_m);
-    set.advance(clock_m);
-    set.intersect(&bound);
+    // The cases of `grow`: its result, word by word.
+    let cells = set.cells();
+    if radius_m.is_nan() || radius_m <= 0.0 || cells.is_empty() {
+        set.advance_within(clock_m, |old, iy, w| old.row(iy)[w]);
+        return;
+    }
+    let diagonal = grid.cell_m * (grid.nx as Real).hypot(grid.ny as Real);
+    if radius_m >= diagonal {
+        set.advance(clock_m);
+        return;
+    }
+    let mut dilation = cells.word_dilation(grid, radius_m);
+    set.advance_within(clock_m, |old, iy, w| dilation.word(old, iy, w));
 }
 
 /// Outer set grown by the motion over `radius_m` metres: every point within `radius_m` of the

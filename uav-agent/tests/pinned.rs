@@ -1,0 +1,222 @@
+//! The estimator's results pinned bit for bit: a seeded scenario rendered by the real world,
+//! every agent's step and every fusion folded into a running digest of the sets (`X̄` and
+//! every `X_j` with their reach and clock, `S^o`, the OEM), compared with the digests recorded
+//! when the test was written. A change that makes any set differ by one cell or one reach unit
+//! at any step fails here; speed work must keep these constants.
+//!
+//! `SETFLEET_PRINT_DIGESTS=1 cargo test -p uav-agent --test pinned -- --nocapture` prints the
+//! digests a run computes (to record them after a deliberate change of the results).
+
+use protocol::frame::CvsFrame;
+use protocol::raster::{CellSet, ReachSet};
+use protocol::scenario::{Scenario, SetGrowth};
+use uav_agent::estimator::message::{self, EstimateOutbox};
+use uav_agent::estimator::{Estimator, EstimatorConfig, EstimatorState, PeerEstimate};
+use uav_agent::occupancy::OccupancyMap;
+use world_server::World;
+
+const RUN_TAG: u64 = 0x0b17_1de7;
+
+/// FNV-1a, folded word by word: stable across runs, machines and builds.
+#[derive(Clone, Copy, Debug)]
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+
+    fn word(&mut self, w: u64) {
+        self.0 = (self.0 ^ w).wrapping_mul(0x100_0000_01b3);
+    }
+}
+
+fn fold_cells(h: &mut Fnv, set: &CellSet) {
+    h.word(set.digest());
+    h.word(set.count());
+}
+
+fn fold_reach(h: &mut Fnv, set: &ReachSet) {
+    fold_cells(h, set.cells());
+    h.word(set.clock_m().to_bits());
+    let (_, base, relative) = set.to_parts();
+    h.word(u64::from(base));
+    for &r in &relative {
+        h.word(u64::from(r));
+    }
+}
+
+fn fold_map(h: &mut Fnv, map: &OccupancyMap) {
+    for ((ix, iy), cell) in map.known_cells() {
+        h.word(u64::from(ix) << 32 | u64::from(iy));
+        h.word(u64::from(cell.status.code()) << 32 | u64::from(cell.height_m.to_bits()));
+    }
+}
+
+/// The digest of one state's sets: `X̄`, every `X_j` (with its id), `S^o`, the OEM.
+fn state_digest(state: &EstimatorState) -> u64 {
+    let mut h = Fnv::new();
+    fold_reach(&mut h, &state.undetected);
+    for (id, set) in &state.targets {
+        h.word(u64::from(*id));
+        fold_reach(&mut h, set);
+    }
+    fold_cells(&mut h, &state.obstacle_free);
+    fold_map(&mut h, &state.oem);
+    h.0
+}
+
+fn scenario(seed: u64, sets: SetGrowth) -> Scenario {
+    let mut s = Scenario {
+        seed,
+        ..Scenario::default()
+    };
+    s.region.half_extent_m = 120.0;
+    s.camera.rows = 180;
+    s.camera.cols = 240;
+    s.targets.count = 8;
+    s.uavs.count = 4;
+    s.estimator.sets = sets;
+    s
+}
+
+/// What a run folded: the running digest after every `every` steps, and how many targets the
+/// fleet identified (so that the pinned run is known to measure targets).
+struct Digests {
+    chain: Vec<u64>,
+    identified: usize,
+}
+
+/// Runs every UAV's estimator over `steps` frames, the yaws swinging on a fixed schedule so
+/// that the views turn as well as move, every agent fusing every other's encoded estimate at
+/// every step. The running digest folds every agent's state after its step and after its
+/// fusion.
+fn run(scenario: &Scenario, steps: u64, every: u64) -> Digests {
+    let mut world = World::new(scenario).expect("world");
+    let config = EstimatorConfig::from_scenario(scenario);
+    let n = world.uav_count();
+    let yaw0: Vec<f64> = (0..n)
+        .map(|i| world.uav_state(i).expect("uav").yaw)
+        .collect();
+    let mut estimators: Vec<Estimator> = (0..n).map(|_| Estimator::new(config.clone())).collect();
+    let mut outboxes: Vec<EstimateOutbox> = (0..n)
+        .map(|i| EstimateOutbox::new(i as u32, 1, config.oem_full_every))
+        .collect();
+    let mut frame = CvsFrame::new_boxed();
+    let mut chain = Fnv::new();
+    let mut out = Vec::new();
+    for k in 0..steps {
+        for (i, &y) in yaw0.iter().enumerate() {
+            // Whole radians per 12 steps: exact in binary, the same everywhere.
+            let swing = if (k / 12 + i as u64).is_multiple_of(3) {
+                -1.0
+            } else {
+                ((k / 12 + i as u64) % 3) as f64 * 0.5
+            };
+            world.set_yaw_ref(i, y + swing);
+        }
+        for (i, est) in estimators.iter_mut().enumerate() {
+            world.render(i, RUN_TAG, &mut frame);
+            est.step(&frame).expect("frame accepted");
+            chain.word(state_digest(est.state()));
+        }
+        let peers: Vec<PeerEstimate> = estimators
+            .iter_mut()
+            .zip(&mut outboxes)
+            .map(|(est, outbox)| {
+                let msg = outbox.compose(est.state_mut());
+                let bytes = message::to_bytes(&msg).expect("encode");
+                PeerEstimate::from_bytes(&bytes, &config).expect("decode")
+            })
+            .collect();
+        for (i, est) in estimators.iter_mut().enumerate() {
+            for (j, peer) in peers.iter().enumerate() {
+                if i != j {
+                    est.fuse(peer);
+                }
+            }
+            chain.word(state_digest(est.state()));
+        }
+        if (k + 1).is_multiple_of(every) {
+            out.push(chain.0);
+        }
+        world.advance();
+    }
+    let identified = estimators
+        .iter()
+        .map(|e| e.state().targets.len())
+        .max()
+        .unwrap_or(0);
+    Digests {
+        chain: out,
+        identified,
+    }
+}
+
+fn check(name: &str, got: &Digests, pinned: &[u64]) {
+    if std::env::var_os("SETFLEET_PRINT_DIGESTS").is_some() {
+        let hex: Vec<String> = got.chain.iter().map(|d| format!("0x{d:016x}")).collect();
+        eprintln!(
+            "{name}: identified {}, [{}]",
+            got.identified,
+            hex.join(", ")
+        );
+    }
+    assert!(got.identified > 0, "{name}: the run identified no target");
+    for (k, (g, p)) in got.chain.iter().zip(pinned).enumerate() {
+        assert_eq!(
+            g, p,
+            "{name}: the sets differ from the pinned ones by checkpoint {k} (0x{g:016x}, pinned 0x{p:016x})"
+        );
+    }
+    assert_eq!(got.chain.len(), pinned.len(), "{name}: checkpoints");
+}
+
+#[test]
+fn reach_sets_are_the_pinned_ones() {
+    let got = run(&scenario(3, SetGrowth::Reach), 80, 10);
+    check(
+        "reach",
+        &got,
+        &[
+            0x87171f3ef12d4ea5,
+            0xcb6a1ad7ced29c4b,
+            0x6930d8df1d7571e2,
+            0x8733f31023bfd0c0,
+            0x537b2ef6fa0127b6,
+            0x713ab1b3bdcc4ad3,
+            0x0540abc0109ad701,
+            0x27482a7d3ca21df6,
+        ],
+    );
+}
+
+#[test]
+fn geodesic_sets_are_the_pinned_ones() {
+    let got = run(&scenario(4, SetGrowth::Geodesic), 40, 10);
+    check(
+        "geodesic",
+        &got,
+        &[
+            0xd6f55802e4197f05,
+            0x43be4a8517a1d750,
+            0xaa4baec984b95c05,
+            0x5079e35425f47d32,
+        ],
+    );
+}
+
+#[test]
+fn whole_cell_sets_are_the_pinned_ones() {
+    let got = run(&scenario(5, SetGrowth::Cells), 40, 10);
+    check(
+        "cells",
+        &got,
+        &[
+            0xcb4ec4391242092e,
+            0x18bc3ee3e8852ff8,
+            0x0cf66f1f074daad4,
+            0x7b4e319649b811e3,
+        ],
+    );
+}
