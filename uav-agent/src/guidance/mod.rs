@@ -44,7 +44,7 @@ use protocol::wire::PlannedView;
 pub use coarse::CoarseGrid;
 pub use ring::{TokenRing, Turn};
 pub use setfleet::SetfleetParams;
-pub use view::ObstacleCell;
+pub use view::{GroundPredictor, ObstacleCell};
 
 /// Everything about the MPC that does not change during a run.
 #[derive(Clone, Debug)]
@@ -187,6 +187,11 @@ struct Search<'a> {
     best: Option<((f64, f64), Cost, Node)>,
     sequences: usize,
     excluded: usize,
+    /// The predicted views' buffers.
+    predictor: GroundPredictor,
+    /// Whether `J` can only grow with `Φ_d` (`λ, κ >= 0`), so a leaf whose cost without it
+    /// cannot beat the best found needs no `Φ_d`.
+    bound_distance: bool,
 }
 
 /// One decision by the planner of `params` (`guidance.planner`).
@@ -205,16 +210,40 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         sets.or_assign(&params.grids.downsample(s));
     }
     let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
+    let mut predictor = GroundPredictor::new(&grid);
+    // The ground the others' views can change in a period: where the sets can be by its end
+    // (the sets only grow by the dilation of each period, so every prediction stays inside
+    // the sets dilated once per period so far).
+    let period_s = params.steps_per_period as f64 * params.dt;
+    let mut reachable = sets.clone();
+    let others_seen = (0..params.horizon)
+        .map(|period| {
+            if input.others.is_empty() {
+                return CellSet::empty(&grid);
+            }
+            reachable = reachable.dilate(&grid, params.target_max_speed * period_s);
+            seen_by_others(
+                params,
+                input.others,
+                period,
+                obstacles,
+                &mut predictor,
+                &reachable,
+            )
+        })
+        .collect();
     let mut search = Search {
         params,
-        others_seen: (0..params.horizon)
-            .map(|period| seen_by_others(params, input.others, period, obstacles))
-            .collect(),
+        others_seen,
         obstacles,
         hidden: params.grids.downsample(input.recently_hidden),
         best: None,
         sequences: 0,
         excluded: 0,
+        predictor,
+        bound_distance: [params.lambda, params.kappa]
+            .iter()
+            .all(|w| w.is_finite() && *w >= 0.0),
     };
     search.expand(&Node {
         increments: Vec::new(),
@@ -288,7 +317,15 @@ impl Search<'_> {
                     position: state.position,
                     yaw: state.yaw,
                 };
-                view::add_visible_ground(&mut seen, &grid, &params.camera, &pose, self.obstacles);
+                // Only the ground of the grown sets can change them.
+                self.predictor.add_visible_ground_within(
+                    &mut seen,
+                    &grid,
+                    &params.camera,
+                    &pose,
+                    self.obstacles,
+                    &grown,
+                );
                 poses.push(pose);
             }
             let mut sets = grown.clone();
@@ -310,7 +347,29 @@ impl Search<'_> {
         if node.stray_m > 0.0 {
             self.excluded += 1;
         }
-        let cost = cost(self.params, node, self.obstacles, &self.hidden);
+        // Branch and bound on `Φ_d`: with `λ >= 0` the total is non-decreasing in `Φ_d >= 0`
+        // (rounded additions and products are monotone), so the total with `Φ_d = 0` is a
+        // lower bound; a leaf whose bound does not beat the best cannot replace it.
+        let optimistic = terms(self.params, node, &self.hidden, 0.0);
+        if self.bound_distance
+            && self
+                .best
+                .as_ref()
+                .is_some_and(|(best, _, _)| !((node.stray_m, optimistic.total) < *best))
+        {
+            return;
+        }
+        let distance_m = match node.poses.last() {
+            Some(pose) => nearest_visible_distance(
+                self.params.planning_grid(),
+                &node.sets,
+                &self.params.camera,
+                pose,
+                self.obstacles,
+            ),
+            None => 0.0,
+        };
+        let cost = terms(self.params, node, &self.hidden, distance_m);
         // Inside the RoI (stray 0) first, then the least stray, then the cost; the strict
         // comparison keeps the first of equals.
         let key = (node.stray_m, cost.total);
@@ -320,19 +379,11 @@ impl Search<'_> {
     }
 }
 
-fn cost(
-    params: &GuidanceParams,
-    node: &Node,
-    obstacles: &[ObstacleCell],
-    hidden: &CellSet,
-) -> Cost {
+/// The cost of a leaf's sets with `Φ_d = distance_m`.
+fn terms(params: &GuidanceParams, node: &Node, hidden: &CellSet, distance_m: f64) -> Cost {
     let grid = params.planning_grid();
     let area_m2 = node.sets.count() as f64 * grid.cell_area();
     let hidden_m2 = node.sets.intersection_count(hidden) as f64 * grid.cell_area();
-    let distance_m = match node.poses.last() {
-        Some(pose) => nearest_visible_distance(grid, &node.sets, &params.camera, pose, obstacles),
-        None => 0.0,
-    };
     Cost {
         area_m2,
         distance_m,
@@ -348,12 +399,15 @@ fn stray(region: &Rect, p: &Point3) -> f64 {
     dx.max(dy)
 }
 
-/// Ground seen in `period` by the UAVs that decided before (from their predicted poses).
+/// Ground of `relevant` seen in `period` by the UAVs that decided before (from their
+/// predicted poses).
 fn seen_by_others(
     params: &GuidanceParams,
     others: &[PlannedView],
     period: u32,
     obstacles: &[ObstacleCell],
+    predictor: &mut GroundPredictor,
+    relevant: &CellSet,
 ) -> CellSet {
     let grid = *params.planning_grid();
     let mut seen = CellSet::empty(&grid);
@@ -362,7 +416,14 @@ fn seen_by_others(
     for view in others {
         for pose in view.poses.get(range.clone()).unwrap_or(&[]) {
             if pose.position.iter().all(|v| v.is_finite()) && pose.yaw.is_finite() {
-                view::add_visible_ground(&mut seen, &grid, &params.camera, pose, obstacles);
+                predictor.add_visible_ground_within(
+                    &mut seen,
+                    &grid,
+                    &params.camera,
+                    pose,
+                    obstacles,
+                    relevant,
+                );
             }
         }
     }

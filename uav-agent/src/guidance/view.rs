@@ -111,6 +111,97 @@ pub fn add_visible_ground(
     seen.or_assign(&visible);
 }
 
+/// Predicts the ground cameras at planned poses will see, but only on the ground a caller
+/// cares about (the cells of the predicted sets: a view only changes the sets where they
+/// are), with buffers reused from one pose to the next.
+///
+/// [`GroundPredictor::add_visible_ground_within`] adds exactly the cells of `relevant` that
+/// [`add_visible_ground`] adds: the shadows are rasterised only on the rows where the field of
+/// view holds relevant cells not yet shadowed, so a pose whose footprint misses the sets costs
+/// its footprint's raster and nothing more.
+#[derive(Clone, Debug)]
+pub struct GroundPredictor {
+    /// The relevant visible cells of the pose being predicted; empty between calls.
+    visible: CellSet,
+    /// The shadows of the pose being predicted; empty between calls.
+    shadows: CellSet,
+}
+
+impl GroundPredictor {
+    /// A predictor for sets on `grid`.
+    pub fn new(grid: &GroundGrid) -> Self {
+        Self {
+            visible: CellSet::empty(grid),
+            shadows: CellSet::empty(grid),
+        }
+    }
+
+    /// Adds to `seen` the cells of `relevant` that [`add_visible_ground`] would add to it.
+    /// `seen` and `relevant` must lie on `grid`, the grid the predictor was made for.
+    pub fn add_visible_ground_within(
+        &mut self,
+        seen: &mut CellSet,
+        grid: &GroundGrid,
+        model: &CameraModel,
+        pose: &CameraPose,
+        obstacles: &[ObstacleCell],
+        relevant: &CellSet,
+    ) {
+        if !(self.visible.same_shape(relevant) && seen.same_shape(relevant)) {
+            // Not the grid the buffers were made for: start afresh rather than mix shapes.
+            *self = Self::new(grid);
+        }
+        let camera = Camera::new(*model, *pose);
+        let Some(footprint) = camera.image_ground_footprint() else {
+            return;
+        };
+        let fov_box = bbox(&footprint);
+        // The inner raster of the footprint lies in these rows (widened by a cell: the
+        // buffers are cleared over them afterwards).
+        let Some((r0, r1)) =
+            grid.rows_touching(fov_box.min.y - grid.cell_m, fov_box.max.y + grid.cell_m)
+        else {
+            return;
+        };
+        self.visible
+            .fill_convex_polygon_rows(grid, &footprint, Coverage::Inner, (r0, r1));
+        let mut any_relevant = false;
+        for y in r0..=r1 {
+            for (v, r) in self.visible.row_mut(y).iter_mut().zip(relevant.row(y)) {
+                *v &= r;
+                any_relevant |= *v != 0;
+            }
+        }
+        if !any_relevant {
+            return;
+        }
+        let mut shadowed: Option<(u32, u32)> = None;
+        for o in obstacles {
+            if let Some(b) = shadow_bounds(&pose.position, o)
+                && overlaps(&b, &fov_box)
+                && let Some(rows) = rows_to_cover(grid, &b, &self.visible, &self.shadows)
+                && let Some(hull) = shadow(&pose.position, o)
+            {
+                self.shadows
+                    .fill_convex_polygon_rows(grid, &hull, Coverage::Outer, rows);
+                shadowed = Some(shadowed.map_or(rows, |(a, b)| (a.min(rows.0), b.max(rows.1))));
+            }
+        }
+        for y in r0..=r1 {
+            let (v, s) = (self.visible.row_mut(y), self.shadows.row(y));
+            for ((out, v), s) in seen.row_mut(y).iter_mut().zip(v.iter_mut()).zip(s) {
+                *out |= *v & !s;
+                *v = 0;
+            }
+        }
+        if let Some((a, b)) = shadowed {
+            for y in a..=b.min(grid.ny.saturating_sub(1)) {
+                self.shadows.row_mut(y).fill(0);
+            }
+        }
+    }
+}
+
 /// The first and last rows where the outer raster of a polygon whose vertices lie in
 /// `bounds` may hold a cell of `visible` not yet in `shadows`: `None` when it holds none, every
 /// row when it cannot tell (non-finite bounds).
