@@ -367,6 +367,42 @@ mod tests {
             add_visible_ground_every_shadow(&mut reference, &grid, &model, &pose, &obstacles);
             prop_assert_eq!(fast, reference);
         }
+
+        /// The predictor adds exactly the relevant cells of the full prediction, pose after
+        /// pose with the same buffers (so nothing is left over from a previous pose).
+        #[test]
+        fn the_predictor_adds_the_relevant_part_of_the_view(
+            poses in proptest::collection::vec(
+                (-100.0f64..100.0, -100.0f64..100.0, 20.0f64..80.0, -4.0f64..4.0),
+                1..5,
+            ),
+            discs in proptest::collection::vec((-150.0f64..150.0, -150.0f64..150.0, 0.0f64..80.0), 0..4),
+            obstacles in proptest::collection::vec(obstacle_strategy(), 0..120),
+        ) {
+            let mut s = Scenario::default();
+            s.region.half_extent_m = 150.0;
+            let model = s.camera_model();
+            let grid = super::super::CoarseGrid::new(s.grid()).coarse;
+            let mut relevant = CellSet::empty(&grid);
+            for (x, y, r) in discs {
+                relevant.fill_disc(&grid, Point2::new(x, y), r, Coverage::Outer);
+            }
+            let mut predictor = GroundPredictor::new(&grid);
+            for (x, y, z, yaw) in poses {
+                let pose = CameraPose {
+                    position: Point3::new(x, y, z),
+                    yaw,
+                };
+                let mut within = CellSet::empty(&grid);
+                predictor.add_visible_ground_within(
+                    &mut within, &grid, &model, &pose, &obstacles, &relevant,
+                );
+                let mut reference = CellSet::empty(&grid);
+                add_visible_ground(&mut reference, &grid, &model, &pose, &obstacles);
+                reference.and_assign(&relevant);
+                prop_assert_eq!(within, reference);
+            }
+        }
     }
 
     #[test]
