@@ -30,11 +30,12 @@
 
 pub mod coarse;
 pub mod ring;
+mod search;
 pub mod setfleet;
 pub mod view;
 
 use protocol::camera::{CameraModel, CameraPose};
-use protocol::flight::{self, UavState};
+use protocol::flight::UavState;
 use protocol::grid::{GroundGrid, Rect};
 use protocol::math::{Point2, Point3};
 use protocol::raster::CellSet;
@@ -165,35 +166,6 @@ pub struct Decision {
     pub excluded: usize,
 }
 
-/// A sequence being expanded: its increments so far, the predicted poses and the predicted
-/// planning set after the periods decided so far.
-#[derive(Clone)]
-struct Node {
-    increments: Vec<f64>,
-    state: UavState,
-    poses: Vec<CameraPose>,
-    sets: CellSet,
-    stray_m: f64,
-}
-
-/// The exhaustive search over `U^h`, sharing the work of common prefixes.
-struct Search<'a> {
-    params: &'a GuidanceParams,
-    /// Ground the UAVs ahead in the token will see, per period.
-    others_seen: Vec<CellSet>,
-    obstacles: &'a [ObstacleCell],
-    hidden: CellSet,
-    /// The best leaf so far, keyed by (distance strayed out of the RoI, cost).
-    best: Option<((f64, f64), Cost, Node)>,
-    sequences: usize,
-    excluded: usize,
-    /// The predicted views' buffers.
-    predictor: GroundPredictor,
-    /// Whether `J` can only grow with `Φ_d` (`λ, κ >= 0`), so a leaf whose cost without it
-    /// cannot beat the best found needs no `Φ_d`.
-    bound_distance: bool,
-}
-
 /// One decision by the planner of `params` (`guidance.planner`).
 pub fn decide(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     match params.planner {
@@ -202,60 +174,10 @@ pub fn decide(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     }
 }
 
-/// Picks the best sequence of yaw increments (docs/design.md §4): the paper's MPC.
+/// Picks the best sequence of yaw increments (docs/design.md §4): the paper's MPC, by the
+/// branch and bound of [`search`].
 pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
-    let grid = *params.planning_grid();
-    let mut sets = CellSet::empty(&grid);
-    for s in input.sets {
-        sets.or_assign(&params.grids.downsample(s));
-    }
-    let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
-    let mut predictor = GroundPredictor::new(&grid);
-    // The ground the others' views can change in a period: where the sets can be by its end
-    // (the sets only grow by the dilation of each period, so every prediction stays inside
-    // the sets dilated once per period so far).
-    let period_s = params.steps_per_period as f64 * params.dt;
-    let mut reachable = sets.clone();
-    let others_seen = (0..params.horizon)
-        .map(|period| {
-            if input.others.is_empty() {
-                return CellSet::empty(&grid);
-            }
-            reachable = reachable.dilate(&grid, params.target_max_speed * period_s);
-            seen_by_others(
-                params,
-                input.others,
-                period,
-                obstacles,
-                &mut predictor,
-                &reachable,
-            )
-        })
-        .collect();
-    let mut search = Search {
-        params,
-        others_seen,
-        obstacles,
-        hidden: params.grids.downsample(input.recently_hidden),
-        best: None,
-        sequences: 0,
-        excluded: 0,
-        predictor,
-        bound_distance: [params.lambda, params.kappa]
-            .iter()
-            .all(|w| w.is_finite() && *w >= 0.0),
-    };
-    search.expand(&Node {
-        increments: Vec::new(),
-        state: input.state,
-        poses: Vec::new(),
-        sets,
-        stray_m: 0.0,
-    });
-    let best = search
-        .best
-        .map(|(_, cost, node)| (node.increments, cost, node.poses));
-    decision(input, best, search.sequences, search.excluded)
+    search::plan(params, input)
 }
 
 /// The decision for the best sequence found (increments, cost, poses), or holding the yaw
@@ -286,109 +208,6 @@ fn decision(
         },
         sequences,
         excluded,
-    }
-}
-
-impl Search<'_> {
-    fn expand(&mut self, node: &Node) {
-        let params = self.params;
-        let grid = *params.planning_grid();
-        let period = node.increments.len();
-        if period == params.horizon as usize {
-            self.leaf(node);
-            return;
-        }
-        let period_s = params.steps_per_period as f64 * params.dt;
-        let mut grown = node.sets.dilate(&grid, params.target_max_speed * period_s);
-        if let Some(seen) = self.others_seen.get(period) {
-            grown.and_not_assign(seen);
-        }
-        for &u in &params.increments {
-            let yaw_ref = node.state.yaw + u;
-            let mut state = node.state;
-            let mut poses = node.poses.clone();
-            let mut seen = CellSet::empty(&grid);
-            let mut stray_m = node.stray_m;
-            for _ in 0..params.steps_per_period {
-                state =
-                    flight::advance(state, yaw_ref, params.dt, params.speed, params.max_yaw_rate);
-                stray_m = stray_m.max(stray(&params.region, &state.position));
-                let pose = CameraPose {
-                    position: state.position,
-                    yaw: state.yaw,
-                };
-                // Only the ground of the grown sets can change them.
-                self.predictor.add_visible_ground_within(
-                    &mut seen,
-                    &grid,
-                    &params.camera,
-                    &pose,
-                    self.obstacles,
-                    &grown,
-                );
-                poses.push(pose);
-            }
-            let mut sets = grown.clone();
-            sets.and_not_assign(&seen);
-            let mut increments = node.increments.clone();
-            increments.push(u);
-            self.expand(&Node {
-                increments,
-                state,
-                poses,
-                sets,
-                stray_m,
-            });
-        }
-    }
-
-    fn leaf(&mut self, node: &Node) {
-        self.sequences += 1;
-        if node.stray_m > 0.0 {
-            self.excluded += 1;
-        }
-        // Branch and bound on `Φ_d`: with `λ >= 0` the total is non-decreasing in `Φ_d >= 0`
-        // (rounded additions and products are monotone), so the total with `Φ_d = 0` is a
-        // lower bound; a leaf whose bound does not beat the best cannot replace it.
-        let optimistic = terms(self.params, node, &self.hidden, 0.0);
-        if self.bound_distance
-            && self
-                .best
-                .as_ref()
-                .is_some_and(|(best, _, _)| !((node.stray_m, optimistic.total) < *best))
-        {
-            return;
-        }
-        let distance_m = match node.poses.last() {
-            Some(pose) => nearest_visible_distance(
-                self.params.planning_grid(),
-                &node.sets,
-                &self.params.camera,
-                pose,
-                self.obstacles,
-            ),
-            None => 0.0,
-        };
-        let cost = terms(self.params, node, &self.hidden, distance_m);
-        // Inside the RoI (stray 0) first, then the least stray, then the cost; the strict
-        // comparison keeps the first of equals.
-        let key = (node.stray_m, cost.total);
-        if self.best.as_ref().is_none_or(|(best, _, _)| key < *best) {
-            self.best = Some((key, cost, node.clone()));
-        }
-    }
-}
-
-/// The cost of a leaf's sets with `Φ_d = distance_m`.
-fn terms(params: &GuidanceParams, node: &Node, hidden: &CellSet, distance_m: f64) -> Cost {
-    let grid = params.planning_grid();
-    let area_m2 = node.sets.count() as f64 * grid.cell_area();
-    let hidden_m2 = node.sets.intersection_count(hidden) as f64 * grid.cell_area();
-    Cost {
-        area_m2,
-        distance_m,
-        hidden_m2,
-        total: area_m2 + params.lambda * distance_m + params.kappa * hidden_m2,
     }
 }
 
@@ -498,6 +317,7 @@ fn ring_cells(cx: i64, cy: i64, ring: i64) -> impl Iterator<Item = (i64, i64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use protocol::flight;
     use protocol::raster::Coverage;
 
     fn scenario() -> Scenario {
@@ -788,7 +608,7 @@ mod tests {
                 lo + (hi - lo) * (state >> 11) as f64 / (1u64 << 53) as f64
             };
             let fine = &params.grids.fine;
-            let mut disc = |lo: f64, hi: f64, uniform: &mut dyn FnMut(f64, f64) -> f64| {
+            let disc = |lo: f64, hi: f64, uniform: &mut dyn FnMut(f64, f64) -> f64| {
                 let (x, y, r) = (
                     uniform(-150.0, 150.0),
                     uniform(-150.0, 150.0),
@@ -822,7 +642,7 @@ mod tests {
                     }
                 })
                 .collect();
-            let mut flown = |uniform: &mut dyn FnMut(f64, f64) -> f64| {
+            let flown = |uniform: &mut dyn FnMut(f64, f64) -> f64| {
                 let mut state = UavState {
                     position: Point3::new(
                         uniform(-145.0, 145.0),

@@ -136,33 +136,54 @@ impl GroundPredictor {
         }
     }
 
-    /// Adds to `seen` the cells of `relevant` that [`add_visible_ground`] would add to it.
-    /// `seen` and `relevant` must lie on `grid`, the grid the predictor was made for.
-    pub fn add_visible_ground_within(
+    /// Adds to `seen` the cells of `relevant` in the field of view of a camera at `pose`
+    /// before any building hides them: a superset of what
+    /// [`GroundPredictor::add_visible_ground_within`] adds, for a fraction of its time.
+    pub fn add_footprint_within(
         &mut self,
         seen: &mut CellSet,
         grid: &GroundGrid,
         model: &CameraModel,
         pose: &CameraPose,
-        obstacles: &[ObstacleCell],
         relevant: &CellSet,
     ) {
-        if !(self.visible.same_shape(relevant) && seen.same_shape(relevant)) {
+        if !seen.same_shape(relevant) {
+            return;
+        }
+        if let Some((r0, r1, _)) = self.relevant_footprint(grid, model, pose, relevant) {
+            for y in r0..=r1 {
+                for (out, v) in seen.row_mut(y).iter_mut().zip(self.visible.row_mut(y)) {
+                    *out |= *v;
+                    *v = 0;
+                }
+            }
+        }
+    }
+
+    /// Rasterises into `visible` the cells of `relevant` in the field of view (inner cells),
+    /// and returns the rows it may have written and the footprint's bounding box; `None` when
+    /// it wrote nothing.
+    fn relevant_footprint(
+        &mut self,
+        grid: &GroundGrid,
+        model: &CameraModel,
+        pose: &CameraPose,
+        relevant: &CellSet,
+    ) -> Option<(u32, u32, Rect)> {
+        if (relevant.nx(), relevant.ny()) != (grid.nx, grid.ny) {
+            return None;
+        }
+        if !self.visible.same_shape(relevant) {
             // Not the grid the buffers were made for: start afresh rather than mix shapes.
             *self = Self::new(grid);
         }
         let camera = Camera::new(*model, *pose);
-        let Some(footprint) = camera.image_ground_footprint() else {
-            return;
-        };
+        let footprint = camera.image_ground_footprint()?;
         let fov_box = bbox(&footprint);
         // The inner raster of the footprint lies in these rows (widened by a cell: the
-        // buffers are cleared over them afterwards).
-        let Some((r0, r1)) =
-            grid.rows_touching(fov_box.min.y - grid.cell_m, fov_box.max.y + grid.cell_m)
-        else {
-            return;
-        };
+        // buffer is cleared over them afterwards).
+        let (r0, r1) =
+            grid.rows_touching(fov_box.min.y - grid.cell_m, fov_box.max.y + grid.cell_m)?;
         self.visible
             .fill_convex_polygon_rows(grid, &footprint, Coverage::Inner, (r0, r1));
         let mut any_relevant = false;
@@ -172,9 +193,26 @@ impl GroundPredictor {
                 any_relevant |= *v != 0;
             }
         }
-        if !any_relevant {
+        any_relevant.then_some((r0, r1, fov_box))
+    }
+
+    /// Adds to `seen` the cells of `relevant` that [`add_visible_ground`] would add to it.
+    /// `seen` and `relevant` must lie on `grid` (nothing is added when their shapes differ).
+    pub fn add_visible_ground_within(
+        &mut self,
+        seen: &mut CellSet,
+        grid: &GroundGrid,
+        model: &CameraModel,
+        pose: &CameraPose,
+        obstacles: &[ObstacleCell],
+        relevant: &CellSet,
+    ) {
+        if !seen.same_shape(relevant) {
             return;
         }
+        let Some((r0, r1, fov_box)) = self.relevant_footprint(grid, model, pose, relevant) else {
+            return;
+        };
         let mut shadowed: Option<(u32, u32)> = None;
         for o in obstacles {
             if let Some(b) = shadow_bounds(&pose.position, o)
