@@ -23,6 +23,10 @@
 //! it, the one that strays least is taken. Ties keep the first sequence in lexicographic
 //! order of the increments, so decisions are deterministic.
 //!
+//! The search is a branch and bound (`search`) that decides exactly as the plain enumeration:
+//! sequences are costed in order of a lower bound (their sets predicted without shadows) and
+//! the visit stops when no bound can beat the best cost.
+//!
 //! Choices where docs/design.md and the paper are silent: fields of view are swept at every CVS
 //! step of a period (not only at its end), since the camera sees at every step; `Φ_d` is
 //! measured from the point the optical axis meets the ground, which is what the camera looks

@@ -26,7 +26,7 @@ use protocol::raster::CellSet;
 
 use super::{
     Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
-    nearest_visible_distance, seen_by_others, stray,
+    nearest_visible_distance, seen_by_others, stray, view,
 };
 
 /// A sequence, simulated, with the lower bound of its cost.
@@ -63,7 +63,7 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
     for s in input.sets {
         sets.or_assign(&params.grids.downsample(s));
     }
-    let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
+    let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
     let mut predictor = GroundPredictor::new(&grid);
     // The ground the others' views can change in a period: where the sets can be by its end
     // (the sets only grow by the dilation of each period, so every prediction stays inside

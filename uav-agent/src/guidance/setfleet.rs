@@ -99,7 +99,7 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
             targets.or_assign(&coarse);
         }
     }
-    let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
+    let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
     let hidden = grids.downsample(input.recently_hidden);
     let depth = sp.lookahead_periods.max(1) as usize;
     let per = params.steps_per_period as usize;

@@ -240,6 +240,15 @@ impl GroundPredictor {
     }
 }
 
+/// The obstacles, tallest first: the predicted views are the same in any order (a union of
+/// shadows is taken away), but tall buildings cast the long shadows that cover those of the
+/// low ones, so that more of the low ones are skipped as changing nothing.
+pub fn tallest_first(obstacles: &[ObstacleCell]) -> Vec<ObstacleCell> {
+    let mut sorted = obstacles.to_vec();
+    sorted.sort_by(|a, b| b.height_m.total_cmp(&a.height_m));
+    sorted
+}
+
 /// The first and last rows where the outer raster of a polygon whose vertices lie in
 /// `bounds` may hold a cell of `visible` not yet in `shadows`: `None` when it holds none, every
 /// row when it cannot tell (non-finite bounds).
