@@ -711,7 +711,9 @@ mod tests {
         let period_s = params.steps_per_period as f64 * params.dt;
         let n = params.increments.len();
         let h = params.horizon as usize;
-        let mut best: Option<((f64, f64), Cost, Vec<f64>, Vec<CameraPose>)> = None;
+        // The best so far: (stray, J), its cost, increments and poses.
+        type Best = ((f64, f64), Cost, Vec<f64>, Vec<CameraPose>);
+        let mut best: Option<Best> = None;
         let (mut sequences, mut excluded) = (0, 0);
         for index in 0..n.pow(h as u32) {
             // The digits of `index` in base |U|, the first period's the most significant.

@@ -123,25 +123,18 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
             grown: None,
         },
     );
-    // The best so far: (stray, J, path), its cost and its leaf.
-    let mut best: Option<((f64, f64, &[usize]), Cost, &Leaf)> = None;
+    // The best so far: its key, its cost and its leaf.
+    let mut best: Option<(Key<'_>, Cost, &Leaf)> = None;
     for leaf in &leaves {
-        if bounded
-            && best
-                .as_ref()
-                .is_some_and(|(key, ..)| !((leaf.stray_m, leaf.bound, &leaf.path[..]) < *key))
-        {
+        let best_key = best.as_ref().map(|(key, ..)| key);
+        if bounded && !beats((leaf.stray_m, leaf.bound, &leaf.path), best_key) {
             break;
         }
         let Some(sets) = search.exact_sets(&mut exact, &leaf.path) else {
             continue;
         };
         let optimistic = terms(params, sets, &search.hidden, 0.0);
-        if bounded
-            && best
-                .as_ref()
-                .is_some_and(|(key, ..)| !((leaf.stray_m, optimistic.total, &leaf.path[..]) < *key))
-        {
+        if bounded && !beats((leaf.stray_m, optimistic.total, &leaf.path), best_key) {
             continue;
         }
         let distance_m = match leaf.poses.last() {
@@ -156,7 +149,7 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
         };
         let cost = terms(params, sets, &search.hidden, distance_m);
         let key = (leaf.stray_m, cost.total, &leaf.path[..]);
-        if best.as_ref().is_none_or(|(b, ..)| key < *b) {
+        if beats(key, best.as_ref().map(|(key, ..)| key)) {
             best = Some((key, cost, leaf));
         }
     }
@@ -165,6 +158,15 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
         (increments, cost, leaf.poses.clone())
     });
     decision(input, best, sequences, excluded)
+}
+
+/// A sequence's rank: how far it strays out of the RoI, `J` (or a bound of it), and the
+/// indices of its increments.
+type Key<'p> = (f64, f64, &'p [usize]);
+
+/// Whether `key` ranks strictly before `best` (always, when there is no best yet).
+fn beats(key: Key<'_>, best: Option<&Key<'_>>) -> bool {
+    best.is_none_or(|b| key < *b)
 }
 
 /// How far the targets can go in a guidance period, m.
