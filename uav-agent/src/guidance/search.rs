@@ -130,6 +130,15 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
         if bounded && !beats((leaf.stray_m, leaf.bound, &leaf.path), best_key) {
             break;
         }
+        // Once the true sets of its prefix are known, a sequence's bound tightens to its last
+        // period's views without shadows taken from them.
+        if bounded
+            && search
+                .tighter_bound(&mut exact, leaf)
+                .is_some_and(|bound| !beats((leaf.stray_m, bound, &leaf.path), best_key))
+        {
+            continue;
+        }
         let Some(sets) = search.exact_sets(&mut exact, &leaf.path) else {
             continue;
         };
@@ -260,6 +269,46 @@ impl Search<'_> {
         }
     }
 
+    /// The sets `sets` at the start of `period` grown over it, less what the UAVs ahead will
+    /// see in it.
+    fn grow(&self, sets: &CellSet, period: usize) -> CellSet {
+        let mut grown = sets.dilate(self.params.planning_grid(), growth_m(self.params));
+        if let Some(seen) = self.others_seen.get(period) {
+            grown.and_not_assign(seen);
+        }
+        grown
+    }
+
+    /// The bound of `leaf` from the true sets of its prefix, if they are known: its last
+    /// period's views without shadows taken from them.
+    fn tighter_bound(
+        &mut self,
+        exact: &mut BTreeMap<Vec<usize>, Exact>,
+        leaf: &Leaf,
+    ) -> Option<f64> {
+        let params = self.params;
+        let grid = *params.planning_grid();
+        let k = leaf.path.len().checked_sub(1)?;
+        let parent = exact.get_mut(&leaf.path[..k])?;
+        let grown = parent
+            .grown
+            .get_or_insert_with(|| self.grow(&parent.sets, k));
+        let poses = leaf.poses.get(k * params.steps_per_period as usize..)?;
+        let mut footprints = CellSet::empty(&grid);
+        for pose in poses {
+            self.predictor.add_footprint_within(
+                &mut footprints,
+                &grid,
+                &params.camera,
+                pose,
+                grown,
+            );
+        }
+        let mut sets = grown.clone();
+        sets.and_not_assign(&footprints);
+        Some(terms(params, &sets, &self.hidden, 0.0).total)
+    }
+
     /// The true predicted sets at the end of the prefix `path`, computed (with those of its
     /// own prefixes) the first time they are asked for; `None` only for a path that leaves
     /// `U`.
@@ -279,13 +328,9 @@ impl Search<'_> {
             let Some(parent) = exact.get_mut(&path[..k]) else {
                 break;
             };
-            let grown = parent.grown.get_or_insert_with(|| {
-                let mut g = parent.sets.dilate(&grid, growth_m(params));
-                if let Some(seen) = self.others_seen.get(k) {
-                    g.and_not_assign(seen);
-                }
-                g
-            });
+            let grown = parent
+                .grown
+                .get_or_insert_with(|| self.grow(&parent.sets, k));
             let mut poses = Vec::new();
             let Some(&u) = params.increments.get(path[k]) else {
                 break;
