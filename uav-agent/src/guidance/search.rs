@@ -11,8 +11,10 @@
 //! 2. **Exact costs, best bound first.** Sequences are visited by (stray, bound, order of the
 //!    increments); the true sets of a prefix (views less the shadows of known buildings,
 //!    rasterised only on the ground of the sets) are computed once, when the first sequence
-//!    through it is. The visit stops at the first sequence whose bound cannot beat the best
-//!    cost found: the rest cannot either.
+//!    through it is. A sequence whose prefix is known is bounded again from the prefix's true
+//!    sets and its last period's views without shadows, and skipped if that cannot win; `Φ_d`
+//!    is computed only when the rest of `J` can still win. The visit stops at the first
+//!    sequence whose bound cannot beat the best cost found: the rest cannot either.
 //!
 //! The winner is the least (stray, `J`, order) sequence, which is the plain enumeration's:
 //! it keeps the first in order of the least (stray, `J`). With a negative or non-finite
