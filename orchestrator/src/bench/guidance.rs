@@ -205,7 +205,7 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
     if let Some(s) = Stats::from_samples(&obstacle_cells) {
         sum.insert("obstacle_cells_median".into(), s.median.into());
     }
-    sum.insert("goal_decision_ms_median".into(), 20.0.into());
+    sum.insert("goal_decision_ms_median".into(), 5.0.into());
     Ok(report)
 }
 

@@ -47,7 +47,10 @@ use protocol::math::Point2;
 use protocol::raster::CellSet;
 use protocol::wire::PlannedView;
 
-use super::{Cost, Decision, GuidanceParams, ObstacleCell, PlanningInput, decision, stray, view};
+use super::{
+    Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision, stray,
+    view,
+};
 
 /// The `setfleet` planner's own settings (from `[guidance]`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -96,18 +99,34 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
             targets.or_assign(&coarse);
         }
     }
-    let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
+    let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
     let hidden = grids.downsample(input.recently_hidden);
     let depth = sp.lookahead_periods.max(1) as usize;
     let per = params.steps_per_period as usize;
+    let period_s = params.steps_per_period as f64 * params.dt;
+    let reach = |d: usize| (params.target_max_speed * period_s * d as f64 / grid.cell_m).floor();
+    let mut predictor = GroundPredictor::new(&grid);
+    // The ground the others' views can change in period `d`: where the sets can be by then,
+    // the initial sets grown by every ring added so far (the predictions only lose cells
+    // besides).
+    let mut reachable = undetected.clone();
+    reachable.or_assign(&targets);
     let others_seen: Vec<CellSet> = (0..depth)
         .map(|d| {
+            if input.others.is_empty() {
+                return CellSet::empty(&grid);
+            }
+            for _ in 0..(reach(d + 1) - reach(d)) as usize {
+                reachable = reachable.dilate(&grid, 0.0);
+            }
             seen_by_others(
                 params,
                 &grid,
                 input.others,
                 d * per..(d + 1) * per,
                 obstacles,
+                &mut predictor,
+                &reachable,
             )
         })
         .collect();
@@ -132,8 +151,6 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     }
     let distance = DistanceMap::new(&grid, &attractive);
     let fov_area = footprint_area(params, &input.state);
-    let period_s = params.steps_per_period as f64 * params.dt;
-    let reach = |d: usize| (params.target_max_speed * period_s * d as f64 / grid.cell_m).floor();
     let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
     let value = |u: &CellSet, t: &CellSet| {
         let area = u.count() as f64 + sp.target_weight * t.count() as f64;
@@ -172,6 +189,9 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
             }
             u0.and_not_assign(seen_ahead);
             t0.and_not_assign(seen_ahead);
+            // Only the ground of the grown sets can change them.
+            let mut relevant = u0.clone();
+            relevant.or_assign(&t0);
             for &inc in &params.increments {
                 let yaw_ref = node.state.yaw + inc;
                 let mut state = node.state;
@@ -191,7 +211,14 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
                         position: state.position,
                         yaw: state.yaw,
                     };
-                    view::add_visible_ground(&mut seen, &grid, &params.camera, &pose, obstacles);
+                    predictor.add_visible_ground_within(
+                        &mut seen,
+                        &grid,
+                        &params.camera,
+                        &pose,
+                        obstacles,
+                        &relevant,
+                    );
                     poses.push(pose);
                 }
                 let mut u = u0.clone();
@@ -254,14 +281,16 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     decision(input, best, sequences, excluded)
 }
 
-/// Ground the UAVs ahead in the token will see during the CVS steps `steps` of this horizon
-/// (as much of it as their plans cover).
+/// Ground of `relevant` the UAVs ahead in the token will see during the CVS steps `steps` of
+/// this horizon (as much of it as their plans cover).
 fn seen_by_others(
     params: &GuidanceParams,
     grid: &GroundGrid,
     others: &[PlannedView],
     steps: std::ops::Range<usize>,
     obstacles: &[ObstacleCell],
+    predictor: &mut GroundPredictor,
+    relevant: &CellSet,
 ) -> CellSet {
     let mut seen = CellSet::empty(grid);
     for view in others {
@@ -269,7 +298,14 @@ fn seen_by_others(
         let start = steps.start.min(end);
         for pose in &view.poses[start..end] {
             if pose.position.iter().all(|v| v.is_finite()) && pose.yaw.is_finite() {
-                view::add_visible_ground(&mut seen, grid, &params.camera, pose, obstacles);
+                predictor.add_visible_ground_within(
+                    &mut seen,
+                    grid,
+                    &params.camera,
+                    pose,
+                    obstacles,
+                    relevant,
+                );
             }
         }
     }
