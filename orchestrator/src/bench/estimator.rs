@@ -379,7 +379,7 @@ pub fn run(config: &BenchEstimatorConfig) -> anyhow::Result<BenchReport> {
     sum.insert("uavs".into(), sim.uav_count().into());
     sum.insert("steps".into(), config.steps.into());
     sum.insert("warm_up_steps".into(), config.warm_up.into());
-    sum.insert("goal_step_ms_median".into(), 10.0.into());
+    sum.insert("goal_step_ms_median".into(), 5.0.into());
     sum.insert("goal_message_bytes".into(), (64 * 1024).into());
     Ok(report)
 }
