@@ -2,14 +2,16 @@
 //! every agent (and after fusing the agents' estimates), every target is in `X̄`, every
 //! identified target is in its `X_j`, and no proven-free cell (`P^g`, `S^o`) holds a target.
 
+mod common;
+
 use protocol::frame::CvsFrame;
 use protocol::grid::GroundGrid;
 use protocol::math::Point2;
 use protocol::scenario::Scenario;
 use protocol::wire::TruthState;
 use uav_agent::estimator::measure::{self, FrameView};
-use uav_agent::estimator::message::{self, EstimateOutbox};
-use uav_agent::estimator::{Estimator, EstimatorConfig, EstimatorState, PeerEstimate};
+use uav_agent::estimator::message::EstimateOutbox;
+use uav_agent::estimator::{Estimator, EstimatorConfig, EstimatorState};
 use world_server::World;
 
 const RUN_TAG: u64 = 0x5e7f_1ee7;
@@ -131,15 +133,7 @@ fn run(scenario: &Scenario, steps: u64, fuse: bool) -> Outcome {
             checks += check_state(&config.grid, est.state(), &truth, &context);
         }
         if fuse {
-            let peers: Vec<PeerEstimate> = estimators
-                .iter_mut()
-                .zip(&mut outboxes)
-                .map(|(est, outbox)| {
-                    let msg = outbox.compose(est.state_mut());
-                    let bytes = message::to_bytes(&msg).expect("encode");
-                    PeerEstimate::from_bytes(&bytes, &config).expect("decode")
-                })
-                .collect();
+            let peers = common::exchanged(&mut estimators, &mut outboxes, &config);
             for (i, est) in estimators.iter_mut().enumerate() {
                 for (j, peer) in peers.iter().enumerate() {
                     if i != j {

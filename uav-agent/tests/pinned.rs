@@ -7,11 +7,13 @@
 //! `SETFLEET_PRINT_DIGESTS=1 cargo test -p uav-agent --test pinned -- --nocapture` prints the
 //! digests a run computes (to record them after a deliberate change of the results).
 
+mod common;
+
 use protocol::frame::CvsFrame;
 use protocol::raster::{CellSet, ReachSet};
 use protocol::scenario::{Scenario, SetGrowth};
-use uav_agent::estimator::message::{self, EstimateOutbox};
-use uav_agent::estimator::{Estimator, EstimatorConfig, EstimatorState, PeerEstimate};
+use uav_agent::estimator::message::EstimateOutbox;
+use uav_agent::estimator::{Estimator, EstimatorConfig, EstimatorState};
 use uav_agent::occupancy::OccupancyMap;
 use world_server::World;
 
@@ -120,15 +122,7 @@ fn run(scenario: &Scenario, steps: u64, every: u64) -> Digests {
             est.step(&frame).expect("frame accepted");
             chain.word(state_digest(est.state()));
         }
-        let peers: Vec<PeerEstimate> = estimators
-            .iter_mut()
-            .zip(&mut outboxes)
-            .map(|(est, outbox)| {
-                let msg = outbox.compose(est.state_mut());
-                let bytes = message::to_bytes(&msg).expect("encode");
-                PeerEstimate::from_bytes(&bytes, &config).expect("decode")
-            })
-            .collect();
+        let peers = common::exchanged(&mut estimators, &mut outboxes, &config);
         for (i, est) in estimators.iter_mut().enumerate() {
             for (j, peer) in peers.iter().enumerate() {
                 if i != j {

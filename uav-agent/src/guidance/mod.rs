@@ -343,6 +343,64 @@ mod tests {
         }
     }
 
+    /// A fixed xorshift stream, for test situations that stay the same on every machine.
+    struct Xorshift(u64);
+
+    impl Xorshift {
+        /// Uniform in [lo, hi).
+        fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+            let s = &mut self.0;
+            *s ^= *s << 13;
+            *s ^= *s >> 7;
+            *s ^= *s << 17;
+            lo + (hi - lo) * (*s >> 11) as f64 / (1u64 << 53) as f64
+        }
+
+        /// A disc of `grid` centred in the square of half side `half` (metres), of radius in
+        /// [lo, hi).
+        fn disc(&mut self, grid: &GroundGrid, half: f64, lo: f64, hi: f64) -> CellSet {
+            let (x, y, r) = (
+                self.uniform(-half, half),
+                self.uniform(-half, half),
+                self.uniform(lo, hi),
+            );
+            let mut d = CellSet::empty(grid);
+            d.fill_disc(grid, Point2::new(x, y), r, Coverage::Outer);
+            d
+        }
+
+        /// A building on one 5 m cell of the OEM within 150 m of the centre, of height in
+        /// [lo, hi).
+        fn building(&mut self, lo: f64, hi: f64) -> ObstacleCell {
+            let (x, y) = (
+                self.uniform(-30.0, 30.0).floor() * 5.0,
+                self.uniform(-30.0, 30.0).floor() * 5.0,
+            );
+            ObstacleCell {
+                rect: Rect {
+                    min: Point2::new(x, y),
+                    max: Point2::new(x + 5.0, y + 5.0),
+                },
+                height_m: self.uniform(lo, hi),
+            }
+        }
+    }
+
+    /// The 12 poses (0.5 s apart, 10 m/s) of a UAV turning by `turn` from `state`, and its
+    /// state after them.
+    fn turning(mut state: UavState, turn: f64) -> (UavState, Vec<CameraPose>) {
+        let poses = (0..12)
+            .map(|_| {
+                state = flight::advance(state, state.yaw + turn, 0.5, 10.0, 1.0);
+                CameraPose {
+                    position: state.position,
+                    yaw: state.yaw,
+                }
+            })
+            .collect();
+        (state, poses)
+    }
+
     fn decide(
         params: &GuidanceParams,
         sets: &[&CellSet],
@@ -494,63 +552,31 @@ mod tests {
         s.guidance.lambda = 10.0;
         s.guidance.target_weight = 1.0;
         let setfleet = GuidanceParams::from_scenario(&s);
-        // A fixed xorshift stream: uniform in [lo, hi).
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut uniform = move |lo: f64, hi: f64| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            lo + (hi - lo) * (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Xorshift(0x9e37_79b9_7f4a_7c15);
         let mut fingerprints = Vec::new();
         for case in 0..6 {
             let fine = &paper.grids.fine;
-            let mut disc = |lo: f64, hi: f64| {
-                let (x, y, r) = (
-                    uniform(-140.0, 140.0),
-                    uniform(-140.0, 140.0),
-                    uniform(lo, hi),
-                );
-                let mut d = CellSet::empty(fine);
-                d.fill_disc(fine, Point2::new(x, y), r, Coverage::Outer);
-                d
-            };
             let mut undetected = CellSet::empty(fine);
             for _ in 0..5 {
-                undetected.or_assign(&disc(10.0, 60.0));
+                undetected.or_assign(&rng.disc(fine, 140.0, 10.0, 60.0));
             }
-            let targets: Vec<CellSet> = (0..case % 3).map(|_| disc(3.0, 12.0)).collect();
-            let hidden = disc(5.0, 40.0);
+            let targets: Vec<CellSet> = (0..case % 3)
+                .map(|_| rng.disc(fine, 140.0, 3.0, 12.0))
+                .collect();
+            let hidden = rng.disc(fine, 140.0, 5.0, 40.0);
             let obstacles: Vec<ObstacleCell> = (0..40 + 30 * case)
-                .map(|_| {
-                    let (x, y) = (
-                        uniform(-30.0, 30.0).floor() * 5.0,
-                        uniform(-30.0, 30.0).floor() * 5.0,
-                    );
-                    ObstacleCell {
-                        rect: Rect {
-                            min: Point2::new(x, y),
-                            max: Point2::new(x + 5.0, y + 5.0),
-                        },
-                        height_m: uniform(10.0, 60.0),
-                    }
-                })
+                .map(|_| rng.building(10.0, 60.0))
                 .collect();
             let mut flown = |uav: u32| {
-                let mut state = UavState {
-                    position: Point3::new(uniform(-100.0, 100.0), uniform(-100.0, 100.0), 60.0),
-                    yaw: uniform(-3.0, 3.0),
+                let state = UavState {
+                    position: Point3::new(
+                        rng.uniform(-100.0, 100.0),
+                        rng.uniform(-100.0, 100.0),
+                        60.0,
+                    ),
+                    yaw: rng.uniform(-3.0, 3.0),
                 };
-                let turn = uniform(-1.0, 1.0);
-                let poses = (0..12)
-                    .map(|_| {
-                        state = flight::advance(state, state.yaw + turn, 0.5, 10.0, 1.0);
-                        CameraPose {
-                            position: state.position,
-                            yaw: state.yaw,
-                        }
-                    })
-                    .collect();
+                let (state, poses) = turning(state, rng.uniform(-1.0, 1.0));
                 (state, PlannedView { uav, poses })
             };
             let others: Vec<PlannedView> = (0..case % 4).map(|u| flown(u).1).collect();
@@ -604,77 +630,39 @@ mod tests {
         /// undetected ground, up to two targets' sets, up to 200 buildings, up to three plans
         /// ahead, and a UAV anywhere in the region (near its border too).
         fn random(params: &GuidanceParams, seed: u64) -> Self {
-            let mut state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
-            let mut uniform = move |lo: f64, hi: f64| {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                lo + (hi - lo) * (state >> 11) as f64 / (1u64 << 53) as f64
-            };
+            let mut rng = Xorshift(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
             let fine = &params.grids.fine;
-            let disc = |lo: f64, hi: f64, uniform: &mut dyn FnMut(f64, f64) -> f64| {
-                let (x, y, r) = (
-                    uniform(-150.0, 150.0),
-                    uniform(-150.0, 150.0),
-                    uniform(lo, hi),
-                );
-                let mut d = CellSet::empty(fine);
-                d.fill_disc(fine, Point2::new(x, y), r, Coverage::Outer);
-                d
-            };
             let mut undetected = CellSet::empty(fine);
-            for _ in 0..uniform(0.0, 6.0) as usize {
-                undetected.or_assign(&disc(5.0, 60.0, &mut uniform));
+            for _ in 0..rng.uniform(0.0, 6.0) as usize {
+                undetected.or_assign(&rng.disc(fine, 150.0, 5.0, 60.0));
             }
             let mut sets = vec![undetected];
-            for _ in 0..uniform(0.0, 3.0) as usize {
-                sets.push(disc(2.0, 15.0, &mut uniform));
+            for _ in 0..rng.uniform(0.0, 3.0) as usize {
+                sets.push(rng.disc(fine, 150.0, 2.0, 15.0));
             }
-            let hidden = disc(0.0, 50.0, &mut uniform);
-            let obstacles = (0..uniform(0.0, 200.0) as usize)
-                .map(|_| {
-                    let (x, y) = (
-                        uniform(-30.0, 30.0).floor() * 5.0,
-                        uniform(-30.0, 30.0).floor() * 5.0,
-                    );
-                    ObstacleCell {
-                        rect: Rect {
-                            min: Point2::new(x, y),
-                            max: Point2::new(x + 5.0, y + 5.0),
-                        },
-                        height_m: uniform(5.0, 80.0),
-                    }
-                })
+            let hidden = rng.disc(fine, 150.0, 0.0, 50.0);
+            let obstacles = (0..rng.uniform(0.0, 200.0) as usize)
+                .map(|_| rng.building(5.0, 80.0))
                 .collect();
-            let flown = |uniform: &mut dyn FnMut(f64, f64) -> f64| {
-                let mut state = UavState {
+            let planned_ahead = rng.uniform(0.0, 4.0) as u32;
+            let mut flown = || {
+                let start = UavState {
                     position: Point3::new(
-                        uniform(-145.0, 145.0),
-                        uniform(-145.0, 145.0),
-                        uniform(40.0, 100.0),
+                        rng.uniform(-145.0, 145.0),
+                        rng.uniform(-145.0, 145.0),
+                        rng.uniform(40.0, 100.0),
                     ),
-                    yaw: uniform(-3.2, 3.2),
+                    yaw: rng.uniform(-3.2, 3.2),
                 };
-                let start = state;
-                let turn = uniform(-1.0, 1.0);
-                let poses = (0..12)
-                    .map(|_| {
-                        state = flight::advance(state, state.yaw + turn, 0.5, 10.0, 1.0);
-                        CameraPose {
-                            position: state.position,
-                            yaw: state.yaw,
-                        }
-                    })
-                    .collect();
-                (start, poses)
+                (start, turning(start, rng.uniform(-1.0, 1.0)).1)
             };
-            let others = (0..uniform(0.0, 4.0) as u32)
+            let others = (0..planned_ahead)
                 .map(|uav| PlannedView {
                     uav,
-                    poses: flown(&mut uniform).1,
+                    poses: flown().1,
                 })
                 .collect();
-            let state = flown(&mut uniform).0;
+            let state = flown().0;
             Self {
                 sets,
                 hidden,
