@@ -210,22 +210,9 @@ impl ReachSet {
             return;
         }
         self.clock_m = clock_m;
-        let reached = reached_units(clock_m);
-        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
-        for iy in 0..self.cells.ny() {
-            for w in 0..wpr {
-                let slot = iy as usize * wpr + w;
-                if self.pending[slot] > reached {
-                    continue;
-                }
-                let x0 = w * 64;
-                let x1 = (x0 + 64).min(nx);
-                let base = iy as usize * nx;
-                let (bits, next) = self.scan(slot, base + x0..base + x1, reached);
-                self.cells.row_mut(iy)[w] |= bits;
-                self.pending[slot] = next;
-            }
-        }
+        self.scan_due(reached_units(clock_m), |cells, iy, w, bits| {
+            cells.row_mut(iy)[w] |= bits;
+        });
     }
 
     /// [`ReachSet::advance`], then [`ReachSet::intersect`] with an outer raster `bound` of the
@@ -243,28 +230,16 @@ impl ReachSet {
             return;
         }
         self.clock_m = clock_m;
-        let reached = reached_units(clock_m);
-        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        let wpr = self.cells.words_per_row();
         // Every word's new cells first, from the cells before the advance, then the bound of
         // those words, read on the same unchanged cells.
         let mut grown: Vec<(u32, usize, u64)> = Vec::new();
-        for iy in 0..self.cells.ny() {
-            for w in 0..wpr {
-                let slot = iy as usize * wpr + w;
-                if self.pending[slot] > reached {
-                    continue;
-                }
-                let x0 = w * 64;
-                let x1 = (x0 + 64).min(nx);
-                let base = iy as usize * nx;
-                let (bits, next) = self.scan(slot, base + x0..base + x1, reached);
-                self.pending[slot] = next;
-                let fresh = bits & !self.cells.row(iy)[w];
-                if fresh != 0 {
-                    grown.push((iy, w, fresh));
-                }
+        self.scan_due(reached_units(clock_m), |cells, iy, w, bits| {
+            let fresh = bits & !cells.row(iy)[w];
+            if fresh != 0 {
+                grown.push((iy, w, fresh));
             }
-        }
+        });
         for &mut (iy, w, ref mut fresh) in &mut grown {
             let keep = *fresh & bound(&self.cells, iy, w);
             if keep != *fresh {
@@ -476,6 +451,27 @@ impl ReachSet {
                     ((gap2 as Real).sqrt() * unit + clock - UNIT_MARGIN).max(0.0) as u32
                 };
                 *slot = (*slot).max(tau.min(u32::MAX - 1));
+            }
+        }
+    }
+
+    /// Scans every word whose pending bound the clock `reached` (in reach units) has come
+    /// to, records its next pending bound, and hands `visit` the set's cells, the word's row
+    /// and index, and the word's cells reached by then.
+    fn scan_due(&mut self, reached: u32, mut visit: impl FnMut(&mut CellSet, u32, usize, u64)) {
+        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
+        for iy in 0..self.cells.ny() {
+            for w in 0..wpr {
+                let slot = iy as usize * wpr + w;
+                if self.pending[slot] > reached {
+                    continue;
+                }
+                let x0 = w * 64;
+                let x1 = (x0 + 64).min(nx);
+                let base = iy as usize * nx;
+                let (bits, next) = self.scan(slot, base + x0..base + x1, reached);
+                self.pending[slot] = next;
+                visit(&mut self.cells, iy, w, bits);
             }
         }
     }
