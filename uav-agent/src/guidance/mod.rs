@@ -179,7 +179,7 @@ pub fn decide(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
 }
 
 /// Picks the best sequence of yaw increments (docs/design.md §4): the paper's MPC, by the
-/// branch and bound of [`search`].
+/// branch and bound of the `search` module.
 pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     search::plan(params, input)
 }
