@@ -16,7 +16,6 @@ use protocol::wire::PlannedView;
 use uav_agent::estimator::message::{self, EstimateOutbox};
 use uav_agent::estimator::{Estimator, EstimatorConfig, PeerEstimate};
 use uav_agent::guidance::{self, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput};
-use uav_agent::occupancy::OemStatus;
 use world_server::World;
 
 /// Steps flown before measuring, so the sets and the maps are a run's.
@@ -36,26 +35,14 @@ impl Inputs {
     fn of(estimator: &Estimator, others: Vec<PlannedView>) -> Self {
         let st = estimator.state();
         let pose = st.pose.expect("a pose after the warm-up");
-        let oem_grid = *st.oem.grid();
         Self {
             state: UavState {
                 position: pose.position,
                 yaw: pose.yaw,
             },
-            sets: std::iter::once(st.undetected.cells())
-                .chain(st.targets.values().map(|s| s.cells()))
-                .cloned()
-                .collect(),
+            sets: st.target_sets().cloned().collect(),
             hidden: st.hidden_history.recently_hidden(),
-            obstacles: st
-                .oem
-                .known_cells()
-                .filter(|(_, c)| c.status == OemStatus::Obstacle)
-                .map(|(idx, c)| ObstacleCell {
-                    rect: oem_grid.cell_rect(idx),
-                    height_m: f64::from(c.height_m),
-                })
-                .collect(),
+            obstacles: ObstacleCell::known(&st.oem),
             others,
         }
     }

@@ -21,7 +21,6 @@ use protocol::wire::PlannedView;
 use uav_agent::estimator::message::{self, EstimateOutbox};
 use uav_agent::estimator::{Estimator, EstimatorConfig, PeerEstimate, StepTimings};
 use uav_agent::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput};
-use uav_agent::occupancy::OemStatus;
 use world_server::World;
 
 use super::{BenchCase, BenchReport, Metrics, Stats};
@@ -234,25 +233,14 @@ impl<'a> PlanningState<'a> {
         let pose = st
             .pose
             .ok_or_else(|| anyhow::anyhow!("no pose to plan from at step {}", st.step))?;
-        let oem_grid = *st.oem.grid();
         Ok(PlanningState {
             state: UavState {
                 position: pose.position,
                 yaw: pose.yaw,
             },
-            sets: std::iter::once(st.undetected.cells())
-                .chain(st.targets.values().map(|s| s.cells()))
-                .collect(),
+            sets: st.target_sets().collect(),
             hidden: st.hidden_history.recently_hidden(),
-            obstacles: st
-                .oem
-                .known_cells()
-                .filter(|(_, c)| c.status == OemStatus::Obstacle)
-                .map(|(idx, c)| ObstacleCell {
-                    rect: oem_grid.cell_rect(idx),
-                    height_m: c.height_m as f64,
-                })
-                .collect(),
+            obstacles: ObstacleCell::known(&st.oem),
         })
     }
 

@@ -64,7 +64,6 @@ use crate::estimator::{
     Estimator, EstimatorConfig, EstimatorStepError, PeerEstimate, StepReport, message,
 };
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
-use crate::occupancy::OemStatus;
 use checkpoint::{CheckpointFile, Owner};
 use links::{LinkError, Links};
 
@@ -910,20 +909,9 @@ impl Agent<'_> {
         let Some(pose) = state.pose else {
             return Err(AgentError::NoPose(k));
         };
-        let sets: Vec<&protocol::raster::CellSet> = std::iter::once(state.undetected.cells())
-            .chain(state.targets.values().map(|s| s.cells()))
-            .collect();
+        let sets: Vec<&protocol::raster::CellSet> = state.target_sets().collect();
         let hidden = state.hidden_history.recently_hidden();
-        let oem_grid = *state.oem.grid();
-        let obstacles: Vec<ObstacleCell> = state
-            .oem
-            .known_cells()
-            .filter(|(_, c)| c.status == OemStatus::Obstacle)
-            .map(|(idx, c)| ObstacleCell {
-                rect: oem_grid.cell_rect(idx),
-                height_m: c.height_m as f64,
-            })
-            .collect();
+        let obstacles = ObstacleCell::known(&state.oem);
         let decision = guidance::decide(
             &self.guidance,
             &PlanningInput {

@@ -160,6 +160,11 @@ impl EstimatorState {
         self.targets.keys().copied()
     }
 
+    /// The sets the guidance shrinks: `X̄`, then every `X_j` by id.
+    pub fn target_sets(&self) -> impl Iterator<Item = &CellSet> + '_ {
+        std::iter::once(self.undetected.cells()).chain(self.targets.values().map(|s| s.cells()))
+    }
+
     /// Whether every set lives on `config`'s grids (e.g. after deserialising a snapshot).
     pub fn fits(&self, config: &EstimatorConfig) -> bool {
         let probe = CellSet::empty(&config.grid);

@@ -6,6 +6,8 @@ use protocol::grid::{GroundGrid, Rect};
 use protocol::math::{Point2, Point3, convex_hull};
 use protocol::raster::{CellSet, Coverage};
 
+use crate::occupancy::{OccupancyMap, OemStatus};
+
 /// A known obstacle for planning: an OEM cell marked occupied, with its estimated height.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ObstacleCell {
@@ -13,6 +15,20 @@ pub struct ObstacleCell {
     pub rect: Rect,
     /// Estimated height, metres.
     pub height_m: f64,
+}
+
+impl ObstacleCell {
+    /// The buildings `oem` knows: every cell marked occupied, with its height.
+    pub fn known(oem: &OccupancyMap) -> Vec<ObstacleCell> {
+        let grid = oem.grid();
+        oem.known_cells()
+            .filter(|(_, c)| c.status == OemStatus::Obstacle)
+            .map(|(idx, c)| ObstacleCell {
+                rect: grid.cell_rect(idx),
+                height_m: f64::from(c.height_m),
+            })
+            .collect()
+    }
 }
 
 /// Ground shadow of an obstacle seen from `eye`: the convex hull of its footprint and of its
