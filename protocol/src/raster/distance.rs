@@ -21,63 +21,85 @@ pub const UNREACHED: u64 = u64::MAX;
 /// # Panics
 /// When `seeds` does not hold one flag per cell of the window (a caller's bug).
 pub fn square_gap_field(window: &CellBox, seeds: &[bool]) -> Vec<u64> {
-    let w = (window.x1 - window.x0 + 1) as usize;
-    let h = (window.y1 - window.y0 + 1) as usize;
-    assert_eq!(seeds.len(), w * h, "one seed flag per cell of the window");
-    // The seeds grown by their horizontal neighbours, inside the window; the vertical part of
-    // the 8-neighbour growth is taken in the column distances below.
-    let mut across = vec![false; w * h];
-    for (src, row) in seeds.chunks_exact(w).zip(across.chunks_exact_mut(w)) {
-        for x in 0..w {
-            row[x] = src[x] || (x > 0 && src[x - 1]) || (x + 1 < w && src[x + 1]);
-        }
-    }
+    GapField::default().compute(window, seeds).to_vec()
+}
 
-    // Vertical distance to the nearest grown seed in the same column, in cells: the distance
-    // `d` to the nearest `across` cell, down the window then up it, is `d - 1` (0 at most) to
-    // that cell grown by its vertical neighbours, which lie between the two rows and so in
-    // the window. A column without seeds keeps values of at least `far`.
-    let far = u32::MAX / 4;
-    let mut vertical = vec![far; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            vertical[y * w + x] = if across[y * w + x] {
-                0
-            } else if y > 0 {
-                vertical[(y - 1) * w + x].saturating_add(1)
-            } else {
-                far
-            };
-        }
-    }
-    drop(across);
-    for y in (0..h.saturating_sub(1)).rev() {
-        for x in 0..w {
-            let from_below = vertical[(y + 1) * w + x].saturating_add(1);
-            let v = &mut vertical[y * w + x];
-            *v = (*v).min(from_below);
-        }
-    }
-    for v in &mut vertical {
-        if *v < far {
-            *v = v.saturating_sub(1);
-        }
-    }
+/// [`square_gap_field`] with its buffers kept between calls: a caller that transforms a
+/// window per frame allocates (and the kernel zeroes) nothing after the first.
+#[derive(Debug, Default)]
+pub struct GapField {
+    /// The current row of seeds grown by their horizontal neighbours.
+    across: Vec<bool>,
+    /// Vertical distances, row-major over the window.
+    vertical: Vec<u32>,
+    /// The result, row-major over the window.
+    out: Vec<u64>,
+    envelope: Envelope,
+}
 
-    // Along each row, the lower envelope of the parabolas (x - x')² + vertical(x')².
-    let mut out = vec![UNREACHED; w * h];
-    let mut envelope = Envelope::with_capacity(w);
-    for y in 0..h {
-        envelope.lower(
-            &vertical[y * w..(y + 1) * w],
-            far,
-            &mut out[y * w..(y + 1) * w],
-        );
+impl GapField {
+    /// [`square_gap_field`] of `window` and `seeds`, in this scratch's buffer.
+    ///
+    /// # Panics
+    /// When `seeds` does not hold one flag per cell of the window (a caller's bug).
+    pub fn compute(&mut self, window: &CellBox, seeds: &[bool]) -> &[u64] {
+        let w = (window.x1 - window.x0 + 1) as usize;
+        let h = (window.y1 - window.y0 + 1) as usize;
+        assert_eq!(seeds.len(), w * h, "one seed flag per cell of the window");
+        // Vertical distance to the nearest seed grown by its horizontal neighbours (inside the
+        // window) in the same column, in cells: the distance `d` to the nearest grown cell,
+        // down the window then up it, is `d - 1` (0 at most) to that cell grown by its
+        // vertical neighbours, which lie between the two rows and so in the window. A column
+        // without seeds keeps values of at least `far`.
+        let far = u32::MAX / 4;
+        self.across.clear();
+        self.across.resize(w, false);
+        self.vertical.clear();
+        self.vertical.resize(w * h, far);
+        for (y, src) in seeds.chunks_exact(w).enumerate() {
+            for x in 0..w {
+                self.across[x] = src[x] || (x > 0 && src[x - 1]) || (x + 1 < w && src[x + 1]);
+            }
+            let (done, rest) = self.vertical.split_at_mut(y * w);
+            let row = &mut rest[..w];
+            let above = done.get(done.len().saturating_sub(w)..).filter(|_| y > 0);
+            for x in 0..w {
+                row[x] = if self.across[x] {
+                    0
+                } else {
+                    above.map_or(far, |a| a[x].saturating_add(1))
+                };
+            }
+        }
+        for y in (0..h.saturating_sub(1)).rev() {
+            let (head, below) = self.vertical.split_at_mut((y + 1) * w);
+            let row = &mut head[y * w..];
+            for (v, b) in row.iter_mut().zip(&below[..w]) {
+                *v = (*v).min(b.saturating_add(1));
+            }
+        }
+        for v in &mut self.vertical {
+            if *v < far {
+                *v = v.saturating_sub(1);
+            }
+        }
+
+        // Along each row, the lower envelope of the parabolas (x - x')² + vertical(x')².
+        self.out.clear();
+        self.out.resize(w * h, UNREACHED);
+        for (g, out) in self
+            .vertical
+            .chunks_exact(w)
+            .zip(self.out.chunks_exact_mut(w))
+        {
+            self.envelope.lower(g, far, out);
+        }
+        &self.out
     }
-    out
 }
 
 /// Scratch space of the one-dimensional transform.
+#[derive(Debug, Default)]
 struct Envelope {
     /// Apexes of the parabolas of the envelope.
     apex: Vec<usize>,
@@ -86,13 +108,6 @@ struct Envelope {
 }
 
 impl Envelope {
-    fn with_capacity(n: usize) -> Self {
-        Self {
-            apex: Vec::with_capacity(n),
-            from: Vec::with_capacity(n + 1),
-        }
-    }
-
     /// `out[x] = min over x' with g[x'] < far of (x - x')² + g[x']²`; [`UNREACHED`] when every
     /// `g` is `far`. Windows are at most a few thousand cells wide, so every product below
     /// stays far inside `i64`.

@@ -61,7 +61,9 @@
 //! assert!(twice.contains((26, 20)) && twice.count() > set.cells().count());
 //! ```
 
-use super::distance::{UNREACHED, square_gap_field};
+use std::cell::RefCell;
+
+use super::distance::{GapField, UNREACHED};
 use super::geodesic::{self, geodesic_gap_field};
 use super::{CellBox, CellSet};
 use crate::grid::{CellIndex, GroundGrid};
@@ -69,6 +71,11 @@ use crate::math::Real;
 
 /// The unit of reach, metres: `1/256` m, far below any cell and any step's motion.
 pub const REACH_UNIT_M: Real = 1.0 / 256.0;
+
+thread_local! {
+    /// The distance transform's buffers, kept between the corrections of this thread's sets.
+    static GAPS: RefCell<GapField> = RefCell::default();
+}
 
 /// Rounding margin of the conversions to reach units, in units.
 const UNIT_MARGIN: Real = 1e-6;
@@ -432,27 +439,29 @@ impl ReachSet {
     /// makes sure no cell of `inside` outside the window is nearer).
     fn raise_outside(&mut self, grid: &GroundGrid, window: &CellBox, inside: &[bool]) {
         self.forget_scans(window);
-        let gaps = square_gap_field(window, inside);
-        let nx = self.cells.nx() as usize;
-        let w = (window.x1 - window.x0 + 1) as usize;
-        let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
-        let rows = gaps.chunks_exact(w).zip(inside.chunks_exact(w));
-        for (iy, (gap_row, seed_row)) in (window.y0 as usize..).zip(rows) {
-            let start = iy * nx + window.x0 as usize;
-            let reach = &mut self.reach[start..start + w];
-            for ((slot, &gap2), &seed) in reach.iter_mut().zip(gap_row).zip(seed_row) {
-                if seed {
-                    continue;
+        GAPS.with_borrow_mut(|field| {
+            let gaps = field.compute(window, inside);
+            let nx = self.cells.nx() as usize;
+            let w = (window.x1 - window.x0 + 1) as usize;
+            let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
+            let rows = gaps.chunks_exact(w).zip(inside.chunks_exact(w));
+            for (iy, (gap_row, seed_row)) in (window.y0 as usize..).zip(rows) {
+                let start = iy * nx + window.x0 as usize;
+                let reach = &mut self.reach[start..start + w];
+                for ((slot, &gap2), &seed) in reach.iter_mut().zip(gap_row).zip(seed_row) {
+                    if seed {
+                        continue;
+                    }
+                    let tau = if gap2 == UNREACHED {
+                        u32::MAX - 1
+                    } else {
+                        // Truncation is the floor here (non-negative); `as` saturates.
+                        ((gap2 as Real).sqrt() * unit + clock - UNIT_MARGIN).max(0.0) as u32
+                    };
+                    *slot = (*slot).max(tau.min(u32::MAX - 1));
                 }
-                let tau = if gap2 == UNREACHED {
-                    u32::MAX - 1
-                } else {
-                    // Truncation is the floor here (non-negative); `as` saturates.
-                    ((gap2 as Real).sqrt() * unit + clock - UNIT_MARGIN).max(0.0) as u32
-                };
-                *slot = (*slot).max(tau.min(u32::MAX - 1));
             }
-        }
+        });
     }
 
     /// Scans every word whose pending bound the clock `reached` (in reach units) has come

@@ -520,6 +520,20 @@ pub fn obstacle_free(
     stride: u32,
 ) -> CellSet {
     let mut out = CellSet::empty(grid);
+    add_obstacle_free(view, grid, safety_distance_m, stride, &mut out);
+    out
+}
+
+/// `out ∪=` [`obstacle_free`] of this frame. Folding a frame into the `S^o` accumulated so
+/// far costs less than building the frame's own and joining it: a disc whose cells the set
+/// already holds is skipped before it is rasterised, and most obstacles were seen before.
+pub fn add_obstacle_free(
+    view: &FrameView<'_>,
+    grid: &GroundGrid,
+    safety_distance_m: Real,
+    stride: u32,
+    out: &mut CellSet,
+) {
     let stride = stride.max(1);
     let o = view.camera.pose.position;
     let is_obstacle = |r: u32, c: u32| view.label(r, c) == Label::Obstacle;
@@ -556,7 +570,6 @@ pub fn obstacle_free(
             out.fill_disc(grid, centre, radius, Coverage::Inner);
         }
     }
-    out
 }
 
 /// Folds the frame into the occupancy map (see the module docs). Returns the cells changed.

@@ -372,11 +372,12 @@ impl Estimator {
         report.timings.measurement_sets = t.elapsed();
 
         let t = Instant::now();
-        let frame_obstacle_free = measure::obstacle_free(
+        measure::add_obstacle_free(
             &view,
             grid,
             cfg.safety_distance_m,
             cfg.obstacle_pixel_stride,
+            &mut st.obstacle_free,
         );
         report.timings.obstacle_sets = t.elapsed();
 
@@ -385,7 +386,6 @@ impl Estimator {
         report.timings.oem = t.elapsed();
 
         let t = Instant::now();
-        st.obstacle_free.or_assign(&frame_obstacle_free);
         let mut free = free_ground.clone();
         free.or_assign(&st.obstacle_free);
         let window = free_ground.bounding_box();
