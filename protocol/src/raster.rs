@@ -302,6 +302,30 @@ impl CellSet {
         })
     }
 
+    /// A 64-bit fingerprint of the set's cells for the wire ([`delta::SetDelta`]): FNV-1a
+    /// over the words in four interleaved lanes, folded together at the end. Its four
+    /// independent multiplications per step run about four times as fast as
+    /// [`CellSet::digest`]'s one chain, and it tells sets apart as well; it is another value.
+    pub fn fingerprint(&self) -> u64 {
+        const BASIS: u64 = 0xcbf2_9ce4_8422_2325;
+        const PRIME: u64 = 0x100_0000_01b3;
+        let mut lanes = [BASIS, BASIS ^ 1, BASIS ^ 2, BASIS ^ 3];
+        let chunks = self.words.chunks_exact(4);
+        let rest = chunks.remainder();
+        for chunk in chunks {
+            for (h, &w) in lanes.iter_mut().zip(chunk) {
+                *h = (*h ^ w).wrapping_mul(PRIME);
+            }
+        }
+        for (h, &w) in lanes.iter_mut().zip(rest) {
+            *h = (*h ^ w).wrapping_mul(PRIME);
+        }
+        let folded = lanes
+            .iter()
+            .fold(BASIS, |h, &lane| (h ^ lane).wrapping_mul(PRIME));
+        (folded ^ self.words.len() as u64).wrapping_mul(PRIME)
+    }
+
     /// Area of the set, m² (an upper bound of the true set's area for outer sets).
     pub fn area(&self, grid: &GroundGrid) -> Real {
         self.count() as Real * grid.cell_area()

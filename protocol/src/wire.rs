@@ -12,7 +12,7 @@ use crate::camera::CameraPose;
 use crate::raster::delta::SetCode;
 
 /// Version of every message layout in this module and in [`crate::frame`].
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 /// Targets a truth message can hold.
 pub const TRUTH_MAX_TARGETS: usize = 64;
 /// UAVs a truth message can hold, and the largest fleet.

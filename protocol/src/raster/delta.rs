@@ -2,7 +2,7 @@
 //!
 //! A [`SetDelta`] is the symmetric difference between the new set and its base, encoded like a
 //! whole set ([`CellSet::encode`]: runs inside the bounding box, so a few changed cells cost a
-//! few bytes), and the [`CellSet::digest`] of the new set. Applying it flips those cells of the
+//! few bytes), and the [`CellSet::fingerprint`] of the new set. Applying it flips those cells of the
 //! base; the receiver then compares the result's digest with the one carried, so a delta
 //! applied to another base than the sender's (a lost message, a restarted sender, a bug) is a
 //! typed error instead of a wrong set. A [`SetCode`] is what a message carries for one set:
@@ -18,7 +18,7 @@ use crate::grid::GroundGrid;
 pub struct SetDelta {
     /// The cells in exactly one of the base and the new set.
     pub flips: EncodedSet,
-    /// [`CellSet::digest`] of the new set.
+    /// [`CellSet::fingerprint`] of the new set.
     pub digest: u64,
 }
 
@@ -74,7 +74,7 @@ impl CellSet {
         flip_words(&mut flips, base);
         Some(SetDelta {
             flips: flips.encode(),
-            digest: self.digest(),
+            digest: self.fingerprint(),
         })
     }
 
@@ -95,7 +95,7 @@ impl CellSet {
             });
         }
         flip_words(&mut set, base);
-        let got = set.digest();
+        let got = set.fingerprint();
         if got != delta.digest {
             return Err(DeltaError::WrongBase {
                 expected: delta.digest,
@@ -212,6 +212,8 @@ mod tests {
             b.set((x, y), !a.contains((x, y)));
             let d = b.encode_delta(&a).unwrap();
             prop_assert!(d.flips.runs.len() <= 2);
+            // One cell is enough to tell the two apart.
+            prop_assert_ne!(a.fingerprint(), b.fingerprint());
         }
     }
 

@@ -141,7 +141,7 @@ fn fuse_into<S: FusedSet>(
         return report;
     }
     let radius = report.step_lag as f64 * radius_per_step;
-    let widen = |s: &CellSet| predict::grow(s, grid, radius);
+    let widen = |s| predict::grow(s, grid, radius);
     let src_undetected = widen(&src.undetected);
     let ids: BTreeSet<u32> = dst
         .targets
@@ -151,7 +151,7 @@ fn fuse_into<S: FusedSet>(
         .collect();
     for id in ids {
         let theirs = src.targets.get(&id).map(widen);
-        let theirs = theirs.as_ref().unwrap_or(&src_undetected);
+        let theirs: &CellSet = theirs.as_deref().unwrap_or(&src_undetected);
         let mine = match dst.targets.entry(id) {
             std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::btree_map::Entry::Vacant(e) => {

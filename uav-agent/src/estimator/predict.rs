@@ -4,6 +4,8 @@
 //! The estimator's own sets are [`ReachSet`]s, which grow by exactly that motion
 //! ([`advance`]); sets received from peers are plain rasters, dilated whole-cell by [`grow`].
 
+use std::borrow::Cow;
+
 use protocol::grid::GroundGrid;
 use protocol::math::Real;
 use protocol::raster::{CellSet, ReachSet};
@@ -36,15 +38,15 @@ pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: R
 /// Outer set grown by the motion over `radius_m` metres: every point within `radius_m` of the
 /// set is in the result. A radius past the grid's diagonal gives the whole grid (the dilation
 /// would anyway) without the work; a zero or invalid radius changes nothing.
-pub fn grow(set: &CellSet, grid: &GroundGrid, radius_m: Real) -> CellSet {
+pub fn grow<'a>(set: &'a CellSet, grid: &GroundGrid, radius_m: Real) -> Cow<'a, CellSet> {
     if radius_m.is_nan() || radius_m <= 0.0 || set.is_empty() {
-        return set.clone();
+        return Cow::Borrowed(set);
     }
     let diagonal = grid.cell_m * (grid.nx as Real).hypot(grid.ny as Real);
     if radius_m >= diagonal {
-        return CellSet::full(grid);
+        return Cow::Owned(CellSet::full(grid));
     }
-    set.dilate(grid, radius_m)
+    Cow::Owned(set.dilate(grid, radius_m))
 }
 
 /// The radius targets may cover in `steps` frames of `period_s` at `max_speed_mps`.
