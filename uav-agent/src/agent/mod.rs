@@ -64,7 +64,7 @@ use crate::estimator::{
     Estimator, EstimatorConfig, EstimatorStepError, PeerEstimate, StepReport, message,
 };
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
-use checkpoint::{CheckpointFile, Owner};
+use checkpoint::{CheckpointFile, CheckpointFlusher, Owner};
 use links::{LinkError, Links};
 
 /// How an agent runs.
@@ -220,8 +220,15 @@ pub struct AgentReport {
     pub checkpoints: u64,
     /// Checkpoints that could not be written.
     pub checkpoint_failures: u64,
-    /// Wall time spent writing checkpoints (encoding, writing, flushing), milliseconds.
+    /// Wall time the step loop spent on checkpoints (encoding and writing them, and flushing
+    /// them when there is no checkpoint thread), milliseconds.
     pub checkpoint_ms: f64,
+    /// Flushes to the disk done by the checkpoint thread (one may serve several checkpoints).
+    pub checkpoint_flushes: u64,
+    /// Flushes that failed.
+    pub checkpoint_flush_failures: u64,
+    /// Wall time the checkpoint thread spent flushing, milliseconds.
+    pub checkpoint_flush_ms: f64,
     /// How the loop ended.
     pub end: Option<EndReason>,
     /// This process's id, so that whoever started it can join this report to the kernel's
@@ -319,6 +326,13 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         .with_set_deltas(),
         inbox: message::EstimateInbox::new(),
         estimator,
+        checkpoint_flusher: checkpoint.clone().and_then(|file| {
+            CheckpointFlusher::start(file)
+                .inspect_err(
+                    |e| tracing::warn!(error = %e, "no checkpoint thread: flushing in the loop"),
+                )
+                .ok()
+        }),
         checkpoint,
         served: u32::MAX,
         guidance: GuidanceParams::from_scenario(&config.scenario),
@@ -341,6 +355,12 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
     agent.refresh_live();
     tracing::info!(uav = config.uav, run = %config.run_id, incarnation, "agent started");
     let result = agent.main_loop();
+    if let Some(flusher) = agent.checkpoint_flusher.take() {
+        let stats = flusher.finish();
+        agent.report.checkpoint_flushes = stats.flushes;
+        agent.report.checkpoint_flush_failures = stats.failed;
+        agent.report.checkpoint_flush_ms = stats.flush_ms;
+    }
     let state = agent.estimator.state();
     let report = AgentReport {
         pid: std::process::id(),
@@ -396,6 +416,8 @@ struct Agent<'a> {
     waitset: &'a WaitSet<Ipc>,
     estimator: Estimator,
     checkpoint: Option<CheckpointFile>,
+    /// The thread that flushes the checkpoints to the disk (none: flushed in the loop).
+    checkpoint_flusher: Option<CheckpointFlusher>,
     /// The agents the world serves at the current step (the frame's mask).
     served: u32,
     outbox: message::EstimateOutbox,
@@ -617,13 +639,24 @@ impl Agent<'_> {
 
     /// Saves the state to the checkpoint file, if there is one (a failure is logged and
     /// counted: the run goes on without it).
+    /// Encodes the state and replaces the checkpoint with it; the checkpoint thread flushes it
+    /// to the disk (without a thread, it is flushed here).
     fn save_checkpoint(&mut self) {
         let Some(file) = &self.checkpoint else {
             return;
         };
         let started = Instant::now();
         let before = self.clock.enter(phase::CHECKPOINT);
-        let saved = file.save(self.estimator.state());
+        let saved =
+            file.encode(self.estimator.state())
+                .and_then(|bytes| match &self.checkpoint_flusher {
+                    Some(flusher) => {
+                        file.replace(&bytes)?;
+                        flusher.request();
+                        Ok(())
+                    }
+                    None => file.write(&bytes),
+                });
         self.clock.enter(before);
         self.report.checkpoint_ms += started.elapsed().as_secs_f64() * 1e3;
         match saved {
