@@ -152,6 +152,71 @@ impl FusedSets {
     }
 }
 
+impl FusedSets {
+    /// [`FusedSets::of_agent`] of every agent of `all`, in `all`'s order. Agents that fuse the
+    /// same estimates (in lockstep with unlimited links, every agent fuses every other) share
+    /// one fusion: on estimates of one step the law meets and joins sets, so the result does
+    /// not depend on whose estimate it starts from; only `H̄`, which starts from each agent's
+    /// own, is built per agent. A shared fusion that met an empty intersection (then the union
+    /// is kept, which depends on the order) or another grid is not shared: each agent of it
+    /// is fused on its own.
+    pub fn of_agents(
+        all: &[ObservedEstimate],
+        config: &EstimatorConfig,
+        range_m: f64,
+    ) -> Vec<FusedSets> {
+        let mut shared: BTreeMap<Vec<u32>, Option<PeerEstimate>> = BTreeMap::new();
+        all.iter()
+            .map(|own| {
+                let peers: Vec<&ObservedEstimate> = fused_peers(own, all, range_m).collect();
+                let mut group: Vec<&ObservedEstimate> = peers.clone();
+                group.push(own);
+                group.sort_by_key(|e| e.uav());
+                let same_step = group.iter().all(|e| e.step() == own.step());
+                let key: Vec<u32> = group.iter().map(|e| e.uav()).collect();
+                let fused = same_step
+                    .then(|| {
+                        shared
+                            .entry(key)
+                            .or_insert_with(|| fuse_in_order(&group, config))
+                            .clone()
+                    })
+                    .flatten();
+                match fused {
+                    Some(fused) => {
+                        let mut unseen = own.unseen.clone();
+                        for peer in &peers {
+                            unseen.or_assign(&peer.estimate.hidden);
+                        }
+                        FusedSets {
+                            undetected: fused.undetected,
+                            targets: fused.targets,
+                            obstacle_free: fused.obstacle_free,
+                            explored: fused.explored,
+                            unseen,
+                        }
+                    }
+                    None => FusedSets::fuse(own, peers, config),
+                }
+            })
+            .collect()
+    }
+}
+
+/// The estimates of `group` (one step) fused in order, or `None` when a fusion met an empty
+/// intersection or another grid (then the result depends on the order).
+fn fuse_in_order(group: &[&ObservedEstimate], config: &EstimatorConfig) -> Option<PeerEstimate> {
+    let (first, rest) = group.split_first()?;
+    let mut fused = first.estimate.clone();
+    for e in rest {
+        let report = fused.fuse(&e.estimate, config);
+        if report.grid_mismatch || !report.empty_intersections.is_empty() {
+            return None;
+        }
+    }
+    Some(fused)
+}
+
 /// The estimates among `all` that agent `own.uav()` fuses at its step, in its order: the
 /// other agents' estimates of the same step whose sender is within `range_m`
 /// ([`in_comms_range`]), by ascending UAV id (as the agent keeps its peers).
@@ -542,6 +607,48 @@ pub(crate) mod tests {
                 observed.targets.keys().copied().collect::<Vec<_>>(),
                 vec![1, 2, 3]
             );
+        }
+    }
+
+    #[test]
+    fn agents_that_fuse_the_same_estimates_share_one_fusion_with_the_same_result() {
+        let cfg = config();
+        let g = grid();
+        // Four agents of one step, each with scattered sets of its own; targets 1 and 2 are
+        // identified by some only; agent 3 is out of a 100 m range; agent 0's target 7 and
+        // agent 1's do not meet (an empty intersection, where the order matters).
+        let all: Vec<ObservedEstimate> = (0..4u32)
+            .map(|uav| {
+                let seed = u64::from(uav) * 10;
+                let mut e = blank(&g, uav, 3);
+                e.estimate.pose = at(if uav == 3 {
+                    500.0
+                } else {
+                    10.0 * f64::from(uav)
+                });
+                e.estimate.undetected = scattered(seed + 1, 0.8);
+                e.estimate.explored = scattered(seed + 2, 0.3);
+                e.estimate.hidden = scattered(seed + 3, 0.1);
+                e.unseen = scattered(seed + 4, 0.2);
+                let mut targets = vec![(1, scattered(seed + 5, 0.9))];
+                if uav % 2 == 0 {
+                    targets.push((2, scattered(seed + 6, 0.9)));
+                }
+                e.estimate.targets = targets.into_iter().collect();
+                e
+            })
+            .collect();
+        let mut clashing = all.clone();
+        clashing[0].estimate.targets.insert(7, set(&[(1, 1)]));
+        clashing[1].estimate.targets.insert(7, set(&[(8, 8)]));
+        for estimates in [&all, &clashing] {
+            for range in [f64::INFINITY, 100.0] {
+                let shared = FusedSets::of_agents(estimates, &cfg, range);
+                for (own, fused) in estimates.iter().zip(&shared) {
+                    let alone = FusedSets::of_agent(own, estimates, &cfg, range);
+                    assert_eq!(fused, &alone, "agent {} at range {range}", own.uav());
+                }
+            }
         }
     }
 

@@ -636,8 +636,8 @@ impl Observer<'_> {
         }
         let range_m = self.config.scenario.comms.range_m;
         let mut agents = BTreeMap::new();
-        for own in &estimates {
-            let fused = FusedSets::of_agent(own, &estimates, &self.estimator, range_m);
+        let all_fused = FusedSets::of_agents(&estimates, &self.estimator, range_m);
+        for (own, fused) in estimates.iter().zip(all_fused) {
             agents.insert(
                 own.uav(),
                 SetMetrics::measure(&fused, truth.targets(), &grid),
