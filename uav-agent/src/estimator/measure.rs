@@ -48,6 +48,7 @@ pub struct FrameView<'a> {
     frame: &'a CvsFrame,
     camera: Camera,
     projector: GroundProjector,
+    rays: CentreRays,
     noise: [Real; 2],
     rows: u32,
     cols: u32,
@@ -77,10 +78,12 @@ impl<'a> FrameView<'a> {
             })
             .collect();
         let h = frame.header.depth_noise;
+        let projector = GroundProjector::new(&camera);
         Self {
             frame,
             camera,
-            projector: GroundProjector::new(&camera),
+            rays: CentreRays::new(&projector, rows, cols),
+            projector,
             noise: [noise[0].min(h[0]), noise[1].max(h[1])],
             rows,
             cols,
@@ -235,12 +238,34 @@ impl GroundProjector {
             )
         })
     }
+}
 
-    /// Unit world direction of the centre ray of pixel `(r, c)` (as [`Camera::centre_ray`]).
-    fn centre_ray(&self, r: u32, c: u32) -> Vector3 {
-        let x = (c as Real + 0.5 - self.cx) / self.f;
-        let y = (r as Real + 0.5 - self.cy) / self.f;
-        (self.right * x + self.down * y + self.forward).normalize()
+/// The centre rays of a frame's pixels (as [`Camera::centre_ray`]), with the term of each
+/// column and of each row computed once per frame.
+struct CentreRays {
+    /// `right * x` per column.
+    across: Vec<Vector3>,
+    /// `down * y` per row.
+    down: Vec<Vector3>,
+    forward: Vector3,
+}
+
+impl CentreRays {
+    fn new(p: &GroundProjector, rows: u32, cols: u32) -> Self {
+        Self {
+            across: (0..cols)
+                .map(|c| p.right * ((c as Real + 0.5 - p.cx) / p.f))
+                .collect(),
+            down: (0..rows)
+                .map(|r| p.down * ((r as Real + 0.5 - p.cy) / p.f))
+                .collect(),
+            forward: p.forward,
+        }
+    }
+
+    /// Unit world direction of the centre ray of pixel `(r, c)`.
+    fn get(&self, r: u32, c: u32) -> Vector3 {
+        (self.across[c as usize] + self.down[r as usize] + self.forward).normalize()
     }
 }
 
@@ -557,7 +582,7 @@ pub fn add_obstacle_free(
             let Some((lo, hi)) = view.range(r, c) else {
                 continue;
             };
-            let dir = view.projector.centre_ray(r, c);
+            let dir = view.rays.get(r, c);
             let mid = (lo + hi) / 2.0;
             let horizontal = dir.x.hypot(dir.y);
             // Slack for the rounding of the ray direction and of the midpoint.
@@ -584,7 +609,7 @@ pub fn observe_map(view: &FrameView<'_>, map: &mut OccupancyMap) -> usize {
             let Some((lo, hi)) = view.range(r, c) else {
                 continue;
             };
-            let p = o + view.projector.centre_ray(r, c) * ((lo + hi) / 2.0);
+            let p = o + view.rays.get(r, c) * ((lo + hi) / 2.0);
             changed += map.observe_obstacle(&Point2::new(p.x, p.y), p.z) as usize;
         }
     }
@@ -674,8 +699,9 @@ mod tests {
                 _ => panic!("front tests disagree at ({x}, {y})"),
             }
         }
+        let rays = CentreRays::new(&p, 24, 32);
         for &(r, c) in &[(0, 0), (5, 17), (23, 31)] {
-            assert!((p.centre_ray(r, c) - cam.centre_ray(r, c)).norm() < 1e-12);
+            assert!((rays.get(r, c) - cam.centre_ray(r, c)).norm() < 1e-12);
         }
     }
 
