@@ -7,8 +7,8 @@
 //!    centre; each ray is tested against the analytic ground `z = 0` and against only the
 //!    objects whose footprint touches the pixels around it, with parry3d's arithmetic
 //!    ([`objects::SeenFrom`]). A ray no footprint touches (most of them) meets only the
-//!    ground: it needs only the vertical component of its unit direction, and a corner ray
-//!    not even the range.
+//!    ground: a centre ray needs only the vertical component of its unit direction and its
+//!    range, a corner ray only whether it points down ([`rays`]).
 //! 3. A pixel is G when its 5 rays hit the ground and no footprint touches it; T (O) when its 5
 //!    rays hit the same target (building) and every other object whose footprint touches it is
 //!    entirely farther than that object's farthest corner (nothing can then stand in front of
@@ -39,7 +39,7 @@ use boxes::RowTargets;
 use footprint::Footprint;
 use noise::RowNoise;
 pub use objects::{ObjectKind, SceneObject, SeenFrom};
-use rays::{RayGrid, RowRays};
+use rays::{RayGrid, RowOf, RowRays, UnitRays};
 
 /// Code of a ray that hit the ground first.
 const HIT_GROUND: u32 = u32::MAX - 1;
@@ -149,22 +149,30 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
         corners
             .par_chunks_mut(corner_cols)
             .enumerate()
-            .for_each(|(r, out)| {
+            .for_each_init(Scratch::default, |scratch, (r, out)| {
                 let r = r as u32;
                 let entries = corner_row_entries(&row_entries, r, rows);
+                let touching = |c: u32| entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
+                scratch.touched.clear();
                 for (c, code) in out.iter_mut().enumerate() {
                     let c = c as u32;
-                    let mut cands = entries.iter().filter(|e| e.c0 <= c && c <= e.c1).peekable();
-                    *code = if cands.peek().is_none() {
+                    if touching(c).next().is_some() {
+                        scratch.touched.push(c);
+                    } else {
                         // `cast` without candidates, from the sign of the unit ray's z.
-                        if origin.z > 0.0 && grid.corner_descends(r, c) {
+                        *code = if origin.z > 0.0 && grid.corner_descends(r, c) {
                             HIT_GROUND
                         } else {
                             HIT_NOTHING
-                        }
-                    } else {
-                        cast(&origin, &grid.corner_ray(r, c), cands, &visible).0
-                    };
+                        };
+                    }
+                }
+                for run in runs(&scratch.touched) {
+                    grid.unit_rays(RowOf::Corners(r), run, &mut scratch.rays);
+                }
+                for &c in &scratch.touched {
+                    let (dir, inv) = scratch.rays.get(c);
+                    out[c as usize] = cast(&origin, (&dir, &inv), touching(c), &visible).0;
                 }
             });
     }
@@ -174,9 +182,9 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
         .par_chunks_mut(cols.max(1) as usize)
         .zip(frame.labels[..n].par_chunks_mut(cols.max(1) as usize))
         .enumerate()
-        .map_init(RowRays::default, |rays, (r, (depth, labels))| {
+        .map_init(Scratch::default, |scratch, (r, (depth, labels))| {
             let r = r as u32;
-            grid.centre_row(r, rays);
+            grid.centre_row(r, origin.z, &mut scratch.row);
             let mut noise = RowNoise::new(
                 spec.seed,
                 spec.step,
@@ -188,18 +196,25 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
             let entries = &row_entries[r as usize];
             let top = &corners[r as usize * corner_cols..(r as usize + 1) * corner_cols];
             let bottom = &corners[(r as usize + 1) * corner_cols..(r as usize + 2) * corner_cols];
+            scratch.touched.clear();
+            scratch
+                .touched
+                .extend((0..cols).filter(|&c| entries.iter().any(|e| e.c0 <= c && c <= e.c1)));
+            for run in runs(&scratch.touched) {
+                grid.unit_rays(RowOf::Centres(r), run, &mut scratch.rays);
+            }
+            let (row, rays) = (&scratch.row, &scratch.rays);
+            let mut touched = scratch.touched.iter().peekable();
             let mut targets = RowTargets::default();
             for c in 0..cols {
                 let ci = c as usize;
                 let touching = || entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
-                let untouched = touching().next().is_none();
+                let untouched = touched.next_if_eq(&&c).is_none();
                 let (centre, range) = if untouched {
-                    ground_only(&origin, rays.z[ci])
+                    ground_only(&origin, row.z[ci], row.ground[ci])
                 } else {
-                    let v = grid.centre_unnormalised(r, c);
-                    let n = rays.norm[ci];
-                    let dir = Vector3::new(v.x / n, v.y / n, rays.z[ci]);
-                    cast(&origin, &dir, touching(), &visible)
+                    let (dir, inv) = rays.get(c);
+                    cast(&origin, (&dir, &inv), touching(), &visible)
                 };
                 let codes = [top[ci], top[ci + 1], bottom[ci + 1], bottom[ci], centre];
                 let mut label = if untouched {
@@ -218,12 +233,15 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
                 // by an explicit altitude): nothing can be measured there.
                 let measured = centre != HIT_NOTHING && range > 0.0;
                 let doubted = (px.doubt || !measured) && label != Label::Unknown;
-                for (k, &code) in codes.iter().enumerate() {
-                    if code >= HIT_GROUND || codes[..k].contains(&code) {
-                        continue;
-                    }
-                    if let ObjectKind::Target(id) = visible[code as usize].object.kind {
-                        targets.hit(id, c, label == Label::Target && !doubted);
+                // Most pixels see only the ground or the sky: no target to note.
+                if codes.iter().any(|&code| code < HIT_GROUND) {
+                    for (k, &code) in codes.iter().enumerate() {
+                        if code >= HIT_GROUND || codes[..k].contains(&code) {
+                            continue;
+                        }
+                        if let ObjectKind::Target(id) = visible[code as usize].object.kind {
+                            targets.hit(id, c, label == Label::Target && !doubted);
+                        }
                     }
                 }
                 if doubted {
@@ -287,11 +305,38 @@ fn corner_row_entries(row_entries: &[Vec<Entry>], r: u32, rows: u32) -> Vec<Entr
     out
 }
 
-/// [`cast`] without candidates, from the vertical component `z` of the unit ray.
+/// The runs of consecutive values of an increasing list, as ranges.
+fn runs(sorted: &[u32]) -> impl Iterator<Item = std::ops::Range<u32>> + '_ {
+    let mut i = 0;
+    std::iter::from_fn(move || {
+        let start = *sorted.get(i)?;
+        let mut end = start + 1;
+        i += 1;
+        while sorted.get(i) == Some(&end) {
+            end += 1;
+            i += 1;
+        }
+        Some(start..end)
+    })
+}
+
+/// Buffers of one row, reused from row to row.
+#[derive(Default)]
+struct Scratch {
+    /// Columns whose ray some footprint touches.
+    touched: Vec<u32>,
+    /// Their unit rays.
+    rays: UnitRays,
+    /// The row's centre rays.
+    row: RowRays,
+}
+
+/// [`cast`] without candidates, from the vertical component `z` of the unit ray and its range
+/// `ground = -origin.z / z` to the ground.
 #[inline]
-fn ground_only(origin: &Point3, z: Real) -> (u32, Real) {
+fn ground_only(origin: &Point3, z: Real, ground: Real) -> (u32, Real) {
     if z < 0.0 && origin.z > 0.0 {
-        (HIT_GROUND, -origin.z / z)
+        (HIT_GROUND, ground)
     } else {
         (HIT_NOTHING, Real::INFINITY)
     }
@@ -299,9 +344,11 @@ fn ground_only(origin: &Point3, z: Real) -> (u32, Real) {
 
 /// First hit of the unit ray `dir` from `origin` among the ground and the candidates:
 /// (code, range). Ties go to the object, the side that labels the pixel U rather than G.
+///
+/// `ray` is the unit direction and the reciprocals of its components.
 fn cast<'a>(
     origin: &Point3,
-    dir: &Vector3,
+    (dir, inv): (&Vector3, &[Real; 3]),
     candidates: impl Iterator<Item = &'a Entry>,
     visible: &[Visible],
 ) -> (u32, Real) {
@@ -311,7 +358,13 @@ fn cast<'a>(
         (HIT_NOTHING, Real::INFINITY)
     };
     for e in candidates {
-        if let Some(t) = visible[e.visible as usize].seen.cast(dir, best)
+        let seen = &visible[e.visible as usize].seen;
+        let t = if seen.is_square() {
+            seen.cast_square(dir, inv, best)
+        } else {
+            seen.cast(dir, best)
+        };
+        if let Some(t) = t
             && t <= best
         {
             best = t;

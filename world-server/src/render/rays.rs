@@ -8,10 +8,15 @@
 //!
 //! Most rays meet only the ground. Of a corner ray the renderer then needs only whether it
 //! points down ([`RayGrid::corner_descends`], mostly without normalising), and of a centre
-//! ray only the vertical component of its unit direction: [`RayGrid::centre_row`] computes
-//! those of a whole row, and the norms that finish the other rays' normalisation, in one loop
-//! the compiler can vectorise, with nalgebra's arithmetic (`Matrix3 * Vector3`, `normalize`)
-//! operation for operation.
+//! ray only the vertical component of its unit direction and its range to the ground:
+//! [`RayGrid::centre_row`] computes those of a whole row in one loop the compiler can
+//! vectorise. The rays that may meet a box are normalised a run of columns at a time too,
+//! with the reciprocals of their components that the slab tests divide by
+//! ([`RayGrid::unit_rays`]).
+//! All of it is nalgebra's arithmetic (`Matrix3 * Vector3`, `norm`, `normalize`) operation
+//! for operation.
+
+use std::ops::Range;
 
 use protocol::camera::Camera;
 use protocol::math::{Real, Vector3};
@@ -46,10 +51,40 @@ const DESCENT_BOUND: Real = 1e-200;
 /// One row of centre rays, as [`RayGrid::centre_row`] fills it.
 #[derive(Clone, Debug, Default)]
 pub struct RowRays {
-    /// Norm of each column's unnormalised direction.
-    pub norm: Vec<Real>,
     /// Vertical component of each column's unit direction.
     pub z: Vec<Real>,
+    /// Range to the ground `z = 0` from the given height, `-height / z` (meaningful where the
+    /// ray points down from above the ground).
+    pub ground: Vec<Real>,
+}
+
+/// Unit rays of some columns of a row, indexed by column, as [`RayGrid::unit_rays`] fills
+/// them: the unit direction and the reciprocals of its components.
+#[derive(Clone, Debug, Default)]
+pub struct UnitRays {
+    dir: [Vec<Real>; 3],
+    inv: [Vec<Real>; 3],
+}
+
+impl UnitRays {
+    /// The unit direction of column `c` and `[1 / dir.x, 1 / dir.y, 1 / dir.z]`, as last
+    /// filled by [`RayGrid::unit_rays`] (a column never filled gives zeros or stale values).
+    #[inline]
+    pub fn get(&self, c: u32) -> (Vector3, [Real; 3]) {
+        let c = c as usize;
+        let [dx, dy, dz] = &self.dir;
+        let [ix, iy, iz] = &self.inv;
+        (Vector3::new(dx[c], dy[c], dz[c]), [ix[c], iy[c], iz[c]])
+    }
+}
+
+/// Which rays of a row: the corner rays of corner row `r`, or the centre rays of pixel row `r`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RowOf {
+    /// Corner row `r` (`0..=rows`), columns `0..=cols`.
+    Corners(u32),
+    /// Pixel row `r` (`0..rows`), columns `0..cols`.
+    Centres(u32),
 }
 
 impl RayGrid {
@@ -137,28 +172,76 @@ impl RayGrid {
         (self.bounded && v.z < -DESCENT_BOUND) || (v.z < 0.0 && unit_z(&v) < 0.0)
     }
 
-    /// The centre rays of row `r`: for column `c`, `out.norm[c]` is the norm of
-    /// `centre_unnormalised(r, c)` and `out.z[c]` is `centre_ray(r, c).z`. The unit ray is
-    /// then `(v.x / norm, v.y / norm, z)` with `v` the unnormalised direction.
-    pub fn centre_row(&self, r: u32, out: &mut RowRays) {
+    /// The centre rays of pixel row `r` seen from `height` above the ground: for column `c`,
+    /// `out.z[c]` is `centre_ray(r, c).z` and `out.ground[c]` is `-height / out.z[c]`.
+    pub fn centre_row(&self, r: u32, height: Real, out: &mut RowRays) {
         let n = self.centre_x.len();
-        out.norm.resize(n, 0.0);
         out.z.resize(n, 0.0);
-        let m = &self.world_from_camera;
-        let y = self.centre_y[r as usize];
-        // `Matrix3 * Vector3` accumulates the columns times the components in order (gemv);
-        // `norm` sums the squares left to right; `normalize` divides by the norm.
-        let (ax, ay, az) = (m[(0, 1)] * y, m[(1, 1)] * y, m[(2, 1)] * y);
-        let (bx, by, bz) = (m[(0, 2)], m[(1, 2)], m[(2, 2)]);
-        let (cx, cy, cz) = (m[(0, 0)], m[(1, 0)], m[(2, 0)]);
-        for ((&x, norm), z) in self.centre_x.iter().zip(&mut out.norm).zip(&mut out.z) {
-            let vx = cx * x + ax + bx;
-            let vy = cy * x + ay + by;
-            let vz = cz * x + az + bz;
-            let s = (vx * vx + vy * vy + vz * vz).sqrt();
-            *norm = s;
-            *z = vz / s;
+        out.ground.resize(n, 0.0);
+        let row = self.row_terms(self.centre_y[r as usize]);
+        for ((&x, z), ground) in self.centre_x.iter().zip(&mut out.z).zip(&mut out.ground) {
+            let v = row.unnormalised(x);
+            let unit_z = v.z / (v.x * v.x + v.y * v.y + v.z * v.z).sqrt();
+            *z = unit_z;
+            *ground = -height / unit_z;
         }
+    }
+
+    /// The unit rays of a run of columns of a row, and their reciprocals: for `c` in
+    /// `columns`, `out.get(c).0` is `corner_ray(r, c)` or `centre_ray(r, c)`.
+    pub fn unit_rays(&self, which: RowOf, columns: Range<u32>, out: &mut UnitRays) {
+        let (xs, y) = match which {
+            RowOf::Corners(r) => (&self.corner_x, self.corner_y[r as usize]),
+            RowOf::Centres(r) => (&self.centre_x, self.centre_y[r as usize]),
+        };
+        for v in out.dir.iter_mut().chain(&mut out.inv) {
+            if v.len() < xs.len() {
+                v.resize(xs.len(), 0.0);
+            }
+        }
+        let row = self.row_terms(y);
+        let span = columns.start as usize..columns.end as usize;
+        let xs = &xs[span.clone()];
+        let [dx, dy, dz] = out.dir.each_mut().map(|v| &mut v[span.clone()]);
+        let [ix, iy, iz] = out.inv.each_mut().map(|v| &mut v[span.clone()]);
+        for (i, &x) in xs.iter().enumerate() {
+            let v = row.unnormalised(x);
+            let s = (v.x * v.x + v.y * v.y + v.z * v.z).sqrt();
+            let d = [v.x / s, v.y / s, v.z / s];
+            (dx[i], dy[i], dz[i]) = (d[0], d[1], d[2]);
+            (ix[i], iy[i], iz[i]) = (1.0 / d[0], 1.0 / d[1], 1.0 / d[2]);
+        }
+    }
+
+    /// The terms of `Matrix3 * Vector3::new(x, y, 1.0)` that do not depend on `x`.
+    #[inline]
+    fn row_terms(&self, y: Real) -> RowTerms {
+        let m = &self.world_from_camera;
+        RowTerms {
+            x: [m[(0, 0)], m[(1, 0)], m[(2, 0)]],
+            y: [m[(0, 1)] * y, m[(1, 1)] * y, m[(2, 1)] * y],
+            one: [m[(0, 2)], m[(1, 2)], m[(2, 2)]],
+        }
+    }
+}
+
+/// `Matrix3 * Vector3::new(x, y, 1.0)` for one `y`: nalgebra's product accumulates the columns
+/// times the components in order (`gemv`), `(m0 * x + m1 * y) + m2`; its `norm` then sums the
+/// squares left to right and `normalize` divides every component by the norm.
+struct RowTerms {
+    x: [Real; 3],
+    y: [Real; 3],
+    one: [Real; 3],
+}
+
+impl RowTerms {
+    #[inline]
+    fn unnormalised(&self, x: Real) -> Vector3 {
+        Vector3::new(
+            self.x[0] * x + self.y[0] + self.one[0],
+            self.x[1] * x + self.y[1] + self.one[1],
+            self.x[2] * x + self.y[2] + self.one[2],
+        )
     }
 }
 
@@ -203,9 +286,13 @@ mod tests {
             let grid = RayGrid::new(&camera);
             let bits = |v: Vector3| v.map(Real::to_bits);
             let mut row = RowRays::default();
+            let (mut corners, mut centres) = (UnitRays::default(), UnitRays::default());
+            let height = 37.5;
             for r in 0..=rows {
+                grid.unit_rays(RowOf::Corners(r), 0..cols + 1, &mut corners);
                 if r < rows {
-                    grid.centre_row(r, &mut row);
+                    grid.centre_row(r, height, &mut row);
+                    grid.unit_rays(RowOf::Centres(r), 0..cols, &mut centres);
                 }
                 for c in 0..=cols {
                     let corner = camera.corner_ray(r, c);
@@ -214,14 +301,19 @@ mod tests {
                     assert_eq!(z.to_bits(), corner.z.to_bits());
                     assert_eq!(bits(grid.ray(c as Real, r as Real)), bits(corner));
                     assert_eq!(grid.corner_descends(r, c), corner.z < 0.0);
+                    let (dir, inv) = corners.get(c);
+                    assert_eq!(bits(dir), bits(corner));
+                    let want = [0, 1, 2].map(|i| (1.0 / corner[i]).to_bits());
+                    assert_eq!(inv.map(Real::to_bits), want);
                     if r < rows && c < cols {
                         let centre = camera.centre_ray(r, c);
-                        let v = grid.centre_unnormalised(r, c);
-                        assert_eq!(row.norm[c as usize].to_bits(), v.norm().to_bits());
                         assert_eq!(row.z[c as usize].to_bits(), centre.z.to_bits());
-                        let n = row.norm[c as usize];
-                        let unit = Vector3::new(v.x / n, v.y / n, row.z[c as usize]);
-                        assert_eq!(bits(unit), bits(centre));
+                        let ground = -height / centre.z;
+                        assert_eq!(row.ground[c as usize].to_bits(), ground.to_bits());
+                        let (dir, inv) = centres.get(c);
+                        assert_eq!(bits(dir), bits(centre));
+                        let want = [0, 1, 2].map(|i| (1.0 / centre[i]).to_bits());
+                        assert_eq!(inv.map(Real::to_bits), want);
                         assert_eq!(bits(grid.centre_ray(r, c)), bits(centre));
                         let z = unit_z(&grid.centre_unnormalised(r, c));
                         assert_eq!(z.to_bits(), centre.z.to_bits());
