@@ -2,7 +2,7 @@
 //!
 //! The scene and the ground truth of a setfleet run: a procedural city, cars on its roads,
 //! the UAVs' dynamics, and the rendering of every UAV's camera frame (depth, labels, boxes)
-//! by parry3d ray casts, published in place into iceoryx2 shared memory.
+//! by ray casts with parry3d's arithmetic, published in place into iceoryx2 shared memory.
 //!
 //! - [`scene`]: the city, a road grid with a ring road and prism buildings in its blocks.
 //! - [`traffic`]: the cars, driving on the lanes and keeping their safety distances.

@@ -5,7 +5,10 @@
 //!    span of pixels its silhouette touches. Those are the only pixels it can appear in.
 //! 2. A ray is cast through every pixel corner (shared between neighbours) and every pixel
 //!    centre; each ray is tested against the analytic ground `z = 0` and against only the
-//!    objects whose footprint touches the pixels around it.
+//!    objects whose footprint touches the pixels around it, with parry3d's arithmetic
+//!    ([`objects::SeenFrom`]). A ray no footprint touches (most of them) meets only the
+//!    ground: a centre ray needs only the vertical component of its unit direction and its
+//!    range, a corner ray only whether it points down ([`rays`]).
 //! 3. A pixel is G when its 5 rays hit the ground and no footprint touches it; T (O) when its 5
 //!    rays hit the same target (building) and every other object whose footprint touches it is
 //!    entirely farther than that object's farthest corner (nothing can then stand in front of
@@ -24,8 +27,10 @@ pub mod footprint;
 pub mod noise;
 pub mod objects;
 pub mod rays;
+#[cfg(test)]
+mod reference;
 
-use protocol::camera::Camera;
+use protocol::camera::{Camera, CameraModel};
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, Label, TargetBox};
 use protocol::math::{Point3, Real, Vector3};
 use rayon::prelude::*;
@@ -33,8 +38,8 @@ use rayon::prelude::*;
 use boxes::RowTargets;
 use footprint::Footprint;
 use noise::RowNoise;
-pub use objects::{ObjectKind, SceneObject};
-use rays::RayGrid;
+pub use objects::{ObjectKind, SceneObject, SeenFrom};
+use rays::{RayGrid, RowOf, RowRays, UnitRays};
 
 /// Code of a ray that hit the ground first.
 const HIT_GROUND: u32 = u32::MAX - 1;
@@ -67,6 +72,7 @@ pub struct FrameSpec {
 /// An object the camera may see, with its footprint and distances from the camera.
 struct Visible {
     object: SceneObject,
+    seen: SeenFrom,
     footprint: Footprint,
     nearest: Real,
     farthest: Real,
@@ -95,7 +101,14 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
     let (rows, cols) = if fits { (rows, cols) } else { (0, 0) };
     let n = rows as usize * cols as usize;
     let origin = camera.origin();
-    let grid = RayGrid::new(camera);
+    let grid = RayGrid::new(&Camera::new(
+        CameraModel {
+            rows,
+            cols,
+            ..camera.model
+        },
+        camera.pose,
+    ));
 
     let visible: Vec<Visible> = objects
         .iter()
@@ -103,6 +116,7 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
             let fp = footprint::footprint(camera, o)?;
             Some(Visible {
                 object: *o,
+                seen: o.seen_from(&origin),
                 footprint: fp,
                 nearest: o.nearest_distance(&origin),
                 farthest: o.farthest_distance(&origin),
@@ -135,14 +149,30 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
         corners
             .par_chunks_mut(corner_cols)
             .enumerate()
-            .for_each(|(r, out)| {
+            .for_each_init(Scratch::default, |scratch, (r, out)| {
                 let r = r as u32;
                 let entries = corner_row_entries(&row_entries, r, rows);
+                let touching = |c: u32| entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
+                scratch.touched.clear();
                 for (c, code) in out.iter_mut().enumerate() {
                     let c = c as u32;
-                    let dir = grid.corner_ray(r, c);
-                    let cands = entries.iter().filter(|e| e.c0 <= c && c <= e.c1);
-                    *code = cast(&origin, &dir, cands, &visible).0;
+                    if touching(c).next().is_some() {
+                        scratch.touched.push(c);
+                    } else {
+                        // `cast` without candidates, from the sign of the unit ray's z.
+                        *code = if origin.z > 0.0 && grid.corner_descends(r, c) {
+                            HIT_GROUND
+                        } else {
+                            HIT_NOTHING
+                        };
+                    }
+                }
+                for run in runs(&scratch.touched) {
+                    grid.unit_rays(RowOf::Corners(r), run, &mut scratch.rays);
+                }
+                for &c in &scratch.touched {
+                    let (dir, inv) = scratch.rays.get(c);
+                    out[c as usize] = cast(&origin, (&dir, &inv), touching(c), &visible).0;
                 }
             });
     }
@@ -152,8 +182,9 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
         .par_chunks_mut(cols.max(1) as usize)
         .zip(frame.labels[..n].par_chunks_mut(cols.max(1) as usize))
         .enumerate()
-        .map(|(r, (depth, labels))| {
+        .map_init(Scratch::default, |scratch, (r, (depth, labels))| {
             let r = r as u32;
+            grid.centre_row(r, origin.z, &mut scratch.row);
             let mut noise = RowNoise::new(
                 spec.seed,
                 spec.step,
@@ -165,26 +196,52 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
             let entries = &row_entries[r as usize];
             let top = &corners[r as usize * corner_cols..(r as usize + 1) * corner_cols];
             let bottom = &corners[(r as usize + 1) * corner_cols..(r as usize + 2) * corner_cols];
+            scratch.touched.clear();
+            scratch
+                .touched
+                .extend((0..cols).filter(|&c| entries.iter().any(|e| e.c0 <= c && c <= e.c1)));
+            for run in runs(&scratch.touched) {
+                grid.unit_rays(RowOf::Centres(r), run, &mut scratch.rays);
+            }
+            let (row, rays) = (&scratch.row, &scratch.rays);
+            let mut touched = scratch.touched.iter().peekable();
             let mut targets = RowTargets::default();
             for c in 0..cols {
                 let ci = c as usize;
                 let touching = || entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
-                let dir = grid.centre_ray(r, c);
-                let (centre, range) = cast(&origin, &dir, touching(), &visible);
+                let untouched = touched.next_if_eq(&&c).is_none();
+                let (centre, range) = if untouched {
+                    ground_only(&origin, row.z[ci], row.ground[ci])
+                } else {
+                    let (dir, inv) = rays.get(c);
+                    cast(&origin, (&dir, &inv), touching(), &visible)
+                };
                 let codes = [top[ci], top[ci + 1], bottom[ci + 1], bottom[ci], centre];
-                let mut label = classify(&codes, touching(), &visible);
+                let mut label = if untouched {
+                    // `classify` when no object touches the pixel.
+                    if codes.iter().all(|&code| code == HIT_GROUND) {
+                        Label::Ground
+                    } else {
+                        Label::Unknown
+                    }
+                } else {
+                    classify(&codes, touching(), &visible)
+                };
 
                 let px = noise.next_pixel();
                 // A zero range means the camera is inside a box (a UAV flown into a building
                 // by an explicit altitude): nothing can be measured there.
                 let measured = centre != HIT_NOTHING && range > 0.0;
                 let doubted = (px.doubt || !measured) && label != Label::Unknown;
-                for (k, &code) in codes.iter().enumerate() {
-                    if code >= HIT_GROUND || codes[..k].contains(&code) {
-                        continue;
-                    }
-                    if let ObjectKind::Target(id) = visible[code as usize].object.kind {
-                        targets.hit(id, c, label == Label::Target && !doubted);
+                // Most pixels see only the ground or the sky: no target to note.
+                if codes.iter().any(|&code| code < HIT_GROUND) {
+                    for (k, &code) in codes.iter().enumerate() {
+                        if code >= HIT_GROUND || codes[..k].contains(&code) {
+                            continue;
+                        }
+                        if let ObjectKind::Target(id) = visible[code as usize].object.kind {
+                            targets.hit(id, c, label == Label::Target && !doubted);
+                        }
                     }
                 }
                 if doubted {
@@ -248,11 +305,50 @@ fn corner_row_entries(row_entries: &[Vec<Entry>], r: u32, rows: u32) -> Vec<Entr
     out
 }
 
+/// The runs of consecutive values of an increasing list, as ranges.
+fn runs(sorted: &[u32]) -> impl Iterator<Item = std::ops::Range<u32>> + '_ {
+    let mut i = 0;
+    std::iter::from_fn(move || {
+        let start = *sorted.get(i)?;
+        let mut end = start + 1;
+        i += 1;
+        while sorted.get(i) == Some(&end) {
+            end += 1;
+            i += 1;
+        }
+        Some(start..end)
+    })
+}
+
+/// Buffers of one row, reused from row to row.
+#[derive(Default)]
+struct Scratch {
+    /// Columns whose ray some footprint touches.
+    touched: Vec<u32>,
+    /// Their unit rays.
+    rays: UnitRays,
+    /// The row's centre rays.
+    row: RowRays,
+}
+
+/// [`cast`] without candidates, from the vertical component `z` of the unit ray and its range
+/// `ground = -origin.z / z` to the ground.
+#[inline]
+fn ground_only(origin: &Point3, z: Real, ground: Real) -> (u32, Real) {
+    if z < 0.0 && origin.z > 0.0 {
+        (HIT_GROUND, ground)
+    } else {
+        (HIT_NOTHING, Real::INFINITY)
+    }
+}
+
 /// First hit of the unit ray `dir` from `origin` among the ground and the candidates:
 /// (code, range). Ties go to the object, the side that labels the pixel U rather than G.
+///
+/// `ray` is the unit direction and the reciprocals of its components.
 fn cast<'a>(
     origin: &Point3,
-    dir: &Vector3,
+    (dir, inv): (&Vector3, &[Real; 3]),
     candidates: impl Iterator<Item = &'a Entry>,
     visible: &[Visible],
 ) -> (u32, Real) {
@@ -262,7 +358,13 @@ fn cast<'a>(
         (HIT_NOTHING, Real::INFINITY)
     };
     for e in candidates {
-        if let Some(t) = visible[e.visible as usize].object.cast(origin, dir, best)
+        let seen = &visible[e.visible as usize].seen;
+        let t = if seen.is_square() {
+            seen.cast_square(dir, inv, best)
+        } else {
+            seen.cast(dir, best)
+        };
+        if let Some(t) = t
             && t <= best
         {
             best = t;
@@ -301,4 +403,97 @@ fn classify<'a>(
     let limit = hit.farthest * (1.0 + DISTANCE_SLACK) + DISTANCE_SLACK;
     let clear = touching.all(|e| e.visible == first || visible[e.visible as usize].nearest > limit);
     if clear { label } else { Label::Unknown }
+}
+
+#[cfg(test)]
+mod tests {
+    use protocol::camera::CameraPose;
+    use protocol::scenario::Scenario;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+    use crate::World;
+
+    /// Asserts two frames equal bit for bit: header, boxes, depth (NaNs included), labels.
+    fn assert_same(fast: &CvsFrame, reference: &CvsFrame, what: &str) {
+        assert_eq!(fast.header, reference.header, "{what}: header");
+        assert_eq!(fast.boxes, reference.boxes, "{what}: boxes");
+        let n = reference.header.rows as usize * reference.header.cols as usize;
+        let bits = |f: &CvsFrame| f.depth[..n].iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        assert!(bits(fast) == bits(reference), "{what}: depth");
+        assert!(fast.labels[..n] == reference.labels[..n], "{what}: labels");
+    }
+
+    /// A random viewpoint over (or in) the default city: mostly the fleet's heights and tilt,
+    /// also low among the cars, inside a building, on or under the ground, and at tilts that
+    /// show the horizon.
+    fn camera(rng: &mut ChaCha8Rng, scenario: &Scenario, objects: &[SceneObject]) -> Camera {
+        let h = scenario.region.half_extent_m;
+        let mut position = Point3::new(
+            rng.random_range(-h..h),
+            rng.random_range(-h..h),
+            [1.0, 3.0, 12.0, 30.0, 79.3, 95.0, 109.3, 140.0][rng.random_range(0..8)],
+        );
+        match rng.random_range(0..12) {
+            0 => position.z = [0.0, -0.5][rng.random_range(0..2)],
+            1 => {
+                let inside = &objects[rng.random_range(0..objects.len())];
+                position = Point3::from(inside.pose.translation.vector);
+            }
+            _ => {}
+        }
+        let mut model = scenario.camera_model();
+        model.tilt_rad = match rng.random_range(0..4) {
+            0 => rng.random_range(0.0..0.4),
+            1 => rng.random_range(0.4..1.5),
+            _ => model.tilt_rad,
+        };
+        let yaw = rng.random_range(-4.0..4.0);
+        Camera::new(model, CameraPose { position, yaw })
+    }
+
+    #[test]
+    fn frames_are_those_of_the_parry_reference_bit_for_bit() {
+        let scenario = Scenario::default();
+        let mut world = World::new(&scenario).unwrap_or_else(|e| panic!("{e}"));
+        let mut rng = ChaCha8Rng::seed_from_u64(2024);
+        let mut fast = CvsFrame::new_boxed();
+        let mut reference = CvsFrame::new_boxed();
+        let [mut target_px, mut obstacle_px, mut boxes, mut horizon_px] = [0usize; 4];
+        for step in 0..=240 {
+            if step % 60 == 0 {
+                let objects = world.scene_objects(None);
+                for k in 0..24 {
+                    let camera = camera(&mut rng, &scenario, &objects);
+                    let spec = FrameSpec {
+                        run_tag: 5,
+                        seed: scenario.seed,
+                        step,
+                        time_s: world.time_s(),
+                        uav: k,
+                        depth_noise: scenario.camera.depth_noise,
+                        unknown_fraction: [0.0, 0.05][k as usize % 2],
+                        min_pixels: scenario.camera.min_pixels,
+                    };
+                    render(&camera, &objects, &spec, &mut fast);
+                    reference::render(&camera, &objects, &spec, &mut reference);
+                    assert_same(&fast, &reference, &format!("step {step}, {camera:?}"));
+                    let n = camera.model.pixel_count();
+                    let count =
+                        |l: Label| fast.labels[..n].iter().filter(|&&x| x == l as u8).count();
+                    target_px += count(Label::Target);
+                    obstacle_px += count(Label::Obstacle);
+                    boxes += fast.header.box_count as usize;
+                    horizon_px += fast.depth[..n].iter().filter(|d| d.is_nan()).count();
+                }
+            }
+            world.advance();
+        }
+        // The frames saw cars, buildings, identified boxes and the sky.
+        assert!(target_px > 1_000, "{target_px} T pixels");
+        assert!(obstacle_px > 100_000, "{obstacle_px} O pixels");
+        assert!(boxes > 5, "{boxes} boxes");
+        assert!(horizon_px > 100_000, "{horizon_px} pixels without depth");
+    }
 }
