@@ -244,7 +244,9 @@ fn a_killed_token_holder_is_skipped_and_the_survivors_process_every_step() {
     let t = TestRun::new("kill-holder");
     let file = t.write("scenario.toml", &scenario(30.0, 3));
     let w = world(&t, &file, "0,1,2");
-    let a0 = agent(&t, &file, 0, &[]);
+    // A token wait far longer than the test: only noticing the holder's death ends the wait.
+    let long_wait = ["--token-wait-ms", "120000"];
+    let a0 = agent(&t, &file, 0, &long_wait);
     // Agent 1 sits on the token for a long time at every turn: it holds it when killed.
     let mut cmd = Command::new(binary("uav-agent"));
     cmd.arg("--run-id")
@@ -254,7 +256,7 @@ fn a_killed_token_holder_is_skipped_and_the_survivors_process_every_step() {
         .args(["--id", "1"])
         .env("SETFLEET_TEST_HOLD_TOKEN_MS", "60000");
     let a1 = ChildGuard::spawn(&mut cmd);
-    let a2 = agent(&t, &file, 2, &[]);
+    let a2 = agent(&t, &file, 2, &long_wait);
     wait_until("agent 1 to hold the token", Duration::from_secs(60), || {
         std::fs::read_dir("/proc").is_ok() && agent_alive(&t, 1) && agent_alive(&t, 2)
     });
