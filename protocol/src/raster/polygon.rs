@@ -12,7 +12,7 @@
 
 use super::{CellSet, Coverage, grid_scale, margin};
 use crate::grid::GroundGrid;
-use crate::math::{Point2, Real};
+use crate::math::{Point2, Real, floor_fast};
 
 impl CellSet {
     /// Adds the cells of a convex polygon (any orientation; repeated or collinear vertices are
@@ -248,8 +248,8 @@ pub(super) fn columns_inside(grid: &GroundGrid, lo: Real, hi: Real) -> Option<(u
     let last = grid.nx as Real - 1.0;
     // Estimate by division (off by at most one), then settle on the exact edges `o + k d` the
     // grid itself uses.
-    let mut a = ((lo - o) / d).ceil().clamp(0.0, last) as u32;
-    let mut b = (((hi - o) / d).floor() - 1.0).clamp(0.0, last) as u32;
+    let mut a = (-floor_fast(-((lo - o) / d))).clamp(0.0, last) as u32;
+    let mut b = (floor_fast((hi - o) / d) - 1.0).clamp(0.0, last) as u32;
     let edge = |k: u32| o + k as Real * d;
     while a > 0 && edge(a - 1) >= lo {
         a -= 1;

@@ -47,6 +47,7 @@ use protocol::math::Point2;
 use protocol::raster::CellSet;
 use protocol::wire::PlannedView;
 
+use super::view::same_pose;
 use super::{
     Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision, stray,
     view,
@@ -192,13 +193,18 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
             // Only the ground of the grown sets can change them.
             let mut relevant = u0.clone();
             relevant.or_assign(&t0);
+            // The views of the children's first poses, by pose: the increments the yaw rate
+            // cannot reach in one CVS step (the large turns to either side) fly the same
+            // first step, whose view is computed once.
+            let mut first_views: Vec<(CameraPose, CellSet)> =
+                Vec::with_capacity(params.increments.len());
             for &inc in &params.increments {
                 let yaw_ref = node.state.yaw + inc;
                 let mut state = node.state;
                 let mut poses = node.poses.clone();
                 let mut seen = CellSet::empty(&grid);
                 let mut stray_m = node.stray_m;
-                for _ in 0..per {
+                for step in 0..per {
                     state = flight::advance(
                         state,
                         yaw_ref,
@@ -211,14 +217,32 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
                         position: state.position,
                         yaw: state.yaw,
                     };
-                    predictor.add_visible_ground_within(
-                        &mut seen,
-                        &grid,
-                        &params.camera,
-                        &pose,
-                        obstacles,
-                        &relevant,
-                    );
+                    if step == 0 {
+                        let known = first_views.iter().position(|(p, _)| same_pose(p, &pose));
+                        let i = known.unwrap_or_else(|| {
+                            let mut view = CellSet::empty(&grid);
+                            predictor.add_visible_ground_within(
+                                &mut view,
+                                &grid,
+                                &params.camera,
+                                &pose,
+                                obstacles,
+                                &relevant,
+                            );
+                            first_views.push((pose, view));
+                            first_views.len() - 1
+                        });
+                        seen.or_assign(&first_views[i].1);
+                    } else {
+                        predictor.add_visible_ground_within(
+                            &mut seen,
+                            &grid,
+                            &params.camera,
+                            &pose,
+                            obstacles,
+                            &relevant,
+                        );
+                    }
                     poses.push(pose);
                 }
                 let mut u = u0.clone();
