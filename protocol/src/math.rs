@@ -46,11 +46,13 @@ pub fn floor_fast(x: Real) -> Real {
 /// Convex hull (counter-clockwise, no repeated points) of a set of ground points,
 /// by Andrew's monotone chain. Collinear points on the hull are dropped.
 pub fn convex_hull(points: &[Point2]) -> Vec<Point2> {
-    let mut pts: Vec<Point2> = points
-        .iter()
-        .copied()
-        .filter(|p| p.x.is_finite() && p.y.is_finite())
-        .collect();
+    let mut pts: Vec<Point2> = Vec::with_capacity(points.len());
+    pts.extend(
+        points
+            .iter()
+            .filter(|p| p.x.is_finite() && p.y.is_finite())
+            .copied(),
+    );
     pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
     pts.dedup();
     if pts.len() < 3 {

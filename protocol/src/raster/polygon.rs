@@ -87,8 +87,8 @@ impl CellSet {
             return;
         };
         let rows = (r1 - r0) as usize + 1;
-        let mut x_lo = vec![Real::INFINITY; rows];
-        let mut x_hi = vec![Real::NEG_INFINITY; rows];
+        // Per row, the x-extent of the clipped edges.
+        let mut extent = vec![(Real::INFINITY, Real::NEG_INFINITY); rows];
         let n = polygon.len();
         for i in 0..n {
             let (a, b) = (polygon[i], polygon[(i + 1) % n]);
@@ -102,13 +102,12 @@ impl CellSet {
                 let strip_lo = grid.origin.y + iy as Real * grid.cell_m - eps;
                 let strip_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m + eps;
                 if let Some((lo, hi)) = clipped_x_extent(a, b, strip_lo, strip_hi) {
-                    let k = (iy - r0) as usize;
-                    x_lo[k] = x_lo[k].min(lo);
-                    x_hi[k] = x_hi[k].max(hi);
+                    let row = &mut extent[(iy - r0) as usize];
+                    *row = (row.0.min(lo), row.1.max(hi));
                 }
             }
         }
-        for (k, (lo, hi)) in x_lo.into_iter().zip(x_hi).enumerate() {
+        for (k, (lo, hi)) in extent.into_iter().enumerate() {
             if let Some((c0, c1)) = grid.columns_touching(lo - eps, hi + eps) {
                 self.fill_row_span(r0 + k as u32, c0, c1);
             }

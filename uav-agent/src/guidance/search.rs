@@ -71,7 +71,8 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
         sets.or_assign(&params.grids.downsample(s));
     }
     let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
-    let mut predictor = GroundPredictor::new(&grid);
+    // Every pose is predicted for the bounds, then again for the exact costs.
+    let mut predictor = GroundPredictor::remembering_footprints(&grid);
     // The ground the others' views can change in a period: where the sets can be by its end
     // (the sets only grow by the dilation of each period, so every prediction stays inside
     // the sets dilated once per period so far).

@@ -1,6 +1,8 @@
 //! Predicted fields of view: the ground a camera at a predicted pose will see, minus what the
 //! known buildings of the occupancy map will hide from it.
 
+use std::collections::BTreeMap;
+
 use protocol::camera::{Camera, CameraModel, CameraPose};
 use protocol::grid::{GroundGrid, Rect};
 use protocol::math::{Point2, Point3, convex_hull};
@@ -142,6 +144,17 @@ pub struct GroundPredictor {
     visible: CellSet,
     /// The shadows of the pose being predicted; empty between calls.
     shadows: CellSet,
+    /// The footprints rasterised so far, by pose, on the grid named (when asked to remember
+    /// them).
+    footprints: Option<(GroundGrid, BTreeMap<[u64; 4], FootprintRaster>)>,
+}
+
+/// The inner raster of a pose's footprint: its rows' words.
+#[derive(Clone, Debug)]
+struct FootprintRaster {
+    rows: (u32, u32),
+    fov_box: Rect,
+    words: Vec<u64>,
 }
 
 impl GroundPredictor {
@@ -150,6 +163,18 @@ impl GroundPredictor {
         Self {
             visible: CellSet::empty(grid),
             shadows: CellSet::empty(grid),
+            footprints: None,
+        }
+    }
+
+    /// A predictor for sets on `grid` that remembers the raster of every pose's footprint,
+    /// for a caller that predicts the same poses several times (the paper's search bounds
+    /// each sequence, then costs it): the same cells for less time, and memory that grows
+    /// with the poses (a few kilobytes each).
+    pub fn remembering_footprints(grid: &GroundGrid) -> Self {
+        Self {
+            footprints: Some((*grid, BTreeMap::new())),
+            ..Self::new(grid)
         }
     }
 
@@ -192,17 +217,51 @@ impl GroundPredictor {
         }
         if !self.visible.same_shape(relevant) {
             // Not the grid the buffers were made for: start afresh rather than mix shapes.
+            let remember = self.footprints.is_some();
             *self = Self::new(grid);
+            if remember {
+                self.footprints = Some((*grid, BTreeMap::new()));
+            }
         }
-        let camera = Camera::new(*model, *pose);
-        let footprint = camera.image_ground_footprint()?;
-        let fov_box = bbox(&footprint);
-        // The inner raster of the footprint lies in these rows (widened by a cell: the
-        // buffer is cleared over them afterwards).
-        let (r0, r1) =
-            grid.rows_touching(fov_box.min.y - grid.cell_m, fov_box.max.y + grid.cell_m)?;
-        self.visible
-            .fill_convex_polygon_rows(grid, &footprint, Coverage::Inner, (r0, r1));
+        if let Some((on, known)) = &mut self.footprints
+            && on != grid
+        {
+            *on = *grid;
+            known.clear();
+        }
+        let key = [pose.position.x, pose.position.y, pose.position.z, pose.yaw].map(f64::to_bits);
+        let known = self.footprints.as_ref().and_then(|(_, k)| k.get(&key));
+        let ((r0, r1), fov_box) = if let Some(raster) = known {
+            let wpr = self.visible.words_per_row();
+            for (y, words) in (raster.rows.0..=raster.rows.1).zip(raster.words.chunks(wpr)) {
+                self.visible.row_mut(y).copy_from_slice(words);
+            }
+            (raster.rows, raster.fov_box)
+        } else {
+            let camera = Camera::new(*model, *pose);
+            let footprint = camera.image_ground_footprint()?;
+            let fov_box = bbox(&footprint);
+            // The inner raster of the footprint lies in these rows (widened by a cell: the
+            // buffer is cleared over them afterwards).
+            let rows =
+                grid.rows_touching(fov_box.min.y - grid.cell_m, fov_box.max.y + grid.cell_m)?;
+            self.visible
+                .fill_convex_polygon_rows(grid, &footprint, Coverage::Inner, rows);
+            if let Some((_, known)) = &mut self.footprints {
+                let words = (rows.0..=rows.1)
+                    .flat_map(|y| self.visible.row(y).iter().copied())
+                    .collect();
+                known.insert(
+                    key,
+                    FootprintRaster {
+                        rows,
+                        fov_box,
+                        words,
+                    },
+                );
+            }
+            (rows, fov_box)
+        };
         let mut cells = CellWindow::EMPTY;
         for y in r0..=r1 {
             for (w, (v, r)) in self
@@ -530,7 +589,8 @@ mod tests {
         }
 
         /// The predictor adds exactly the relevant cells of the full prediction, pose after
-        /// pose with the same buffers (so nothing is left over from a previous pose).
+        /// pose with the same buffers (so nothing is left over from a previous pose), and so
+        /// does one that remembers the footprints, looking at the same poses again.
         #[test]
         fn the_predictor_adds_the_relevant_part_of_the_view(
             poses in proptest::collection::vec(
@@ -549,7 +609,9 @@ mod tests {
                 relevant.fill_disc(&grid, Point2::new(x, y), r, Coverage::Outer);
             }
             let mut predictor = GroundPredictor::new(&grid);
-            for (x, y, z, yaw) in poses {
+            let mut remembering = GroundPredictor::remembering_footprints(&grid);
+            // Every pose twice: the remembering predictor's second look is from memory.
+            for (x, y, z, yaw) in poses.iter().chain(&poses).copied() {
                 let pose = CameraPose {
                     position: Point3::new(x, y, z),
                     yaw,
@@ -561,7 +623,20 @@ mod tests {
                 let mut reference = CellSet::empty(&grid);
                 add_visible_ground(&mut reference, &grid, &model, &pose, &obstacles);
                 reference.and_assign(&relevant);
-                prop_assert_eq!(within, reference);
+                prop_assert_eq!(&within, &reference);
+                let mut remembered = CellSet::empty(&grid);
+                remembering.add_visible_ground_within(
+                    &mut remembered, &grid, &model, &pose, &obstacles, &relevant,
+                );
+                prop_assert_eq!(&remembered, &reference);
+                let (mut footprint, mut footprint_remembered) =
+                    (CellSet::empty(&grid), CellSet::empty(&grid));
+                predictor.add_footprint_within(&mut footprint, &grid, &model, &pose, &relevant);
+                remembering.add_footprint_within(
+                    &mut footprint_remembered, &grid, &model, &pose, &relevant,
+                );
+                prop_assert_eq!(&footprint_remembered, &footprint);
+                prop_assert!(reference.is_subset_of(&footprint));
             }
         }
     }
