@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::math::{Point2, Real};
+use crate::math::{Point2, Real, floor_fast};
 
 /// A cell index: column `ix` (east), row `iy` (north).
 pub type CellIndex = (u32, u32);
@@ -135,8 +135,8 @@ impl GroundGrid {
             return None;
         }
         // A cell [k d, (k+1) d] touches [lo, hi] when k d <= hi and (k+1) d >= lo.
-        let k0 = ((lo - origin) / d).floor() - 1.0;
-        let k1 = ((hi - origin) / d).floor() + 1.0;
+        let k0 = floor_fast((lo - origin) / d) - 1.0;
+        let k1 = floor_fast((hi - origin) / d) + 1.0;
         let k0 = k0.max(0.0);
         let k1 = k1.min(n as Real - 1.0);
         if k0 > k1 {

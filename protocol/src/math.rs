@@ -46,39 +46,41 @@ pub fn floor_fast(x: Real) -> Real {
 /// Convex hull (counter-clockwise, no repeated points) of a set of ground points,
 /// by Andrew's monotone chain. Collinear points on the hull are dropped.
 pub fn convex_hull(points: &[Point2]) -> Vec<Point2> {
-    let mut pts: Vec<Point2> = points
-        .iter()
-        .copied()
-        .filter(|p| p.x.is_finite() && p.y.is_finite())
-        .collect();
+    let mut pts: Vec<Point2> = Vec::with_capacity(points.len());
+    pts.extend(
+        points
+            .iter()
+            .filter(|p| p.x.is_finite() && p.y.is_finite())
+            .copied(),
+    );
     pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
     pts.dedup();
     if pts.len() < 3 {
         return pts;
     }
+    let mut hull: Vec<Point2> = Vec::with_capacity(pts.len() + 1);
+    // Lower hull left to right, then upper hull right to left.
+    monotone_chain(&mut hull, pts.iter());
+    monotone_chain(&mut hull, pts.iter().rev());
+    hull
+}
+
+/// One pass of the monotone chain: appends the turn-left chain of `ordered` to `hull` and
+/// drops its last point (the next pass starts there). The points already in `hull` (the
+/// floor) are never popped, so the upper pass keeps the lower hull.
+fn monotone_chain<'a>(hull: &mut Vec<Point2>, ordered: impl Iterator<Item = &'a Point2>) {
     let cross =
         |o: &Point2, a: &Point2, b: &Point2| (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
-    let mut hull: Vec<Point2> = Vec::with_capacity(pts.len() + 1);
-    // Lower hull left to right, then upper hull right to left; `floor` keeps the upper pass
-    // from popping points of the lower hull.
-    for pass in 0..2 {
-        let floor = hull.len();
-        let ordered: Box<dyn Iterator<Item = &Point2>> = if pass == 0 {
-            Box::new(pts.iter())
-        } else {
-            Box::new(pts.iter().rev())
-        };
-        for p in ordered {
-            while hull.len() >= floor + 2
-                && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0
-            {
-                hull.pop();
-            }
-            hull.push(*p);
+    let floor = hull.len();
+    for p in ordered {
+        while hull.len() >= floor + 2
+            && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0
+        {
+            hull.pop();
         }
-        hull.pop();
+        hull.push(*p);
     }
-    hull
+    hull.pop();
 }
 
 #[cfg(test)]

@@ -259,11 +259,13 @@ impl CellSet {
         let x1 = x1.min(self.nx - 1);
         let row = self.row_mut(iy);
         let (w0, w1) = (x0 as usize / 64, x1 as usize / 64);
-        for (w, word) in row.iter_mut().enumerate().take(w1 + 1).skip(w0) {
-            let lo = if w == w0 { x0 % 64 } else { 0 };
-            let hi = if w == w1 { x1 % 64 } else { 63 };
-            let mask = (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
-            *word |= mask;
+        let (first, last) = (u64::MAX << (x0 % 64), u64::MAX >> (63 - x1 % 64));
+        if w0 == w1 {
+            row[w0] |= first & last;
+        } else {
+            row[w0] |= first;
+            row[w0 + 1..w1].fill(u64::MAX);
+            row[w1] |= last;
         }
     }
 

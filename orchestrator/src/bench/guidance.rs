@@ -113,6 +113,7 @@ fn token_for(uav: usize, round: &[PlannedView], count: usize) -> Vec<PlannedView
 
 /// Runs the fleet and times the decisions.
 pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
+    let load_start = load_average();
     let mut report = BenchReport::new("guidance");
     let mut sim = FleetSim::new(&config.scenario)?;
     let setfleet = GuidanceParams::from_scenario(&config.setfleet);
@@ -206,7 +207,26 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
         sum.insert("obstacle_cells_median".into(), s.median.into());
     }
     sum.insert("goal_decision_ms_median".into(), 5.0.into());
+    // How busy the machine was: the timings are wall-clock times.
+    for (key, load) in [
+        ("load_average_1m_start", load_start),
+        ("load_average_1m_end", load_average()),
+    ] {
+        if let Some(load) = load {
+            sum.insert(key.into(), load.into());
+        }
+    }
     Ok(report)
+}
+
+/// The 1-minute load average (`/proc/loadavg`; `None` where there is none).
+fn load_average() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
 }
 
 fn decision_case(name: &str, others: usize, s: &Stats) -> BenchCase {

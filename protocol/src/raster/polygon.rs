@@ -12,7 +12,7 @@
 
 use super::{CellSet, Coverage, grid_scale, margin};
 use crate::grid::GroundGrid;
-use crate::math::{Point2, Real};
+use crate::math::{Point2, Real, floor_fast};
 
 impl CellSet {
     /// Adds the cells of a convex polygon (any orientation; repeated or collinear vertices are
@@ -87,8 +87,8 @@ impl CellSet {
             return;
         };
         let rows = (r1 - r0) as usize + 1;
-        let mut x_lo = vec![Real::INFINITY; rows];
-        let mut x_hi = vec![Real::NEG_INFINITY; rows];
+        // Per row, the x-extent of the clipped edges.
+        let mut extent = vec![(Real::INFINITY, Real::NEG_INFINITY); rows];
         let n = polygon.len();
         for i in 0..n {
             let (a, b) = (polygon[i], polygon[(i + 1) % n]);
@@ -102,13 +102,12 @@ impl CellSet {
                 let strip_lo = grid.origin.y + iy as Real * grid.cell_m - eps;
                 let strip_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m + eps;
                 if let Some((lo, hi)) = clipped_x_extent(a, b, strip_lo, strip_hi) {
-                    let k = (iy - r0) as usize;
-                    x_lo[k] = x_lo[k].min(lo);
-                    x_hi[k] = x_hi[k].max(hi);
+                    let row = &mut extent[(iy - r0) as usize];
+                    *row = (row.0.min(lo), row.1.max(hi));
                 }
             }
         }
-        for (k, (lo, hi)) in x_lo.into_iter().zip(x_hi).enumerate() {
+        for (k, (lo, hi)) in extent.into_iter().enumerate() {
             if let Some((c0, c1)) = grid.columns_touching(lo - eps, hi + eps) {
                 self.fill_row_span(r0 + k as u32, c0, c1);
             }
@@ -248,8 +247,8 @@ pub(super) fn columns_inside(grid: &GroundGrid, lo: Real, hi: Real) -> Option<(u
     let last = grid.nx as Real - 1.0;
     // Estimate by division (off by at most one), then settle on the exact edges `o + k d` the
     // grid itself uses.
-    let mut a = ((lo - o) / d).ceil().clamp(0.0, last) as u32;
-    let mut b = (((hi - o) / d).floor() - 1.0).clamp(0.0, last) as u32;
+    let mut a = (-floor_fast(-((lo - o) / d))).clamp(0.0, last) as u32;
+    let mut b = (floor_fast((hi - o) / d) - 1.0).clamp(0.0, last) as u32;
     let edge = |k: u32| o + k as Real * d;
     while a > 0 && edge(a - 1) >= lo {
         a -= 1;

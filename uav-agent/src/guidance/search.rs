@@ -26,6 +26,7 @@ use protocol::camera::CameraPose;
 use protocol::flight::{self, UavState};
 use protocol::raster::CellSet;
 
+use super::view::same_pose;
 use super::{
     Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
     nearest_visible_distance, seen_by_others, stray, view,
@@ -46,6 +47,10 @@ struct Exact {
     state: UavState,
     sets: CellSet,
     grown: Option<CellSet>,
+    /// The views (on `grown`) of its children's first poses, by pose: the increments the yaw
+    /// rate cannot reach in one CVS step (the large turns to either side) fly the same first
+    /// step, whose view is computed once.
+    first_views: Vec<(CameraPose, CellSet)>,
 }
 
 /// The search's fixed inputs and buffers.
@@ -66,7 +71,8 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
         sets.or_assign(&params.grids.downsample(s));
     }
     let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
-    let mut predictor = GroundPredictor::new(&grid);
+    // Every pose is predicted for the bounds, then again for the exact costs.
+    let mut predictor = GroundPredictor::remembering_footprints(&grid);
     // The ground the others' views can change in a period: where the sets can be by its end
     // (the sets only grow by the dilation of each period, so every prediction stays inside
     // the sets dilated once per period so far).
@@ -123,6 +129,7 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
             state: input.state,
             sets,
             grown: None,
+            first_views: Vec::new(),
         },
     );
     // The best so far: its key, its cost and its leaf.
@@ -340,15 +347,34 @@ impl Search<'_> {
             let (state, _) = self.fly(parent.state, u, 0.0, &mut poses);
             let mut seen = CellSet::empty(&grid);
             // Only the ground of the grown sets can change them.
-            for pose in &poses {
-                self.predictor.add_visible_ground_within(
-                    &mut seen,
-                    &grid,
-                    &params.camera,
-                    pose,
-                    self.obstacles,
-                    grown,
-                );
+            for (step, pose) in poses.iter().enumerate() {
+                if step > 0 {
+                    self.predictor.add_visible_ground_within(
+                        &mut seen,
+                        &grid,
+                        &params.camera,
+                        pose,
+                        self.obstacles,
+                        grown,
+                    );
+                    continue;
+                }
+                let views = &mut parent.first_views;
+                let known = views.iter().position(|(p, _)| same_pose(p, pose));
+                let i = known.unwrap_or_else(|| {
+                    let mut view = CellSet::empty(&grid);
+                    self.predictor.add_visible_ground_within(
+                        &mut view,
+                        &grid,
+                        &params.camera,
+                        pose,
+                        self.obstacles,
+                        grown,
+                    );
+                    views.push((*pose, view));
+                    views.len() - 1
+                });
+                seen.or_assign(&views[i].1);
             }
             let mut sets = grown.clone();
             sets.and_not_assign(&seen);
@@ -358,6 +384,7 @@ impl Search<'_> {
                     state,
                     sets,
                     grown: None,
+                    first_views: Vec::new(),
                 },
             );
         }

@@ -1,6 +1,8 @@
 //! Predicted fields of view: the ground a camera at a predicted pose will see, minus what the
 //! known buildings of the occupancy map will hide from it.
 
+use std::collections::BTreeMap;
+
 use protocol::camera::{Camera, CameraModel, CameraPose};
 use protocol::grid::{GroundGrid, Rect};
 use protocol::math::{Point2, Point3, convex_hull};
@@ -36,10 +38,10 @@ impl ObstacleCell {
 pub fn shadow(eye: &Point3, obstacle: &ObstacleCell) -> Option<Vec<Point2>> {
     let scale = shadow_scale(eye, obstacle)?;
     let corners = obstacle.rect.corners();
-    let mut pts = Vec::with_capacity(8);
-    for c in corners {
-        pts.push(c);
-        pts.push(project(eye, &c, scale));
+    let mut pts = [Point2::origin(); 8];
+    for (i, c) in corners.iter().enumerate() {
+        pts[2 * i] = *c;
+        pts[2 * i + 1] = project(eye, c, scale);
     }
     Some(convex_hull(&pts))
 }
@@ -105,6 +107,7 @@ pub fn add_visible_ground(
     visible.fill_convex_polygon(grid, &footprint, Coverage::Inner);
     if !obstacles.is_empty() {
         let fov_box = bbox(&footprint);
+        let whole = CellWindow::whole(grid);
         let mut shadows = CellSet::empty(grid);
         let mut any = false;
         for o in obstacles {
@@ -113,7 +116,7 @@ pub fn add_visible_ground(
             // shadows far longer than the field of view).
             if let Some(b) = shadow_bounds(&pose.position, o)
                 && overlaps(&b, &fov_box)
-                && let Some(rows) = rows_to_cover(grid, &b, &visible, &shadows)
+                && let Some(rows) = rows_to_cover(grid, &b, &visible, &shadows, &whole)
                 && let Some(hull) = shadow(&pose.position, o)
             {
                 shadows.fill_convex_polygon_rows(grid, &hull, Coverage::Outer, rows);
@@ -141,6 +144,17 @@ pub struct GroundPredictor {
     visible: CellSet,
     /// The shadows of the pose being predicted; empty between calls.
     shadows: CellSet,
+    /// The footprints rasterised so far, by pose, on the grid named (when asked to remember
+    /// them).
+    footprints: Option<(GroundGrid, BTreeMap<[u64; 4], FootprintRaster>)>,
+}
+
+/// The inner raster of a pose's footprint: its rows' words.
+#[derive(Clone, Debug)]
+struct FootprintRaster {
+    rows: (u32, u32),
+    fov_box: Rect,
+    words: Vec<u64>,
 }
 
 impl GroundPredictor {
@@ -149,6 +163,18 @@ impl GroundPredictor {
         Self {
             visible: CellSet::empty(grid),
             shadows: CellSet::empty(grid),
+            footprints: None,
+        }
+    }
+
+    /// A predictor for sets on `grid` that remembers the raster of every pose's footprint,
+    /// for a caller that predicts the same poses several times (the paper's search bounds
+    /// each sequence, then costs it): the same cells for less time, and memory that grows
+    /// with the poses (a few kilobytes each).
+    pub fn remembering_footprints(grid: &GroundGrid) -> Self {
+        Self {
+            footprints: Some((*grid, BTreeMap::new())),
+            ..Self::new(grid)
         }
     }
 
@@ -166,7 +192,8 @@ impl GroundPredictor {
         if !seen.same_shape(relevant) {
             return;
         }
-        if let Some((r0, r1, _)) = self.relevant_footprint(grid, model, pose, relevant) {
+        if let Some(footprint) = self.relevant_footprint(grid, model, pose, relevant) {
+            let (r0, r1) = footprint.rows;
             for y in r0..=r1 {
                 for (out, v) in seen.row_mut(y).iter_mut().zip(self.visible.row_mut(y)) {
                     *out |= *v;
@@ -176,44 +203,90 @@ impl GroundPredictor {
         }
     }
 
-    /// Rasterises into `visible` the cells of `relevant` in the field of view (inner cells),
-    /// and returns the rows it may have written and the footprint's bounding box; `None` when
-    /// it wrote nothing.
+    /// Rasterises into `visible` the cells of `relevant` in the field of view (inner cells)
+    /// and says where they are; `None` when there is none (`visible` is then left empty).
     fn relevant_footprint(
         &mut self,
         grid: &GroundGrid,
         model: &CameraModel,
         pose: &CameraPose,
         relevant: &CellSet,
-    ) -> Option<(u32, u32, Rect)> {
+    ) -> Option<Footprint> {
         if (relevant.nx(), relevant.ny()) != (grid.nx, grid.ny) {
             return None;
         }
         if !self.visible.same_shape(relevant) {
             // Not the grid the buffers were made for: start afresh rather than mix shapes.
+            let remember = self.footprints.is_some();
             *self = Self::new(grid);
-        }
-        let camera = Camera::new(*model, *pose);
-        let footprint = camera.image_ground_footprint()?;
-        let fov_box = bbox(&footprint);
-        // The inner raster of the footprint lies in these rows (widened by a cell: the
-        // buffer is cleared over them afterwards).
-        let (r0, r1) =
-            grid.rows_touching(fov_box.min.y - grid.cell_m, fov_box.max.y + grid.cell_m)?;
-        self.visible
-            .fill_convex_polygon_rows(grid, &footprint, Coverage::Inner, (r0, r1));
-        let mut any_relevant = false;
-        for y in r0..=r1 {
-            for (v, r) in self.visible.row_mut(y).iter_mut().zip(relevant.row(y)) {
-                *v &= r;
-                any_relevant |= *v != 0;
+            if remember {
+                self.footprints = Some((*grid, BTreeMap::new()));
             }
         }
-        any_relevant.then_some((r0, r1, fov_box))
+        if let Some((on, known)) = &mut self.footprints
+            && on != grid
+        {
+            *on = *grid;
+            known.clear();
+        }
+        let key = [pose.position.x, pose.position.y, pose.position.z, pose.yaw].map(f64::to_bits);
+        let known = self.footprints.as_ref().and_then(|(_, k)| k.get(&key));
+        let ((r0, r1), fov_box) = if let Some(raster) = known {
+            let wpr = self.visible.words_per_row();
+            for (y, words) in (raster.rows.0..=raster.rows.1).zip(raster.words.chunks(wpr)) {
+                self.visible.row_mut(y).copy_from_slice(words);
+            }
+            (raster.rows, raster.fov_box)
+        } else {
+            let camera = Camera::new(*model, *pose);
+            let footprint = camera.image_ground_footprint()?;
+            let fov_box = bbox(&footprint);
+            // The inner raster of the footprint lies in these rows (widened by a cell: the
+            // buffer is cleared over them afterwards).
+            let rows =
+                grid.rows_touching(fov_box.min.y - grid.cell_m, fov_box.max.y + grid.cell_m)?;
+            self.visible
+                .fill_convex_polygon_rows(grid, &footprint, Coverage::Inner, rows);
+            if let Some((_, known)) = &mut self.footprints {
+                let words = (rows.0..=rows.1)
+                    .flat_map(|y| self.visible.row(y).iter().copied())
+                    .collect();
+                known.insert(
+                    key,
+                    FootprintRaster {
+                        rows,
+                        fov_box,
+                        words,
+                    },
+                );
+            }
+            (rows, fov_box)
+        };
+        let mut cells = CellWindow::EMPTY;
+        for y in r0..=r1 {
+            for (w, (v, r)) in self
+                .visible
+                .row_mut(y)
+                .iter_mut()
+                .zip(relevant.row(y))
+                .enumerate()
+            {
+                *v &= r;
+                cells.add_word(y, w, *v);
+            }
+        }
+        (cells.count > 0).then_some(Footprint {
+            rows: (r0, r1),
+            fov_box,
+            cells,
+        })
     }
 
     /// Adds to `seen` the cells of `relevant` that [`add_visible_ground`] would add to it.
     /// `seen` and `relevant` must lie on `grid` (nothing is added when their shapes differ).
+    ///
+    /// A shadow is rasterised only when it may cover a visible cell not yet shadowed, and only
+    /// on the rows where it may: the shadows and rows skipped would change no cell.
     pub fn add_visible_ground_within(
         &mut self,
         seen: &mut CellSet,
@@ -226,14 +299,17 @@ impl GroundPredictor {
         if !seen.same_shape(relevant) {
             return;
         }
-        let Some((r0, r1, fov_box)) = self.relevant_footprint(grid, model, pose, relevant) else {
+        let Some(footprint) = self.relevant_footprint(grid, model, pose, relevant) else {
             return;
         };
+        let cells = footprint.cells;
+        let window = cells.rect(grid);
         let mut shadowed: Option<(u32, u32)> = None;
         for o in obstacles {
             if let Some(b) = shadow_bounds(&pose.position, o)
-                && overlaps(&b, &fov_box)
-                && let Some(rows) = rows_to_cover(grid, &b, &self.visible, &self.shadows)
+                && overlaps(&b, &footprint.fov_box)
+                && overlaps(&b, &window)
+                && let Some(rows) = rows_to_cover(grid, &b, &self.visible, &self.shadows, &cells)
                 && let Some(hull) = shadow(&pose.position, o)
             {
                 self.shadows
@@ -241,6 +317,7 @@ impl GroundPredictor {
                 shadowed = Some(shadowed.map_or(rows, |(a, b)| (a.min(rows.0), b.max(rows.1))));
             }
         }
+        let (r0, r1) = footprint.rows;
         for y in r0..=r1 {
             let (v, s) = (self.visible.row_mut(y), self.shadows.row(y));
             for ((out, v), s) in seen.row_mut(y).iter_mut().zip(v.iter_mut()).zip(s) {
@@ -254,6 +331,79 @@ impl GroundPredictor {
             }
         }
     }
+}
+
+/// What [`GroundPredictor::relevant_footprint`] rasterised.
+struct Footprint {
+    /// The rows written (to clear afterwards).
+    rows: (u32, u32),
+    /// The footprint's bounding box.
+    fov_box: Rect,
+    /// Where the relevant visible cells are.
+    cells: CellWindow,
+}
+
+/// The rows and columns the cells of a set lie in, and how many there are.
+#[derive(Clone, Copy, Debug)]
+struct CellWindow {
+    rows: (u32, u32),
+    columns: (u32, u32),
+    count: u64,
+}
+
+impl CellWindow {
+    const EMPTY: Self = Self {
+        rows: (u32::MAX, 0),
+        columns: (u32::MAX, 0),
+        count: 0,
+    };
+
+    /// Every cell of `grid` (its count left at 0).
+    fn whole(grid: &GroundGrid) -> Self {
+        Self {
+            rows: (0, grid.ny.saturating_sub(1)),
+            columns: (0, grid.nx.saturating_sub(1)),
+            count: 0,
+        }
+    }
+
+    /// Takes in word `w` of row `y`.
+    fn add_word(&mut self, y: u32, w: usize, word: u64) {
+        if word == 0 {
+            return;
+        }
+        let base = w as u32 * 64;
+        self.rows = (self.rows.0.min(y), self.rows.1.max(y));
+        self.columns = (
+            self.columns.0.min(base + word.trailing_zeros()),
+            self.columns.1.max(base + 63 - word.leading_zeros()),
+        );
+        self.count += u64::from(word.count_ones());
+    }
+
+    /// The window's cells on `grid`, widened by a cell on every side (so that rounding cannot
+    /// make a box that misses it touch one of its cells).
+    fn rect(&self, grid: &GroundGrid) -> Rect {
+        let d = grid.cell_m;
+        let at = |o: f64, k: u32| o + f64::from(k) * d;
+        Rect {
+            min: Point2::new(
+                at(grid.origin.x, self.columns.0) - d,
+                at(grid.origin.y, self.rows.0) - d,
+            ),
+            max: Point2::new(
+                at(grid.origin.x, self.columns.1) + 2.0 * d,
+                at(grid.origin.y, self.rows.1) + 2.0 * d,
+            ),
+        }
+    }
+}
+
+/// Whether two poses are the same, bit for bit (so that everything predicted from one holds
+/// for the other).
+pub(super) fn same_pose(a: &CameraPose, b: &CameraPose) -> bool {
+    let bits = |p: &CameraPose| [p.position.x, p.position.y, p.position.z, p.yaw].map(f64::to_bits);
+    bits(a) == bits(b)
 }
 
 /// The obstacles, tallest first: the predicted views are the same in any order (a union of
@@ -277,6 +427,7 @@ fn rows_to_cover(
     bounds: &Rect,
     visible: &CellSet,
     shadows: &CellSet,
+    cells: &CellWindow,
 ) -> Option<(u32, u32)> {
     let scale = [bounds.min, bounds.max, grid.origin, grid.bounds().max]
         .iter()
@@ -291,6 +442,12 @@ fn rows_to_cover(
     ) else {
         return None;
     };
+    // Outside the window of the visible cells there is nothing to cover.
+    let (x0, x1) = (x0.max(cells.columns.0), x1.min(cells.columns.1));
+    let (y0, y1) = (y0.max(cells.rows.0), y1.min(cells.rows.1));
+    if x0 > x1 || y0 > y1 {
+        return None;
+    }
     let (w0, w1) = (x0 as usize / 64, x1 as usize / 64);
     let uncovered = |&y: &u32| {
         let (v, s) = (visible.row(y), shadows.row(y));
@@ -432,7 +589,8 @@ mod tests {
         }
 
         /// The predictor adds exactly the relevant cells of the full prediction, pose after
-        /// pose with the same buffers (so nothing is left over from a previous pose).
+        /// pose with the same buffers (so nothing is left over from a previous pose), and so
+        /// does one that remembers the footprints, looking at the same poses again.
         #[test]
         fn the_predictor_adds_the_relevant_part_of_the_view(
             poses in proptest::collection::vec(
@@ -451,7 +609,9 @@ mod tests {
                 relevant.fill_disc(&grid, Point2::new(x, y), r, Coverage::Outer);
             }
             let mut predictor = GroundPredictor::new(&grid);
-            for (x, y, z, yaw) in poses {
+            let mut remembering = GroundPredictor::remembering_footprints(&grid);
+            // Every pose twice: the remembering predictor's second look is from memory.
+            for (x, y, z, yaw) in poses.iter().chain(&poses).copied() {
                 let pose = CameraPose {
                     position: Point3::new(x, y, z),
                     yaw,
@@ -463,7 +623,20 @@ mod tests {
                 let mut reference = CellSet::empty(&grid);
                 add_visible_ground(&mut reference, &grid, &model, &pose, &obstacles);
                 reference.and_assign(&relevant);
-                prop_assert_eq!(within, reference);
+                prop_assert_eq!(&within, &reference);
+                let mut remembered = CellSet::empty(&grid);
+                remembering.add_visible_ground_within(
+                    &mut remembered, &grid, &model, &pose, &obstacles, &relevant,
+                );
+                prop_assert_eq!(&remembered, &reference);
+                let (mut footprint, mut footprint_remembered) =
+                    (CellSet::empty(&grid), CellSet::empty(&grid));
+                predictor.add_footprint_within(&mut footprint, &grid, &model, &pose, &relevant);
+                remembering.add_footprint_within(
+                    &mut footprint_remembered, &grid, &model, &pose, &relevant,
+                );
+                prop_assert_eq!(&footprint_remembered, &footprint);
+                prop_assert!(reference.is_subset_of(&footprint));
             }
         }
     }
