@@ -77,10 +77,11 @@ const HEAP_LIMIT_BYTES: i32 = 1 << 30;
 
 /// Tells the C allocator (glibc) to serve large blocks from its heap and keep freed memory for
 /// the next ones. Sets, reach arrays and frames are hundreds of KB to MB each and are made and
-/// dropped every step; by default each such block is mapped fresh, zeroed by the kernel page
-/// by page and unmapped at its drop, which cost the agents about a tenth of their CPU. The
-/// process's peak memory is unchanged (it is what it holds at once); it is kept until the
-/// process exits. Elsewhere than Linux with glibc nothing happens.
+/// dropped every step; by default whether such a block is mapped fresh (zeroed by the kernel
+/// page by page, unmapped at its drop) depends on the sizes freed before it, which made the
+/// cost of a fusion vary threefold with unrelated changes and the page faults up to a fifth of
+/// an agent's CPU. The process's peak memory is unchanged (it is what it holds at once); it is
+/// kept until the process exits. Elsewhere than Linux with glibc nothing happens.
 pub fn keep_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only sets two tuning parameters of the allocator; called before the
