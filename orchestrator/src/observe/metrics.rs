@@ -125,11 +125,25 @@ impl FusedSets {
         config: &EstimatorConfig,
     ) -> FusedSets {
         let mut fused = own.estimate.clone();
-        let mut unseen = own.unseen.clone();
+        let mut fused_with = Vec::new();
         for peer in peers {
             if !fused.fuse(&peer.estimate, config).grid_mismatch {
-                unseen.or_assign(&peer.estimate.hidden);
+                fused_with.push(peer);
             }
+        }
+        FusedSets::with_unseen(fused, own, &fused_with)
+    }
+
+    /// The sets of `fused`, with `H̄` of agent `own` once it fused `peers`: its own joined
+    /// with the peers' `H^CVS`.
+    fn with_unseen(
+        fused: PeerEstimate,
+        own: &ObservedEstimate,
+        peers: &[&ObservedEstimate],
+    ) -> FusedSets {
+        let mut unseen = own.unseen.clone();
+        for peer in peers {
+            unseen.or_assign(&peer.estimate.hidden);
         }
         FusedSets {
             undetected: fused.undetected,
@@ -150,9 +164,7 @@ impl FusedSets {
     ) -> FusedSets {
         FusedSets::fuse(own, fused_peers(own, all, range_m), config)
     }
-}
 
-impl FusedSets {
     /// [`FusedSets::of_agent`] of every agent of `all`, in `all`'s order. Agents that fuse the
     /// same estimates (in lockstep with unlimited links, every agent fuses every other) share
     /// one fusion: on estimates of one step the law meets and joins sets, so the result does
@@ -168,34 +180,18 @@ impl FusedSets {
         let mut shared: BTreeMap<Vec<u32>, Option<PeerEstimate>> = BTreeMap::new();
         all.iter()
             .map(|own| {
+                // The peers are of `own`'s step ([`fused_peers`]).
                 let peers: Vec<&ObservedEstimate> = fused_peers(own, all, range_m).collect();
                 let mut group: Vec<&ObservedEstimate> = peers.clone();
                 group.push(own);
                 group.sort_by_key(|e| e.uav());
-                let same_step = group.iter().all(|e| e.step() == own.step());
                 let key: Vec<u32> = group.iter().map(|e| e.uav()).collect();
-                let fused = same_step
-                    .then(|| {
-                        shared
-                            .entry(key)
-                            .or_insert_with(|| fuse_in_order(&group, config))
-                            .clone()
-                    })
-                    .flatten();
+                let fused = shared
+                    .entry(key)
+                    .or_insert_with(|| fuse_in_order(&group, config))
+                    .clone();
                 match fused {
-                    Some(fused) => {
-                        let mut unseen = own.unseen.clone();
-                        for peer in &peers {
-                            unseen.or_assign(&peer.estimate.hidden);
-                        }
-                        FusedSets {
-                            undetected: fused.undetected,
-                            targets: fused.targets,
-                            obstacle_free: fused.obstacle_free,
-                            explored: fused.explored,
-                            unseen,
-                        }
-                    }
+                    Some(fused) => FusedSets::with_unseen(fused, own, &peers),
                     None => FusedSets::fuse(own, peers, config),
                 }
             })
