@@ -39,7 +39,7 @@ pub mod setfleet;
 pub mod view;
 
 use protocol::camera::{CameraModel, CameraPose};
-use protocol::flight::UavState;
+use protocol::flight::{self, UavState};
 use protocol::grid::{GroundGrid, Rect};
 use protocol::math::{Point2, Point3};
 use protocol::raster::CellSet;
@@ -216,6 +216,17 @@ fn decision(
 }
 
 /// How far outside the region a position is, metres (0 inside).
+/// One CVS step of the UAV's predicted flight toward `yaw_ref` (the world's dynamics): its new
+/// state and camera pose.
+fn fly_step(params: &GuidanceParams, state: UavState, yaw_ref: f64) -> (UavState, CameraPose) {
+    let state = flight::advance(state, yaw_ref, params.dt, params.speed, params.max_yaw_rate);
+    let pose = CameraPose {
+        position: state.position,
+        yaw: state.yaw,
+    };
+    (state, pose)
+}
+
 fn stray(region: &Rect, p: &Point3) -> f64 {
     let dx = (region.min.x - p.x).max(p.x - region.max.x).max(0.0);
     let dy = (region.min.y - p.y).max(p.y - region.max.y).max(0.0);
@@ -718,18 +729,9 @@ mod tests {
                 let yaw_ref = state.yaw + u;
                 let mut seen = CellSet::empty(&grid);
                 for _ in 0..per {
-                    state = flight::advance(
-                        state,
-                        yaw_ref,
-                        params.dt,
-                        params.speed,
-                        params.max_yaw_rate,
-                    );
+                    let pose;
+                    (state, pose) = fly_step(params, state, yaw_ref);
                     stray_m = stray_m.max(stray(&params.region, &state.position));
-                    let pose = CameraPose {
-                        position: state.position,
-                        yaw: state.yaw,
-                    };
                     view::add_visible_ground(&mut seen, &grid, &params.camera, &pose, obstacles);
                     poses.push(pose);
                 }

@@ -23,13 +23,13 @@
 use std::collections::BTreeMap;
 
 use protocol::camera::CameraPose;
-use protocol::flight::{self, UavState};
+use protocol::flight::UavState;
 use protocol::raster::CellSet;
 
 use super::view::same_pose;
 use super::{
     Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
-    nearest_visible_distance, seen_by_others, stray, view,
+    fly_step, nearest_visible_distance, seen_by_others, stray, view,
 };
 
 /// A sequence, simulated, with the lower bound of its cost.
@@ -219,12 +219,10 @@ impl Search<'_> {
         let yaw_ref = state.yaw + u;
         let (mut state, mut stray_m) = (state, stray_m);
         for _ in 0..params.steps_per_period {
-            state = flight::advance(state, yaw_ref, params.dt, params.speed, params.max_yaw_rate);
+            let pose;
+            (state, pose) = fly_step(params, state, yaw_ref);
             stray_m = stray_m.max(stray(&params.region, &state.position));
-            poses.push(CameraPose {
-                position: state.position,
-                yaw: state.yaw,
-            });
+            poses.push(pose);
         }
         (state, stray_m)
     }

@@ -49,7 +49,7 @@
 //! benchmark's decisions, for the price of a footprint per pose).
 
 use protocol::camera::{Camera, CameraPose};
-use protocol::flight::{self, UavState};
+use protocol::flight::UavState;
 use protocol::grid::GroundGrid;
 use protocol::math::Point2;
 use protocol::raster::CellSet;
@@ -57,8 +57,8 @@ use protocol::wire::PlannedView;
 
 use super::view::same_pose;
 use super::{
-    Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision, stray,
-    view,
+    Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
+    fly_step, stray, view,
 };
 
 /// The `setfleet` planner's own settings (from `[guidance]`).
@@ -217,18 +217,9 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
                 let mut seen = CellSet::empty(&grid);
                 let mut stray_m = node.stray_m;
                 for step in 0..per {
-                    state = flight::advance(
-                        state,
-                        yaw_ref,
-                        params.dt,
-                        params.speed,
-                        params.max_yaw_rate,
-                    );
+                    let pose;
+                    (state, pose) = fly_step(params, state, yaw_ref);
                     stray_m = stray_m.max(stray(&params.region, &state.position));
-                    let pose = CameraPose {
-                        position: state.position,
-                        yaw: state.yaw,
-                    };
                     if step == 0 {
                         let known = first_views.iter().position(|(p, _)| same_pose(p, &pose));
                         let i = known.unwrap_or_else(|| {
