@@ -14,6 +14,17 @@
 //!
 //! The waits come from [`protocol::timeouts::Timeouts`], like the agents'.
 //!
+//! **Rendering ahead** (lockstep): while the acks of step `k` are awaited, the server steps a
+//! copy of the world to `k + 1` with the yaw references it holds and renders the frames of
+//! `k + 1` into loaned samples, one between each look at the acks ([`Lookahead`]). When the
+//! acks are in, the copy *is* the next world if no ack changed a commanded yaw reference
+//! (stepping is a function of the world and those references alone, compared bit for bit):
+//! it replaces the world and its frames go out at once; otherwise copy and frames are
+//! dropped and the world steps and renders as without them. Either way every frame is the
+//! same bits. It fills the time the world would wait while the last agents estimate. At
+//! steps where agents decide (a multiple of the guidance period), acks bring new references,
+//! so nothing is rendered ahead then.
+//!
 //! Where the process's time goes is in [`ServerReport::phases`] ([`phase`]): CPU time of the
 //! whole process (rendering runs on a pool of threads that the stepping thread waits for) and
 //! wall time, per phase.
@@ -30,6 +41,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
+use iceoryx2::sample_mut::SampleMut;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{self, EventService, Ipc, IpcOpenError, PubSubService, RunNode, WakeEvent};
 use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
@@ -170,6 +182,11 @@ pub struct AgentReport {
     pub foreign_commands: u64,
     /// Frames that could not be loaned or sent.
     pub send_failures: u64,
+    /// Frames rendered ahead ([`Lookahead`]) and sent.
+    pub frames_ahead: u64,
+    /// Frames rendered ahead and dropped: an ack changed a yaw reference, or the agent was
+    /// no longer served.
+    pub frames_ahead_dropped: u64,
 }
 
 /// The outcome of a run.
@@ -258,6 +275,7 @@ pub fn run(config: ServerConfig, shutdown: &AtomicBool) -> Result<ServerReport, 
         interrupted: false,
         shutdown,
         clock,
+        ahead: None,
     };
     let started = Instant::now();
     server.start(config.start_timeout);
@@ -400,6 +418,31 @@ struct Server<'a> {
     shutdown: &'a AtomicBool,
     /// Where the time goes ([`phase`]).
     clock: PhaseClock,
+    /// The next step being rendered while this one's acks are awaited.
+    ahead: Option<Lookahead>,
+}
+
+/// The world one step ahead and its frames, rendered while the acks of the current step are
+/// awaited (lockstep; see the module docs).
+struct Lookahead {
+    /// The world stepped on with `refs`.
+    world: World,
+    /// Every UAV's commanded yaw reference when the copy was stepped, as bits.
+    refs: Vec<u64>,
+    /// Frames of the next step by UAV, rendered and not sent.
+    frames: Vec<Option<SampleMut<Ipc, CvsFrame, ()>>>,
+    /// The next UAV to render for.
+    next: usize,
+}
+
+/// Every UAV's commanded yaw reference, as bits (what stepping the UAVs reads besides their
+/// state).
+fn commanded_refs(world: &World) -> Vec<u64> {
+    world
+        .uavs()
+        .iter()
+        .map(|u| u.commanded_yaw_ref.to_bits())
+        .collect()
 }
 
 /// Longest single wait, so the shutdown flag and dead processes are noticed promptly.
@@ -461,12 +504,16 @@ impl Server<'_> {
                 return k;
             }
             self.publish(k);
+            self.look_ahead(k, steps);
             let deadline = Instant::now() + ack_timeout;
             loop {
                 self.drain_commands(Some(k));
                 self.drain_observer(Some(k));
                 if self.all_acked(k) {
                     break;
+                }
+                if self.render_ahead() {
+                    continue;
                 }
                 if !self.wait_until(deadline) {
                     if self.interrupted {
@@ -515,10 +562,76 @@ impl Server<'_> {
         steps
     }
 
+    /// Steps the world; the [`Lookahead`]'s copy is the stepped world when no yaw reference
+    /// changed since it was made, and its frames are kept for [`Server::publish`].
     fn advance(&mut self) {
         let before = self.clock.enter(phase::ADVANCE);
-        self.world.advance();
+        match self.ahead.take() {
+            Some(mut ahead) if ahead.refs == commanded_refs(&self.world) => {
+                std::mem::swap(&mut self.world, &mut ahead.world);
+                self.ahead = Some(ahead);
+            }
+            stale => {
+                if let Some(ahead) = stale {
+                    self.drop_frames_ahead(ahead);
+                }
+                self.world.advance();
+            }
+        }
         self.clock.enter(before);
+    }
+
+    /// Starts rendering step `k + 1` ahead, unless it is past the run or `k` is a step at which
+    /// agents decide (their acks then bring new yaw references).
+    fn look_ahead(&mut self, k: u64, steps: u64) {
+        let per_guidance = self.world.scenario().steps_per_guidance();
+        if k + 1 >= steps || k.is_multiple_of(per_guidance) || !self.agents.iter().any(|a| a.live) {
+            return;
+        }
+        let before = self.clock.enter(phase::ADVANCE);
+        let mut world = self.world.clone();
+        world.advance();
+        self.clock.enter(before);
+        self.ahead = Some(Lookahead {
+            refs: commanded_refs(&self.world),
+            frames: (0..self.uavs()).map(|_| None).collect(),
+            next: 0,
+            world,
+        });
+    }
+
+    /// Renders the next frame ahead, if one is left: false when there is nothing to render.
+    fn render_ahead(&mut self) -> bool {
+        let Some(ahead) = self.ahead.as_mut() else {
+            return false;
+        };
+        let Some(uav) = (ahead.next..ahead.frames.len()).find(|&u| self.agents[u].live) else {
+            ahead.next = ahead.frames.len();
+            return false;
+        };
+        ahead.next = uav + 1;
+        let before = self.clock.enter(phase::RENDER);
+        match self.ports.cvs[uav].loan_uninit() {
+            Ok(mut sample) => {
+                let frame = CvsFrame::init_in_place(sample.payload_mut());
+                ahead.world.render(uav, self.run_tag, frame);
+                // SAFETY: init_in_place initialised every byte of the payload.
+                ahead.frames[uav] = Some(unsafe { sample.assume_init() });
+            }
+            // Rendered at publishing instead, as without rendering ahead.
+            Err(e) => tracing::debug!(uav, error = %e, "cannot loan a frame to render ahead"),
+        }
+        self.clock.enter(before);
+        true
+    }
+
+    /// Counts the unsent frames of `ahead` as dropped (they return to the pool).
+    fn drop_frames_ahead(&mut self, ahead: Lookahead) {
+        for (uav, frame) in ahead.frames.into_iter().enumerate() {
+            if frame.is_some() {
+                self.agents[uav].report.frames_ahead_dropped += 1;
+            }
+        }
     }
 
     fn stop_requested(&mut self) -> bool {
@@ -765,8 +878,15 @@ impl Server<'_> {
             if !self.agents[uav].live {
                 continue;
             }
+            let ready = self.ahead.as_mut().and_then(|a| a.frames[uav].take());
             let before = self.clock.enter(phase::RENDER);
-            let sent = self.send_frame(uav, served);
+            let sent = match ready {
+                Some(frame) => {
+                    self.agents[uav].report.frames_ahead += 1;
+                    send_rendered(frame, served)
+                }
+                None => self.send_frame(uav, served),
+            };
             self.clock.enter(before);
             if let Err(e) = sent {
                 tracing::warn!(uav, step = k, error = %e, "cannot send frame");
@@ -792,6 +912,9 @@ impl Server<'_> {
             Err(e) => tracing::warn!(step = k, error = %e, "cannot loan truth"),
         }
         notify(&self.ports.observer_wake, WakeEvent::Truth);
+        if let Some(ahead) = self.ahead.take() {
+            self.drop_frames_ahead(ahead);
+        }
         self.clock.enter(before);
     }
 
@@ -799,11 +922,8 @@ impl Server<'_> {
         let mut sample = self.ports.cvs[uav].loan_uninit()?;
         let frame = CvsFrame::init_in_place(sample.payload_mut());
         self.world.render(uav, self.run_tag, frame);
-        frame.header.served = served;
         // SAFETY: init_in_place initialised every byte of the payload.
-        let sample = unsafe { sample.assume_init() };
-        sample.send()?;
-        Ok(())
+        send_rendered(unsafe { sample.assume_init() }, served)
     }
 
     fn end_of_run(&self) {
@@ -824,6 +944,16 @@ enum FrameSendError {
 }
 
 /// Wakes listeners; a listener that is gone is not an error of the world's.
+/// Sends a rendered frame with the mask of the agents served at its step.
+fn send_rendered(
+    mut frame: SampleMut<Ipc, CvsFrame, ()>,
+    served: u32,
+) -> Result<(), FrameSendError> {
+    frame.payload_mut().header.served = served;
+    frame.send()?;
+    Ok(())
+}
+
 fn notify(notifier: &iceoryx2::port::notifier::Notifier<Ipc>, event: WakeEvent) {
     if let Err(e) = notifier.notify_with_custom_event_id(event.id()) {
         tracing::debug!(?event, error = %e, "notify failed");

@@ -1,5 +1,7 @@
 //! The simulated world: scene, cars and UAVs advanced together, one CVS period at a time.
 
+use std::sync::Arc;
+
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, TargetBox};
@@ -24,11 +26,12 @@ const CITY_STREAM: u64 = 1;
 const TRAFFIC_STREAM: u64 = 2;
 
 /// The whole simulated world of one run. Deterministic: the same scenario gives the same
-/// city, the same trajectories and the same frames, bit for bit.
+/// city, the same trajectories and the same frames, bit for bit. A clone shares the static
+/// city, so copying a world to step it ahead costs only its cars and UAVs.
 #[derive(Clone, Debug)]
 pub struct World {
     scenario: Scenario,
-    city: City,
+    city: Arc<City>,
     traffic: Traffic,
     fleet: Fleet,
     step: u64,
@@ -49,7 +52,7 @@ impl World {
         let fleet = Fleet::launch(scenario, city.tallest())?;
         Ok(World {
             scenario: scenario.clone(),
-            city,
+            city: Arc::new(city),
             traffic,
             fleet,
             step: 0,
