@@ -49,7 +49,7 @@ use crate::math::Real;
 
 pub use dilate::WordDilation;
 pub use polygon::polygon_is_finite;
-pub use reach::{REACH_UNIT_M, ReachSet};
+pub use reach::{REACH_UNIT_M, ReachSet, WordBound};
 
 /// How a continuous shape is turned into cells.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

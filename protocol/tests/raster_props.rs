@@ -310,9 +310,10 @@ proptest! {
         prop_assert_eq!(filled, alone);
     }
 
-    /// Every word read through [`CellSet::word_dilation`] is that word of the whole dilation:
-    /// across word boundaries and grid edges, for empty sets, radii from negative to past the
-    /// grid and radii no cell size bounds.
+    /// Every word read through [`CellSet::word_dilation`] is that word of the whole dilation,
+    /// and a word it says cannot hold cells ([`protocol::raster::WordDilation::may_hold`]) is
+    /// empty: across word boundaries and grid edges, for empty sets, radii from negative to
+    /// past the grid and radii no cell size bounds.
     #[test]
     fn a_dilation_read_word_by_word_is_the_dilation(
         (ox, oy, cell_m) in (-100.0..100.0, -100.0..100.0, 0.1..3.0),
@@ -335,6 +336,10 @@ proptest! {
                 prop_assert_eq!(
                     words.word(&set, iy, w), whole.row(iy)[w],
                     "row {} word {} radius {}", iy, w, r
+                );
+                prop_assert!(
+                    words.may_hold(iy, w) || whole.row(iy)[w] == 0,
+                    "row {} word {} radius {} is not empty", iy, w, r
                 );
             }
         }

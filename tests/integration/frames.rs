@@ -72,7 +72,10 @@ impl PlayedAgent {
     /// Says hello until the first frame, and hands every frame to `answer` (which must send
     /// its command), until the end of the run, the world's exit or the test's deadline.
     fn play(&self, world: &mut ChildGuard, mut answer: impl FnMut(&CvsFrame)) {
-        let _guard = self.waitset.attach_notification(&self.wake_me).expect("iceoryx2");
+        let _guard = self
+            .waitset
+            .attach_notification(&self.wake_me)
+            .expect("iceoryx2");
         let deadline = Instant::now() + EXIT_TIMEOUT;
         let mut last_hello = None::<Instant>;
         let (mut ended, mut seen) = (false, false);

@@ -91,12 +91,53 @@ impl CellSet {
             Element::Runs(run) => (run[0] as usize).div_ceil(64),
             _ => 0,
         };
+        let support = match &element {
+            // `word` reads rows `iy ± (run.len() - 1)` and words `w ± max(pad, 1)`.
+            Element::Runs(run) => Some(self.word_support(run.len() - 1, pad.max(1))),
+            Element::Identity => Some(self.word_support(0, 0)),
+            Element::Everything => None,
+        };
         WordDilation {
             element,
             pad,
             buffer: vec![0; 2 * pad + 1],
             scratch: vec![0; 2 * pad + 1],
+            support,
         }
+    }
+
+    /// Per row, one bit per word: set when a word of the set within `rows` rows and `words`
+    /// words of it (on the grid) is not empty.
+    fn word_support(&self, rows: usize, words: usize) -> WordMask {
+        let (ny, wpr) = (self.ny as usize, self.words_per_row);
+        let per_row = wpr.div_ceil(64).max(1);
+        // The rows' non-empty words, grown by `words` along the row.
+        let mut across = vec![0u64; ny * per_row];
+        for (row, mask) in self
+            .words
+            .chunks_exact(wpr.max(1))
+            .zip(across.chunks_exact_mut(per_row))
+        {
+            for (w, &word) in row.iter().enumerate() {
+                if word != 0 {
+                    let (a, b) = (w.saturating_sub(words), (w + words).min(wpr - 1));
+                    for v in a..=b {
+                        mask[v / 64] |= 1 << (v % 64);
+                    }
+                }
+            }
+        }
+        // Then by `rows` across the rows.
+        let mut bits = vec![0u64; ny * per_row];
+        for (iy, out) in bits.chunks_exact_mut(per_row).enumerate() {
+            let (a, b) = (iy.saturating_sub(rows), (iy + rows).min(ny - 1));
+            for src in across[a * per_row..(b + 1) * per_row].chunks_exact(per_row) {
+                for (o, s) in out.iter_mut().zip(src) {
+                    *o |= s;
+                }
+            }
+        }
+        WordMask { per_row, bits }
     }
 
     /// Clears the bits past `nx` in the last word of every row.
@@ -124,6 +165,22 @@ pub struct WordDilation {
     pad: usize,
     buffer: Vec<u64>,
     scratch: Vec<u64>,
+    /// The words of the dilation that may hold cells (`None`: every word).
+    support: Option<WordMask>,
+}
+
+/// One bit per word of a [`CellSet`], row by row.
+#[derive(Clone, Debug)]
+struct WordMask {
+    per_row: usize,
+    bits: Vec<u64>,
+}
+
+impl WordMask {
+    fn contains(&self, iy: u32, w: usize) -> bool {
+        let i = iy as usize * self.per_row + w / 64;
+        self.bits.get(i).is_some_and(|b| b >> (w % 64) & 1 != 0)
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -137,6 +194,13 @@ enum Element {
 }
 
 impl WordDilation {
+    /// False when word `w` of row `iy` of the dilation is certainly empty: no cell of the set
+    /// it was made from lies within the element's reach of the word. True otherwise (the
+    /// word may still be empty).
+    pub fn may_hold(&self, iy: u32, w: usize) -> bool {
+        self.support.as_ref().is_none_or(|s| s.contains(iy, w))
+    }
+
     /// Word `w` of row `iy` of `set.dilate(grid, radius)`, for the `grid` and `radius` this
     /// was made with and the `set` it was made from, unchanged since (row and word inside it).
     pub fn word(&mut self, set: &CellSet, iy: u32, w: usize) -> u64 {

@@ -77,6 +77,34 @@ thread_local! {
     static GAPS: RefCell<GapField> = RefCell::default();
 }
 
+/// An outer raster given word by word, for [`ReachSet::advance_within`]: a closure
+/// `(cells, row, word) -> word` or a [`super::WordDilation`].
+pub trait WordBound {
+    /// Word `w` of row `iy` of the raster, from `cells`, the set's cells before the advance.
+    fn word(&mut self, cells: &CellSet, iy: u32, w: usize) -> u64;
+
+    /// False only when word `w` of row `iy` of the raster is certainly empty.
+    fn may_hold(&self, _iy: u32, _w: usize) -> bool {
+        true
+    }
+}
+
+impl<F: FnMut(&CellSet, u32, usize) -> u64> WordBound for F {
+    fn word(&mut self, cells: &CellSet, iy: u32, w: usize) -> u64 {
+        self(cells, iy, w)
+    }
+}
+
+impl WordBound for super::WordDilation {
+    fn word(&mut self, cells: &CellSet, iy: u32, w: usize) -> u64 {
+        super::WordDilation::word(self, cells, iy, w)
+    }
+
+    fn may_hold(&self, iy: u32, w: usize) -> bool {
+        super::WordDilation::may_hold(self, iy, w)
+    }
+}
+
 /// Rounding margin of the conversions to reach units, in units.
 const UNIT_MARGIN: Real = 1e-6;
 
@@ -217,38 +245,44 @@ impl ReachSet {
             return;
         }
         self.clock_m = clock_m;
-        self.scan_due(reached_units(clock_m), |cells, iy, w, bits| {
-            cells.row_mut(iy)[w] |= bits;
-        });
+        self.scan_due(
+            reached_units(clock_m),
+            |_, _| false,
+            |cells, iy, w, bits| {
+                cells.row_mut(iy)[w] |= bits;
+            },
+        );
     }
 
     /// [`ReachSet::advance`], then [`ReachSet::intersect`] with an outer raster `bound` of the
     /// set's targets that holds every cell of the set (a dilation of its cells by the motion
-    /// since the last clock), given word by word: `bound(cells, iy, w)` is word `w` of row `iy`
-    /// of the raster, and `cells` are the set's cells before the advance. Only the words the
-    /// clock adds cells to are asked for, so a bound that is costly over the whole grid (a
-    /// dilation, through [`super::WordDilation`]) costs only where the set grows.
-    pub fn advance_within(
-        &mut self,
-        clock_m: Real,
-        mut bound: impl FnMut(&CellSet, u32, usize) -> u64,
-    ) {
+    /// since the last clock), given word by word ([`WordBound`]) from the set's cells before
+    /// the advance. Only the words the clock adds cells to are asked for, so a bound that is
+    /// costly over the whole grid (a dilation, through [`super::WordDilation`]) costs only
+    /// where the set grows; a word the bound says is empty ([`WordBound::may_hold`]) is not
+    /// even read, since none of its cells could join.
+    pub fn advance_within(&mut self, clock_m: Real, mut bound: impl WordBound) {
         if clock_m.is_nan() || clock_m <= self.clock_m {
             return;
         }
         self.clock_m = clock_m;
         let wpr = self.cells.words_per_row();
         // Every word's new cells first, from the cells before the advance, then the bound of
-        // those words, read on the same unchanged cells.
+        // those words, read on the same unchanged cells. A skipped word keeps its pending
+        // bound (at most the clock), so the next advance looks at it again.
         let mut grown: Vec<(u32, usize, u64)> = Vec::new();
-        self.scan_due(reached_units(clock_m), |cells, iy, w, bits| {
-            let fresh = bits & !cells.row(iy)[w];
-            if fresh != 0 {
-                grown.push((iy, w, fresh));
-            }
-        });
+        self.scan_due(
+            reached_units(clock_m),
+            |iy, w| !bound.may_hold(iy, w),
+            |cells, iy, w, bits| {
+                let fresh = bits & !cells.row(iy)[w];
+                if fresh != 0 {
+                    grown.push((iy, w, fresh));
+                }
+            },
+        );
         for &mut (iy, w, ref mut fresh) in &mut grown {
-            let keep = *fresh & bound(&self.cells, iy, w);
+            let keep = *fresh & bound.word(&self.cells, iy, w);
             if keep != *fresh {
                 // Cells reached but outside the bound stay out: the pending bound drops to 0
                 // so that the next advance settles the word, as `intersect` does.
@@ -465,14 +499,19 @@ impl ReachSet {
     }
 
     /// Scans every word whose pending bound the clock `reached` (in reach units) has come
-    /// to, records its next pending bound, and hands `visit` the set's cells, the word's row
-    /// and index, and the word's cells reached by then.
-    fn scan_due(&mut self, reached: u32, mut visit: impl FnMut(&mut CellSet, u32, usize, u64)) {
+    /// to, but those `skip` names, records its next pending bound, and hands `visit` the
+    /// set's cells, the word's row and index, and the word's cells reached by then.
+    fn scan_due(
+        &mut self,
+        reached: u32,
+        skip: impl Fn(u32, usize) -> bool,
+        mut visit: impl FnMut(&mut CellSet, u32, usize, u64),
+    ) {
         let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
         for iy in 0..self.cells.ny() {
             for w in 0..wpr {
                 let slot = iy as usize * wpr + w;
-                if self.pending[slot] > reached {
+                if self.pending[slot] > reached || skip(iy, w) {
                     continue;
                 }
                 let x0 = w * 64;
@@ -570,6 +609,14 @@ impl ReachSet {
 /// The cells of a word (at most 64 reach values) the clock `reached` reaches, as bits, and the
 /// least reach of the others (`u32::MAX` when none), without branches so that it vectorises.
 fn reached_bits(reach: &[u32], reached: u32) -> (u64, u32) {
+    match <&[u32; 64]>::try_from(reach) {
+        Ok(word) => reached_bits_64(word, reached),
+        Err(_) => reached_bits_of_any(reach, reached),
+    }
+}
+
+/// [`reached_bits`] of at most 64 cells, one at a time.
+fn reached_bits_of_any(reach: &[u32], reached: u32) -> (u64, u32) {
     let mut bits = 0u64;
     let mut next = u32::MAX;
     for (b, &tau) in reach.iter().enumerate() {
@@ -578,6 +625,25 @@ fn reached_bits(reach: &[u32], reached: u32) -> (u64, u32) {
         next = next.min(if hit { u32::MAX } else { tau });
     }
     (bits, next)
+}
+
+/// [`reached_bits`] of a whole word, in fixed lanes the compiler vectorises.
+fn reached_bits_64(reach: &[u32; 64], reached: u32) -> (u64, u32) {
+    let mut bits = 0u64;
+    for (k, lane) in reach.chunks_exact(8).enumerate() {
+        let mut byte = 0u8;
+        for (j, &tau) in lane.iter().enumerate() {
+            byte |= u8::from(tau <= reached) << j;
+        }
+        bits |= u64::from(byte) << (8 * k);
+    }
+    let mut next = [u32::MAX; 8];
+    for lane in reach.chunks_exact(8) {
+        for (n, &tau) in next.iter_mut().zip(lane) {
+            *n = (*n).min(if tau <= reached { u32::MAX } else { tau });
+        }
+    }
+    (bits, next.into_iter().fold(u32::MAX, u32::min))
 }
 
 /// Whole cells strictly between index `i` and the span `lo..=hi` (0 inside or next to it).
@@ -602,4 +668,27 @@ fn clamp_box(bbox: &CellBox, margin: u32, cells: &CellSet) -> Option<CellBox> {
         y1: bbox.y1.saturating_add(margin).min(cells.ny() - 1),
     };
     (b.x0 <= b.x1 && b.y0 <= b.y1).then_some(b)
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    proptest! {
+        /// The vectorised word scan gives the bits and the next reach of the plain one,
+        /// around the clock and at the ends of the range.
+        #[test]
+        fn the_word_scan_in_lanes_is_the_plain_scan(
+            reach in prop::collection::vec(
+                prop_oneof![990u32..1010, Just(0), Just(u32::MAX - 1), Just(u32::MAX)],
+                64,
+            ),
+            reached in prop_oneof![995u32..1005, Just(0), Just(u32::MAX)],
+        ) {
+            let word: &[u32; 64] = reach.as_slice().try_into().expect("64 cells");
+            prop_assert_eq!(reached_bits_64(word, reached), reached_bits_of_any(&reach, reached));
+        }
+    }
 }

@@ -18,12 +18,12 @@ use protocol::raster::{CellSet, ReachSet};
 ///
 /// The dilation is read only in the words the clock adds cells to ([`ReachSet::advance_within`]
 /// with a [`protocol::raster::WordDilation`]): the same sets as dilating the whole grid, at the
-/// cost of the few words where the set grows.
+/// cost of the few words where the set grows; words no cell of the set is near are not read.
 pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: Real) {
     // The cases of `grow`: its result, word by word.
     let cells = set.cells();
     if radius_m.is_nan() || radius_m <= 0.0 || cells.is_empty() {
-        set.advance_within(clock_m, |old, iy, w| old.row(iy)[w]);
+        set.advance_within(clock_m, |old: &CellSet, iy, w| old.row(iy)[w]);
         return;
     }
     let diagonal = grid.cell_m * (grid.nx as Real).hypot(grid.ny as Real);
@@ -31,8 +31,8 @@ pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: R
         set.advance(clock_m);
         return;
     }
-    let mut dilation = cells.word_dilation(grid, radius_m);
-    set.advance_within(clock_m, |old, iy, w| dilation.word(old, iy, w));
+    let dilation = cells.word_dilation(grid, radius_m);
+    set.advance_within(clock_m, dilation);
 }
 
 /// Outer set grown by the motion over `radius_m` metres: every point within `radius_m` of the
