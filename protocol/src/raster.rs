@@ -269,6 +269,25 @@ impl CellSet {
         }
     }
 
+    /// Flips the cells of row `iy` in columns `x0..=x1` (clamped to the grid, as
+    /// [`CellSet::fill_row_span`]).
+    pub(crate) fn flip_row_span(&mut self, iy: u32, x0: u32, x1: u32) {
+        if iy >= self.ny || x0 > x1 || x0 >= self.nx {
+            return;
+        }
+        let x1 = x1.min(self.nx - 1);
+        let row = self.row_mut(iy);
+        let (w0, w1) = (x0 as usize / 64, x1 as usize / 64);
+        let (first, last) = (u64::MAX << (x0 % 64), u64::MAX >> (63 - x1 % 64));
+        if w0 == w1 {
+            row[w0] ^= first & last;
+        } else {
+            row[w0] ^= first;
+            row[w0 + 1..w1].iter_mut().for_each(|w| *w = !*w);
+            row[w1] ^= last;
+        }
+    }
+
     /// Whether row `iy` holds every cell of columns `x0..=x1` (clamped to the grid; `false`
     /// for a row outside the grid or an empty span).
     pub fn row_span_is_full(&self, iy: u32, x0: u32, x1: u32) -> bool {

@@ -85,16 +85,18 @@ impl CellSet {
         grid: &GroundGrid,
         delta: &SetDelta,
     ) -> Result<CellSet, DeltaError> {
-        let mut set = CellSet::decode(grid, &delta.flips)?;
-        if !set.same_shape(base) {
+        let (nx, ny) = (delta.flips.nx, delta.flips.ny);
+        if (nx, ny) == (grid.nx, grid.ny) && (base.nx, base.ny) != (nx, ny) {
             return Err(DeltaError::BaseShape {
-                nx: set.nx,
-                ny: set.ny,
+                nx,
+                ny,
                 got_nx: base.nx,
                 got_ny: base.ny,
             });
         }
-        flip_words(&mut set, base);
+        // The flips go straight into a copy of the base (checked like a whole set first).
+        let mut set = base.clone();
+        set.flip_encoded(grid, &delta.flips)?;
         let got = set.fingerprint();
         if got != delta.digest {
             return Err(DeltaError::WrongBase {

@@ -113,17 +113,21 @@ impl CellSet {
         let per_row = wpr.div_ceil(64).max(1);
         // The rows' non-empty words, grown by `words` along the row.
         let mut across = vec![0u64; ny * per_row];
+        let mut shifted = vec![0u64; per_row];
         for (row, mask) in self
             .words
             .chunks_exact(wpr.max(1))
             .zip(across.chunks_exact_mut(per_row))
         {
             for (w, &word) in row.iter().enumerate() {
-                if word != 0 {
-                    let (a, b) = (w.saturating_sub(words), (w + words).min(wpr - 1));
-                    for v in a..=b {
-                        mask[v / 64] |= 1 << (v % 64);
-                    }
+                mask[w / 64] |= u64::from(word != 0) << (w % 64);
+            }
+            for _ in 0..words {
+                shifted.copy_from_slice(mask);
+                for i in 0..per_row {
+                    let carry_up = if i > 0 { shifted[i - 1] >> 63 } else { 0 };
+                    let carry_down = shifted.get(i + 1).map_or(0, |h| h << 63);
+                    mask[i] |= shifted[i] << 1 | carry_up | shifted[i] >> 1 | carry_down;
                 }
             }
         }
@@ -345,6 +349,28 @@ mod tests {
 
     fn grid() -> GroundGrid {
         GroundGrid::new(50.0, 1.0)
+    }
+
+    #[test]
+    fn the_words_a_dilation_may_hold_cross_the_mask_words_of_a_wide_grid() {
+        // 130 words a row: the mask of a row spans three u64.
+        let g = GroundGrid {
+            origin: crate::math::Point2::origin(),
+            cell_m: 1.0,
+            nx: 64 * 130,
+            ny: 9,
+        };
+        let set = CellSet::from_cells(&g, [(63 * 64, 4), (128 * 64 + 5, 4)]);
+        let words = set.word_dilation(&g, 1.0);
+        let whole = set.dilate(&g, 1.0);
+        for iy in 0..g.ny {
+            for w in 0..set.words_per_row() {
+                let near = (62..=64).contains(&w) || (127..=129).contains(&w);
+                let rows = (2..=6).contains(&iy);
+                assert_eq!(words.may_hold(iy, w), near && rows, "row {iy} word {w}");
+                assert!(whole.row(iy)[w] == 0 || words.may_hold(iy, w));
+            }
+        }
     }
 
     /// The dilation straight from its definition.

@@ -45,6 +45,18 @@ impl CellSet {
     /// the box and the run total are all checked before anything is allocated, and the only
     /// allocation is the set on the caller's own grid.
     pub fn decode(grid: &GroundGrid, encoded: &EncodedSet) -> Result<CellSet, SetDecodeError> {
+        let mut set = CellSet::empty(grid);
+        set.flip_encoded(grid, encoded)?;
+        Ok(set)
+    }
+
+    /// `self ← self xor` the cells of `encoded` (on `grid`, the grid of `self`), after the
+    /// same checks as [`CellSet::decode`]; `self` is untouched when they fail.
+    pub(crate) fn flip_encoded(
+        &mut self,
+        grid: &GroundGrid,
+        encoded: &EncodedSet,
+    ) -> Result<(), SetDecodeError> {
         if (encoded.nx, encoded.ny) != (grid.nx, grid.ny) {
             return Err(SetDecodeError::GridMismatch {
                 nx: grid.nx,
@@ -62,7 +74,7 @@ impl CellSet {
             if got != 0 {
                 return Err(SetDecodeError::RunLength { expected: 0, got });
             }
-            return Ok(CellSet::empty(grid));
+            return Ok(());
         };
         let inside = b.x0 <= b.x1 && b.y0 <= b.y1 && b.x1 < grid.nx && b.y1 < grid.ny;
         if !inside {
@@ -72,21 +84,20 @@ impl CellSet {
         if got != expected {
             return Err(SetDecodeError::RunLength { expected, got });
         }
-        let mut set = CellSet::empty(grid);
         let width = u64::from(b.x1 - b.x0) + 1;
         let mut pos = 0u64;
         for (i, &r) in encoded.runs.iter().enumerate() {
             let end = pos + u64::from(r);
             if i % 2 == 1 {
-                set.fill_box_cells(&b, width, pos, end);
+                self.flip_box_cells(&b, width, pos, end);
             }
             pos = end;
         }
-        Ok(set)
+        Ok(())
     }
 
-    /// Adds the cells at row-major positions `from..to` of box `b` (of `width` columns).
-    fn fill_box_cells(&mut self, b: &CellBox, width: u64, from: u64, to: u64) {
+    /// Flips the cells at row-major positions `from..to` of box `b` (of `width` columns).
+    fn flip_box_cells(&mut self, b: &CellBox, width: u64, from: u64, to: u64) {
         let mut p = from;
         while p < to {
             let (row, col) = (p / width, p % width);
@@ -94,7 +105,7 @@ impl CellSet {
             // Positions are inside the checked box, so these fit in u32.
             let iy = b.y0 + row as u32;
             let x0 = b.x0 + col as u32;
-            self.fill_row_span(iy, x0, x0 + (span - 1) as u32);
+            self.flip_row_span(iy, x0, x0 + (span - 1) as u32);
             p += span;
         }
     }
