@@ -440,9 +440,26 @@ proptest! {
 
         // Encoding round-trips.
         let e = sa.encode();
+        prop_assert_eq!(sa.encoded_run_count(), e.runs.len());
         prop_assert_eq!(e.bbox, bbox);
         prop_assert_eq!(e.runs.iter().map(|&r| u64::from(r)).sum::<u64>(), bbox.map_or(0, |b| b.cell_count()));
         prop_assert_eq!(CellSet::decode(&grid, &e), Ok(sa.clone()));
+    }
+
+    /// The runs counted word by word are the runs written, on grids several words wide, for
+    /// sets of spans that start and end anywhere in a word.
+    #[test]
+    fn the_runs_counted_are_the_runs_encoded(
+        (nx, ny) in (1u32..300, 1u32..12),
+        spans in prop::collection::vec((0.0..1.0, 0.0..1.0, 0u32..140), 0..12),
+    ) {
+        let grid = GroundGrid { origin: Point2::origin(), cell_m: 1.0, nx, ny };
+        let mut set = CellSet::empty(&grid);
+        for (u, v, len) in spans {
+            let (x, y) = ((u * Real::from(nx)) as u32, (v * Real::from(ny)) as u32);
+            set.fill_row_span(y.min(ny - 1), x, x.saturating_add(len));
+        }
+        prop_assert_eq!(set.encoded_run_count(), set.encode().runs.len());
     }
 
     #[test]

@@ -113,10 +113,11 @@ impl SetCode {
     /// when there is a base on the same grid and the delta has fewer runs than the whole set,
     /// else whole.
     pub fn choose(set: &CellSet, base: Option<&CellSet>) -> SetCode {
-        let whole = set.encode();
         match base.and_then(|b| set.encode_delta(b)) {
-            Some(delta) if delta.flips.runs.len() < whole.runs.len() => SetCode::Delta(delta),
-            _ => SetCode::Whole(whole),
+            Some(delta) if delta.flips.runs.len() < set.encoded_run_count() => {
+                SetCode::Delta(delta)
+            }
+            _ => SetCode::Whole(set.encode()),
         }
     }
 

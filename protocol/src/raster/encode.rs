@@ -41,6 +41,36 @@ impl CellSet {
         }
     }
 
+    /// The number of runs of [`CellSet::encode`], counted without writing them: the transitions
+    /// between empty and full cells along the box, word by word.
+    pub fn encoded_run_count(&self) -> usize {
+        let Some(b) = self.bounding_box() else {
+            return 0;
+        };
+        if b.cell_count() > u64::from(u32::MAX) {
+            // Runs that long are split ([`CellSet::encode`]'s module docs): count them there.
+            return self.encode().runs.len();
+        }
+        let mut transitions = 0u64;
+        // The cell before the box's first one counts as empty: runs start with an empty one.
+        let mut previous = 0u64;
+        let (w0, w1) = (b.x0 as usize / 64, b.x1 as usize / 64);
+        for iy in b.y0..=b.y1 {
+            let row = self.row(iy);
+            for (w, &bits) in row.iter().enumerate().take(w1 + 1).skip(w0) {
+                let lo = if w == w0 { b.x0 % 64 } else { 0 };
+                let hi = if w == w1 { b.x1 % 64 } else { 63 };
+                let mask = (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
+                // Each cell's predecessor along the box: the bit below it, or the last cell
+                // read for the first cell of this word's part of the row.
+                let before = (bits << 1) & !(1 << lo) | previous << lo;
+                transitions += u64::from(((bits ^ before) & mask).count_ones());
+                previous = bits >> hi & 1;
+            }
+        }
+        transitions as usize + 1
+    }
+
     /// Decodes a set received from a peer on `grid`; never panics on bad input. The grid size,
     /// the box and the run total are all checked before anything is allocated, and the only
     /// allocation is the set on the caller's own grid.
