@@ -81,6 +81,13 @@ mod codec {
         bencher.bench(|| black_box(&set).encode());
     }
 
+    /// The runs of the undetected set counted without writing them.
+    #[divan::bench]
+    fn count_runs_blobs(bencher: Bencher) {
+        let set = blobs(&grid(), 2, 0.2);
+        bencher.bench(|| black_box(&set).encoded_run_count());
+    }
+
     #[divan::bench]
     fn decode_blobs(bencher: Bencher) {
         let g = grid();
@@ -95,6 +102,14 @@ mod codec {
         let mut set = CellSet::empty(&g);
         set.fill_disc(&g, Point2::new(30.0, -40.0), 10.0, Coverage::Outer);
         bencher.bench(|| black_box(&set).encode());
+    }
+
+    #[divan::bench]
+    fn count_runs_target(bencher: Bencher) {
+        let g = grid();
+        let mut set = CellSet::empty(&g);
+        set.fill_disc(&g, Point2::new(30.0, -40.0), 10.0, Coverage::Outer);
+        bencher.bench(|| black_box(&set).encoded_run_count());
     }
 
     #[divan::bench]

@@ -51,22 +51,28 @@ impl CellSet {
             // Runs that long are split ([`CellSet::encode`]'s module docs): count them there.
             return self.encode().runs.len();
         }
+        // Each cell against the one before it along the box. The row's bits outside the box
+        // are made copies of their neighbours inside it, so they add no transition: those
+        // before `lo` repeat the cell before the row (the last cell read, or empty before the
+        // first run), those after `hi` repeat the cell at `hi`.
         let mut transitions = 0u64;
-        // The cell before the box's first one counts as empty: runs start with an empty one.
         let mut previous = 0u64;
         let (w0, w1) = (b.x0 as usize / 64, b.x1 as usize / 64);
+        let (head, tail) = (u64::MAX << (b.x0 % 64), u64::MAX >> (63 - b.x1 % 64));
+        let mut padded = Vec::with_capacity(w1 - w0 + 1);
         for iy in b.y0..=b.y1 {
-            let row = self.row(iy);
-            for (w, &bits) in row.iter().enumerate().take(w1 + 1).skip(w0) {
-                let lo = if w == w0 { b.x0 % 64 } else { 0 };
-                let hi = if w == w1 { b.x1 % 64 } else { 63 };
-                let mask = (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
-                // Each cell's predecessor along the box: the bit below it, or the last cell
-                // read for the first cell of this word's part of the row.
-                let before = (bits << 1) & !(1 << lo) | previous << lo;
-                transitions += u64::from(((bits ^ before) & mask).count_ones());
-                previous = bits >> hi & 1;
+            padded.clear();
+            padded.extend_from_slice(&self.row(iy)[w0..=w1]);
+            padded[0] = padded[0] & head | previous.wrapping_neg() & !head;
+            let last = padded.len() - 1;
+            let top = padded[last] >> (b.x1 % 64) & 1;
+            padded[last] = padded[last] & tail | top.wrapping_neg() & !tail;
+            let mut carry = previous;
+            for &bits in &padded {
+                transitions += u64::from((bits ^ (bits << 1 | carry)).count_ones());
+                carry = bits >> 63;
             }
+            previous = top;
         }
         transitions as usize + 1
     }
