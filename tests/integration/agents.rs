@@ -4,9 +4,13 @@
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use iceoryx2::prelude::SignalHandlingMode;
-use protocol::ipc::{RunNode, WakeEvent, WirePublisher, scan_nodes};
-use protocol::wire::{WireHeader, WireKind};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSet};
+use protocol::ipc::{Ipc, RunNode, WakeEvent, WirePublisher, scan_nodes};
+use protocol::wire::{HELLO_STEP, ObserverAck, TruthState, WireHeader, WireKind, uav_bit};
 use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, wait_until};
 
 /// A small scenario with a camera large enough to see and identify cars.
@@ -214,7 +218,8 @@ fn bad_peer_messages_are_counted_and_dropped() {
 #[test]
 fn agents_exit_with_a_clear_message_when_the_world_is_killed() {
     let t = TestRun::new("world-killed");
-    let file = t.write("scenario.toml", &scenario(300.0, 2));
+    // Far longer than the test: the world is killed while it steps, however fast it steps.
+    let file = t.write("scenario.toml", &scenario(3600.0, 2));
     let w = world(&t, &file, "0,1");
     let timeout = ["--world-timeout-ms", "1500"];
     let a0 = agent(&t, &file, 0, &timeout);
@@ -283,17 +288,46 @@ fn a_killed_token_holder_is_skipped_and_the_survivors_process_every_step() {
 fn a_restarted_agent_rebuilds_its_sets_from_its_peers() {
     let t = TestRun::new("restart");
     let file = t.write("scenario.toml", &scenario(120.0, 2));
-    let w = world(&t, &file, "0,1");
+    // The test is the run's observer: the world waits for its ack of every step, so agent 1
+    // is killed and restarted at step KILL_STEP however fast the run goes.
+    const KILL_STEP: u64 = 20;
+    let observer = PlayedObserver::join(&t);
+    let mut w = ChildGuard::spawn(
+        Command::new(binary("world-server"))
+            .arg("--run-id")
+            .arg(t.run.as_str())
+            .arg("--scenario")
+            .arg(&file)
+            .args([
+                "--agents",
+                "0,1",
+                "--wait-observer",
+                "--start-timeout-ms",
+                "60000",
+            ])
+            .args(["--ack-timeout-ms", "30000"]),
+    );
     let a0 = agent(&t, &file, 0, &[]);
-    let a1 = agent(&t, &file, 1, &[]);
-    wait_until("both agents", Duration::from_secs(30), || {
-        agent_alive(&t, 0) && agent_alive(&t, 1)
+    let mut a1 = Some(agent(&t, &file, 1, &[]));
+    let mut again = None;
+    observer.follow(&mut w, |step| {
+        if step != KILL_STEP {
+            return 0;
+        }
+        let killed = a1.take().expect("agent 1 is killed once");
+        killed.signal(libc::SIGKILL);
+        drop(killed);
+        wait_until("agent 1's death", Duration::from_secs(30), || {
+            !agent_alive(&t, 1)
+        });
+        again = Some(agent(&t, &file, 1, &[]));
+        wait_until("the new agent 1", Duration::from_secs(30), || {
+            agent_alive(&t, 1)
+        });
+        // Restarted: the world waits for its hello before the next frame.
+        uav_bit(1)
     });
-    std::thread::sleep(Duration::from_millis(1500));
-    a1.signal(libc::SIGKILL);
-    drop(a1);
-    std::thread::sleep(Duration::from_millis(500));
-    let again = agent(&t, &file, 1, &[]);
+    let again = again.expect("the run reached the kill step");
     let (r0, r1) = (
         report(&finish(a0, "agent 0")),
         report(&finish(again, "agent 1")),
@@ -301,9 +335,9 @@ fn a_restarted_agent_rebuilds_its_sets_from_its_peers() {
     assert!(finish(w, "world-server").status.success());
     let steps = 240;
     assert_eq!(r0["frames"], steps, "the survivor missed steps: {r0}");
-    let rejoined = r1["frames"].as_u64().unwrap();
-    assert!(
-        rejoined > 0 && rejoined < steps,
+    assert_eq!(
+        r1["frames"],
+        steps - KILL_STEP - 1,
         "restarted agent frames: {r1}"
     );
     assert_eq!(r1["end"], "EndOfRun");
@@ -312,4 +346,87 @@ fn a_restarted_agent_rebuilds_its_sets_from_its_peers() {
         r0["final_undetected_digest"], r1["final_undetected_digest"],
         "{r0} {r1}"
     );
+}
+
+/// This test, playing the run's observer over iceoryx2.
+struct PlayedObserver {
+    tag: u64,
+    truth: Subscriber<Ipc, TruthState, ()>,
+    acks: Publisher<Ipc, ObserverAck, ()>,
+    wake_world: Notifier<Ipc>,
+    wake_me: Listener<Ipc>,
+    waitset: WaitSet<Ipc>,
+    // Last: the ports above close before the node.
+    _node: RunNode,
+}
+
+impl PlayedObserver {
+    fn join(t: &TestRun) -> PlayedObserver {
+        let node = RunNode::new(&t.run, RunNode::OBSERVER, SignalHandlingMode::Disabled)
+            .expect("observer node");
+        let truth = node.open_truth().expect("truth service");
+        let acks = node.open_observer_ack().expect("observer ack service");
+        let wake_world = node.open_world_wake().expect("world wake service");
+        let wake_me = node.open_observer_wake().expect("observer wake service");
+        PlayedObserver {
+            tag: t.run.tag(),
+            truth: truth
+                .subscriber_builder()
+                .create()
+                .expect("truth subscriber"),
+            acks: acks.publisher_builder().create().expect("ack publisher"),
+            wake_world: wake_world.notifier_builder().create().expect("notifier"),
+            wake_me: wake_me.listener_builder().create().expect("listener"),
+            waitset: node.waitset().expect("waitset"),
+            _node: node,
+        }
+    }
+
+    fn ack(&self, step: u64, restarted: u32) {
+        let ack = ObserverAck {
+            run_tag: self.tag,
+            step,
+            restarted,
+            reserved: 0,
+        };
+        self.acks.send_copy(ack).expect("ack sent");
+        let _ = self
+            .wake_world
+            .notify_with_custom_event_id(WakeEvent::ObserverAck.id());
+    }
+
+    /// Says hello until the first truth, then acks every step with the agents `on_step`
+    /// reports restarted at it, until the end of the run or the world's exit.
+    fn follow(&self, world: &mut ChildGuard, mut on_step: impl FnMut(u64) -> u32) {
+        let _guard = self
+            .waitset
+            .attach_notification(&self.wake_me)
+            .expect("attach");
+        let deadline = std::time::Instant::now() + EXIT_TIMEOUT;
+        let (mut ended, mut seen) = (false, false);
+        let mut last_hello = None::<std::time::Instant>;
+        while !ended && std::time::Instant::now() < deadline && world.is_running() {
+            if !seen && last_hello.is_none_or(|h| h.elapsed() > Duration::from_millis(200)) {
+                self.ack(HELLO_STEP, 0);
+                last_hello = Some(std::time::Instant::now());
+            }
+            self.waitset
+                .wait_and_process_once_with_timeout(
+                    |_| {
+                        let _ = self.wake_me.try_wait(|e| {
+                            ended |= WakeEvent::from_id(e.id) == Some(WakeEvent::EndOfRun)
+                        });
+                        CallbackProgression::Continue
+                    },
+                    Duration::from_millis(100),
+                )
+                .expect("wait");
+            while let Some(sample) = self.truth.receive().expect("truth received") {
+                seen = true;
+                let step = sample.payload().step;
+                let restarted = on_step(step);
+                self.ack(step, restarted);
+            }
+        }
+    }
 }

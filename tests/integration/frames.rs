@@ -201,8 +201,6 @@ fn frames_rendered_ahead_are_those_of_the_world_stepped_with_the_acked_yaw_refer
             );
             assert_eq!(frame.boxes(), expected.boxes(), "boxes of step {k}");
             steps_seen.push(k);
-            // Time for the world to render the next frame ahead before the ack arrives.
-            std::thread::sleep(Duration::from_millis(300));
             let turn = turns.iter().find(|(s, _)| *s == k).map(|(_, yaw)| *yaw);
             if let Some(yaw) = turn {
                 local.set_yaw_ref(0, yaw);
@@ -216,7 +214,7 @@ fn frames_rendered_ahead_are_those_of_the_world_stepped_with_the_acked_yaw_refer
     let agent = &report["agents"][0];
     let ahead = agent["frames_ahead"].as_u64().unwrap();
     let dropped = agent["frames_ahead_dropped"].as_u64().unwrap();
-    // Frames 2 to 11 are rendered while the previous step's ack is awaited, but for frame 7
+    // Frames 2 to 11 are rendered before the previous step's ack is awaited, but for frame 7
     // (after the guidance step 6, whose acks may turn the UAVs); frames 3 and 8 are dropped
     // (the turns acked at steps 2 and 7), and the frames 1 and 7 rendered when published.
     assert_eq!((ahead, dropped), (7, 2), "{agent}");

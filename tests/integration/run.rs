@@ -220,7 +220,8 @@ fn killed_agents_leave_a_run_that_completes_with_guaranteed_survivors() {
 fn an_interrupted_run_stops_everything_and_leaves_nothing() {
     for (signal, name) in [(libc::SIGINT, "SIGINT"), (libc::SIGTERM, "SIGTERM")] {
         let t = TestRun::new("run-interrupt");
-        let file = t.write("scenario.toml", &scenario(300.0, 2));
+        // Far longer than the test: the run is stopped while it steps, however fast.
+        let file = t.write("scenario.toml", &scenario(3600.0, 2));
         let out_dir = t.dir.join("out");
         let fleet = ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &[]));
         wait_until("the agents to start", Duration::from_secs(60), || {
@@ -238,7 +239,8 @@ fn an_interrupted_run_stops_everything_and_leaves_nothing() {
 #[test]
 fn a_killed_fleet_takes_its_children_along_and_the_next_run_cleans_up() {
     let first = TestRun::new("run-killed");
-    let file = first.write("scenario.toml", &scenario(300.0, 2));
+    // Far longer than the test: fleet is killed while the run steps, however fast.
+    let file = first.write("scenario.toml", &scenario(3600.0, 2));
     let fleet = ChildGuard::spawn(&mut fleet_run(&first, &file, &first.dir.join("out"), &[]));
     wait_until("the agents to start", Duration::from_secs(60), || {
         processes_mentioning(first.run.as_str()).len() >= 3
@@ -272,7 +274,8 @@ fn a_killed_fleet_takes_its_children_along_and_the_next_run_cleans_up() {
 #[test]
 fn a_killed_world_server_ends_the_run_with_a_clear_message() {
     let t = TestRun::new("run-world-kill");
-    let file = t.write("scenario.toml", &scenario(300.0, 2));
+    // Far longer than the test: the world is killed while it steps, however fast.
+    let file = t.write("scenario.toml", &scenario(3600.0, 2));
     let out_dir = t.dir.join("out");
     let fleet = ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &[]));
     let world = || {

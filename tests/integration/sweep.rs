@@ -176,7 +176,8 @@ fn an_interrupted_jobs_sweep_stops_every_run_and_leaves_nothing() {
     cmd.arg("sweep")
         .arg("--scenario")
         .arg(t.dir.join("scenario.toml"))
-        .args(["--seeds", "2", "--variants", "paper", "--duration", "300"])
+        // Far longer than the test: the sweep is stopped while its runs step.
+        .args(["--seeds", "2", "--variants", "paper", "--duration", "3600"])
         .args(["--jobs", "2", "--out"])
         .arg(&out_dir);
     let mut fleet = ChildGuard::spawn(&mut cmd);

@@ -14,16 +14,16 @@
 //!
 //! The waits come from [`protocol::timeouts::Timeouts`], like the agents'.
 //!
-//! **Rendering ahead** (lockstep): while the acks of step `k` are awaited, the server steps a
-//! copy of the world to `k + 1` with the yaw references it holds and renders the frames of
-//! `k + 1` into loaned samples, one between each look at the acks ([`Lookahead`]). When the
-//! acks are in, the copy *is* the next world if no ack changed a commanded yaw reference
-//! (stepping is a function of the world and those references alone, compared bit for bit):
-//! it replaces the world and its frames go out at once; otherwise copy and frames are
-//! dropped and the world steps and renders as without them. Either way every frame is the
-//! same bits. It fills the time the world would wait while the last agents estimate. At
-//! steps where agents decide (a multiple of the guidance period), acks bring new references,
-//! so nothing is rendered ahead then.
+//! **Rendering ahead** (lockstep): once frame `k` is out, before it waits for the acks, the
+//! server steps a copy of the world to `k + 1` with the yaw references it holds and renders
+//! the frames of `k + 1` into loaned samples ([`Lookahead`]). When the acks are in, the copy
+//! *is* the next world if no ack changed a commanded yaw reference (stepping is a function of
+//! the world and those references alone, compared bit for bit): it replaces the world and its
+//! frames go out at once; otherwise copy and frames are dropped and the world steps and
+//! renders as without them. Either way every frame is the same bits. The frames are rendered
+//! while the agents estimate, instead of after the last of them acked. At steps where agents
+//! decide (a multiple of the guidance period), acks bring new references, so nothing is
+//! rendered ahead then.
 //!
 //! Where the process's time goes is in [`ServerReport::phases`] ([`phase`]): CPU time of the
 //! whole process (rendering runs on a pool of threads that the stepping thread waits for) and
@@ -504,16 +504,16 @@ impl Server<'_> {
                 return k;
             }
             self.publish(k);
+            // The next frames are rendered anyway before the next step: now, while the agents
+            // work, unless the acks may change the references they depend on.
             self.look_ahead(k, steps);
+            while self.render_ahead() {}
             let deadline = Instant::now() + ack_timeout;
             loop {
                 self.drain_commands(Some(k));
                 self.drain_observer(Some(k));
                 if self.all_acked(k) {
                     break;
-                }
-                if self.render_ahead() {
-                    continue;
                 }
                 if !self.wait_until(deadline) {
                     if self.interrupted {
@@ -600,7 +600,7 @@ impl Server<'_> {
         });
     }
 
-    /// Renders the next frame ahead, if one is left: false when there is nothing to render.
+    /// Renders the next frame ahead, if one is left: false when there is nothing left.
     fn render_ahead(&mut self) -> bool {
         let Some(ahead) = self.ahead.as_mut() else {
             return false;
