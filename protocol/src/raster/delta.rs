@@ -113,11 +113,19 @@ impl SetCode {
     /// when there is a base on the same grid and the delta has fewer runs than the whole set,
     /// else whole.
     pub fn choose(set: &CellSet, base: Option<&CellSet>) -> SetCode {
-        match base.and_then(|b| set.encode_delta(b)) {
-            Some(delta) if delta.flips.runs.len() < set.encoded_run_count() => {
-                SetCode::Delta(delta)
-            }
-            _ => SetCode::Whole(set.encode()),
+        let Some(base) = base.filter(|b| set.same_shape(b)) else {
+            return SetCode::Whole(set.encode());
+        };
+        // Runs are counted first (cheaper than writing them), and only the shorter written.
+        let mut flips = set.clone();
+        flip_words(&mut flips, base);
+        if flips.encoded_run_count() < set.encoded_run_count() {
+            SetCode::Delta(SetDelta {
+                flips: flips.encode(),
+                digest: set.fingerprint(),
+            })
+        } else {
+            SetCode::Whole(set.encode())
         }
     }
 
