@@ -106,6 +106,14 @@ fn grid_scale(grid: &GroundGrid) -> Real {
         .max(b.max.y.abs())
 }
 
+/// The words of a row span ([`CellSet::fill_row_span`]) and the masks of its end words.
+struct SpanWords {
+    w0: usize,
+    w1: usize,
+    first: u64,
+    last: u64,
+}
+
 /// A set of ground cells as a bitmap over the whole grid.
 #[derive(Clone, PartialEq, Eq, Debug)]
 pub struct CellSet {
@@ -253,38 +261,47 @@ impl CellSet {
 
     /// Adds cells `x0..=x1` of row `iy` (clamped to the grid).
     pub fn fill_row_span(&mut self, iy: u32, x0: u32, x1: u32) {
-        if iy >= self.ny || x0 > x1 || x0 >= self.nx {
+        let Some(span) = self.span_words(iy, x0, x1) else {
             return;
+        };
+        let row = self.row_mut(iy);
+        if span.w0 == span.w1 {
+            row[span.w0] |= span.first & span.last;
+        } else {
+            row[span.w0] |= span.first;
+            row[span.w0 + 1..span.w1].fill(u64::MAX);
+            row[span.w1] |= span.last;
+        }
+    }
+
+    /// The words and end masks of columns `x0..=x1` of row `iy`, clamped to the grid; `None`
+    /// for a row outside the grid or an empty span.
+    fn span_words(&self, iy: u32, x0: u32, x1: u32) -> Option<SpanWords> {
+        if iy >= self.ny || x0 > x1 || x0 >= self.nx {
+            return None;
         }
         let x1 = x1.min(self.nx - 1);
-        let row = self.row_mut(iy);
-        let (w0, w1) = (x0 as usize / 64, x1 as usize / 64);
-        let (first, last) = (u64::MAX << (x0 % 64), u64::MAX >> (63 - x1 % 64));
-        if w0 == w1 {
-            row[w0] |= first & last;
-        } else {
-            row[w0] |= first;
-            row[w0 + 1..w1].fill(u64::MAX);
-            row[w1] |= last;
-        }
+        Some(SpanWords {
+            w0: x0 as usize / 64,
+            w1: x1 as usize / 64,
+            first: u64::MAX << (x0 % 64),
+            last: u64::MAX >> (63 - x1 % 64),
+        })
     }
 
     /// Flips the cells of row `iy` in columns `x0..=x1` (clamped to the grid, as
     /// [`CellSet::fill_row_span`]).
     pub(crate) fn flip_row_span(&mut self, iy: u32, x0: u32, x1: u32) {
-        if iy >= self.ny || x0 > x1 || x0 >= self.nx {
+        let Some(span) = self.span_words(iy, x0, x1) else {
             return;
-        }
-        let x1 = x1.min(self.nx - 1);
+        };
         let row = self.row_mut(iy);
-        let (w0, w1) = (x0 as usize / 64, x1 as usize / 64);
-        let (first, last) = (u64::MAX << (x0 % 64), u64::MAX >> (63 - x1 % 64));
-        if w0 == w1 {
-            row[w0] ^= first & last;
+        if span.w0 == span.w1 {
+            row[span.w0] ^= span.first & span.last;
         } else {
-            row[w0] ^= first;
-            row[w0 + 1..w1].iter_mut().for_each(|w| *w = !*w);
-            row[w1] ^= last;
+            row[span.w0] ^= span.first;
+            row[span.w0 + 1..span.w1].iter_mut().for_each(|w| *w = !*w);
+            row[span.w1] ^= span.last;
         }
     }
 

@@ -8,10 +8,10 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSet};
+use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
 use protocol::ipc::{Ipc, RunNode, WakeEvent, WirePublisher, scan_nodes};
 use protocol::wire::{HELLO_STEP, ObserverAck, TruthState, WireHeader, WireKind, uav_bit};
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, wait_until};
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, follow, wait_until, world_server};
 
 /// A small scenario with a camera large enough to see and identify cars.
 fn scenario(duration_s: f64, uavs: u32) -> String {
@@ -22,15 +22,7 @@ fn scenario(duration_s: f64, uavs: u32) -> String {
 }
 
 fn world(t: &TestRun, scenario: &std::path::Path, agents: &str) -> ChildGuard {
-    ChildGuard::spawn(
-        Command::new(binary("world-server"))
-            .arg("--run-id")
-            .arg(t.run.as_str())
-            .arg("--scenario")
-            .arg(scenario)
-            .args(["--agents", agents, "--start-timeout-ms", "60000"])
-            .args(["--ack-timeout-ms", "30000"]),
-    )
+    world_server(t, scenario, agents, &[])
 }
 
 fn agent(t: &TestRun, scenario: &std::path::Path, id: u32, extra: &[&str]) -> ChildGuard {
@@ -398,35 +390,17 @@ impl PlayedObserver {
     /// Says hello until the first truth, then acks every step with the agents `on_step`
     /// reports restarted at it, until the end of the run or the world's exit.
     fn follow(&self, world: &mut ChildGuard, mut on_step: impl FnMut(u64) -> u32) {
-        let _guard = self
-            .waitset
-            .attach_notification(&self.wake_me)
-            .expect("attach");
-        let deadline = std::time::Instant::now() + EXIT_TIMEOUT;
-        let (mut ended, mut seen) = (false, false);
-        let mut last_hello = None::<std::time::Instant>;
-        while !ended && std::time::Instant::now() < deadline && world.is_running() {
-            if !seen && last_hello.is_none_or(|h| h.elapsed() > Duration::from_millis(200)) {
-                self.ack(HELLO_STEP, 0);
-                last_hello = Some(std::time::Instant::now());
-            }
-            self.waitset
-                .wait_and_process_once_with_timeout(
-                    |_| {
-                        let _ = self.wake_me.try_wait(|e| {
-                            ended |= WakeEvent::from_id(e.id) == Some(WakeEvent::EndOfRun)
-                        });
-                        CallbackProgression::Continue
-                    },
-                    Duration::from_millis(100),
-                )
-                .expect("wait");
-            while let Some(sample) = self.truth.receive().expect("truth received") {
-                seen = true;
-                let step = sample.payload().step;
-                let restarted = on_step(step);
-                self.ack(step, restarted);
-            }
-        }
+        let hello = || self.ack(HELLO_STEP, 0);
+        follow(
+            &self.waitset,
+            &self.wake_me,
+            &self.truth,
+            world,
+            hello,
+            |truth| {
+                let restarted = on_step(truth.step);
+                self.ack(truth.step, restarted);
+            },
+        );
     }
 }

@@ -7,12 +7,12 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSet};
+use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
 use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, RunNode, WakeEvent};
 use protocol::scenario::Scenario;
 use protocol::wire::{HELLO_STEP, UavCommand};
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, small_scenario_toml};
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, follow, small_scenario_toml, world_server};
 use world_server::World;
 
 /// Steps of the test scenario: 2 s at T = 0.5 s.
@@ -71,51 +71,21 @@ impl PlayedAgent {
 
     /// Says hello until the first frame, and hands every frame to `answer` (which must send
     /// its command), until the end of the run, the world's exit or the test's deadline.
-    fn play(&self, world: &mut ChildGuard, mut answer: impl FnMut(&CvsFrame)) {
-        let _guard = self
-            .waitset
-            .attach_notification(&self.wake_me)
-            .expect("iceoryx2");
-        let deadline = Instant::now() + EXIT_TIMEOUT;
-        let mut last_hello = None::<Instant>;
-        let (mut ended, mut seen) = (false, false);
-        while !ended && Instant::now() < deadline {
-            if !seen && last_hello.is_none_or(|t| t.elapsed() > Duration::from_millis(200)) {
-                self.send(HELLO_STEP, None);
-                last_hello = Some(Instant::now());
-            }
-            self.waitset
-                .wait_and_process_once_with_timeout(
-                    |_| {
-                        let _ = self.wake_me.try_wait(|e| {
-                            ended |= WakeEvent::from_id(e.id) == Some(WakeEvent::EndOfRun)
-                        });
-                        CallbackProgression::Continue
-                    },
-                    Duration::from_millis(100),
-                )
-                .expect("iceoryx2");
-            while let Some(sample) = self.frames.receive().expect("iceoryx2") {
-                seen = true;
-                answer(sample.payload());
-            }
-            if !world.is_running() {
-                break;
-            }
-        }
+    fn play(&self, world: &mut ChildGuard, answer: impl FnMut(&CvsFrame)) {
+        let hello = || self.send(HELLO_STEP, None);
+        follow(
+            &self.waitset,
+            &self.wake_me,
+            &self.frames,
+            world,
+            hello,
+            answer,
+        );
     }
 }
 
 fn spawn_world(t: &TestRun, scenario: &std::path::Path) -> ChildGuard {
-    ChildGuard::spawn(
-        Command::new(binary("world-server"))
-            .arg("--run-id")
-            .arg(t.run.as_str())
-            .arg("--scenario")
-            .arg(scenario)
-            .args(["--agents", "0", "--start-timeout-ms", "60000"])
-            .args(["--ack-timeout-ms", "30000"]),
-    )
+    world_server(t, scenario, "0", &[])
 }
 
 /// The world-server's exit: successful, no panic; its report (the JSON line on stdout).

@@ -286,6 +286,61 @@ pub fn wait_until(what: &str, timeout: Duration, mut done: impl FnMut() -> bool)
     }
 }
 
+/// Starts a `world-server` of `t`'s run on `scenario`, serving the agents `agents` (a
+/// comma-separated list), with long start and ack waits and `extra` arguments.
+pub fn world_server(t: &TestRun, scenario: &Path, agents: &str, extra: &[&str]) -> ChildGuard {
+    ChildGuard::spawn(
+        Command::new(binary("world-server"))
+            .arg("--run-id")
+            .arg(t.run.as_str())
+            .arg("--scenario")
+            .arg(scenario)
+            .args(["--agents", agents, "--start-timeout-ms", "60000"])
+            .args(["--ack-timeout-ms", "30000"])
+            .args(extra),
+    )
+}
+
+/// Plays one of the run's processes in the test: calls `hello` every 200 ms until the first
+/// sample of `samples` arrives, hands every sample to `handle`, and returns at the run's end
+/// (the `EndOfRun` event on `wake`), when `world` exits, or after [`EXIT_TIMEOUT`].
+pub fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend>(
+    waitset: &iceoryx2::prelude::WaitSet<ipc::Ipc>,
+    wake: &iceoryx2::port::listener::Listener<ipc::Ipc>,
+    samples: &iceoryx2::port::subscriber::Subscriber<ipc::Ipc, T, ()>,
+    world: &mut ChildGuard,
+    hello: impl Fn(),
+    mut handle: impl FnMut(&T),
+) {
+    let _guard = waitset
+        .attach_notification(wake)
+        .expect("a listener attaches to the waitset");
+    let deadline = Instant::now() + EXIT_TIMEOUT;
+    let (mut ended, mut seen) = (false, false);
+    let mut last_hello = None::<Instant>;
+    while !ended && Instant::now() < deadline && world.is_running() {
+        if !seen && last_hello.is_none_or(|h| h.elapsed() > Duration::from_millis(200)) {
+            hello();
+            last_hello = Some(Instant::now());
+        }
+        waitset
+            .wait_and_process_once_with_timeout(
+                |_| {
+                    let _ = wake.try_wait(|e| {
+                        ended |= ipc::WakeEvent::from_id(e.id) == Some(ipc::WakeEvent::EndOfRun)
+                    });
+                    iceoryx2::prelude::CallbackProgression::Continue
+                },
+                Duration::from_millis(100),
+            )
+            .expect("the waitset waits");
+        while let Some(sample) = samples.receive().expect("a sample is received") {
+            seen = true;
+            handle(sample.payload());
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
