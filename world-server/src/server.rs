@@ -16,7 +16,7 @@
 //!
 //! **Rendering ahead** (lockstep): once frame `k` is out, before it waits for the acks, the
 //! server steps a copy of the world to `k + 1` with the yaw references it holds and renders
-//! the frames of `k + 1` into loaned samples ([`Lookahead`]). When the acks are in, the copy
+//! the frames of `k + 1` into loaned samples (`Lookahead`). When the acks are in, the copy
 //! *is* the next world if no ack changed a commanded yaw reference (stepping is a function of
 //! the world and those references alone, compared bit for bit): it replaces the world and its
 //! frames go out at once; otherwise copy and frames are dropped and the world steps and
@@ -182,7 +182,7 @@ pub struct AgentReport {
     pub foreign_commands: u64,
     /// Frames that could not be loaned or sent.
     pub send_failures: u64,
-    /// Frames rendered ahead ([`Lookahead`]) and sent.
+    /// Frames rendered ahead (`Lookahead`) and sent.
     pub frames_ahead: u64,
     /// Frames rendered ahead and dropped: an ack changed a yaw reference, or the agent was
     /// no longer served.
