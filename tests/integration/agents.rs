@@ -21,10 +21,6 @@ fn scenario(duration_s: f64, uavs: u32) -> String {
     )
 }
 
-fn world(t: &TestRun, scenario: &std::path::Path, agents: &str) -> ChildGuard {
-    world_server(t, scenario, agents, &[])
-}
-
 fn agent(t: &TestRun, scenario: &std::path::Path, id: u32, extra: &[&str]) -> ChildGuard {
     ChildGuard::spawn(
         Command::new(binary("uav-agent"))
@@ -63,7 +59,7 @@ fn agent_alive(t: &TestRun, id: u32) -> bool {
 fn two_agents_shrink_their_sets_and_agree_after_fusion() {
     let t = TestRun::new("two-agents");
     let file = t.write("scenario.toml", &scenario(30.0, 2));
-    let w = world(&t, &file, "0,1");
+    let w = world_server(&t, &file, "0,1", &[]);
     let a0 = agent(&t, &file, 0, &[]);
     let a1 = agent(&t, &file, 1, &[]);
     let (r0, r1) = (finish(a0, "agent 0"), finish(a1, "agent 1"));
@@ -105,7 +101,7 @@ fn an_agent_outside_the_fleet_is_refused() {
 fn a_second_agent_with_a_live_id_is_refused() {
     let t = TestRun::new("duplicate");
     let file = t.write("scenario.toml", &scenario(20.0, 1));
-    let w = world(&t, &file, "0");
+    let w = world_server(&t, &file, "0", &[]);
     let first = agent(&t, &file, 0, &[]);
     wait_until("agent 0 to be live", Duration::from_secs(30), || {
         agent_alive(&t, 0)
@@ -135,7 +131,7 @@ fn bad_peer_messages_are_counted_and_dropped() {
     // Two UAVs in the scenario, but only agent 0 runs: the test speaks on UAV 1's services
     // from a node that is not an agent, so agent 0 never waits for it.
     let file = t.write("scenario.toml", &scenario(20.0, 2));
-    let w = world(&t, &file, "0");
+    let w = world_server(&t, &file, "0", &[]);
     let a0 = agent(&t, &file, 0, &[]);
     wait_until("agent 0 to be live", Duration::from_secs(30), || {
         agent_alive(&t, 0)
@@ -212,7 +208,7 @@ fn agents_exit_with_a_clear_message_when_the_world_is_killed() {
     let t = TestRun::new("world-killed");
     // Far longer than the test: the world is killed while it steps, however fast it steps.
     let file = t.write("scenario.toml", &scenario(3600.0, 2));
-    let w = world(&t, &file, "0,1");
+    let w = world_server(&t, &file, "0,1", &[]);
     let timeout = ["--world-timeout-ms", "1500"];
     let a0 = agent(&t, &file, 0, &timeout);
     let a1 = agent(&t, &file, 1, &timeout);
@@ -240,7 +236,7 @@ fn agents_exit_with_a_clear_message_when_the_world_is_killed() {
 fn a_killed_token_holder_is_skipped_and_the_survivors_process_every_step() {
     let t = TestRun::new("kill-holder");
     let file = t.write("scenario.toml", &scenario(30.0, 3));
-    let w = world(&t, &file, "0,1,2");
+    let w = world_server(&t, &file, "0,1,2", &[]);
     // A token wait far longer than the test: only noticing the holder's death ends the wait.
     let long_wait = ["--token-wait-ms", "120000"];
     let a0 = agent(&t, &file, 0, &long_wait);

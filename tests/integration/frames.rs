@@ -84,10 +84,6 @@ impl PlayedAgent {
     }
 }
 
-fn spawn_world(t: &TestRun, scenario: &std::path::Path) -> ChildGuard {
-    world_server(t, scenario, "0", &[])
-}
-
 /// The world-server's exit: successful, no panic; its report (the JSON line on stdout).
 fn world_exit(world: &mut ChildGuard) -> serde_json::Value {
     let out = world
@@ -106,7 +102,7 @@ fn agent_receives_intact_frames_in_lockstep_and_the_world_cleans_up() {
     let t = TestRun::new("frames");
     let scenario = t.write("scenario.toml", &small_scenario_toml(2.0));
     let tag = t.run.tag();
-    let mut world = spawn_world(&t, &scenario);
+    let mut world = world_server(&t, &scenario, "0", &[]);
 
     let mut steps_seen = Vec::new();
     {
@@ -151,7 +147,7 @@ fn frames_rendered_ahead_are_those_of_the_world_stepped_with_the_acked_yaw_refer
     // Guidance every 6 steps (3 s): steps 2 and 7 are not guidance steps, so the world renders
     // ahead there and must drop what it rendered when the ack turns the UAV.
     let turns = [(2, 1.0), (7, -2.0)];
-    let mut world = spawn_world(&t, &scenario);
+    let mut world = world_server(&t, &scenario, "0", &[]);
     let mut steps_seen = Vec::new();
     {
         let agent = PlayedAgent::join(&t);

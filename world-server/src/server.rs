@@ -431,8 +431,6 @@ struct Lookahead {
     refs: Vec<u64>,
     /// Frames of the next step by UAV, rendered and not sent.
     frames: Vec<Option<SampleMut<Ipc, CvsFrame, ()>>>,
-    /// The next UAV to render for.
-    next: usize,
 }
 
 /// Every UAV's commanded yaw reference, as bits (what stepping the UAVs reads besides their
@@ -507,7 +505,6 @@ impl Server<'_> {
             // The next frames are rendered anyway before the next step: now, while the agents
             // work, unless the acks may change the references they depend on.
             self.look_ahead(k, steps);
-            while self.render_ahead() {}
             let deadline = Instant::now() + ack_timeout;
             loop {
                 self.drain_commands(Some(k));
@@ -581,8 +578,9 @@ impl Server<'_> {
         self.clock.enter(before);
     }
 
-    /// Starts rendering step `k + 1` ahead, unless it is past the run or `k` is a step at which
-    /// agents decide (their acks then bring new yaw references).
+    /// Steps a copy of the world to `k + 1` and renders its frames for the live agents,
+    /// unless `k + 1` is past the run or `k` is a step at which agents decide (their acks
+    /// then bring new yaw references).
     fn look_ahead(&mut self, k: u64, steps: u64) {
         let per_guidance = self.world.scenario().steps_per_guidance();
         if k + 1 >= steps || k.is_multiple_of(per_guidance) || !self.agents.iter().any(|a| a.live) {
@@ -592,37 +590,24 @@ impl Server<'_> {
         let mut world = self.world.clone();
         world.advance();
         self.clock.enter(before);
+        let before = self.clock.enter(phase::RENDER);
+        let frames = (0..self.uavs())
+            .map(|uav| {
+                if !self.agents[uav].live {
+                    return None;
+                }
+                // A frame that cannot be loaned now is rendered when published.
+                render_frame(&self.ports.cvs[uav], &world, uav, self.run_tag)
+                    .inspect_err(|e| tracing::debug!(uav, error = %e, "cannot render ahead"))
+                    .ok()
+            })
+            .collect();
+        self.clock.enter(before);
         self.ahead = Some(Lookahead {
             refs: commanded_refs(&self.world),
-            frames: (0..self.uavs()).map(|_| None).collect(),
-            next: 0,
+            frames,
             world,
         });
-    }
-
-    /// Renders the next frame ahead, if one is left: false when there is nothing left.
-    fn render_ahead(&mut self) -> bool {
-        let Some(ahead) = self.ahead.as_mut() else {
-            return false;
-        };
-        let Some(uav) = (ahead.next..ahead.frames.len()).find(|&u| self.agents[u].live) else {
-            ahead.next = ahead.frames.len();
-            return false;
-        };
-        ahead.next = uav + 1;
-        let before = self.clock.enter(phase::RENDER);
-        match self.ports.cvs[uav].loan_uninit() {
-            Ok(mut sample) => {
-                let frame = CvsFrame::init_in_place(sample.payload_mut());
-                ahead.world.render(uav, self.run_tag, frame);
-                // SAFETY: init_in_place initialised every byte of the payload.
-                ahead.frames[uav] = Some(unsafe { sample.assume_init() });
-            }
-            // Rendered at publishing instead, as without rendering ahead.
-            Err(e) => tracing::debug!(uav, error = %e, "cannot loan a frame to render ahead"),
-        }
-        self.clock.enter(before);
-        true
     }
 
     /// Counts the unsent frames of `ahead` as dropped (they return to the pool).
@@ -919,11 +904,8 @@ impl Server<'_> {
     }
 
     fn send_frame(&self, uav: usize, served: u32) -> Result<(), FrameSendError> {
-        let mut sample = self.ports.cvs[uav].loan_uninit()?;
-        let frame = CvsFrame::init_in_place(sample.payload_mut());
-        self.world.render(uav, self.run_tag, frame);
-        // SAFETY: init_in_place initialised every byte of the payload.
-        send_rendered(unsafe { sample.assume_init() }, served)
+        let frame = render_frame(&self.ports.cvs[uav], &self.world, uav, self.run_tag)?;
+        send_rendered(frame, served)
     }
 
     fn end_of_run(&self) {
@@ -943,7 +925,20 @@ enum FrameSendError {
     Send(#[from] iceoryx2::port::SendError),
 }
 
-/// Wakes listeners; a listener that is gone is not an error of the world's.
+/// Renders UAV `uav`'s frame of `world` in place, into a sample loaned from `publisher`.
+fn render_frame(
+    publisher: &iceoryx2::port::publisher::Publisher<Ipc, CvsFrame, ()>,
+    world: &World,
+    uav: usize,
+    run_tag: u64,
+) -> Result<SampleMut<Ipc, CvsFrame, ()>, iceoryx2::port::LoanError> {
+    let mut sample = publisher.loan_uninit()?;
+    let frame = CvsFrame::init_in_place(sample.payload_mut());
+    world.render(uav, run_tag, frame);
+    // SAFETY: init_in_place initialised every byte of the payload.
+    Ok(unsafe { sample.assume_init() })
+}
+
 /// Sends a rendered frame with the mask of the agents served at its step.
 fn send_rendered(
     mut frame: SampleMut<Ipc, CvsFrame, ()>,
@@ -954,6 +949,7 @@ fn send_rendered(
     Ok(())
 }
 
+/// Wakes listeners; a listener that is gone is not an error of the world's.
 fn notify(notifier: &iceoryx2::port::notifier::Notifier<Ipc>, event: WakeEvent) {
     if let Err(e) = notifier.notify_with_custom_event_id(event.id()) {
         tracing::debug!(?event, error = %e, "notify failed");

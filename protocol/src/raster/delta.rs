@@ -67,15 +67,24 @@ impl CellSet {
     /// The delta that turns `base` into `self`; `None` when the two live on grids of different
     /// sizes (then only the whole set can be sent).
     pub fn encode_delta(&self, base: &CellSet) -> Option<SetDelta> {
-        if !self.same_shape(base) {
-            return None;
-        }
-        let mut flips = self.clone();
-        flip_words(&mut flips, base);
-        Some(SetDelta {
+        self.flips_from(base).map(|flips| self.delta_of(&flips))
+    }
+
+    /// The cells in exactly one of `self` and `base` (`None` on grids of different sizes).
+    fn flips_from(&self, base: &CellSet) -> Option<CellSet> {
+        self.same_shape(base).then(|| {
+            let mut flips = self.clone();
+            flip_words(&mut flips, base);
+            flips
+        })
+    }
+
+    /// The delta of `flips` ([`CellSet::flips_from`] of some base) that rebuilds `self`.
+    fn delta_of(&self, flips: &CellSet) -> SetDelta {
+        SetDelta {
             flips: flips.encode(),
             digest: self.fingerprint(),
-        })
+        }
     }
 
     /// The set a delta makes of `base` on `grid`; never panics on bad input. The result is
@@ -113,19 +122,12 @@ impl SetCode {
     /// when there is a base on the same grid and the delta has fewer runs than the whole set,
     /// else whole.
     pub fn choose(set: &CellSet, base: Option<&CellSet>) -> SetCode {
-        let Some(base) = base.filter(|b| set.same_shape(b)) else {
-            return SetCode::Whole(set.encode());
-        };
         // Runs are counted first (cheaper than writing them), and only the shorter written.
-        let mut flips = set.clone();
-        flip_words(&mut flips, base);
-        if flips.encoded_run_count() < set.encoded_run_count() {
-            SetCode::Delta(SetDelta {
-                flips: flips.encode(),
-                digest: set.fingerprint(),
-            })
-        } else {
-            SetCode::Whole(set.encode())
+        match base.and_then(|b| set.flips_from(b)) {
+            Some(flips) if flips.encoded_run_count() < set.encoded_run_count() => {
+                SetCode::Delta(set.delta_of(&flips))
+            }
+            _ => SetCode::Whole(set.encode()),
         }
     }
 

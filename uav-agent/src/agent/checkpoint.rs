@@ -134,11 +134,6 @@ impl CheckpointFile {
         &self.path
     }
 
-    /// Replaces the checkpoint with `state`, atomically and durably.
-    pub fn save(&self, state: &EstimatorState) -> Result<(), CheckpointError> {
-        self.write(&self.encode(state)?)
-    }
-
     /// The file's bytes for `state`: header, then the body.
     pub fn encode(&self, state: &EstimatorState) -> Result<Vec<u8>, CheckpointError> {
         let body = codec::encode(&BodyRef {
@@ -416,8 +411,8 @@ mod tests {
         let file = CheckpointFile::new(dir.join("agent-1.ckpt"), Owner::new(9, 1, &scenario));
         assert!(file.load(&config).unwrap().is_none());
         let saved = state(&config);
-        file.save(&saved).unwrap();
-        file.save(&saved).unwrap();
+        file.write(&file.encode(&saved).unwrap()).unwrap();
+        file.write(&file.encode(&saved).unwrap()).unwrap();
         let back = file.load(&config).unwrap().expect("a checkpoint");
         let back = back.state();
         assert_eq!((back.step, back.frames), (42, 7));
@@ -473,7 +468,7 @@ mod tests {
         let dir = dir("refused");
         let path = dir.join("agent-0.ckpt");
         let mine = CheckpointFile::new(path.clone(), Owner::new(9, 0, &scenario));
-        mine.save(&state(&config)).unwrap();
+        mine.write(&mine.encode(&state(&config)).unwrap()).unwrap();
         let good = fs::read(&path).unwrap();
 
         let mut flipped = good.clone();
