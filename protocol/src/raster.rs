@@ -42,6 +42,8 @@ pub mod geodesic;
 mod polygon;
 pub mod reach;
 
+use std::ops::Range;
+
 use serde::{Deserialize, Serialize};
 
 use crate::grid::{CellIndex, GroundGrid};
@@ -437,9 +439,22 @@ impl CellSet {
 
     /// The first and last non-empty rows, `None` when the set is empty.
     pub fn row_range(&self) -> Option<(u32, u32)> {
-        let first = (0..self.ny).find(|&iy| !self.row_is_empty(iy))?;
-        let last = (first..self.ny).rev().find(|&iy| !self.row_is_empty(iy))?;
+        self.row_range_within(0..self.ny)
+    }
+
+    /// The first and last non-empty rows among `rows`, `None` when they hold no cell.
+    pub fn row_range_within(&self, rows: Range<u32>) -> Option<(u32, u32)> {
+        let rows = rows.start..rows.end.min(self.ny);
+        let first = rows.clone().find(|&iy| !self.row_is_empty(iy))?;
+        let last = (first..rows.end).rev().find(|&iy| !self.row_is_empty(iy))?;
         Some((first, last))
+    }
+
+    /// The words of rows `rows` (clamped to the grid), row after row.
+    pub fn rows_words(&self, rows: Range<u32>) -> &[u64] {
+        let end = rows.end.min(self.ny) as usize * self.words_per_row;
+        let start = (rows.start as usize * self.words_per_row).min(end);
+        &self.words[start..end]
     }
 
     /// Iterates over the cells of the set, row by row.

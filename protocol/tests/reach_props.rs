@@ -198,6 +198,47 @@ proptest! {
         }
     }
 
+    /// The rows a set keeps ([`ReachSet::rows`]) hold every cell of it through any history of
+    /// growth, proven-free ground, measurements, meets and joins, so the queries that read
+    /// only those rows (emptiness, count, bounding box, sharing a cell) answer what the
+    /// whole-grid ones do.
+    #[test]
+    fn the_rows_a_set_keeps_hold_every_cell_it_has(
+        events in proptest::collection::vec(
+            (wide_event(), cell_box(160, 40), 0u8..4), 1..24,
+        ),
+    ) {
+        let g = GroundGrid::new(40.0, 0.5);
+        let mut set = ReachSet::full(&g);
+        let mut clock = 0.0;
+        for (e, other_box, op) in &events {
+            let other = box_set(&g, other_box);
+            match e {
+                Event::Move(r) => {
+                    clock += r;
+                    set.advance_within(clock, set.cells().word_dilation(&g, *r));
+                }
+                Event::Free(b) => set.clear(&g, &box_set(&g, b), b),
+                Event::Measure(b) => set.restrict(&g, &box_set(&g, b), 8),
+                Event::Restore => set = ReachSet::from_cells_at(&g, set.cells().clone(), clock),
+            }
+            match op {
+                0 => set.intersect(&other),
+                1 => set.join(&other),
+                2 => set.bound_by_box(&g),
+                _ => set.advance(clock + 0.5),
+            }
+            let rows = set.rows();
+            for (_, iy) in set.cells().iter() {
+                prop_assert!(rows.contains(&iy), "row {} outside {:?} after {:?}", iy, rows, e);
+            }
+            prop_assert_eq!(set.is_empty(), set.cells().is_empty());
+            prop_assert_eq!(set.count(), set.cells().count());
+            prop_assert_eq!(set.bounding_box(), set.cells().bounding_box());
+            prop_assert_eq!(set.intersects(&other), set.cells().intersects(&other));
+        }
+    }
+
     /// A pocket left unobserved for `n` steps of `R` grows to exactly the cells whose squares
     /// lie within `n R` of its squares: at most `n R` plus one cell diagonal from it.
     #[test]

@@ -26,6 +26,7 @@
 //! any agent. Every area is a fraction of the grid's area (the region of interest).
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
 
 use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
@@ -145,11 +146,16 @@ impl FusedSets {
         for peer in peers {
             unseen.or_assign(&peer.estimate.hidden);
         }
+        let owned = Arc::unwrap_or_clone;
         FusedSets {
-            undetected: fused.undetected,
-            targets: fused.targets,
-            obstacle_free: fused.obstacle_free,
-            explored: fused.explored,
+            undetected: owned(fused.undetected),
+            targets: fused
+                .targets
+                .into_iter()
+                .map(|(id, s)| (id, owned(s)))
+                .collect(),
+            obstacle_free: owned(fused.obstacle_free),
+            explored: owned(fused.explored),
             unseen,
         }
     }
@@ -479,11 +485,11 @@ pub(crate) mod tests {
                 seq: step,
                 incarnation: 1,
                 pose: None,
-                undetected: CellSet::full(grid),
+                undetected: CellSet::full(grid).into(),
                 targets: BTreeMap::new(),
-                obstacle_free: CellSet::empty(grid),
-                explored: CellSet::empty(grid),
-                hidden: CellSet::empty(grid),
+                obstacle_free: CellSet::empty(grid).into(),
+                explored: CellSet::empty(grid).into(),
+                hidden: CellSet::empty(grid).into(),
                 oem: OccupancyMap::new(*grid),
                 oem_full: false,
             },
@@ -494,8 +500,11 @@ pub(crate) mod tests {
 
     fn estimate(uav: u32, undetected: CellSet, targets: &[(u32, CellSet)]) -> ObservedEstimate {
         let mut e = blank(&grid(), uav, 3);
-        e.estimate.undetected = undetected;
-        e.estimate.targets = targets.iter().cloned().collect();
+        e.estimate.undetected = undetected.into();
+        e.estimate.targets = targets
+            .iter()
+            .map(|(id, s)| (*id, s.clone().into()))
+            .collect();
         e
     }
 
@@ -544,16 +553,20 @@ pub(crate) mod tests {
                 let mut e = blank(&grid(), uav, 3);
                 let mut x1 = scattered(seed + 1, 0.5);
                 x1.or_assign(&set(&[(4, 4), (5, 4)]));
-                e.estimate.undetected = scattered(seed + 2, 0.8);
-                e.estimate.targets.insert(1, x1);
+                e.estimate.undetected = scattered(seed + 2, 0.8).into();
+                e.estimate.targets.insert(1, x1.into());
                 if uav == 0 {
-                    e.estimate.targets.insert(2, scattered(seed + 3, 0.5));
+                    e.estimate
+                        .targets
+                        .insert(2, scattered(seed + 3, 0.5).into());
                 } else {
-                    e.estimate.targets.insert(3, scattered(seed + 4, 0.6));
+                    e.estimate
+                        .targets
+                        .insert(3, scattered(seed + 4, 0.6).into());
                 }
-                e.estimate.obstacle_free = scattered(seed + 5, 0.1);
-                e.estimate.explored = scattered(seed + 6, 0.3);
-                e.estimate.hidden = scattered(seed + 7, 0.2);
+                e.estimate.obstacle_free = scattered(seed + 5, 0.1).into();
+                e.estimate.explored = scattered(seed + 6, 0.3).into();
+                e.estimate.hidden = scattered(seed + 7, 0.2).into();
                 e.unseen = scattered(seed + 8, 0.3);
                 e.unseen.or_assign(&e.estimate.hidden);
                 e
@@ -567,15 +580,15 @@ pub(crate) mod tests {
             let e = &own.estimate;
             let mut state = EstimatorState::new(&cfg);
             state.step = e.step;
-            state.undetected = ReachSet::with_cells(e.undetected.clone());
+            state.undetected = ReachSet::with_cells((*e.undetected).clone());
             state.targets = e
                 .targets
                 .iter()
-                .map(|(id, s)| (*id, ReachSet::with_cells(s.clone())))
+                .map(|(id, s)| (*id, ReachSet::with_cells((**s).clone())))
                 .collect();
-            state.obstacle_free = e.obstacle_free.clone();
-            state.explored = e.explored.clone();
-            state.hidden = e.hidden.clone();
+            state.obstacle_free = (*e.obstacle_free).clone();
+            state.explored = (*e.explored).clone();
+            state.hidden = (*e.hidden).clone();
             state
                 .hidden_history
                 .record(e.step, &own.unseen, &CellSet::empty(&cfg.grid));
@@ -622,21 +635,27 @@ pub(crate) mod tests {
                 } else {
                     10.0 * f64::from(uav)
                 });
-                e.estimate.undetected = scattered(seed + 1, 0.8);
-                e.estimate.explored = scattered(seed + 2, 0.3);
-                e.estimate.hidden = scattered(seed + 3, 0.1);
+                e.estimate.undetected = scattered(seed + 1, 0.8).into();
+                e.estimate.explored = scattered(seed + 2, 0.3).into();
+                e.estimate.hidden = scattered(seed + 3, 0.1).into();
                 e.unseen = scattered(seed + 4, 0.2);
                 let mut targets = vec![(1, scattered(seed + 5, 0.9))];
                 if uav % 2 == 0 {
                     targets.push((2, scattered(seed + 6, 0.9)));
                 }
-                e.estimate.targets = targets.into_iter().collect();
+                e.estimate.targets = targets.into_iter().map(|(id, s)| (id, s.into())).collect();
                 e
             })
             .collect();
         let mut clashing = all.clone();
-        clashing[0].estimate.targets.insert(7, set(&[(1, 1)]));
-        clashing[1].estimate.targets.insert(7, set(&[(8, 8)]));
+        clashing[0]
+            .estimate
+            .targets
+            .insert(7, set(&[(1, 1)]).into());
+        clashing[1]
+            .estimate
+            .targets
+            .insert(7, set(&[(8, 8)]).into());
         for estimates in [&all, &clashing] {
             for range in [f64::INFINITY, 100.0] {
                 let shared = FusedSets::of_agents(estimates, &cfg, range);
@@ -682,8 +701,10 @@ pub(crate) mod tests {
                 e.unseen = set(&row);
                 // Each agent explored a column of its own.
                 let column: Vec<CellIndex> = (0..g.ny).map(|iy| (9 - uav, iy)).collect();
-                e.estimate.explored = set(&column);
-                e.estimate.undetected.and_not_assign(&e.estimate.explored);
+                let mut undetected = CellSet::full(&g);
+                undetected.and_not_assign(&set(&column));
+                e.estimate.explored = set(&column).into();
+                e.estimate.undetected = undetected.into();
                 e
             })
             .collect();
@@ -726,7 +747,7 @@ pub(crate) mod tests {
             set(&[(0, 0), (1, 0), (2, 0)]),
             &[(4, set(&[(5, 5), (6, 5)])), (7, set(&[(0, 9)]))],
         );
-        a.estimate.explored = set(&[(8, 9), (9, 9)]);
+        a.estimate.explored = set(&[(8, 9), (9, 9)]).into();
         a.unseen = set(&[(1, 0), (5, 5)]);
         let fused = FusedSets::fuse(&a, [], &config());
         let truth = [target(4, 1.5, 1.5), target(7, -4.5, 4.5)];

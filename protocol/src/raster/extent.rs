@@ -7,7 +7,13 @@ use crate::math::{Point2, Real};
 impl CellSet {
     /// The smallest box holding every cell of the set, `None` when empty.
     pub fn bounding_box(&self) -> Option<CellBox> {
-        let (y0, y1) = self.row_range()?;
+        self.bounding_box_within(0..self.ny)
+    }
+
+    /// The smallest box holding every cell of the set in rows `rows`, `None` when they hold
+    /// none.
+    pub fn bounding_box_within(&self, rows: std::ops::Range<u32>) -> Option<CellBox> {
+        let (y0, y1) = self.row_range_within(rows)?;
         let mut x0 = u32::MAX;
         let mut x1 = 0;
         for iy in y0..=y1 {

@@ -123,6 +123,10 @@ pub struct ReachSet {
     /// word changes, so that a word the clock keeps reaching (cells held out by a bound) is not
     /// read again while nothing in it changed.
     scanned: Vec<Scan>,
+    /// Rows `rows.0..rows.1` hold every cell of the set (some of them may be empty), so that
+    /// queries and meets visit only those rows: a car's small set costs its rows, not the
+    /// grid's. Meets tighten it; growth widens it.
+    rows: (u32, u32),
     /// The motion clock `b` of the last [`ReachSet::advance`], metres.
     clock_m: Real,
 }
@@ -137,7 +141,7 @@ struct Scan {
     next: u32,
 }
 
-/// Equal cells, reach and clock (the pending bounds and the scans are caches).
+/// Equal cells, reach and clock (the pending bounds, the scans and the rows are caches).
 impl PartialEq for ReachSet {
     fn eq(&self, other: &Self) -> bool {
         self.cells == other.cells && self.reach == other.reach && self.clock_m == other.clock_m
@@ -159,6 +163,7 @@ impl ReachSet {
             reach: vec![0; grid.cell_count()],
             pending: vec![u32::MAX; cells.words_per_row() * grid.ny as usize],
             scanned: vec![Scan::default(); cells.words_per_row() * grid.ny as usize],
+            rows: rows_of(&cells),
             cells,
             clock_m: 0.0,
         }
@@ -172,6 +177,7 @@ impl ReachSet {
             pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
             scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
             reach: vec![0; n],
+            rows: rows_of(&cells),
             cells,
             clock_m: 0.0,
         };
@@ -190,6 +196,7 @@ impl ReachSet {
             pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
             scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
             reach: vec![0; n],
+            rows: rows_of(&cells),
             cells,
             clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
         };
@@ -215,6 +222,52 @@ impl ReachSet {
     /// Whether cell `c` is in the set.
     pub fn contains(&self, c: CellIndex) -> bool {
         self.cells.contains(c)
+    }
+
+    /// Rows that hold every cell of the set (some may be empty): what the queries below visit.
+    pub fn rows(&self) -> std::ops::Range<u32> {
+        self.rows.0..self.rows.1
+    }
+
+    /// The words of the set's [`ReachSet::rows`].
+    fn words(&self) -> &[u64] {
+        self.cells.rows_words(self.rows())
+    }
+
+    /// Whether the set has no cell.
+    pub fn is_empty(&self) -> bool {
+        self.words().iter().all(|&w| w == 0)
+    }
+
+    /// Number of cells in the set.
+    pub fn count(&self) -> u64 {
+        self.words().iter().map(|w| u64::from(w.count_ones())).sum()
+    }
+
+    /// Area of the set, m².
+    pub fn area(&self, grid: &GroundGrid) -> Real {
+        self.count() as Real * grid.cell_area()
+    }
+
+    /// Whether the set shares a cell with `other` (on the same grid).
+    pub fn intersects(&self, other: &CellSet) -> bool {
+        debug_assert!(self.cells.same_shape(other));
+        let theirs = other.rows_words(self.rows());
+        self.words().iter().zip(theirs).any(|(a, b)| a & b != 0)
+    }
+
+    /// The smallest box holding every cell of the set, `None` when empty.
+    pub fn bounding_box(&self) -> Option<CellBox> {
+        self.cells.bounding_box_within(self.rows())
+    }
+
+    /// Widens the rows to hold row `iy`.
+    fn hold_row(&mut self, iy: u32) {
+        self.rows = if self.rows.0 < self.rows.1 {
+            (self.rows.0.min(iy), self.rows.1.max(iy + 1))
+        } else {
+            (iy, iy + 1)
+        };
     }
 
     /// The motion clock of the last advance, metres.
@@ -245,13 +298,21 @@ impl ReachSet {
             return;
         }
         self.clock_m = clock_m;
+        let mut grown_rows: Option<(u32, u32)> = None;
         self.scan_due(
             reached_units(clock_m),
             |_, _| false,
             |cells, iy, w, bits| {
                 cells.row_mut(iy)[w] |= bits;
+                if bits != 0 {
+                    grown_rows = Some(grown_rows.map_or((iy, iy), |(a, _)| (a, iy)));
+                }
             },
         );
+        if let Some((first, last)) = grown_rows {
+            self.hold_row(first);
+            self.hold_row(last);
+        }
     }
 
     /// [`ReachSet::advance`], then [`ReachSet::intersect`] with an outer raster `bound` of the
@@ -292,6 +353,9 @@ impl ReachSet {
         }
         for (iy, w, fresh) in grown {
             self.cells.row_mut(iy)[w] |= fresh;
+            if fresh != 0 {
+                self.hold_row(iy);
+            }
         }
     }
 
@@ -323,6 +387,10 @@ impl ReachSet {
             }
         }
         self.cells.or_assign(extra);
+        if let Some((first, last)) = extra.row_range() {
+            self.hold_row(first);
+            self.hold_row(last);
+        }
     }
 
     /// Removes ground proven free at the current clock (`free`, an inner raster: no target in
@@ -431,7 +499,6 @@ impl ReachSet {
             return;
         };
         let was_wider = self
-            .cells
             .bounding_box()
             .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
         self.raise_outside(grid, &window, &outer.window_flags(&window, false));
@@ -445,7 +512,7 @@ impl ReachSet {
     /// the set's cells (which hold the targets, so they are no nearer): the far field of a
     /// small set, so that it regrows as a rounded box rather than all at once.
     pub fn bound_by_box(&mut self, grid: &GroundGrid) {
-        let Some(b) = self.cells.bounding_box() else {
+        let Some(b) = self.bounding_box() else {
             return;
         };
         let nx = self.cells.nx() as usize;
@@ -547,19 +614,27 @@ impl ReachSet {
         }
     }
 
-    /// Removes the bits `remove(cells, row, word)` of every word; their pending bound drops
-    /// to 0 (always a lower bound), so the next advance settles those words.
+    /// Removes the bits `remove(cells, row, word)` of every word of the set's rows (the
+    /// others hold no cell to remove); their pending bound drops to 0 (always a lower bound),
+    /// so the next advance settles those words. The rows shrink to those still holding cells.
     fn remove_where(&mut self, remove: impl Fn(&CellSet, u32, usize) -> u64) {
         let wpr = self.cells.words_per_row();
-        for iy in 0..self.cells.ny() {
+        let mut held: Option<(u32, u32)> = None;
+        for iy in self.rows() {
+            let mut any = 0;
             for w in 0..wpr {
                 let gone = remove(&self.cells, iy, w);
                 if gone != 0 {
                     self.cells.row_mut(iy)[w] &= !gone;
                     self.pending[iy as usize * wpr + w] = 0;
                 }
+                any |= self.cells.row(iy)[w];
+            }
+            if any != 0 {
+                held = Some(held.map_or((iy, iy), |(a, _)| (a, iy)));
             }
         }
+        self.rows = held.map_or((0, 0), |(first, last)| (first, last + 1));
     }
 
     /// The set as parts for snapshots ([`ReachSet::from_parts`]): its cells, the least reach
@@ -580,6 +655,7 @@ impl ReachSet {
         let mut set = Self {
             pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
             scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
+            rows: rows_of(&cells),
             cells,
             reach,
             clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
@@ -644,6 +720,13 @@ fn reached_bits_64(reach: &[u32; 64], reached: u32) -> (u64, u32) {
         }
     }
     (bits, next.into_iter().fold(u32::MAX, u32::min))
+}
+
+/// The rows holding the cells of `cells`, as `ReachSet::rows` keeps them.
+fn rows_of(cells: &CellSet) -> (u32, u32) {
+    cells
+        .row_range()
+        .map_or((0, 0), |(first, last)| (first, last + 1))
 }
 
 /// Whole cells strictly between index `i` and the span `lo..=hi` (0 inside or next to it).

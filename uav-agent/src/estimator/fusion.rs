@@ -13,6 +13,7 @@
 //! simply keeps its own (guaranteed) state.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
 
 use protocol::camera::CameraPose;
 use protocol::grid::GroundGrid;
@@ -22,6 +23,11 @@ use protocol::scenario::SetGrowth;
 use super::predict;
 use super::{EstimatorConfig, EstimatorState};
 use crate::occupancy::OccupancyMap;
+
+/// A set as estimates carry it: shared between a received estimate and the inbox that keeps
+/// it as the base of the sender's next delta, so that neither copies it; a fusion into an
+/// estimate copies a set only when it changes one still shared.
+pub type SharedSet = Arc<CellSet>;
 
 /// A peer's estimate as received and validated ([`super::message`]), or this agent's own
 /// exchanged sets ([`EstimatorState::to_peer`]).
@@ -40,15 +46,15 @@ pub struct PeerEstimate {
     /// Sender's camera pose at that step.
     pub pose: Option<CameraPose>,
     /// `X̄`, outer.
-    pub undetected: CellSet,
+    pub undetected: SharedSet,
     /// `X_j`, outer, per identified id.
-    pub targets: BTreeMap<u32, CellSet>,
+    pub targets: BTreeMap<u32, SharedSet>,
     /// `S^o`, inner.
-    pub obstacle_free: CellSet,
+    pub obstacle_free: SharedSet,
     /// Explored ground.
-    pub explored: CellSet,
+    pub explored: SharedSet,
     /// `H^CVS`.
-    pub hidden: CellSet,
+    pub hidden: SharedSet,
     /// The sender's map cells carried by the message (all others unknown).
     pub oem: OccupancyMap,
     /// Whether `oem` is the sender's whole known map rather than a delta.
@@ -68,32 +74,48 @@ pub struct FuseReport {
     pub grid_mismatch: bool,
 }
 
-/// A set the fusion law meets and joins with a peer's raster: a plain [`CellSet`] (an
-/// estimate) or a [`ReachSet`] (an agent's own state, whose reach the meet keeps).
+/// A set the fusion law meets and joins with a peer's raster: an estimate's [`SharedSet`] or
+/// a [`ReachSet`] (an agent's own state, whose reach the meet keeps).
 pub trait FusedSet: Clone {
     /// The cells of the set.
     fn cells(&self) -> &CellSet;
+    /// Whether the set has no cell.
+    fn is_empty(&self) -> bool;
+    /// Whether the set shares a cell with `other`.
+    fn intersects(&self, other: &CellSet) -> bool;
     /// `self ← self ∩ other`.
     fn meet(&mut self, other: &CellSet);
     /// `self ← self ∪ other`.
     fn join(&mut self, other: &CellSet);
 }
 
-impl FusedSet for CellSet {
+impl FusedSet for SharedSet {
     fn cells(&self) -> &CellSet {
         self
     }
+    fn is_empty(&self) -> bool {
+        CellSet::is_empty(self)
+    }
+    fn intersects(&self, other: &CellSet) -> bool {
+        CellSet::intersects(self, other)
+    }
     fn meet(&mut self, other: &CellSet) {
-        self.and_assign(other);
+        Arc::make_mut(self).and_assign(other);
     }
     fn join(&mut self, other: &CellSet) {
-        self.or_assign(other);
+        Arc::make_mut(self).or_assign(other);
     }
 }
 
 impl FusedSet for ReachSet {
     fn cells(&self) -> &CellSet {
         ReachSet::cells(self)
+    }
+    fn is_empty(&self) -> bool {
+        ReachSet::is_empty(self)
+    }
+    fn intersects(&self, other: &CellSet) -> bool {
+        ReachSet::intersects(self, other)
     }
     fn meet(&mut self, other: &CellSet) {
         self.intersect(other);
@@ -141,8 +163,7 @@ fn fuse_into<S: FusedSet>(
         return report;
     }
     let radius = report.step_lag as f64 * radius_per_step;
-    let widen = |s| predict::grow(s, grid, radius);
-    let src_undetected = widen(&src.undetected);
+    let src_undetected = predict::grow(&src.undetected, grid, radius);
     let ids: BTreeSet<u32> = dst
         .targets
         .keys()
@@ -150,7 +171,7 @@ fn fuse_into<S: FusedSet>(
         .copied()
         .collect();
     for id in ids {
-        let theirs = src.targets.get(&id).map(widen);
+        let theirs = src.targets.get(&id).map(|s| predict::grow(s, grid, radius));
         let theirs: &CellSet = theirs.as_deref().unwrap_or(&src_undetected);
         let mine = match dst.targets.entry(id) {
             std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
@@ -159,8 +180,7 @@ fn fuse_into<S: FusedSet>(
                 e.insert(dst.undetected.clone())
             }
         };
-        let both_empty = mine.cells().is_empty() && theirs.is_empty();
-        if both_empty || mine.cells().intersects(theirs) {
+        if mine.intersects(theirs) || (mine.is_empty() && theirs.is_empty()) {
             mine.meet(theirs);
         } else {
             tracing::error!(
@@ -226,15 +246,15 @@ impl EstimatorState {
             seq: 0,
             incarnation: 0,
             pose: self.pose,
-            undetected: self.undetected.cells().clone(),
+            undetected: Arc::new(self.undetected.cells().clone()),
             targets: self
                 .targets
                 .iter()
-                .map(|(id, s)| (*id, s.cells().clone()))
+                .map(|(id, s)| (*id, Arc::new(s.cells().clone())))
                 .collect(),
-            obstacle_free: self.obstacle_free.clone(),
-            explored: self.explored.clone(),
-            hidden: self.hidden.clone(),
+            obstacle_free: Arc::new(self.obstacle_free.clone()),
+            explored: Arc::new(self.explored.clone()),
+            hidden: Arc::new(self.hidden.clone()),
             oem: self.oem.clone(),
             oem_full: true,
         }
@@ -250,9 +270,9 @@ impl PeerEstimate {
                 step: self.step,
                 undetected: &mut self.undetected,
                 targets: &mut self.targets,
-                obstacle_free: &mut self.obstacle_free,
-                explored: &mut self.explored,
-                hidden: &mut self.hidden,
+                obstacle_free: Arc::make_mut(&mut self.obstacle_free),
+                explored: Arc::make_mut(&mut self.explored),
+                hidden: Arc::make_mut(&mut self.hidden),
                 oem: &mut self.oem,
             },
             other,
@@ -319,11 +339,11 @@ pub(crate) mod tests {
                         seq: 0,
                         incarnation: 0,
                         pose: None,
-                        undetected,
-                        targets,
-                        obstacle_free: so,
-                        explored,
-                        hidden,
+                        undetected: undetected.into(),
+                        targets: targets.into_iter().map(|(id, s)| (id, s.into())).collect(),
+                        obstacle_free: so.into(),
+                        explored: explored.into(),
+                        hidden: hidden.into(),
                         oem,
                         oem_full: false,
                     }
@@ -333,11 +353,11 @@ pub(crate) mod tests {
 
     /// The fused content, without sender bookkeeping or the map's pending changes.
     type Content = (
-        CellSet,
-        BTreeMap<u32, CellSet>,
-        CellSet,
-        CellSet,
-        CellSet,
+        SharedSet,
+        BTreeMap<u32, SharedSet>,
+        SharedSet,
+        SharedSet,
+        SharedSet,
         Vec<((u32, u32), OemCell)>,
     );
 
@@ -435,15 +455,15 @@ pub(crate) mod tests {
             .expect("tree")
             .current();
         let mut state = EstimatorState::new(&cfg);
-        state.undetected = ReachSet::with_cells(a.undetected.clone());
+        state.undetected = ReachSet::with_cells((*a.undetected).clone());
         state.targets = a
             .targets
             .iter()
-            .map(|(k, v)| (*k, ReachSet::with_cells(v.clone())))
+            .map(|(k, v)| (*k, ReachSet::with_cells((**v).clone())))
             .collect();
-        state.obstacle_free = a.obstacle_free.clone();
-        state.explored = a.explored.clone();
-        state.hidden = a.hidden.clone();
+        state.obstacle_free = (*a.obstacle_free).clone();
+        state.explored = (*a.explored).clone();
+        state.hidden = (*a.hidden).clone();
         state.oem = a.oem.clone();
         state.fuse(&b, &cfg);
         assert_eq!(content(&state.to_peer(0)), content(&fused(&a, &b)));
@@ -455,7 +475,7 @@ pub(crate) mod tests {
         let cfg = config();
         let mut state = EstimatorState::new(&cfg);
         let mut other = state.to_peer(1);
-        other.undetected = CellSet::empty(&GroundGrid::new(4.0, 0.5));
+        other.undetected = CellSet::empty(&GroundGrid::new(4.0, 0.5)).into();
         let r = state.fuse(&other, &cfg);
         assert!(r.grid_mismatch);
         assert_eq!(state.undetected.cells(), &CellSet::full(&cfg.grid));

@@ -23,6 +23,7 @@
 //! cell out of range, a duplicated target are typed errors, never a panic.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use protocol::camera::CameraPose;
 use protocol::codec::{self, DecodeError, EncodeError};
@@ -32,41 +33,43 @@ use protocol::raster::CellSet;
 use protocol::raster::delta::{DeltaError, SetCode};
 use protocol::wire::{DropReason, EstimateMsg, TargetSetMsg, uav_bit};
 
+use super::fusion::SharedSet;
 use super::{EstimatorConfig, EstimatorState, PeerEstimate};
 use crate::occupancy::{OccupancyMap, OemUpdateError};
 
 /// The sets of one estimate: what a sender keeps as the base of its next deltas and a
-/// receiver rebuilds.
+/// receiver rebuilds (sharing them with the [`PeerEstimate`] it hands on).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EstimateSets {
     /// `X̄`.
-    pub undetected: CellSet,
+    pub undetected: SharedSet,
     /// `X_j` per identified id.
-    pub targets: BTreeMap<u32, CellSet>,
+    pub targets: BTreeMap<u32, SharedSet>,
     /// `S^o`.
-    pub obstacle_free: CellSet,
+    pub obstacle_free: SharedSet,
     /// The explored ground.
-    pub explored: CellSet,
+    pub explored: SharedSet,
     /// `H^CVS`.
-    pub hidden: CellSet,
+    pub hidden: SharedSet,
     /// `H̄`.
-    pub unseen: CellSet,
+    pub unseen: SharedSet,
 }
 
 impl EstimateSets {
     /// The exchanged sets of a state.
     pub fn of_state(state: &EstimatorState) -> Self {
+        let share = |set: &CellSet| Arc::new(set.clone());
         Self {
-            undetected: state.undetected.cells().clone(),
+            undetected: share(state.undetected.cells()),
             targets: state
                 .targets
                 .iter()
-                .map(|(&id, set)| (id, set.cells().clone()))
+                .map(|(&id, set)| (id, share(set.cells())))
                 .collect(),
-            obstacle_free: state.obstacle_free.clone(),
-            explored: state.explored.clone(),
-            hidden: state.hidden.clone(),
-            unseen: state.hidden_history.unseen().clone(),
+            obstacle_free: share(&state.obstacle_free),
+            explored: share(&state.explored),
+            hidden: share(&state.hidden),
+            unseen: share(state.hidden_history.unseen()),
         }
     }
 }
@@ -129,7 +132,8 @@ impl EstimateOutbox {
         };
         let sets = EstimateSets::of_state(state);
         let base = if full { None } else { self.last.as_ref() };
-        let code = |set: &CellSet, base: Option<&CellSet>| SetCode::choose(set, base);
+        let code =
+            |set: &SharedSet, base: Option<&SharedSet>| SetCode::choose(set, base.map(|b| &**b));
         let undetected = code(&sets.undetected, base.map(|b| &b.undetected));
         let targets: Vec<TargetSetMsg> = sets
             .targets
@@ -259,9 +263,10 @@ fn decode_set(
     grid: &GroundGrid,
     role: SetRole,
     code: &SetCode,
-    base: Option<&CellSet>,
-) -> Result<CellSet, EstimateReadError> {
-    code.decode(grid, base)
+    base: Option<&SharedSet>,
+) -> Result<SharedSet, EstimateReadError> {
+    code.decode(grid, base.map(|b| &**b))
+        .map(Arc::new)
         .map_err(|source| EstimateReadError::Set { role, source })
 }
 
@@ -409,7 +414,7 @@ impl EstimateInbox {
 
     /// `H̄` of the last message rebuilt from `uav`.
     pub fn unseen(&self, uav: u32) -> Option<&CellSet> {
-        self.held.get(&uav).map(|h| &h.sets.unseen)
+        self.held.get(&uav).map(|h| &*h.sets.unseen)
     }
 }
 
@@ -444,15 +449,15 @@ mod tests {
         let mut s = EstimatorState::new(&cfg);
         s.step = p.step;
         s.time_s = p.time_s;
-        s.undetected = ReachSet::with_cells(p.undetected.clone());
+        s.undetected = ReachSet::with_cells((*p.undetected).clone());
         s.targets = p
             .targets
             .iter()
-            .map(|(id, set)| (*id, ReachSet::with_cells(set.clone())))
+            .map(|(id, set)| (*id, ReachSet::with_cells((**set).clone())))
             .collect();
-        s.obstacle_free = p.obstacle_free.clone();
-        s.explored = p.explored.clone();
-        s.hidden = p.hidden.clone();
+        s.obstacle_free = (*p.obstacle_free).clone();
+        s.explored = (*p.explored).clone();
+        s.hidden = (*p.hidden).clone();
         s.oem = p.oem.clone();
         s
     }
@@ -614,12 +619,12 @@ mod tests {
         let whole = outbox.compose(&mut moving_state(4));
         assert_eq!(whole.base_seq, None);
         let back = inbox.read(&whole, &cfg).unwrap();
-        assert_eq!(back.undetected, moving_state(4).undetected.cells().clone());
+        assert_eq!(*back.undetected, *moving_state(4).undetected.cells());
         assert_eq!(inbox.wanted(), 0);
         let next = outbox.compose(&mut moving_state(5));
         assert_eq!(next.base_seq, Some(4));
         let back = inbox.read(&next, &cfg).unwrap();
-        assert_eq!(back.explored, moving_state(5).explored);
+        assert_eq!(*back.explored, moving_state(5).explored);
         // A stateless reader (or a newcomer) cannot use a delta message.
         assert!(matches!(
             PeerEstimate::from_msg(&next, &cfg),

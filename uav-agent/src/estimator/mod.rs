@@ -411,7 +411,7 @@ impl Estimator {
                     st.undetected.clone()
                 }
             };
-            if x.cells().intersects(&xm) {
+            if x.intersects(&xm) {
                 clearing.restrict(&mut x, &xm, margin);
             } else {
                 tracing::error!(
@@ -433,9 +433,8 @@ impl Estimator {
             }
             // Free ground the set does not touch tells it nothing it needs now.
             let near = set
-                .cells()
                 .intersects(&free_ground)
-                .then(|| set.cells().bounding_box())
+                .then(|| set.bounding_box())
                 .flatten()
                 .and_then(|b| intersect_boxes(&grow_box(&b, margin), window.as_ref()?));
             clearing.clear(set, near.as_ref());
@@ -454,11 +453,11 @@ impl Estimator {
         let cam = frame.camera();
         st.pose = Some(cam.pose);
 
-        report.undetected_area_m2 = st.undetected.cells().area(grid);
+        report.undetected_area_m2 = st.undetected.area(grid);
         report.target_areas_m2 = st
             .targets
             .iter()
-            .map(|(id, s)| (*id, s.cells().area(grid)))
+            .map(|(id, s)| (*id, s.area(grid)))
             .collect();
         report.free_ground_area_m2 = free_ground.area(grid);
         report.obstacle_free_area_m2 = st.obstacle_free.area(grid);

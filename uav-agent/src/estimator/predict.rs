@@ -21,8 +21,7 @@ use protocol::raster::{CellSet, ReachSet};
 /// cost of the few words where the set grows; words no cell of the set is near are not read.
 pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: Real) {
     // The cases of `grow`: its result, word by word.
-    let cells = set.cells();
-    if radius_m.is_nan() || radius_m <= 0.0 || cells.is_empty() {
+    if radius_m.is_nan() || radius_m <= 0.0 || set.is_empty() {
         set.advance_within(clock_m, |old: &CellSet, iy, w| old.row(iy)[w]);
         return;
     }
@@ -31,7 +30,7 @@ pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: R
         set.advance(clock_m);
         return;
     }
-    let dilation = cells.word_dilation(grid, radius_m);
+    let dilation = set.cells().word_dilation(grid, radius_m);
     set.advance_within(clock_m, dilation);
 }
 
