@@ -444,10 +444,12 @@ impl CellSet {
 
     /// The first and last non-empty rows among `rows`, `None` when they hold no cell.
     pub fn row_range_within(&self, rows: Range<u32>) -> Option<(u32, u32)> {
-        let rows = rows.start..rows.end.min(self.ny);
-        let first = rows.clone().find(|&iy| !self.row_is_empty(iy))?;
-        let last = (first..rows.end).rev().find(|&iy| !self.row_is_empty(iy))?;
-        Some((first, last))
+        let start = rows.start.min(self.ny);
+        let words = self.rows_words(start..rows.end);
+        let wpr = self.words_per_row.max(1);
+        let first = words.iter().position(|&w| w != 0)?;
+        let last = words.iter().rposition(|&w| w != 0)?;
+        Some((start + (first / wpr) as u32, start + (last / wpr) as u32))
     }
 
     /// The words of rows `rows` (clamped to the grid), row after row.

@@ -310,9 +310,10 @@ proptest! {
         prop_assert_eq!(filled, alone);
     }
 
-    /// Every word read through [`CellSet::word_dilation`] is that word of the whole dilation,
-    /// and a word it says cannot hold cells ([`protocol::raster::WordDilation::may_hold`]) is
-    /// empty: across word boundaries and grid edges, for empty sets, radii from negative to
+    /// Every word read through [`CellSet::word_dilation`] (or
+    /// [`CellSet::word_dilation_within`] the set's rows) is that word of the whole dilation,
+    /// and a word or row it says cannot hold cells ([`protocol::raster::WordDilation::may_hold`],
+    /// `may_hold_row`) is empty: across word boundaries and grid edges, for empty sets, radii from negative to
     /// past the grid and radii no cell size bounds.
     #[test]
     fn a_dilation_read_word_by_word_is_the_dilation(
@@ -331,12 +332,22 @@ proptest! {
         let r = radius_cells * cell_m;
         let whole = set.dilate(&grid, r);
         let mut words = set.word_dilation(&grid, r);
+        // Told the rows the set's cells lie in (with a margin), it reads only those rows and
+        // must answer the same.
+        let held = set.row_range().map_or(0..0, |(a, b)| a.saturating_sub(1)..b + 2);
+        let mut within = set.word_dilation_within(&grid, r, held);
         for iy in 0..ny {
+            prop_assert!(
+                within.may_hold_row(iy) || whole.row(iy).iter().all(|&w| w == 0),
+                "row {} radius {} is not empty", iy, r
+            );
             for w in 0..set.words_per_row() {
                 prop_assert_eq!(
                     words.word(&set, iy, w), whole.row(iy)[w],
                     "row {} word {} radius {}", iy, w, r
                 );
+                prop_assert_eq!(within.word(&set, iy, w), whole.row(iy)[w]);
+                prop_assert_eq!(within.may_hold(iy, w), words.may_hold(iy, w));
                 prop_assert!(
                     words.may_hold(iy, w) || whole.row(iy)[w] == 0,
                     "row {} word {} radius {} is not empty", iy, w, r

@@ -143,11 +143,11 @@ proptest! {
     }
 
     /// Advancing within a dilation read word by word ([`ReachSet::advance_within`] with a
-    /// [`protocol::raster::WordDilation`], which skips the words no cell is near) leaves the
-    /// set, its reach and its clock exactly as advancing and then intersecting with the whole
-    /// dilation does, and as a bound that reads every word does, through any history, on a
-    /// grid several words wide; and advancing with the scans a set remembers gives what a set
-    /// without them (rebuilt from its parts) gives.
+    /// [`protocol::raster::WordDilation`] of the set's rows, which skips the rows and words no
+    /// cell is near) leaves the set, its reach and its clock exactly as advancing and then
+    /// intersecting with the whole dilation does, and as a bound that reads every word does,
+    /// through any history, on a grid several words wide; and advancing with the scans a set
+    /// remembers gives what a set without them (rebuilt from its parts) gives.
     #[test]
     fn advancing_within_a_dilation_read_word_by_word_is_the_whole_grid_way(
         events in proptest::collection::vec(wide_event(), 1..24),
@@ -171,7 +171,8 @@ proptest! {
                     uncached.advance(clock);
                     uncached.intersect(&previous);
                     prop_assert!(whole == uncached, "cached scans changed the set");
-                    local.advance_within(clock, local.cells().word_dilation(&g, *r));
+                    let near = local.cells().word_dilation_within(&g, *r, local.rows());
+                    local.advance_within(clock, near);
                     let mut words = unskipped.cells().word_dilation(&g, *r);
                     unskipped.advance_within(clock, |old: &CellSet, iy, w| words.word(old, iy, w));
                 }

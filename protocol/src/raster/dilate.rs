@@ -7,6 +7,8 @@
 //! horizontally, word-parallel, from the narrowest run (largest `|dy|`) to the widest, and
 //! each stage is OR-ed into rows `y - dy` and `y + dy`.
 
+use std::ops::Range;
+
 use super::{CellSet, margin};
 use crate::grid::GroundGrid;
 use crate::math::Real;
@@ -77,9 +79,23 @@ impl CellSet {
     /// The disc element of [`CellSet::dilate`] by `radius` metres, for reading single words
     /// of a dilation without building it ([`WordDilation::word`]).
     pub fn word_dilation(&self, grid: &GroundGrid, radius: Real) -> WordDilation {
+        self.word_dilation_within(grid, radius, 0..self.ny)
+    }
+
+    /// [`CellSet::word_dilation`] of a set whose cells all lie in rows `rows`: the same
+    /// words, found by reading only those rows (a small set on a large grid pays for its
+    /// rows). Rows of the set outside `rows` would be ignored.
+    pub fn word_dilation_within(
+        &self,
+        grid: &GroundGrid,
+        radius: Real,
+        rows: Range<u32>,
+    ) -> WordDilation {
+        let rows = rows.start.min(self.ny)..rows.end.min(self.ny);
         let d = grid.cell_m;
         let reach = (radius + margin(radius + d)) / d;
-        let element = if radius < 0.0 || self.is_empty() {
+        let empty = self.rows_words(rows.clone()).iter().all(|&w| w == 0);
+        let element = if radius < 0.0 || empty {
             Element::Identity
         } else if !(reach.is_finite() && d > 0.0) {
             Element::Everything
@@ -93,8 +109,8 @@ impl CellSet {
         };
         let support = match &element {
             // `word` reads rows `iy ± (run.len() - 1)` and words `w ± max(pad, 1)`.
-            Element::Runs(run) => Some(self.word_support(run.len() - 1, pad.max(1))),
-            Element::Identity => Some(self.word_support(0, 0)),
+            Element::Runs(run) => Some(self.word_support(rows, run.len() - 1, pad.max(1))),
+            Element::Identity => Some(self.word_support(rows, 0, 0)),
             Element::Everything => None,
         };
         WordDilation {
@@ -107,17 +123,18 @@ impl CellSet {
     }
 
     /// Per row, one bit per word: set when a word of the set within `rows` rows and `words`
-    /// words of it (on the grid) is not empty.
-    fn word_support(&self, rows: usize, words: usize) -> WordMask {
+    /// words of it (on the grid) is not empty; the set's cells lie in rows `held`.
+    fn word_support(&self, held: Range<u32>, rows: usize, words: usize) -> WordMask {
         let (ny, wpr) = (self.ny as usize, self.words_per_row);
         let per_row = wpr.div_ceil(64).max(1);
+        let held = held.start as usize..held.end as usize;
         // The rows' non-empty words, grown by `words` along the row.
         let mut across = vec![0u64; ny * per_row];
         let mut shifted = vec![0u64; per_row];
         for (row, mask) in self
-            .words
+            .rows_words(held.start as u32..held.end as u32)
             .chunks_exact(wpr.max(1))
-            .zip(across.chunks_exact_mut(per_row))
+            .zip(across[held.start * per_row..].chunks_exact_mut(per_row))
         {
             for (w, &word) in row.iter().enumerate() {
                 mask[w / 64] |= u64::from(word != 0) << (w % 64);
@@ -131,9 +148,15 @@ impl CellSet {
                 }
             }
         }
-        // Then by `rows` across the rows.
+        // Then by `rows` across the rows (only rows near `held` can gain a bit).
         let mut bits = vec![0u64; ny * per_row];
-        for (iy, out) in bits.chunks_exact_mut(per_row).enumerate() {
+        let near = held.start.saturating_sub(rows)..(held.end + rows).min(ny);
+        for (iy, out) in bits
+            .chunks_exact_mut(per_row)
+            .enumerate()
+            .take(near.end)
+            .skip(near.start)
+        {
             let (a, b) = (iy.saturating_sub(rows), (iy + rows).min(ny - 1));
             for src in across[a * per_row..(b + 1) * per_row].chunks_exact(per_row) {
                 for (o, s) in out.iter_mut().zip(src) {
@@ -185,6 +208,13 @@ impl WordMask {
         let i = iy as usize * self.per_row + w / 64;
         self.bits.get(i).is_some_and(|b| b >> (w % 64) & 1 != 0)
     }
+
+    fn row_has_any(&self, iy: u32) -> bool {
+        let start = iy as usize * self.per_row;
+        self.bits
+            .get(start..start + self.per_row)
+            .is_some_and(|row| row.iter().any(|&b| b != 0))
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -203,6 +233,12 @@ impl WordDilation {
     /// word may still be empty).
     pub fn may_hold(&self, iy: u32, w: usize) -> bool {
         self.support.as_ref().is_none_or(|s| s.contains(iy, w))
+    }
+
+    /// False when row `iy` of the dilation is certainly empty ([`WordDilation::may_hold`] of
+    /// each of its words is false).
+    pub fn may_hold_row(&self, iy: u32) -> bool {
+        self.support.as_ref().is_none_or(|s| s.row_has_any(iy))
     }
 
     /// Word `w` of row `iy` of `set.dilate(grid, radius)`, for the `grid` and `radius` this

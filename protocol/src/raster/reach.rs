@@ -87,6 +87,11 @@ pub trait WordBound {
     fn may_hold(&self, _iy: u32, _w: usize) -> bool {
         true
     }
+
+    /// False only when row `iy` of the raster is certainly empty.
+    fn may_hold_row(&self, _iy: u32) -> bool {
+        true
+    }
 }
 
 impl<F: FnMut(&CellSet, u32, usize) -> u64> WordBound for F {
@@ -102,6 +107,10 @@ impl WordBound for super::WordDilation {
 
     fn may_hold(&self, iy: u32, w: usize) -> bool {
         super::WordDilation::may_hold(self, iy, w)
+    }
+
+    fn may_hold_row(&self, iy: u32) -> bool {
+        super::WordDilation::may_hold_row(self, iy)
     }
 }
 
@@ -301,6 +310,7 @@ impl ReachSet {
         let mut grown_rows: Option<(u32, u32)> = None;
         self.scan_due(
             reached_units(clock_m),
+            |_| false,
             |_, _| false,
             |cells, iy, w, bits| {
                 cells.row_mut(iy)[w] |= bits;
@@ -334,6 +344,7 @@ impl ReachSet {
         let mut grown: Vec<(u32, usize, u64)> = Vec::new();
         self.scan_due(
             reached_units(clock_m),
+            |iy| !bound.may_hold_row(iy),
             |iy, w| !bound.may_hold(iy, w),
             |cells, iy, w, bits| {
                 let fresh = bits & !cells.row(iy)[w];
@@ -566,16 +577,21 @@ impl ReachSet {
     }
 
     /// Scans every word whose pending bound the clock `reached` (in reach units) has come
-    /// to, but those `skip` names, records its next pending bound, and hands `visit` the
-    /// set's cells, the word's row and index, and the word's cells reached by then.
+    /// to, but those `skip` names and those of the rows `skip_row` names, records its next
+    /// pending bound, and hands `visit` the set's cells, the word's row and index, and the
+    /// word's cells reached by then.
     fn scan_due(
         &mut self,
         reached: u32,
+        skip_row: impl Fn(u32) -> bool,
         skip: impl Fn(u32, usize) -> bool,
         mut visit: impl FnMut(&mut CellSet, u32, usize, u64),
     ) {
         let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
         for iy in 0..self.cells.ny() {
+            if skip_row(iy) {
+                continue;
+            }
             for w in 0..wpr {
                 let slot = iy as usize * wpr + w;
                 if self.pending[slot] > reached || skip(iy, w) {

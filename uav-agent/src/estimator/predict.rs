@@ -30,7 +30,7 @@ pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: R
         set.advance(clock_m);
         return;
     }
-    let dilation = set.cells().word_dilation(grid, radius_m);
+    let dilation = set.cells().word_dilation_within(grid, radius_m, set.rows());
     set.advance_within(clock_m, dilation);
 }
 
