@@ -57,31 +57,41 @@ impl GapField {
         self.vertical.clear();
         self.vertical.resize(w * h, far);
         for (y, src) in seeds.chunks_exact(w).enumerate() {
-            for x in 0..w {
-                self.across[x] = src[x] || (x > 0 && src[x - 1]) || (x + 1 < w && src[x + 1]);
+            // Each seed grown by its horizontal neighbours, in loops the compiler vectorises.
+            let across = &mut self.across[..];
+            across.copy_from_slice(src);
+            for x in 1..w {
+                across[x] |= src[x - 1];
+            }
+            for x in 0..w - 1 {
+                across[x] |= src[x + 1];
             }
             let (done, rest) = self.vertical.split_at_mut(y * w);
             let row = &mut rest[..w];
-            let above = done.get(done.len().saturating_sub(w)..).filter(|_| y > 0);
-            for x in 0..w {
-                row[x] = if self.across[x] {
-                    0
-                } else {
-                    above.map_or(far, |a| a[x].saturating_add(1))
-                };
+            match y.checked_sub(1) {
+                None => {
+                    for (v, &a) in row.iter_mut().zip(across.iter()) {
+                        *v = if a { 0 } else { far };
+                    }
+                }
+                Some(up) => {
+                    // Values stay below `far + h`, far from overflowing.
+                    let above = &done[up * w..];
+                    for ((v, &a), &u) in row.iter_mut().zip(across.iter()).zip(above) {
+                        *v = if a { 0 } else { u + 1 };
+                    }
+                }
             }
         }
         for y in (0..h.saturating_sub(1)).rev() {
             let (head, below) = self.vertical.split_at_mut((y + 1) * w);
             let row = &mut head[y * w..];
-            for (v, b) in row.iter_mut().zip(&below[..w]) {
-                *v = (*v).min(b.saturating_add(1));
+            for (v, &b) in row.iter_mut().zip(&below[..w]) {
+                *v = (*v).min(b + 1);
             }
         }
         for v in &mut self.vertical {
-            if *v < far {
-                *v = v.saturating_sub(1);
-            }
+            *v -= u32::from(*v < far && *v > 0);
         }
 
         // Along each row, the lower envelope of the parabolas (x - x')² + vertical(x')².
@@ -101,10 +111,19 @@ impl GapField {
 /// Scratch space of the one-dimensional transform.
 #[derive(Debug, Default)]
 struct Envelope {
-    /// Apexes of the parabolas of the envelope.
-    apex: Vec<usize>,
-    /// Where each parabola starts to be the lowest, as the fraction `num / den` (`den > 0`).
-    from: Vec<(i64, i64)>,
+    /// The parabolas of the envelope, left to right.
+    parabolas: Vec<Parabola>,
+}
+
+/// One parabola `(x - apex)² + g(apex)²` of an envelope.
+#[derive(Clone, Copy, Debug)]
+struct Parabola {
+    apex: usize,
+    /// `g(apex)² + apex²`: the parabola is `x² - 2 apex x + level`.
+    level: i64,
+    /// Where it starts to be the lowest, as the fraction `num / den` (`den > 0`); once the
+    /// envelope is built, the first integer at or after it.
+    from: (i64, i64),
 }
 
 impl Envelope {
@@ -112,46 +131,50 @@ impl Envelope {
     /// `g` is `far`. Windows are at most a few thousand cells wide, so every product below
     /// stays far inside `i64`.
     fn lower(&mut self, g: &[u32], far: u32, out: &mut [u64]) {
-        self.apex.clear();
-        self.from.clear();
-        let value = |q: usize| i64::from(g[q]) * i64::from(g[q]);
+        let envelope = &mut self.parabolas;
+        envelope.clear();
         for (q, &gq) in g.iter().enumerate() {
             if gq >= far {
                 continue;
             }
-            // Where the parabola at q undercuts the one at p: s = (f(q) + q² - f(p) - p²) /
+            let qi = q as i64;
+            let level = i64::from(gq) * i64::from(gq) + qi * qi;
+            // Where the parabola at q undercuts the one at p: s = (level(q) - level(p)) /
             // (2 (q - p)), kept as an exact fraction.
-            let meets = |p: usize| {
-                let (qi, pi) = (q as i64, p as i64);
-                (value(q) + qi * qi - value(p) - pi * pi, 2 * (qi - pi))
-            };
-            while self.apex.len() > 1 {
-                let s = meets(self.apex[self.apex.len() - 1]);
-                let start = self.from[self.from.len() - 1];
+            let meets = |p: &Parabola| (level - p.level, 2 * (qi - p.apex as i64));
+            while let [.., _, last] = envelope.as_slice() {
+                let s = meets(last);
                 // s <= start, both with positive denominators.
-                if s.0 * start.1 <= start.0 * s.1 {
-                    self.apex.pop();
-                    self.from.pop();
+                if s.0 * last.from.1 <= last.from.0 * s.1 {
+                    envelope.pop();
                 } else {
                     break;
                 }
             }
             // The first parabola starts at minus infinity; its fraction is never read.
-            let start = self.apex.last().map_or((0, 1), |&p| meets(p));
-            self.apex.push(q);
-            self.from.push(start);
+            let from = envelope.last().map_or((0, 1), meets);
+            envelope.push(Parabola {
+                apex: q,
+                level,
+                from,
+            });
         }
-        if self.apex.is_empty() {
+        if envelope.is_empty() {
             out.fill(UNREACHED);
             return;
+        }
+        // A parabola is the lowest from the first integer at or after its fraction on.
+        for p in envelope.iter_mut().skip(1) {
+            let (num, den) = p.from;
+            p.from.0 = -(-num).div_euclid(den);
         }
         let mut k = 0;
         for (x, o) in out.iter_mut().enumerate() {
             // Move to the last parabola that starts at or before x.
-            while k + 1 < self.apex.len() && self.from[k + 1].0 <= x as i64 * self.from[k + 1].1 {
+            while envelope.get(k + 1).is_some_and(|p| p.from.0 <= x as i64) {
                 k += 1;
             }
-            let p = self.apex[k];
+            let p = envelope[k].apex;
             let d = x.abs_diff(p) as u64;
             *o = d * d + u64::from(g[p]) * u64::from(g[p]);
         }
@@ -232,6 +255,28 @@ mod tests {
                 .collect();
             let f = square_gap_field(&window, &mask(&window, &seeds));
             prop_assert_eq!(f, brute(&window, &seeds));
+        }
+
+        /// Dense and sparse seeds on wide windows: many parabolas per row, ties between them,
+        /// rows with one seed or none, and one scratch reused across windows of every shape.
+        #[test]
+        fn matches_the_definition_with_many_seeds(
+            windows in proptest::collection::vec(
+                (1u32..90, 1u32..24, 0.0f64..0.5, proptest::collection::vec(0.0f64..1.0, 90 * 24)),
+                1..4,
+            ),
+        ) {
+            let mut field = GapField::default();
+            for (w, h, density, draws) in windows {
+                let window = CellBox { x0: 3, y0: 5, x1: 3 + w - 1, y1: 5 + h - 1 };
+                let seeds: Vec<(u32, u32)> = (0..w * h)
+                    .filter(|&i| draws[i as usize] < density)
+                    .map(|i| (3 + i % w, 5 + i / w))
+                    .collect();
+                let flags = mask(&window, &seeds);
+                let expected = brute(&window, &seeds);
+                prop_assert_eq!(field.compute(&window, &flags), expected.as_slice());
+            }
         }
     }
 }
