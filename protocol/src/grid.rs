@@ -122,31 +122,104 @@ impl GroundGrid {
     /// The range of cell columns whose closed extent meets `[x_lo, x_hi]`, clamped to the grid
     /// (`None` if empty). Useful for outer rasterisation.
     pub fn columns_touching(&self, x_lo: Real, x_hi: Real) -> Option<(u32, u32)> {
-        Self::touching(self.origin.x, self.cell_m, self.nx, x_lo, x_hi)
+        self.columns().touching(x_lo, x_hi)
     }
 
     /// As [`GroundGrid::columns_touching`], for rows and `y`.
     pub fn rows_touching(&self, y_lo: Real, y_hi: Real) -> Option<(u32, u32)> {
-        Self::touching(self.origin.y, self.cell_m, self.ny, y_lo, y_hi)
+        self.rows().touching(y_lo, y_hi)
     }
 
-    fn touching(origin: Real, d: Real, n: u32, lo: Real, hi: Real) -> Option<(u32, u32)> {
+    /// The columns, for many range queries along x ([`GridAxis`]).
+    pub fn columns(&self) -> GridAxis {
+        GridAxis::new(self.origin.x, self.cell_m, self.nx)
+    }
+
+    /// The rows, for many range queries along y ([`GridAxis`]).
+    pub fn rows(&self) -> GridAxis {
+        GridAxis::new(self.origin.y, self.cell_m, self.ny)
+    }
+}
+
+/// One axis of a [`GroundGrid`] (its columns or its rows), made once for many range queries,
+/// as rasterising a shape row by row asks: each range is estimated with the reciprocal of the
+/// cell size (a product, not a division) and then settled on the exact cell edges
+/// `origin + k cell_m` the grid uses, so the answers do not depend on the estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridAxis {
+    origin: Real,
+    cell_m: Real,
+    per_m: Real,
+    n: u32,
+}
+
+impl GridAxis {
+    fn new(origin: Real, cell_m: Real, n: u32) -> Self {
+        Self {
+            origin,
+            cell_m,
+            per_m: 1.0 / cell_m,
+            n,
+        }
+    }
+
+    /// Where cell `k` starts (and cell `k - 1` ends).
+    fn edge(&self, k: u32) -> Real {
+        self.origin + k as Real * self.cell_m
+    }
+
+    /// `floor((v - origin) / cell_m)`, up to one either way.
+    fn estimate(&self, v: Real) -> Real {
+        floor_fast((v - self.origin) * self.per_m)
+    }
+
+    /// The cells whose closed extent meets `[lo, hi]`, clamped to the axis (`None` if
+    /// empty).
+    pub fn touching(&self, lo: Real, hi: Real) -> Option<(u32, u32)> {
         if lo.is_nan() || hi.is_nan() || lo > hi {
             return None;
         }
-        // A cell [k d, (k+1) d] touches [lo, hi] when k d <= hi and (k+1) d >= lo.
-        let k0 = floor_fast((lo - origin) / d) - 1.0;
-        let k1 = floor_fast((hi - origin) / d) + 1.0;
-        let k0 = k0.max(0.0);
-        let k1 = k1.min(n as Real - 1.0);
+        // A cell [k d, (k+1) d] touches [lo, hi] when k d <= hi and (k+1) d >= lo. The
+        // estimates start below the first such cell and above the last (each is off by at
+        // most one, one more for the product), and settle towards them.
+        let k0 = (self.estimate(lo) - 2.0).max(0.0);
+        let k1 = (self.estimate(hi) + 2.0).min(self.n as Real - 1.0);
         if k0 > k1 {
             return None;
         }
         let (mut a, mut b) = (k0 as u32, k1 as u32);
-        while a <= b && origin + (a as Real + 1.0) * d < lo {
+        while a <= b && self.edge(a + 1) < lo {
             a += 1;
         }
-        while b >= a && origin + b as Real * d > hi {
+        while b >= a && self.edge(b) > hi {
+            if b == 0 {
+                return None;
+            }
+            b -= 1;
+        }
+        (a <= b).then_some((a, b))
+    }
+
+    /// The cells whose closed extent lies inside `[lo, hi]`, clamped to the axis (`None` if
+    /// none). Useful for inner rasterisation.
+    pub fn inside(&self, lo: Real, hi: Real) -> Option<(u32, u32)> {
+        if lo.is_nan() || hi.is_nan() || lo > hi || self.n == 0 {
+            return None;
+        }
+        let last = self.n as Real - 1.0;
+        // Estimate, then settle on the exact edges, in both directions.
+        let mut a = (-floor_fast(-((lo - self.origin) * self.per_m))).clamp(0.0, last) as u32;
+        let mut b = (self.estimate(hi) - 1.0).clamp(0.0, last) as u32;
+        while a > 0 && self.edge(a - 1) >= lo {
+            a -= 1;
+        }
+        while a < self.n && self.edge(a) < lo {
+            a += 1;
+        }
+        while b + 1 < self.n && self.edge(b + 2) <= hi {
+            b += 1;
+        }
+        while self.edge(b + 1) > hi {
             if b == 0 {
                 return None;
             }
@@ -178,5 +251,41 @@ mod tests {
         assert_eq!(g.columns_touching(-4.5, -4.2), Some((0, 0)));
         assert_eq!(g.columns_touching(-20.0, -10.0), None);
         assert_eq!(g.columns_touching(4.5, 30.0), Some((9, 9)));
+    }
+
+    /// The definitions, cell by cell, on the exact edges `origin + k cell_m`.
+    fn by_definition(axis: &GridAxis, keep: impl Fn(Real, Real) -> bool) -> Option<(u32, u32)> {
+        let cells: Vec<u32> = (0..axis.n)
+            .filter(|&k| keep(axis.edge(k), axis.edge(k + 1)))
+            .collect();
+        Some((*cells.first()?, *cells.last()?))
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(512))]
+
+        /// The ranges an axis finds from its product estimates are the cells the definitions
+        /// give: ends exactly on cell edges, a hair either side of them, inside, across and
+        /// outside the grid, on grids of odd origins and cell sizes.
+        #[test]
+        fn axis_ranges_are_the_definitions(
+            origin in -300.0f64..300.0,
+            cell_m in proptest::prop_oneof![0.05f64..5.0, proptest::strategy::Just(0.1), proptest::strategy::Just(0.3)],
+            n in 0u32..60,
+            (k_lo, k_hi) in (-5i32..70, -5i32..70),
+            (t_lo, t_hi) in (0usize..5, 0usize..5),
+        ) {
+            let axis = GridAxis::new(origin, cell_m, n);
+            // Ends on an edge, a relative hair off it, or between edges.
+            let end = |k: i32, t: usize| {
+                let e = origin + Real::from(k) * cell_m;
+                [e, e.next_up(), e.next_down(), e + 0.37 * cell_m, e - 0.61 * cell_m][t]
+            };
+            let (lo, hi) = (end(k_lo, t_lo), end(k_hi, t_hi));
+            let touching = by_definition(&axis, |a, b| a <= hi && b >= lo).filter(|_| lo <= hi);
+            let inside = by_definition(&axis, |a, b| a >= lo && b <= hi).filter(|_| lo <= hi);
+            proptest::prop_assert_eq!(axis.touching(lo, hi), touching);
+            proptest::prop_assert_eq!(axis.inside(lo, hi), inside);
+        }
     }
 }

@@ -4,7 +4,6 @@
 //! the centre (outer) and narrowest at its farthest edge (inner). Half-widths are computed as
 //! `sqrt((r - dy) (r + dy))`, which keeps its relative accuracy where `r² - dy²` would cancel.
 
-use super::polygon::columns_inside;
 use super::{CellSet, Coverage, grid_scale, margin};
 use crate::grid::GroundGrid;
 use crate::math::{Point2, Real};
@@ -48,6 +47,7 @@ impl CellSet {
         let Some((r0, r1)) = grid.rows_touching(c.y - r, c.y + r) else {
             return;
         };
+        let columns = grid.columns();
         for iy in r0..=r1 {
             let y_lo = grid.origin.y + iy as Real * grid.cell_m;
             let y_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m;
@@ -56,7 +56,7 @@ impl CellSet {
                 continue;
             }
             let w = ((r - dy) * (r + dy)).sqrt();
-            if let Some((c0, c1)) = grid.columns_touching(c.x - w - eps, c.x + w + eps) {
+            if let Some((c0, c1)) = columns.touching(c.x - w - eps, c.x + w + eps) {
                 self.fill_row_span(iy, c0, c1);
             }
         }
@@ -72,7 +72,8 @@ impl CellSet {
         // Every cell filled below lies inside the disc's bounding square, so touches it: when
         // the set already holds every cell touching the square, nothing would change (the
         // many overlapping discs of one obstacle mostly end here).
-        if let Some((c0, c1)) = grid.columns_touching(c.x - r, c.x + r)
+        let columns = grid.columns();
+        if let Some((c0, c1)) = columns.touching(c.x - r, c.x + r)
             && (r0..=r1).all(|iy| self.row_span_is_full(iy, c0, c1))
         {
             return;
@@ -85,7 +86,7 @@ impl CellSet {
                 continue;
             }
             let w = ((r - dy) * (r + dy)).sqrt();
-            if let Some((c0, c1)) = columns_inside(grid, c.x - w + eps, c.x + w - eps) {
+            if let Some((c0, c1)) = columns.inside(c.x - w + eps, c.x + w - eps) {
                 self.fill_row_span(iy, c0, c1);
             }
         }

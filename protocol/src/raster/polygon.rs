@@ -12,7 +12,7 @@
 
 use super::{CellSet, Coverage, grid_scale, margin};
 use crate::grid::GroundGrid;
-use crate::math::{Point2, Real, floor_fast};
+use crate::math::{Point2, Real};
 
 impl CellSet {
     /// Adds the cells of a convex polygon (any orientation; repeated or collinear vertices are
@@ -107,8 +107,9 @@ impl CellSet {
                 }
             }
         }
+        let columns = grid.columns();
         for (k, (lo, hi)) in extent.into_iter().enumerate() {
-            if let Some((c0, c1)) = grid.columns_touching(lo - eps, hi + eps) {
+            if let Some((c0, c1)) = columns.touching(lo - eps, hi + eps) {
                 self.fill_row_span(r0 + k as u32, c0, c1);
             }
         }
@@ -165,6 +166,7 @@ impl CellSet {
         else {
             return;
         };
+        let columns = grid.columns();
         for iy in r0..=r1 {
             let y_lo = grid.origin.y + iy as Real * grid.cell_m;
             let y_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m;
@@ -187,7 +189,7 @@ impl CellSet {
                     lo = lo.max(bound);
                 }
             }
-            if let Some((c0, c1)) = columns_inside(grid, lo, hi).filter(|_| open) {
+            if let Some((c0, c1)) = columns.inside(lo, hi).filter(|_| open) {
                 self.fill_row_span(iy, c0, c1);
             }
         }
@@ -236,36 +238,6 @@ fn clipped_x_extent(a: Point2, b: Point2, lo: Real, hi: Real) -> Option<(Real, R
         return Some((Real::NEG_INFINITY, Real::INFINITY));
     }
     Some((xa.min(xb), xa.max(xb)))
-}
-
-/// The columns whose closed extent lies inside `[lo, hi]`, clamped to the grid.
-pub(super) fn columns_inside(grid: &GroundGrid, lo: Real, hi: Real) -> Option<(u32, u32)> {
-    if lo.is_nan() || hi.is_nan() || lo > hi || grid.nx == 0 {
-        return None;
-    }
-    let (o, d) = (grid.origin.x, grid.cell_m);
-    let last = grid.nx as Real - 1.0;
-    // Estimate by division (off by at most one), then settle on the exact edges `o + k d` the
-    // grid itself uses.
-    let mut a = (-floor_fast(-((lo - o) / d))).clamp(0.0, last) as u32;
-    let mut b = (floor_fast((hi - o) / d) - 1.0).clamp(0.0, last) as u32;
-    let edge = |k: u32| o + k as Real * d;
-    while a > 0 && edge(a - 1) >= lo {
-        a -= 1;
-    }
-    while a < grid.nx && edge(a) < lo {
-        a += 1;
-    }
-    while b + 1 < grid.nx && edge(b + 2) <= hi {
-        b += 1;
-    }
-    while edge(b + 1) > hi {
-        if b == 0 {
-            return None;
-        }
-        b -= 1;
-    }
-    (a <= b).then_some((a, b))
 }
 
 #[cfg(test)]
@@ -404,12 +376,12 @@ mod tests {
 
     #[test]
     fn columns_inside_uses_the_grid_edges() {
-        let g = grid();
-        assert_eq!(columns_inside(&g, -5.0, -4.0), Some((0, 0)));
-        assert_eq!(columns_inside(&g, -5.0, -4.0 - 1e-12), None);
-        assert_eq!(columns_inside(&g, -4.5, 0.0), Some((1, 4)));
-        assert_eq!(columns_inside(&g, -1e9, 1e9), Some((0, 9)));
-        assert_eq!(columns_inside(&g, Real::NAN, 1.0), None);
+        let columns = grid().columns();
+        assert_eq!(columns.inside(-5.0, -4.0), Some((0, 0)));
+        assert_eq!(columns.inside(-5.0, -4.0 - 1e-12), None);
+        assert_eq!(columns.inside(-4.5, 0.0), Some((1, 4)));
+        assert_eq!(columns.inside(-1e9, 1e9), Some((0, 9)));
+        assert_eq!(columns.inside(Real::NAN, 1.0), None);
     }
 
     proptest::proptest! {
