@@ -32,8 +32,10 @@ pub struct GapField {
     across: Vec<bool>,
     /// Vertical distances, row-major over the window.
     vertical: Vec<u32>,
-    /// The result, row-major over the window.
+    /// The result, row-major over the window ([`GapField::compute`]).
     out: Vec<u64>,
+    /// One row of the result ([`GapField::compute_rows`]).
+    row: Vec<u64>,
     envelope: Envelope,
 }
 
@@ -43,6 +45,26 @@ impl GapField {
     /// # Panics
     /// When `seeds` does not hold one flag per cell of the window (a caller's bug).
     pub fn compute(&mut self, window: &CellBox, seeds: &[bool]) -> &[u64] {
+        let mut out = std::mem::take(&mut self.out);
+        out.clear();
+        self.compute_rows(window, seeds, |_, row| out.extend_from_slice(row));
+        self.out = out;
+        &self.out
+    }
+
+    /// [`GapField::compute`] handed out a row at a time, from the window's first row to its
+    /// last, as `(row index in the window, the row's squared gaps)`: a caller that uses each
+    /// row once reads it while it is still in the cache, and no field of the whole window is
+    /// written.
+    ///
+    /// # Panics
+    /// When `seeds` does not hold one flag per cell of the window (a caller's bug).
+    pub fn compute_rows(
+        &mut self,
+        window: &CellBox,
+        seeds: &[bool],
+        mut row: impl FnMut(usize, &[u64]),
+    ) {
         let w = (window.x1 - window.x0 + 1) as usize;
         let h = (window.y1 - window.y0 + 1) as usize;
         assert_eq!(seeds.len(), w * h, "one seed flag per cell of the window");
@@ -95,16 +117,12 @@ impl GapField {
         }
 
         // Along each row, the lower envelope of the parabolas (x - x')² + vertical(x')².
-        self.out.clear();
-        self.out.resize(w * h, UNREACHED);
-        for (g, out) in self
-            .vertical
-            .chunks_exact(w)
-            .zip(self.out.chunks_exact_mut(w))
-        {
-            self.envelope.lower(g, far, out);
+        self.row.clear();
+        self.row.resize(w, UNREACHED);
+        for (y, g) in self.vertical.chunks_exact(w).enumerate() {
+            self.envelope.lower(g, far, &mut self.row);
+            row(y, &self.row);
         }
-        &self.out
     }
 }
 

@@ -552,13 +552,12 @@ impl ReachSet {
     fn raise_outside(&mut self, grid: &GroundGrid, window: &CellBox, inside: &[bool]) {
         self.forget_scans(window);
         GAPS.with_borrow_mut(|field| {
-            let gaps = field.compute(window, inside);
             let nx = self.cells.nx() as usize;
             let w = (window.x1 - window.x0 + 1) as usize;
             let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
-            let rows = gaps.chunks_exact(w).zip(inside.chunks_exact(w));
-            for (iy, (gap_row, seed_row)) in (window.y0 as usize..).zip(rows) {
-                let start = iy * nx + window.x0 as usize;
+            field.compute_rows(window, inside, |y, gap_row| {
+                let seed_row = &inside[y * w..(y + 1) * w];
+                let start = (window.y0 as usize + y) * nx + window.x0 as usize;
                 let reach = &mut self.reach[start..start + w];
                 for ((slot, &gap2), &seed) in reach.iter_mut().zip(gap_row).zip(seed_row) {
                     if seed {
@@ -572,7 +571,7 @@ impl ReachSet {
                     };
                     *slot = (*slot).max(tau.min(u32::MAX - 1));
                 }
-            }
+            });
         });
     }
 
