@@ -1,7 +1,7 @@
 //! A world-server and real agent processes, without the orchestrator: the estimator exchange,
 //! identity checks, bad peer messages and a lost world.
 
-use std::process::{Command, Output};
+use std::process::Output;
 use std::time::Duration;
 
 use iceoryx2::port::listener::Listener;
@@ -11,7 +11,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
 use protocol::ipc::{Ipc, RunNode, WakeEvent, WirePublisher, scan_nodes};
 use protocol::wire::{HELLO_STEP, ObserverAck, TruthState, WireHeader, WireKind, uav_bit};
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, follow, wait_until, world_server};
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, follow, run_process, wait_until, world_server};
 
 /// A small scenario with a camera large enough to see and identify cars.
 fn scenario(duration_s: f64, uavs: u32) -> String {
@@ -23,11 +23,7 @@ fn scenario(duration_s: f64, uavs: u32) -> String {
 
 fn agent(t: &TestRun, scenario: &std::path::Path, id: u32, extra: &[&str]) -> ChildGuard {
     ChildGuard::spawn(
-        Command::new(binary("uav-agent"))
-            .arg("--run-id")
-            .arg(t.run.as_str())
-            .arg("--scenario")
-            .arg(scenario)
+        run_process("uav-agent", t, scenario)
             .arg("--id")
             .arg(id.to_string())
             .args(extra),
@@ -241,12 +237,8 @@ fn a_killed_token_holder_is_skipped_and_the_survivors_process_every_step() {
     let long_wait = ["--token-wait-ms", "120000"];
     let a0 = agent(&t, &file, 0, &long_wait);
     // Agent 1 sits on the token for a long time at every turn: it holds it when killed.
-    let mut cmd = Command::new(binary("uav-agent"));
-    cmd.arg("--run-id")
-        .arg(t.run.as_str())
-        .arg("--scenario")
-        .arg(&file)
-        .args(["--id", "1"])
+    let mut cmd = run_process("uav-agent", &t, &file);
+    cmd.args(["--id", "1"])
         .env("SETFLEET_TEST_HOLD_TOKEN_MS", "60000");
     let a1 = ChildGuard::spawn(&mut cmd);
     let a2 = agent(&t, &file, 2, &long_wait);
@@ -281,11 +273,7 @@ fn a_restarted_agent_rebuilds_its_sets_from_its_peers() {
     const KILL_STEP: u64 = 20;
     let observer = PlayedObserver::join(&t);
     let mut w = ChildGuard::spawn(
-        Command::new(binary("world-server"))
-            .arg("--run-id")
-            .arg(t.run.as_str())
-            .arg("--scenario")
-            .arg(&file)
+        run_process("world-server", &t, &file)
             .args([
                 "--agents",
                 "0,1",

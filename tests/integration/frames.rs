@@ -1,6 +1,5 @@
 //! A world-server process with one expected agent; the test plays agent 0 over iceoryx2.
 
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
@@ -12,7 +11,9 @@ use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, RunNode, WakeEvent};
 use protocol::scenario::Scenario;
 use protocol::wire::{HELLO_STEP, UavCommand};
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, follow, small_scenario_toml, world_server};
+use tests::{
+    ChildGuard, EXIT_TIMEOUT, TestRun, follow, run_process, small_scenario_toml, world_server,
+};
 use world_server::World;
 
 /// Steps of the test scenario: 2 s at T = 0.5 s.
@@ -190,14 +191,12 @@ fn frames_rendered_ahead_are_those_of_the_world_stepped_with_the_acked_yaw_refer
 fn world_stops_cleanly_on_sigterm_while_waiting_for_agents() {
     let t = TestRun::new("sigterm");
     let scenario = t.write("scenario.toml", &small_scenario_toml(600.0));
-    let mut world = ChildGuard::spawn(
-        Command::new(binary("world-server"))
-            .arg("--run-id")
-            .arg(t.run.as_str())
-            .arg("--scenario")
-            .arg(&scenario)
-            .args(["--agents", "0", "--start-timeout-ms", "600000"]),
-    );
+    let mut world = ChildGuard::spawn(run_process("world-server", &t, &scenario).args([
+        "--agents",
+        "0",
+        "--start-timeout-ms",
+        "600000",
+    ]));
     // Wait until the world's node exists (it handles SIGTERM from its first wait on).
     let deadline = Instant::now() + EXIT_TIMEOUT;
     while !protocol::ipc::scan_nodes(&t.run, false)

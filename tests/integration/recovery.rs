@@ -8,7 +8,9 @@ use std::time::Duration;
 
 use protocol::ipc::{RunNode, scan_nodes};
 use serde_json::Value;
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, processes_mentioning, wait_until};
+use tests::{
+    ChildGuard, EXIT_TIMEOUT, TestRun, binary, processes_mentioning, run_process, wait_until,
+};
 
 /// A small scenario with a camera large enough to see and identify cars.
 fn scenario(duration_s: f64, uavs: u32) -> String {
@@ -19,14 +21,7 @@ fn scenario(duration_s: f64, uavs: u32) -> String {
 }
 
 fn process(name: &str, t: &TestRun, scenario: &Path, extra: &[&str]) -> ChildGuard {
-    ChildGuard::spawn(
-        Command::new(binary(name))
-            .arg("--run-id")
-            .arg(t.run.as_str())
-            .arg("--scenario")
-            .arg(scenario)
-            .args(extra),
-    )
+    ChildGuard::spawn(run_process(name, t, scenario).args(extra))
 }
 
 fn finish(mut child: ChildGuard, what: &str) -> Output {

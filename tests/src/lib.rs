@@ -286,15 +286,22 @@ pub fn wait_until(what: &str, timeout: Duration, mut done: impl FnMut() -> bool)
     }
 }
 
+/// The command of one of `t`'s run's processes (`world-server`, `uav-agent`): the binary
+/// `name` with the run's id and `scenario`; the caller adds the rest.
+pub fn run_process(name: &str, t: &TestRun, scenario: &Path) -> Command {
+    let mut cmd = Command::new(binary(name));
+    cmd.arg("--run-id")
+        .arg(t.run.as_str())
+        .arg("--scenario")
+        .arg(scenario);
+    cmd
+}
+
 /// Starts a `world-server` of `t`'s run on `scenario`, serving the agents `agents` (a
 /// comma-separated list), with long start and ack waits and `extra` arguments.
 pub fn world_server(t: &TestRun, scenario: &Path, agents: &str, extra: &[&str]) -> ChildGuard {
     ChildGuard::spawn(
-        Command::new(binary("world-server"))
-            .arg("--run-id")
-            .arg(t.run.as_str())
-            .arg("--scenario")
-            .arg(scenario)
+        run_process("world-server", t, scenario)
             .args(["--agents", agents, "--start-timeout-ms", "60000"])
             .args(["--ack-timeout-ms", "30000"])
             .args(extra),

@@ -139,9 +139,10 @@ struct Parabola {
     apex: usize,
     /// `g(apex)² + apex²`: the parabola is `x² - 2 apex x + level`.
     level: i64,
-    /// Where it starts to be the lowest, as the fraction `num / den` (`den > 0`); once the
-    /// envelope is built, the first integer at or after it.
+    /// Where it starts to be the lowest, as the fraction `num / den` (`den > 0`).
     from: (i64, i64),
+    /// The first integer at or after `from`, once the envelope is built.
+    start: i64,
 }
 
 impl Envelope {
@@ -175,6 +176,7 @@ impl Envelope {
                 apex: q,
                 level,
                 from,
+                start: 0,
             });
         }
         if envelope.is_empty() {
@@ -184,12 +186,12 @@ impl Envelope {
         // A parabola is the lowest from the first integer at or after its fraction on.
         for p in envelope.iter_mut().skip(1) {
             let (num, den) = p.from;
-            p.from.0 = -(-num).div_euclid(den);
+            p.start = -(-num).div_euclid(den);
         }
         let mut k = 0;
         for (x, o) in out.iter_mut().enumerate() {
             // Move to the last parabola that starts at or before x.
-            while envelope.get(k + 1).is_some_and(|p| p.from.0 <= x as i64) {
+            while envelope.get(k + 1).is_some_and(|p| p.start <= x as i64) {
                 k += 1;
             }
             let p = envelope[k].apex;
