@@ -53,17 +53,46 @@ enum Event {
     Measure(CellBox),
     /// The set is saved as its cells and restored ([`ReachSet::from_cells_at`]).
     Restore,
+    /// The target is measured inside a rectangle of cells, and the set is replaced by its
+    /// copy met with the measurement ([`ReachSet::restricted_copy`], as a target's set is
+    /// first made from `X̄`).
+    Learn(CellBox),
+    /// The reach is bounded by the set's box ([`ReachSet::bound_by_box`]).
+    Bound,
+}
+
+/// Rows around its cells a learned set stores its reach over ([`Event::Learn`]).
+const LEARN_MARGIN: u32 = 3;
+
+/// Applies `e` to `set` as the estimator would: motion within the whole-cell dilation.
+fn apply(g: &GroundGrid, set: &mut ReachSet, e: &Event, clock: &mut f64) {
+    match e {
+        Event::Move(r) => {
+            *clock += r;
+            set.advance_within(*clock, set.cells().word_dilation(g, *r));
+        }
+        Event::Free(b) => set.clear(g, &box_set(g, b), b),
+        Event::Measure(b) => set.restrict(g, &box_set(g, b), 8),
+        Event::Restore => *set = ReachSet::from_cells_at(g, set.cells().clone(), *clock),
+        Event::Learn(b) => *set = set.restricted_copy(g, &box_set(g, b), LEARN_MARGIN),
+        Event::Bound => set.bound_by_box(g),
+    }
 }
 
 fn event(n: u32) -> impl Strategy<Value = Event> {
+    // Measurements are larger: a few metres around the target.
+    let measured = move |b: CellBox| CellBox {
+        x1: (b.x1 + 6).min(n - 1),
+        y1: (b.y1 + 6).min(n - 1),
+        ..b
+    };
     prop_oneof![
         4 => (0.1f64..1.6).prop_map(Event::Move),
         4 => cell_box(n, 11).prop_map(Event::Free),
-        1 => cell_box(n, 11).prop_map(move |b| {
-            // Measurements are larger: a few metres around the target.
-            Event::Measure(CellBox { x1: (b.x1 + 6).min(n - 1), y1: (b.y1 + 6).min(n - 1), ..b })
-        }),
+        1 => cell_box(n, 11).prop_map(move |b| Event::Measure(measured(b))),
         1 => Just(Event::Restore),
+        1 => cell_box(n, 11).prop_map(move |b| Event::Learn(measured(b))),
+        1 => Just(Event::Bound),
     ]
 }
 
@@ -74,6 +103,8 @@ fn wide_event() -> impl Strategy<Value = Event> {
         4 => cell_box(160, 60).prop_map(Event::Free),
         1 => cell_box(160, 30).prop_map(Event::Measure),
         1 => Just(Event::Restore),
+        1 => cell_box(160, 30).prop_map(Event::Learn),
+        1 => Just(Event::Bound),
     ]
 }
 
@@ -85,61 +116,17 @@ proptest! {
     /// whole-cell dilation it replaces.
     #[test]
     fn the_set_holds_every_possible_position(events in proptest::collection::vec(event(24), 1..24)) {
-        let g = grid();
-        let pts = samples(&g);
-        let mut possible = vec![true; pts.len()];
-        let mut set = ReachSet::full(&g);
-        let mut dilated = CellSet::full(&g);
-        let mut clock = 0.0;
-        for e in &events {
-            match e {
-                Event::Move(r) => {
-                    let before = possible.clone();
-                    let held: Vec<Point2> = pts
-                        .iter()
-                        .zip(&before)
-                        .filter(|(_, k)| **k)
-                        .map(|((p, _), _)| *p)
-                        .collect();
-                    for ((p, _), k) in pts.iter().zip(possible.iter_mut()) {
-                        *k = held.iter().any(|q| (p - q).norm() <= *r);
-                    }
-                    clock += r;
-                    let previous = set.cells().dilate(&g, *r);
-                    set.advance(clock);
-                    set.intersect(&previous);
-                    dilated = dilated.dilate(&g, *r);
-                }
-                Event::Free(b) => {
-                    let free = box_set(&g, b);
-                    for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
-                        *k &= !free.contains(*c);
-                    }
-                    set.clear(&g, &free, b);
-                    dilated.and_not_assign(&free);
-                }
-                Event::Measure(b) => {
-                    let m = box_set(&g, b);
-                    for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
-                        *k &= m.contains(*c);
-                    }
-                    set.restrict(&g, &m, 8);
-                    dilated.and_assign(&m);
-                }
-                Event::Restore => {
-                    let restored = ReachSet::from_cells_at(&g, set.cells().clone(), clock);
-                    prop_assert_eq!(restored.cells(), set.cells());
-                    set = restored;
-                }
-            }
-            for ((p, c), k) in pts.iter().zip(&possible) {
-                prop_assert!(
-                    !*k || set.contains(*c),
-                    "possible position {:?} outside the set (cell {:?}) after {:?}", p, c, e
-                );
-            }
-            prop_assert!(set.cells().is_subset_of(&dilated));
-        }
+        holds_every_possible_position(&events, None)?;
+    }
+
+    /// The same for a set that stores its reach over the rows near its cells only, with the
+    /// far field of its box elsewhere ([`ReachSet::with_row_margin`]), for every margin.
+    #[test]
+    fn a_set_stored_over_its_rows_holds_every_possible_position(
+        events in proptest::collection::vec(event(24), 1..24),
+        margin in 0u32..6,
+    ) {
+        holds_every_possible_position(&events, Some(margin))?;
     }
 
     /// Advancing within a dilation read word by word ([`ReachSet::advance_within`] with a
@@ -147,7 +134,10 @@ proptest! {
     /// cell is near) leaves the set, its reach and its clock exactly as advancing and then
     /// intersecting with the whole dilation does, and as a bound that reads every word does,
     /// through any history, on a grid several words wide; and advancing with the scans a set
-    /// remembers gives what a set without them (rebuilt from its parts) gives.
+    /// remembers gives what a set without them (rebuilt from its parts) gives. A set learned
+    /// from a measurement stores the rows near its cells only; the one rebuilt from its parts
+    /// stores every row, so the two growing alike also shows that the stored rows widen
+    /// before the clock reaches a row outside them.
     #[test]
     fn advancing_within_a_dilation_read_word_by_word_is_the_whole_grid_way(
         events in proptest::collection::vec(wide_event(), 1..24),
@@ -193,6 +183,17 @@ proptest! {
                         *set = ReachSet::from_cells_at(&g, set.cells().clone(), clock);
                     }
                 }
+                Event::Learn(b) => {
+                    let m = box_set(&g, b);
+                    for set in [&mut whole, &mut local, &mut unskipped] {
+                        *set = set.restricted_copy(&g, &m, LEARN_MARGIN);
+                    }
+                }
+                Event::Bound => {
+                    for set in [&mut whole, &mut local, &mut unskipped] {
+                        set.bound_by_box(&g);
+                    }
+                }
             }
             prop_assert!(whole == local, "the sets differ after {:?}", e);
             prop_assert!(whole == unskipped, "the sets differ after {:?}", e);
@@ -202,7 +203,7 @@ proptest! {
     /// The rows a set keeps ([`ReachSet::rows`]) hold every cell of it through any history of
     /// growth, proven-free ground, measurements, meets and joins, so the queries that read
     /// only those rows (emptiness, count, bounding box, sharing a cell) answer what the
-    /// whole-grid ones do.
+    /// whole-grid ones do; and the rows whose reach it stores hold them.
     #[test]
     fn the_rows_a_set_keeps_hold_every_cell_it_has(
         events in proptest::collection::vec(
@@ -214,22 +215,15 @@ proptest! {
         let mut clock = 0.0;
         for (e, other_box, op) in &events {
             let other = box_set(&g, other_box);
-            match e {
-                Event::Move(r) => {
-                    clock += r;
-                    set.advance_within(clock, set.cells().word_dilation(&g, *r));
-                }
-                Event::Free(b) => set.clear(&g, &box_set(&g, b), b),
-                Event::Measure(b) => set.restrict(&g, &box_set(&g, b), 8),
-                Event::Restore => set = ReachSet::from_cells_at(&g, set.cells().clone(), clock),
-            }
+            apply(&g, &mut set, e, &mut clock);
             match op {
                 0 => set.intersect(&other),
                 1 => set.join(&other),
                 2 => set.bound_by_box(&g),
                 _ => set.advance(clock + 0.5),
             }
-            let rows = set.rows();
+            let (rows, stored) = (set.rows(), set.stored_rows());
+            prop_assert!(rows.is_empty() || (stored.start <= rows.start && rows.end <= stored.end));
             for (_, iy) in set.cells().iter() {
                 prop_assert!(rows.contains(&iy), "row {} outside {:?} after {:?}", iy, rows, e);
             }
@@ -237,6 +231,46 @@ proptest! {
             prop_assert_eq!(set.count(), set.cells().count());
             prop_assert_eq!(set.bounding_box(), set.cells().bounding_box());
             prop_assert_eq!(set.intersects(&other), set.cells().intersects(&other));
+        }
+    }
+
+    /// A copy of a set met with an outer raster of its targets ([`ReachSet::restricted_copy`])
+    /// has the cells of cloning, meeting and bounding by the box, and the same reach over the
+    /// rows it stores; elsewhere its reach (the far field of its box) is at most that one. (An
+    /// empty copy holds no target, and any reach holds for it.)
+    #[test]
+    fn a_restricted_copy_is_the_bounded_meet_over_its_rows(
+        events in proptest::collection::vec(wide_event(), 0..16),
+        outer in cell_box(160, 40),
+        margin in 0u32..24,
+    ) {
+        let g = GroundGrid::new(40.0, 0.5);
+        let mut set = ReachSet::full(&g);
+        let mut clock = 0.0;
+        for e in &events {
+            apply(&g, &mut set, e, &mut clock);
+        }
+        let outer = box_set(&g, &outer);
+        let copy = set.restricted_copy(&g, &outer, margin);
+        // The reference stores every row: the set's reach, wherever it was stored.
+        let (cells, base, relative) = set.to_parts();
+        let mut reference = ReachSet::from_parts(cells, base, &relative, set.clock_m())
+            .expect("parts of the same grid");
+        reference.intersect(&outer);
+        reference.bound_by_box(&g);
+        prop_assert_eq!(copy.cells(), reference.cells());
+        if copy.is_empty() {
+            return Ok(());
+        }
+        let (stored, nx) = (copy.stored_rows(), g.nx as usize);
+        let (mine, theirs) = (reach_of(&copy), reach_of(&reference));
+        for (k, (a, b)) in mine.iter().zip(&theirs).enumerate() {
+            let (ix, iy) = (k % nx, (k / nx) as u32);
+            if stored.contains(&iy) {
+                prop_assert_eq!(a, b, "cell {:?}", (ix, iy));
+            } else {
+                prop_assert!(a <= b, "cell {:?}: {} > {}", (ix, iy), a, b);
+            }
         }
     }
 
@@ -250,6 +284,88 @@ proptest! {
     ) {
         pocket_growth(&pocket, steps, r)?;
     }
+}
+
+/// The reach of every cell of `set`, row-major, however the set stores it.
+fn reach_of(set: &ReachSet) -> Vec<u32> {
+    let (_, base, relative) = set.to_parts();
+    relative.iter().map(|r| r + base).collect()
+}
+
+/// The checks of `the_set_holds_every_possible_position` through `events`, for a set that
+/// stores every row (`margin` `None`) or the rows within `margin` of its cells.
+fn holds_every_possible_position(
+    events: &[Event],
+    margin: Option<u32>,
+) -> Result<(), TestCaseError> {
+    let g = grid();
+    let pts = samples(&g);
+    let mut possible = vec![true; pts.len()];
+    let stored_near = |set: ReachSet| match margin {
+        Some(m) => set.with_row_margin(m),
+        None => set,
+    };
+    let mut set = stored_near(ReachSet::full(&g));
+    let mut dilated = CellSet::full(&g);
+    let mut clock = 0.0;
+    for e in events {
+        match e {
+            Event::Move(r) => {
+                let before = possible.clone();
+                let held: Vec<Point2> = pts
+                    .iter()
+                    .zip(&before)
+                    .filter(|(_, k)| **k)
+                    .map(|((p, _), _)| *p)
+                    .collect();
+                for ((p, _), k) in pts.iter().zip(possible.iter_mut()) {
+                    *k = held.iter().any(|q| (p - q).norm() <= *r);
+                }
+                clock += r;
+                let previous = set.cells().dilate(&g, *r);
+                set.advance(clock);
+                set.intersect(&previous);
+                dilated = dilated.dilate(&g, *r);
+            }
+            Event::Free(b) => {
+                let free = box_set(&g, b);
+                for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
+                    *k &= !free.contains(*c);
+                }
+                set.clear(&g, &free, b);
+                dilated.and_not_assign(&free);
+            }
+            Event::Measure(b) | Event::Learn(b) => {
+                let m = box_set(&g, b);
+                for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
+                    *k &= m.contains(*c);
+                }
+                if matches!(e, Event::Learn(_)) {
+                    set = set.restricted_copy(&g, &m, margin.unwrap_or(LEARN_MARGIN));
+                } else {
+                    set.restrict(&g, &m, 8);
+                }
+                dilated.and_assign(&m);
+            }
+            Event::Restore => {
+                let restored = ReachSet::from_cells_at(&g, set.cells().clone(), clock);
+                prop_assert_eq!(restored.cells(), set.cells());
+                set = stored_near(restored);
+            }
+            Event::Bound => set.bound_by_box(&g),
+        }
+        for ((p, c), k) in pts.iter().zip(&possible) {
+            prop_assert!(
+                !*k || set.contains(*c),
+                "possible position {:?} outside the set (cell {:?}) after {:?}",
+                p,
+                c,
+                e
+            );
+        }
+        prop_assert!(set.cells().is_subset_of(&dilated));
+    }
+    Ok(())
 }
 
 /// The checks of `a_pocket_grows_by_the_motion_and_one_diagonal` for one case.

@@ -138,12 +138,14 @@ struct Lattice<'a, S: FusedSet> {
 
 /// The fusion law: every set of `dst` meets the matching set of `src` (its `X̄` for an id it
 /// has not identified), proven facts are joined. In place: a target's set is only copied when
-/// `dst` learns its id.
+/// `dst` learns its id, as `learn(X̄, theirs)` makes it (`X̄` or any outer raster of the
+/// target that holds `X̄ ∩ theirs`).
 fn fuse_into<S: FusedSet>(
     dst: Lattice<'_, S>,
     src: &PeerEstimate,
     grid: &GroundGrid,
     radius_per_step: f64,
+    learn: impl Fn(&S, &CellSet) -> S,
 ) -> FuseReport {
     let mut report = FuseReport {
         step_lag: dst.step.abs_diff(src.step),
@@ -177,7 +179,7 @@ fn fuse_into<S: FusedSet>(
             std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::btree_map::Entry::Vacant(e) => {
                 report.new_targets.push(id);
-                e.insert(dst.undetected.clone())
+                e.insert(learn(dst.undetected, theirs))
             }
         };
         if mine.intersects(theirs) || (mine.is_empty() && theirs.is_empty()) {
@@ -219,12 +221,15 @@ impl EstimatorState {
             peer,
             &config.grid,
             predict::motion_radius(1, config.period_s, config.max_speed_mps),
+            |undetected: &ReachSet, theirs: &CellSet| learned_set(undetected, theirs, config),
         );
         if !report.grid_mismatch {
             self.hidden_history.add_hidden(step, &peer.hidden);
         }
         // A target learned from a peer starts from this side's X̄, whose reach knows nothing
         // near the target: bound it by its (small) set's box (whole-cell growth keeps none).
+        // The copy made of X̄ is bounded already, and bounding it again changes nothing; the
+        // union kept when the sets did not meet is bounded here.
         let new_targets = match config.sets {
             SetGrowth::Cells => &[][..],
             SetGrowth::Reach | SetGrowth::Geodesic => &report.new_targets[..],
@@ -278,7 +283,23 @@ impl PeerEstimate {
             other,
             &config.grid,
             predict::motion_radius(1, config.period_s, config.max_speed_mps),
+            |undetected: &SharedSet, _: &CellSet| undetected.clone(),
         )
+    }
+}
+
+/// A target's set as a state first learns it from a peer's set of it (`theirs`, grown to the
+/// state's step): a copy of `X̄` that keeps its reach, stored over the rows near `theirs`
+/// ([`ReachSet::restricted_copy`]) when the two meet, else the whole of `X̄` (fusion then
+/// keeps the union). Whole-cell sets keep no reach: `X̄` whole.
+fn learned_set(undetected: &ReachSet, theirs: &CellSet, config: &EstimatorConfig) -> ReachSet {
+    let margin = super::target_reach_margin(&config.grid);
+    match config.sets {
+        SetGrowth::Reach | SetGrowth::Geodesic if undetected.intersects(theirs) => {
+            undetected.restricted_copy(&config.grid, theirs, margin)
+        }
+        SetGrowth::Reach | SetGrowth::Geodesic => undetected.clone().with_row_margin(margin),
+        SetGrowth::Cells => undetected.clone(),
     }
 }
 

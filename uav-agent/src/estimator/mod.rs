@@ -51,6 +51,12 @@ use snapshot::{cell_set, reach_set, reach_set_map};
 /// whole-cell dilation beyond it.
 pub const TARGET_REACH_MARGIN_M: Real = 40.0;
 
+/// [`TARGET_REACH_MARGIN_M`] in cells of `grid`: also the rows around its cells over which a
+/// target's set stores its reach ([`ReachSet::with_row_margin`]).
+fn target_reach_margin(grid: &GroundGrid) -> u32 {
+    (TARGET_REACH_MARGIN_M / grid.cell_m).ceil() as u32
+}
+
 /// Everything the estimator needs from the scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EstimatorConfig {
@@ -292,11 +298,13 @@ impl Estimator {
             return Err(EstimatorRestoreError::GridMismatch);
         }
         let grid = &config.grid;
-        let rebuild = |set: &mut ReachSet| {
-            *set = ReachSet::from_cells_at(grid, set.cells().clone(), set.clock_m());
-        };
-        rebuild(&mut state.undetected);
-        state.targets.values_mut().for_each(rebuild);
+        let rebuild =
+            |set: &ReachSet| ReachSet::from_cells_at(grid, set.cells().clone(), set.clock_m());
+        state.undetected = rebuild(&state.undetected);
+        let margin = target_reach_margin(grid);
+        for set in state.targets.values_mut() {
+            *set = rebuild(set).with_row_margin(margin);
+        }
         Ok(Self { config, state })
     }
 
@@ -396,7 +404,7 @@ impl Estimator {
             blocked: &st.obstacle_free,
         };
         clearing.clear(&mut st.undetected, window.as_ref());
-        let margin = (TARGET_REACH_MARGIN_M / grid.cell_m).ceil() as u32;
+        let margin = target_reach_margin(grid);
         let mut measured_ids = Vec::new();
         for (id, measurement) in measurements {
             let Some(mut xm) = measurement else {
@@ -408,7 +416,7 @@ impl Estimator {
                 Some(x) => x,
                 None => {
                     report.newly_identified.push(id);
-                    st.undetected.clone()
+                    clearing.new_target(&st.undetected, &xm, margin)
                 }
             };
             if x.intersects(&xm) {
@@ -420,7 +428,7 @@ impl Estimator {
                     "empty target set after correction: keeping the measurement alone"
                 );
                 report.empty_intersections.push(id);
-                x = ReachSet::full(grid);
+                x = ReachSet::full(grid).with_row_margin(margin);
                 x.advance(clock);
                 clearing.restrict(&mut x, &xm, margin);
             }
@@ -495,6 +503,19 @@ impl Clearing<'_> {
             (SetGrowth::Reach, Some(w)) => set.clear(self.grid, self.free, w),
             (SetGrowth::Geodesic, Some(w)) => {
                 set.clear_around(self.grid, self.free, self.blocked, w)
+            }
+        }
+    }
+
+    /// The set of a target first measured in `xm`, from `X̄` (`undetected`), before it is
+    /// restricted to `xm`: with reach, a copy of `X̄ ∩ xm` stored over the rows within
+    /// `margin` of it ([`ReachSet::restricted_copy`]); whole-cell sets keep no reach, and
+    /// take `X̄` whole.
+    fn new_target(&self, undetected: &ReachSet, xm: &CellSet, margin: u32) -> ReachSet {
+        match self.growth {
+            SetGrowth::Cells => undetected.clone(),
+            SetGrowth::Reach | SetGrowth::Geodesic => {
+                undetected.restricted_copy(self.grid, xm, margin)
             }
         }
     }

@@ -37,6 +37,33 @@
 //! and would take the larger reach (both bounds hold); the fleet exchanges cells only, so a
 //! peer's set enters as an outer raster through [`ReachSet::intersect`].
 //!
+//! # Storage over a window of rows
+//! A target's set is small next to the region, yet storing its reach for every cell of the
+//! grid (4 bytes a cell: 16 MB for a 1 km square of 0.5 m cells) makes every copy and every
+//! bound of it cost the whole region. A set given a row margin
+//! ([`ReachSet::with_row_margin`]) stores its reach only over a window of rows: the rows of its
+//! cells and the margin on each side, cut when the reach is bounded by the set's box
+//! ([`ReachSet::bound_by_box`]). Outside the window `τ` is the *far field* of the last cut:
+//! with `B` the bounding box of the set's cells and `b_w` the clock then,
+//! `τ_far(c) = ⌊(gap(c, B) + b_w) / unit⌋`, less two units for the rounding of its `f32`
+//! arithmetic. Why (I1) holds for it:
+//!
+//! - at `b_w` every target lay in the closed square of one of the set's cells (I2), so in the
+//!   rectangle of `B`, and `dist(p(b_w), square(c)) ≥ gap(c, B)`: (I1) holds at `b_w`, and
+//!   (I1) is invariant in time;
+//! - any lower reach keeps (I1), so the window may forget what clearing free ground had
+//!   raised outside it: the set may then regrow there sooner, never lose a target.
+//!
+//! The window follows the set, and every cell the set holds stays in it:
+//!
+//! - before an advance lets the clock reach a row outside the window, the window widens and
+//!   its new rows take the far field. The far field never falls as a row's gap to `B` grows,
+//!   so once the rows next to the window are out of the clock's reach, every row beyond is;
+//! - an operation that writes the reach of rows outside the window (a measurement's window, a
+//!   join) widens it first;
+//! - clearing free ground raises the reach over the window's rows only, and counts the
+//!   window's edges as not free, which only lowers the bounds.
+//!
 //! ```
 //! use protocol::grid::GroundGrid;
 //! use protocol::raster::{CellBox, CellSet, ReachSet};
@@ -68,6 +95,9 @@ use super::geodesic::{self, geodesic_gap_field};
 use super::{CellBox, CellSet};
 use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
+use window::FarField;
+
+mod window;
 
 /// The unit of reach, metres: `1/256` m, far below any cell and any step's motion.
 pub const REACH_UNIT_M: Real = 1.0 / 256.0;
@@ -122,13 +152,13 @@ const UNIT_MARGIN: Real = 1e-6;
 #[derive(Clone, Debug)]
 pub struct ReachSet {
     cells: CellSet,
-    /// `τ` per cell, row-major.
+    /// `τ` per cell of the stored rows, row-major.
     reach: Vec<u32>,
-    /// Per word of `cells`: a lower bound of `τ` over the word's cells outside the set
+    /// Per word of the stored rows: a lower bound of `τ` over the word's cells outside the set
     /// (`u32::MAX` when it has none), so that [`ReachSet::advance`] visits only the words the
     /// clock can change.
     pending: Vec<u32>,
-    /// Per word of `cells`: its last scan of the reach ([`Scan`]), valid until a reach of the
+    /// Per word of the stored rows: its last scan of the reach ([`Scan`]), valid until a reach of the
     /// word changes, so that a word the clock keeps reaching (cells held out by a bound) is not
     /// read again while nothing in it changed.
     scanned: Vec<Scan>,
@@ -136,6 +166,13 @@ pub struct ReachSet {
     /// queries and meets visit only those rows: a car's small set costs its rows, not the
     /// grid's. Meets tighten it; growth widens it.
     rows: (u32, u32),
+    /// Rows `stored.0..stored.1` are those whose reach is stored; they hold `rows`.
+    stored: (u32, u32),
+    /// The reach of the rows outside the stored ones; `None` when every row is stored.
+    far: Option<FarField>,
+    /// Rows around the cells a cut of the window keeps ([`ReachSet::with_row_margin`]);
+    /// `None`: every row is stored.
+    row_margin: Option<u32>,
     /// The motion clock `b` of the last [`ReachSet::advance`], metres.
     clock_m: Real,
 }
@@ -150,10 +187,23 @@ struct Scan {
     next: u32,
 }
 
-/// Equal cells, reach and clock (the pending bounds, the scans and the rows are caches).
+/// Equal cells, reach and clock, however each stores its reach (the pending bounds, the scans
+/// and the rows are caches).
 impl PartialEq for ReachSet {
     fn eq(&self, other: &Self) -> bool {
-        self.cells == other.cells && self.reach == other.reach && self.clock_m == other.clock_m
+        if self.cells != other.cells || self.clock_m != other.clock_m {
+            return false;
+        }
+        if self.stored == other.stored && self.far.is_none() && other.far.is_none() {
+            return self.reach == other.reach;
+        }
+        let nx = self.cells.nx() as usize;
+        let (mut mine, mut theirs) = (vec![0; nx], vec![0; nx]);
+        (0..self.cells.ny()).all(|iy| {
+            self.copy_reach_row(iy, &mut mine);
+            other.copy_reach_row(iy, &mut theirs);
+            mine == theirs
+        })
     }
 }
 
@@ -167,29 +217,31 @@ fn reached_units(clock_m: Real) -> u32 {
 impl ReachSet {
     /// Every cell of `grid`, nothing known, clock 0.
     pub fn full(grid: &GroundGrid) -> Self {
-        let cells = CellSet::full(grid);
+        Self::storing_every_row(CellSet::full(grid), 0.0)
+    }
+
+    /// A set of `cells` at the clock `clock_m` (0 when not finite) that stores every row, with
+    /// the reach 0 and the pending bounds `u32::MAX`: the callers fill them in.
+    fn storing_every_row(cells: CellSet, clock_m: Real) -> Self {
+        let n = cells.nx() as usize * cells.ny() as usize;
+        let words = cells.words_per_row() * cells.ny() as usize;
         Self {
-            reach: vec![0; grid.cell_count()],
-            pending: vec![u32::MAX; cells.words_per_row() * grid.ny as usize],
-            scanned: vec![Scan::default(); cells.words_per_row() * grid.ny as usize],
+            reach: vec![0; n],
+            pending: vec![u32::MAX; words],
+            scanned: vec![Scan::default(); words],
             rows: rows_of(&cells),
+            stored: (0, cells.ny()),
+            far: None,
+            row_margin: None,
             cells,
-            clock_m: 0.0,
+            clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
         }
     }
 
     /// A set of `cells` at clock 0 whose reach is unknown (0): its other cells join it at the
     /// first advance.
     pub fn with_cells(cells: CellSet) -> Self {
-        let n = cells.nx() as usize * cells.ny() as usize;
-        let mut set = Self {
-            pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
-            scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
-            reach: vec![0; n],
-            rows: rows_of(&cells),
-            cells,
-            clock_m: 0.0,
-        };
+        let mut set = Self::storing_every_row(cells, 0.0);
         set.rebuild_pending();
         set
     }
@@ -200,15 +252,7 @@ impl ReachSet {
     /// closed square of one of `cells` at that clock. What a checkpoint restores: the set then
     /// grows from `cells` by the motion since, without the sub-cell reach it had.
     pub fn from_cells_at(grid: &GroundGrid, cells: CellSet, clock_m: Real) -> Self {
-        let n = cells.nx() as usize * cells.ny() as usize;
-        let mut set = Self {
-            pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
-            scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
-            reach: vec![0; n],
-            rows: rows_of(&cells),
-            cells,
-            clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
-        };
+        let mut set = Self::storing_every_row(cells, clock_m);
         let whole = CellBox {
             x0: 0,
             y0: 0,
@@ -291,12 +335,18 @@ impl ReachSet {
         if ix >= self.cells.nx() || iy >= self.cells.ny() {
             return None;
         }
-        let tau = self.reach[self.index(ix, iy)];
+        let tau = self.reach_at(ix, iy);
         Some((Real::from(tau) * REACH_UNIT_M - self.clock_m).max(0.0))
     }
 
+    /// Index into `reach` of cell `(ix, iy)` of a stored row.
     fn index(&self, ix: u32, iy: u32) -> usize {
-        iy as usize * self.cells.nx() as usize + ix as usize
+        (iy - self.stored.0) as usize * self.cells.nx() as usize + ix as usize
+    }
+
+    /// Index into `pending` and `scanned` of word `w` of stored row `iy`.
+    fn slot(&self, iy: u32, w: usize) -> usize {
+        (iy - self.stored.0) as usize * self.cells.words_per_row() + w
     }
 
     /// Moves the clock to `clock_m` (`v_max` times the time since the clock's origin): every
@@ -307,9 +357,11 @@ impl ReachSet {
             return;
         }
         self.clock_m = clock_m;
+        let reached = reached_units(clock_m);
+        self.widen_for(reached);
         let mut grown_rows: Option<(u32, u32)> = None;
         self.scan_due(
-            reached_units(clock_m),
+            reached,
             |_| false,
             |_, _| false,
             |cells, iy, w, bits| {
@@ -337,13 +389,14 @@ impl ReachSet {
             return;
         }
         self.clock_m = clock_m;
-        let wpr = self.cells.words_per_row();
+        let reached = reached_units(clock_m);
+        self.widen_for(reached);
         // Every word's new cells first, from the cells before the advance, then the bound of
         // those words, read on the same unchanged cells. A skipped word keeps its pending
         // bound (at most the clock), so the next advance looks at it again.
         let mut grown: Vec<(u32, usize, u64)> = Vec::new();
         self.scan_due(
-            reached_units(clock_m),
+            reached,
             |iy| !bound.may_hold_row(iy),
             |iy, w| !bound.may_hold(iy, w),
             |cells, iy, w, bits| {
@@ -358,7 +411,8 @@ impl ReachSet {
             if keep != *fresh {
                 // Cells reached but outside the bound stay out: the pending bound drops to 0
                 // so that the next advance settles the word, as `intersect` does.
-                self.pending[iy as usize * wpr + w] = 0;
+                let slot = self.slot(iy, w);
+                self.pending[slot] = 0;
             }
             *fresh = keep;
         }
@@ -389,19 +443,20 @@ impl ReachSet {
     /// estimates of one target disagree.
     pub fn join(&mut self, extra: &CellSet) {
         debug_assert!(self.cells.same_shape(extra));
-        let nx = self.cells.nx() as usize;
-        let wpr = self.cells.words_per_row();
+        let Some((first, last)) = extra.row_range() else {
+            return;
+        };
+        self.store_rows(first, last + 1);
         for (ix, iy) in extra.iter() {
             if !self.cells.contains((ix, iy)) {
-                self.reach[iy as usize * nx + ix as usize] = 0;
-                self.scanned[iy as usize * wpr + ix as usize / 64] = Scan::default();
+                let (at, slot) = (self.index(ix, iy), self.slot(iy, ix as usize / 64));
+                self.reach[at] = 0;
+                self.scanned[slot] = Scan::default();
             }
         }
         self.cells.or_assign(extra);
-        if let Some((first, last)) = extra.row_range() {
-            self.hold_row(first);
-            self.hold_row(last);
-        }
+        self.hold_row(first);
+        self.hold_row(last);
     }
 
     /// Removes ground proven free at the current clock (`free`, an inner raster: no target in
@@ -444,11 +499,19 @@ impl ReachSet {
         self.remove(free);
     }
 
-    /// The window clamped to the grid and grown by 2 cells, and its seeds: the cells that are
-    /// not free, and the cells of every window side inside the grid (they stand for every cell
-    /// beyond it, so counting them as not free keeps each gap at most the true one).
+    /// The window grown by 2 cells and clamped to the grid and to the stored rows, and its
+    /// seeds: the cells that are not free, and the cells of every window side inside the grid
+    /// (they stand for every cell beyond it, so counting them as not free keeps each gap at
+    /// most the true one).
     fn window_seeds(&self, free: &CellSet, window: &CellBox) -> Option<(CellBox, Vec<bool>)> {
-        let w = clamp_box(window, 2, &self.cells)?;
+        let mut w = clamp_box(window, 2, &self.cells)?;
+        (w.y0, w.y1) = (
+            w.y0.max(self.stored.0),
+            w.y1.min(self.stored.1.checked_sub(1)?),
+        );
+        if w.y0 > w.y1 {
+            return None;
+        }
         let (nx, ny) = (self.cells.nx(), self.cells.ny());
         let mut seeds = free.window_flags(&w, false);
         let width = (w.x1 - w.x0 + 1) as usize;
@@ -490,7 +553,7 @@ impl ReachSet {
                 None => u32::MAX - 1,
             };
             let (ix, iy) = (window.x0 as usize + k % w, window.y0 as usize + k / w);
-            let slot = &mut self.reach[iy * nx + ix];
+            let slot = &mut self.reach[(iy - self.stored.0 as usize) * nx + ix];
             *slot = (*slot).max(tau.min(u32::MAX - 1));
         }
     }
@@ -512,6 +575,7 @@ impl ReachSet {
         let was_wider = self
             .bounding_box()
             .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
+        self.store_rows(window.y0, window.y1 + 1);
         self.raise_outside(grid, &window, &outer.window_flags(&window, false));
         self.intersect(outer);
         if was_wider {
@@ -521,29 +585,14 @@ impl ReachSet {
 
     /// Raises the reach of every cell to the gap between its square and the bounding box of
     /// the set's cells (which hold the targets, so they are no nearer): the far field of a
-    /// small set, so that it regrows as a rounded box rather than all at once.
+    /// small set, so that it regrows as a rounded box rather than all at once. A set with a
+    /// row margin ([`ReachSet::with_row_margin`]) then stores the rows within the margin of
+    /// its box only, and this bound is its reach elsewhere.
     pub fn bound_by_box(&mut self, grid: &GroundGrid) {
         let Some(b) = self.bounding_box() else {
             return;
         };
-        let nx = self.cells.nx() as usize;
-        let unit = grid.cell_m / REACH_UNIT_M;
-        let clock = self.clock_m / REACH_UNIT_M;
-        // f32 keeps the loop vectorised; its rounding (below 1e-6 relative) and the float to
-        // integer truncation are covered by taking two units off.
-        let cap = (u32::MAX - 1) as f32;
-        self.scanned.fill(Scan::default());
-        for iy in 0..self.cells.ny() {
-            let gy = gap_cells(iy, b.y0, b.y1);
-            let gy2 = (gy * gy) as f32;
-            let row = &mut self.reach[iy as usize * nx..(iy as usize + 1) * nx];
-            for (ix, tau) in row.iter_mut().enumerate() {
-                let gx = gap_cells(ix as u32, b.x0, b.x1) as f32;
-                let units = (gx * gx + gy2).sqrt() * unit as f32 + clock as f32;
-                let bound = (units * (1.0 - 1e-6) - 2.0).clamp(0.0, cap) as u32;
-                *tau = (*tau).max(bound);
-            }
-        }
+        self.bound_by(FarField::new(grid, b, self.clock_m), &b);
     }
 
     /// Raises `τ` of every cell of `window` outside the outer raster `inside` to the gap
@@ -557,7 +606,7 @@ impl ReachSet {
             let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
             field.compute_rows(window, inside, |y, gap_row| {
                 let seed_row = &inside[y * w..(y + 1) * w];
-                let start = (window.y0 as usize + y) * nx + window.x0 as usize;
+                let start = (window.y0 - self.stored.0) as usize * nx + y * nx + window.x0 as usize;
                 let reach = &mut self.reach[start..start + w];
                 for ((slot, &gap2), &seed) in reach.iter_mut().zip(gap_row).zip(seed_row) {
                     if seed {
@@ -587,18 +636,18 @@ impl ReachSet {
         mut visit: impl FnMut(&mut CellSet, u32, usize, u64),
     ) {
         let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
-        for iy in 0..self.cells.ny() {
+        for iy in self.stored_rows() {
             if skip_row(iy) {
                 continue;
             }
             for w in 0..wpr {
-                let slot = iy as usize * wpr + w;
+                let slot = self.slot(iy, w);
                 if self.pending[slot] > reached || skip(iy, w) {
                     continue;
                 }
                 let x0 = w * 64;
                 let x1 = (x0 + 64).min(nx);
-                let base = iy as usize * nx;
+                let base = self.index(0, iy);
                 let (bits, next) = self.scan(slot, base + x0..base + x1, reached);
                 self.pending[slot] = next;
                 visit(&mut self.cells, iy, w, bits);
@@ -623,8 +672,8 @@ impl ReachSet {
     fn forget_scans(&mut self, window: &CellBox) {
         let wpr = self.cells.words_per_row();
         let (w0, w1) = (window.x0 as usize / 64, window.x1 as usize / 64);
-        for iy in window.y0..=window.y1.min(self.cells.ny().saturating_sub(1)) {
-            let row = iy as usize * wpr;
+        for iy in window.y0..=window.y1.min(self.stored.1.saturating_sub(1)) {
+            let row = self.slot(iy, 0);
             self.scanned[row + w0..=row + w1.min(wpr - 1)].fill(Scan::default());
         }
     }
@@ -641,7 +690,8 @@ impl ReachSet {
                 let gone = remove(&self.cells, iy, w);
                 if gone != 0 {
                     self.cells.row_mut(iy)[w] &= !gone;
-                    self.pending[iy as usize * wpr + w] = 0;
+                    let slot = self.slot(iy, w);
+                    self.pending[slot] = 0;
                 }
                 any |= self.cells.row(iy)[w];
             }
@@ -655,9 +705,16 @@ impl ReachSet {
     /// The set as parts for snapshots ([`ReachSet::from_parts`]): its cells, the least reach
     /// and every cell's reach above it, row-major.
     pub fn to_parts(&self) -> (CellSet, u32, Vec<u32>) {
-        let base = self.reach.iter().copied().min().unwrap_or(0);
-        let relative = self.reach.iter().map(|&t| t - base).collect();
-        (self.cells.clone(), base, relative)
+        let nx = self.cells.nx() as usize;
+        let mut reach = vec![0; nx * self.cells.ny() as usize];
+        if nx > 0 {
+            for (iy, row) in (0..self.cells.ny()).zip(reach.chunks_exact_mut(nx)) {
+                self.copy_reach_row(iy, row);
+            }
+        }
+        let base = reach.iter().copied().min().unwrap_or(0);
+        reach.iter_mut().for_each(|t| *t -= base);
+        (self.cells.clone(), base, reach)
     }
 
     /// Rebuilds a set from [`ReachSet::to_parts`] with the clock at `clock_m`; `None` when the
@@ -666,15 +723,10 @@ impl ReachSet {
         if relative.len() != cells.nx() as usize * cells.ny() as usize {
             return None;
         }
-        let reach: Vec<u32> = relative.iter().map(|&d| d.saturating_add(base)).collect();
-        let mut set = Self {
-            pending: vec![u32::MAX; cells.words_per_row() * cells.ny() as usize],
-            scanned: vec![Scan::default(); cells.words_per_row() * cells.ny() as usize],
-            rows: rows_of(&cells),
-            cells,
-            reach,
-            clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
-        };
+        let mut set = Self::storing_every_row(cells, clock_m);
+        for (tau, &d) in set.reach.iter_mut().zip(relative) {
+            *tau = d.saturating_add(base);
+        }
         set.rebuild_pending();
         Some(set)
     }
@@ -682,12 +734,13 @@ impl ReachSet {
     /// Recomputes every word's pending reach exactly.
     fn rebuild_pending(&mut self) {
         let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
-        for iy in 0..self.cells.ny() {
+        for iy in self.stored_rows() {
             for w in 0..wpr {
                 let word = self.cells.row(iy)[w];
-                let base = iy as usize * nx + w * 64;
+                let base = self.index(0, iy) + w * 64;
                 let len = 64.min(nx - w * 64);
-                self.pending[iy as usize * wpr + w] = (0..len)
+                let slot = self.slot(iy, w);
+                self.pending[slot] = (0..len)
                     .filter(|b| word >> b & 1 == 0)
                     .map(|b| self.reach[base + b])
                     .min()
