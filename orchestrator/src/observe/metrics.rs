@@ -26,13 +26,13 @@
 //! any agent. Every area is a fraction of the grid's area (the region of interest).
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::sync::Arc;
 
 use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
 use protocol::raster::CellSet;
 use protocol::wire::{AgentStats, TargetTruth};
 use uav_agent::agent::in_comms_range;
+use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::{self, EstimateInbox};
 use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate};
 use uav_agent::occupancy::OccupancyMap;
@@ -102,17 +102,18 @@ impl ObservedEstimate {
     }
 }
 
-/// One agent's sets after its fusion of one step.
+/// One agent's sets after its fusion of one step. The sets are shared (`Arc`): agents that
+/// fuse the same estimates share one fusion's sets ([`FusedSets::of_agents`]), not copies.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FusedSets {
     /// `X̄`.
-    pub undetected: CellSet,
+    pub undetected: SharedSet,
     /// `X_j` per identified id.
-    pub targets: BTreeMap<u32, CellSet>,
+    pub targets: BTreeMap<u32, SharedSet>,
     /// `S^o`.
-    pub obstacle_free: CellSet,
+    pub obstacle_free: SharedSet,
     /// Explored ground.
-    pub explored: CellSet,
+    pub explored: SharedSet,
     /// `H̄`.
     pub unseen: CellSet,
 }
@@ -146,16 +147,11 @@ impl FusedSets {
         for peer in peers {
             unseen.or_assign(&peer.estimate.hidden);
         }
-        let owned = Arc::unwrap_or_clone;
         FusedSets {
-            undetected: owned(fused.undetected),
-            targets: fused
-                .targets
-                .into_iter()
-                .map(|(id, s)| (id, owned(s)))
-                .collect(),
-            obstacle_free: owned(fused.obstacle_free),
-            explored: owned(fused.explored),
+            undetected: fused.undetected,
+            targets: fused.targets,
+            obstacle_free: fused.obstacle_free,
+            explored: fused.explored,
             unseen,
         }
     }
@@ -447,6 +443,8 @@ pub fn identified_ids<'a>(
 
 #[cfg(test)]
 pub(crate) mod tests {
+    use std::sync::Arc;
+
     use protocol::camera::CameraPose;
     use protocol::math::Point3;
     use protocol::raster::ReachSet;
@@ -598,19 +596,19 @@ pub(crate) mod tests {
             }
             let observed = FusedSets::of_agent(own, &all, &cfg, f64::INFINITY);
             assert_eq!(
-                &observed.undetected,
+                &*observed.undetected,
                 state.undetected.cells(),
                 "X̄ of {}",
                 own.uav()
             );
-            let cells: BTreeMap<u32, CellSet> = state
+            let cells: BTreeMap<u32, SharedSet> = state
                 .targets
                 .iter()
-                .map(|(id, s)| (*id, s.cells().clone()))
+                .map(|(id, s)| (*id, Arc::new(s.cells().clone())))
                 .collect();
             assert_eq!(observed.targets, cells, "X_j of {}", own.uav());
-            assert_eq!(observed.obstacle_free, state.obstacle_free);
-            assert_eq!(observed.explored, state.explored);
+            assert_eq!(*observed.obstacle_free, state.obstacle_free);
+            assert_eq!(*observed.explored, state.explored);
             assert_eq!(&observed.unseen, state.hidden_history.unseen());
             assert_eq!(
                 observed.targets.keys().copied().collect::<Vec<_>>(),
@@ -679,7 +677,12 @@ pub(crate) mod tests {
         let all = [a, b];
         for own in &all {
             let fused = FusedSets::of_agent(own, &all, &cfg, f64::INFINITY);
-            assert_eq!(fused.targets[&4], set(&[(5, 5)]), "seen from {}", own.uav());
+            assert_eq!(
+                *fused.targets[&4],
+                set(&[(5, 5)]),
+                "seen from {}",
+                own.uav()
+            );
         }
     }
 

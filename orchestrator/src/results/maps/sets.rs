@@ -267,13 +267,13 @@ pub(super) fn paint_sets(
 fn check_grid(state: &FinalState, scenario: &Scenario) -> anyhow::Result<()> {
     let grid = scenario.grid();
     let sets = &state.sets;
-    let named = [
+    let named: [(&str, &CellSet); 4] = [
         ("X\u{304}", &sets.undetected),
         ("S^o", &sets.obstacle_free),
         ("explored", &sets.explored),
         ("H\u{304}", &sets.unseen),
     ];
-    let targets = sets.targets.values().map(|s| ("X_j", s));
+    let targets = sets.targets.values().map(|s| ("X_j", &**s));
     for (name, set) in named.into_iter().chain(targets) {
         anyhow::ensure!(
             set.nx() == grid.nx && set.ny() == grid.ny,
@@ -295,6 +295,7 @@ fn target_colour(id: u32) -> RGBColor {
 #[cfg(test)]
 mod tests {
     use std::collections::BTreeMap;
+    use std::sync::Arc;
 
     use protocol::raster::Coverage;
     use uav_agent::occupancy::OccupancyMap;
@@ -344,17 +345,17 @@ mod tests {
                 4.0,
                 Coverage::Outer,
             );
-            sets.insert(t.id, s);
+            sets.insert(t.id, Arc::new(s));
         }
         FinalState {
             step: 40,
             time_s: 20.0,
             uav: 0,
             sets: FusedSets {
-                undetected,
+                undetected: Arc::new(undetected),
                 targets: sets,
-                obstacle_free,
-                explored,
+                obstacle_free: Arc::new(obstacle_free),
+                explored: Arc::new(explored),
                 unseen,
             },
             targets,
