@@ -163,8 +163,9 @@ impl GridAxis {
         }
     }
 
-    /// Where cell `k` starts (and cell `k - 1` ends).
-    fn edge(&self, k: u32) -> Real {
+    /// Where cell `k` starts (and cell `k - 1` ends): `origin + k cell_m`, the edges every
+    /// raster fill of the grid uses.
+    pub fn edge(&self, k: u32) -> Real {
         self.origin + k as Real * self.cell_m
     }
 

@@ -47,10 +47,9 @@ impl CellSet {
         let Some((r0, r1)) = grid.rows_touching(c.y - r, c.y + r) else {
             return;
         };
-        let columns = grid.columns();
+        let (columns, grid_rows) = (grid.columns(), grid.rows());
         for iy in r0..=r1 {
-            let y_lo = grid.origin.y + iy as Real * grid.cell_m;
-            let y_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m;
+            let (y_lo, y_hi) = (grid_rows.edge(iy), grid_rows.edge(iy + 1));
             let dy = (c.y - c.y.clamp(y_lo, y_hi)).abs();
             if dy > r {
                 continue;
@@ -72,15 +71,14 @@ impl CellSet {
         // Every cell filled below lies inside the disc's bounding square, so touches it: when
         // the set already holds every cell touching the square, nothing would change (the
         // many overlapping discs of one obstacle mostly end here).
-        let columns = grid.columns();
+        let (columns, grid_rows) = (grid.columns(), grid.rows());
         if let Some((c0, c1)) = columns.touching(c.x - r, c.x + r)
             && (r0..=r1).all(|iy| self.row_span_is_full(iy, c0, c1))
         {
             return;
         }
         for iy in r0..=r1 {
-            let y_lo = grid.origin.y + iy as Real * grid.cell_m;
-            let y_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m;
+            let (y_lo, y_hi) = (grid_rows.edge(iy), grid_rows.edge(iy + 1));
             let dy = (c.y - y_lo).abs().max((c.y - y_hi).abs());
             if dy >= r {
                 continue;

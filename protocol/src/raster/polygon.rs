@@ -90,6 +90,7 @@ impl CellSet {
         // Per row, the x-extent of the clipped edges.
         let mut extent = vec![(Real::INFINITY, Real::NEG_INFINITY); rows];
         let n = polygon.len();
+        let grid_rows = grid.rows();
         for i in 0..n {
             let (a, b) = (polygon[i], polygon[(i + 1) % n]);
             let Some((e0, e1)) = grid
@@ -99,8 +100,8 @@ impl CellSet {
                 continue;
             };
             for iy in e0..=e1 {
-                let strip_lo = grid.origin.y + iy as Real * grid.cell_m - eps;
-                let strip_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m + eps;
+                let strip_lo = grid_rows.edge(iy) - eps;
+                let strip_hi = grid_rows.edge(iy + 1) + eps;
                 if let Some((lo, hi)) = clipped_x_extent(a, b, strip_lo, strip_hi) {
                     let row = &mut extent[(iy - r0) as usize];
                     *row = (row.0.min(lo), row.1.max(hi));
@@ -166,10 +167,9 @@ impl CellSet {
         else {
             return;
         };
-        let columns = grid.columns();
+        let (columns, grid_rows) = (grid.columns(), grid.rows());
         for iy in r0..=r1 {
-            let y_lo = grid.origin.y + iy as Real * grid.cell_m;
-            let y_hi = grid.origin.y + (iy + 1) as Real * grid.cell_m;
+            let (y_lo, y_hi) = (grid_rows.edge(iy), grid_rows.edge(iy + 1));
             let mut lo = Real::NEG_INFINITY;
             let mut hi = Real::INFINITY;
             let mut open = true;

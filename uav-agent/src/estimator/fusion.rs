@@ -227,14 +227,17 @@ impl EstimatorState {
             self.hidden_history.add_hidden(step, &peer.hidden);
         }
         // A target learned from a peer starts from this side's X̄, whose reach knows nothing
-        // near the target: bound it by its (small) set's box (whole-cell growth keeps none).
-        // The copy made of X̄ is bounded already, and bounding it again changes nothing; the
-        // union kept when the sets did not meet is bounded here.
+        // near the target: its set must be bounded by its box (whole-cell growth keeps none).
+        // The copy of X̄ it starts from is bounded already ([`learned_set`]); only the union
+        // kept when the two sets did not meet is bounded here.
         let new_targets = match config.sets {
             SetGrowth::Cells => &[][..],
             SetGrowth::Reach | SetGrowth::Geodesic => &report.new_targets[..],
         };
-        for id in new_targets {
+        let unions = new_targets
+            .iter()
+            .filter(|id| report.empty_intersections.contains(id));
+        for id in unions {
             if let Some(set) = self.targets.get_mut(id) {
                 set.bound_by_box(&config.grid);
             }

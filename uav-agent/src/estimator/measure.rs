@@ -129,10 +129,10 @@ impl<'a> FrameView<'a> {
                 (lo.min(p.y), hi.max(p.y))
             });
         let (iy0, iy1) = grid.rows_touching(y0, y1)?;
-        let columns = grid.columns();
+        let (columns, rows) = (grid.columns(), grid.rows());
         let spans = (iy0..=iy1)
             .map(|iy| {
-                let band_lo = grid.origin.y + Real::from(iy) * grid.cell_m;
+                let band_lo = rows.edge(iy);
                 let (x0, x1) = x_extent_in_band(&quad, band_lo, band_lo + grid.cell_m)?;
                 // The margin of a cell covers every rounding of the projections.
                 columns.touching(x0 - grid.cell_m, x1 + grid.cell_m)

@@ -190,17 +190,11 @@ impl ReachSet {
         };
         let ny = self.cells.ny();
         let (mut lo, mut hi) = self.stored;
-        if lo > 0 && far.row_least(lo - 1) <= reached {
+        while lo > 0 && far.row_least(lo - 1) <= reached {
             lo = lo.saturating_sub(WIDEN_ROWS);
-            while lo > 0 && far.row_least(lo - 1) <= reached {
-                lo = lo.saturating_sub(WIDEN_ROWS);
-            }
         }
-        if hi < ny && far.row_least(hi) <= reached {
+        while hi < ny && far.row_least(hi) <= reached {
             hi = hi.saturating_add(WIDEN_ROWS).min(ny);
-            while hi < ny && far.row_least(hi) <= reached {
-                hi = hi.saturating_add(WIDEN_ROWS).min(ny);
-            }
         }
         self.store_rows(lo, hi);
     }
