@@ -44,25 +44,44 @@ pub fn floor_fast(x: Real) -> Real {
 }
 
 /// Convex hull (counter-clockwise, no repeated points) of a set of ground points,
-/// by Andrew's monotone chain. Collinear points on the hull are dropped.
+/// by Andrew's monotone chain. Collinear points on the hull are dropped; points with a
+/// non-finite coordinate are left out.
 pub fn convex_hull(points: &[Point2]) -> Vec<Point2> {
-    let mut pts: Vec<Point2> = Vec::with_capacity(points.len());
-    pts.extend(
-        points
-            .iter()
-            .filter(|p| p.x.is_finite() && p.y.is_finite())
-            .copied(),
-    );
-    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    pts.dedup();
-    if pts.len() < 3 {
-        return pts;
-    }
-    let mut hull: Vec<Point2> = Vec::with_capacity(pts.len() + 1);
-    // Lower hull left to right, then upper hull right to left.
-    monotone_chain(&mut hull, pts.iter());
-    monotone_chain(&mut hull, pts.iter().rev());
+    let mut hull = Vec::with_capacity(points.len() + 1);
+    convex_hull_into(&mut points.to_vec(), &mut hull);
     hull
+}
+
+/// [`convex_hull`] for callers that take many hulls: reorders `points` in place and writes
+/// the hull into `hull` (cleared first), so nothing is allocated once `hull` has room.
+pub fn convex_hull_into(points: &mut [Point2], hull: &mut Vec<Point2>) {
+    hull.clear();
+    // The finite points first, then sorted, then each repeated point once (repeats are next
+    // to each other once sorted).
+    let mut finite = 0;
+    for i in 0..points.len() {
+        if points[i].x.is_finite() && points[i].y.is_finite() {
+            points.swap(finite, i);
+            finite += 1;
+        }
+    }
+    let points = &mut points[..finite];
+    points.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    let mut distinct = 0;
+    for i in 0..points.len() {
+        if distinct == 0 || points[i] != points[distinct - 1] {
+            points[distinct] = points[i];
+            distinct += 1;
+        }
+    }
+    let pts = &points[..distinct];
+    if pts.len() < 3 {
+        hull.extend_from_slice(pts);
+        return;
+    }
+    // Lower hull left to right, then upper hull right to left.
+    monotone_chain(hull, pts.iter());
+    monotone_chain(hull, pts.iter().rev());
 }
 
 /// One pass of the monotone chain: appends the turn-left chain of `ordered` to `hull` and
@@ -145,5 +164,29 @@ mod tests {
         let h = convex_hull(&pts);
         assert_eq!(h.len(), 4);
         assert!(!h.contains(&Point2::new(0.5, 0.5)));
+    }
+
+    #[test]
+    fn hull_keeps_repeated_points_once() {
+        let p = |x, y| Point2::new(x, y);
+        let h = convex_hull(&[
+            p(0.0, 0.0),
+            p(2.0, 0.0),
+            p(0.0, 0.0),
+            p(1.0, 3.0),
+            p(2.0, 0.0),
+        ]);
+        assert_eq!(h, vec![p(0.0, 0.0), p(2.0, 0.0), p(1.0, 3.0)]);
+        // Two distinct points (one repeated) are the hull, as a segment.
+        assert_eq!(
+            convex_hull(&[p(1.0, 1.0), p(1.0, 1.0), p(0.0, 2.0)]),
+            vec![p(0.0, 2.0), p(1.0, 1.0)]
+        );
+        let mut buffer = vec![p(9.0, 9.0)];
+        convex_hull_into(
+            &mut [p(1.0, 1.0), p(f64::NAN, 0.0), p(1.0, 1.0)],
+            &mut buffer,
+        );
+        assert_eq!(buffer, vec![p(1.0, 1.0)]);
     }
 }

@@ -14,8 +14,10 @@ use protocol::raster::{CellBox, CellSet, Coverage, EncodedSet};
 /// rasteriser's margin (about 1e-9 relative), far below a cell.
 const TOL: Real = 1e-6;
 
+/// Grids of 10 to 59 columns and 10 to 89 rows (a polygon's fill keeps the extents of up to
+/// 64 rows on the stack, of more in a vector: both are met).
 fn grids() -> impl Strategy<Value = GroundGrid> {
-    (-100.0..100.0, -100.0..100.0, 0.1..3.0, 10u32..60, 10u32..60).prop_map(
+    (-100.0..100.0, -100.0..100.0, 0.1..3.0, 10u32..60, 10u32..90).prop_map(
         |(ox, oy, cell_m, nx, ny)| GroundGrid {
             origin: Point2::new(ox, oy),
             cell_m,

@@ -10,7 +10,10 @@
 //! same inputs. The fleet flies the `paper` variant's scenario; the `setfleet` planner gets the
 //! `setfleet` variant's settings (both with the user's `--set` overrides on top). The summary's
 //! `decision_ms_median`/`decision_ms_p99` are the paper's MPC, `setfleet_decision_ms_*` the
-//! project's.
+//! project's, which shares its work with rayon's pool as the agents run it
+//! (`setfleet_threads` threads). The fleet then flies again with the setfleet planner on the
+//! calling thread only (`setfleet_one_thread_decision_ms_median`), and the bench fails if any
+//! decision differs.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -19,7 +22,7 @@ use std::time::Instant;
 use clap::Args;
 use protocol::scenario::Scenario;
 use protocol::wire::PlannedView;
-use uav_agent::guidance::{self, GuidanceParams};
+use uav_agent::guidance::{self, Decision, GuidanceParams};
 
 use super::estimator::{FleetSim, PlanningState};
 use super::{BenchCase, BenchReport, Metrics, Stats};
@@ -111,47 +114,103 @@ fn token_for(uav: usize, round: &[PlannedView], count: usize) -> Vec<PlannedView
         .collect()
 }
 
-/// Runs the fleet and times the decisions.
-pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
-    let load_start = load_average();
-    let mut report = BenchReport::new("guidance");
+/// One flight of the fleet with each UAV's decisions timed at every guidance step after the
+/// warm-up.
+#[derive(Default)]
+struct Timings {
+    /// The paper's MPC (when timed), by number of plans in the token.
+    paper: Vec<Vec<f64>>,
+    /// The `setfleet` planner, by number of plans in the token.
+    setfleet: Vec<Vec<f64>>,
+    /// The `setfleet` planner's decisions, in the order taken.
+    decisions: Vec<Decision>,
+    obstacle_cells: Vec<f64>,
+    sequences: usize,
+    setfleet_sequences: usize,
+    rounds: u64,
+}
+
+/// Flies the fleet and times, for every UAV, number of plans in the token and repeat, the
+/// paper's MPC (when `paper`) and then the `setfleet` planner with `setfleet`.
+fn time_decisions(
+    config: &BenchGuidanceConfig,
+    setfleet: &GuidanceParams,
+    paper: bool,
+) -> anyhow::Result<Timings> {
     let mut sim = FleetSim::new(&config.scenario)?;
-    let setfleet = GuidanceParams::from_scenario(&config.setfleet);
-    let mut by_others: Vec<Vec<f64>> = vec![Vec::new(); MAX_OTHERS + 1];
-    let mut setfleet_by_others: Vec<Vec<f64>> = vec![Vec::new(); MAX_OTHERS + 1];
-    let mut obstacle_cells = Vec::new();
-    let mut sequences = 0;
-    let mut setfleet_sequences = 0;
-    let mut rounds = 0u64;
+    let mut t = Timings {
+        paper: vec![Vec::new(); MAX_OTHERS + 1],
+        setfleet: vec![Vec::new(); MAX_OTHERS + 1],
+        ..Timings::default()
+    };
     let period = u64::from(sim.guidance().steps_per_period.max(1));
     for _ in 0..config.steps {
         // Time the decisions where the agents take them: after the frame of a guidance step
         // has been folded in and the peers' estimates fused.
         let step = sim.step()?.step;
         if step >= config.warm_up && step.is_multiple_of(period) {
-            rounds += 1;
+            t.rounds += 1;
             let round: Vec<PlannedView> =
                 sim.plan_round(&[])?.into_iter().map(|(_, v)| v).collect();
             for (i, estimator) in sim.estimators().iter().enumerate() {
                 let state = PlanningState::of(estimator)?;
-                obstacle_cells.push(state.obstacle_count() as f64);
+                t.obstacle_cells.push(state.obstacle_count() as f64);
                 for count in 0..=MAX_OTHERS {
                     let others = token_for(i, &round, count);
                     let input = state.input(i as u32, &others);
                     for _ in 0..config.repeats {
+                        if paper {
+                            let start = Instant::now();
+                            let decision = guidance::plan(sim.guidance(), &input);
+                            t.paper[count].push(start.elapsed().as_secs_f64() * 1e3);
+                            t.sequences = decision.sequences;
+                        }
                         let start = Instant::now();
-                        let decision = guidance::plan(sim.guidance(), &input);
-                        by_others[count].push(start.elapsed().as_secs_f64() * 1e3);
-                        sequences = decision.sequences;
-                        let start = Instant::now();
-                        let decision = guidance::setfleet::plan(&setfleet, &input);
-                        setfleet_by_others[count].push(start.elapsed().as_secs_f64() * 1e3);
-                        setfleet_sequences = decision.sequences;
+                        let decision = guidance::setfleet::plan(setfleet, &input);
+                        t.setfleet[count].push(start.elapsed().as_secs_f64() * 1e3);
+                        t.setfleet_sequences = decision.sequences;
+                        t.decisions.push(decision);
                     }
                 }
             }
         }
     }
+    Ok(t)
+}
+
+/// Runs the fleet and times the decisions.
+pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
+    let load_start = load_average();
+    let mut report = BenchReport::new("guidance");
+    let setfleet = GuidanceParams::from_scenario(&config.setfleet);
+    let timed = time_decisions(config, &setfleet, true)?;
+    // The same flight again with the setfleet planner on the calling thread only (a flight of
+    // its own, so that neither run disturbs the other's timing): its time, and the check that
+    // sharing the work changes no decision.
+    let one_thread = GuidanceParams {
+        parallel: false,
+        ..setfleet
+    };
+    let one_thread = time_decisions(config, &one_thread, false)?;
+    if let Some(k) = (0..timed.decisions.len().max(one_thread.decisions.len()))
+        .find(|&k| timed.decisions.get(k) != one_thread.decisions.get(k))
+    {
+        anyhow::bail!(
+            "the setfleet planner decided differently on one thread (decision {k}): {:?} \
+             against {:?}",
+            one_thread.decisions.get(k),
+            timed.decisions.get(k)
+        );
+    }
+    let Timings {
+        paper: by_others,
+        setfleet: setfleet_by_others,
+        obstacle_cells,
+        sequences,
+        setfleet_sequences,
+        rounds,
+        ..
+    } = timed;
     let all: Vec<f64> = by_others.iter().flatten().copied().collect();
     let overall = Stats::from_samples(&all).ok_or_else(|| {
         anyhow::anyhow!(
@@ -203,6 +262,20 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
         "setfleet_sequences_per_decision".into(),
         setfleet_sequences.into(),
     );
+    sum.insert(
+        "setfleet_threads".into(),
+        (rayon::current_num_threads() as u64).into(),
+    );
+    let one_thread: Vec<f64> = one_thread.setfleet.iter().flatten().copied().collect();
+    if let Some(s) = Stats::from_samples(&one_thread) {
+        sum.insert(
+            "setfleet_one_thread_decision_ms_median".into(),
+            s.median.into(),
+        );
+        report
+            .cases
+            .push(decision_case("setfleet one thread", MAX_OTHERS, &s));
+    }
     if let Some(s) = Stats::from_samples(&obstacle_cells) {
         sum.insert("obstacle_cells_median".into(), s.median.into());
     }

@@ -87,8 +87,17 @@ impl CellSet {
             return;
         };
         let rows = (r1 - r0) as usize + 1;
-        // Per row, the x-extent of the clipped edges.
-        let mut extent = vec![(Real::INFINITY, Real::NEG_INFINITY); rows];
+        // Per row, the x-extent of the clipped edges (on the stack for the short polygons
+        // most callers fill many of).
+        let unset = (Real::INFINITY, Real::NEG_INFINITY);
+        let mut short = [unset; SHORT_ROWS];
+        let mut tall = Vec::new();
+        let extent = if rows <= SHORT_ROWS {
+            &mut short[..rows]
+        } else {
+            tall.resize(rows, unset);
+            &mut tall[..]
+        };
         let n = polygon.len();
         let grid_rows = grid.rows();
         for i in 0..n {
@@ -109,7 +118,7 @@ impl CellSet {
             }
         }
         let columns = grid.columns();
-        for (k, (lo, hi)) in extent.into_iter().enumerate() {
+        for (k, &(lo, hi)) in extent.iter().enumerate() {
             if let Some((c0, c1)) = columns.touching(lo - eps, hi + eps) {
                 self.fill_row_span(r0 + k as u32, c0, c1);
             }
@@ -195,6 +204,9 @@ impl CellSet {
         }
     }
 }
+
+/// Rows of an outer fill whose extents are kept on the stack.
+const SHORT_ROWS: usize = 64;
 
 /// The rows of `range` that are also in `window` (both inclusive), if any.
 fn within(range: (u32, u32), window: (u32, u32)) -> Option<(u32, u32)> {

@@ -84,6 +84,11 @@ pub struct GuidanceParams {
     pub planner: Planner,
     /// The `setfleet` planner's settings (unused by the paper's MPC).
     pub setfleet: SetfleetParams,
+    /// Whether the `setfleet` planner shares its work with rayon's thread pool (whose size
+    /// `RAYON_NUM_THREADS` sets; the machine's cores by default). Decisions do not depend on
+    /// it. While one UAV plans, the others of a lockstep round wait for the token, so the
+    /// cores are free.
+    pub parallel: bool,
 }
 
 impl GuidanceParams {
@@ -115,6 +120,7 @@ impl GuidanceParams {
                 growth_horizon_s: s.guidance.growth_horizon_s,
                 spread_m: s.guidance.spread_m,
             },
+            parallel: true,
         }
     }
 

@@ -47,6 +47,14 @@
 //! the bound from views without shadows (area, and the boundary cells next to ground outside
 //! the sets) is too loose to skip children (it would have spared about a fifth of them on the
 //! benchmark's decisions, for the price of a footprint per pose).
+//!
+//! Threads: while one UAV plans, the others of a lockstep round wait for the token, so the
+//! planner shares its work with rayon's pool ([`GuidanceParams::parallel`]; the pool has
+//! `RAYON_NUM_THREADS` threads, the machine's cores by default): the sets' downsampling, the
+//! others' views of each period, the distance map beside the first period's children, and
+//! each period's children in jobs of a node and half its increments. A child depends on its
+//! node and increment only and the jobs' results are put back in their order, so the decision
+//! is the same on any number of threads (tested, and checked by `fleet bench guidance`).
 
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
@@ -54,6 +62,7 @@ use protocol::grid::GroundGrid;
 use protocol::math::Point2;
 use protocol::raster::CellSet;
 use protocol::wire::PlannedView;
+use rayon::prelude::*;
 
 use super::view::same_pose;
 use super::{
@@ -87,9 +96,29 @@ struct Node {
     /// Sum over the periods so far of the sets' value, m².
     value_sum: f64,
     stray_m: f64,
-    /// Ranking key: the mean value plus the distance and spread charges, m².
+    /// The view centre of the last pose.
+    centre: Point2,
+    /// The charge for crowding the others' view centres, m².
+    crowding: f64,
+    /// Ranking key: the mean value plus the distance and spread charges, m² (set by
+    /// [`Node::rank_by`]).
     rank: f64,
     cost: Cost,
+}
+
+impl Node {
+    /// Sets the ranking key: the mean value (`cost.area_m2`), plus `lambda` per metre from the
+    /// view centre to the sets on `distance`, the crowding charge and `kappa` per m² of sets
+    /// in occluded ground.
+    fn rank_by(&mut self, distance: &DistanceMap, params: &GuidanceParams) {
+        let distance_m = distance.at(&self.centre);
+        self.rank = self.cost.area_m2
+            + params.lambda * distance_m
+            + self.crowding
+            + params.kappa * self.cost.hidden_m2;
+        self.cost.distance_m = distance_m;
+        self.cost.total = self.rank;
+    }
 }
 
 /// Picks the yaw increments with the `setfleet` planner (see the module docs).
@@ -97,48 +126,67 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let sp = &params.setfleet;
     let grids = &params.grids;
     let grid = grids.coarse;
-    let mut undetected = CellSet::empty(&grid);
-    let mut targets = CellSet::empty(&grid);
+    let mut predictor = GroundPredictor::new(&grid);
     // `sets[0]` is `X̄`, the others the identified targets' sets (the agent's order).
-    for (i, s) in input.sets.iter().enumerate() {
-        let coarse = grids.downsample(s);
-        if i == 0 {
-            undetected = coarse;
-        } else {
-            targets.or_assign(&coarse);
-        }
+    let (coarse, hidden) = join_if(
+        params.parallel,
+        || {
+            in_parallel(
+                input.sets,
+                params.parallel,
+                &grid,
+                &mut predictor,
+                |s, _| grids.downsample(s),
+            )
+        },
+        || grids.downsample(input.recently_hidden),
+    );
+    let mut coarse = coarse.into_iter();
+    let undetected = coarse.next().unwrap_or_else(|| CellSet::empty(&grid));
+    let mut targets = CellSet::empty(&grid);
+    for set in coarse {
+        targets.or_assign(&set);
     }
     let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
-    let hidden = grids.downsample(input.recently_hidden);
     let depth = sp.lookahead_periods.max(1) as usize;
     let per = params.steps_per_period as usize;
     let period_s = params.steps_per_period as f64 * params.dt;
     let reach = |d: usize| (params.target_max_speed * period_s * d as f64 / grid.cell_m).floor();
-    let mut predictor = GroundPredictor::new(&grid);
     // The ground the others' views can change in period `d`: where the sets can be by then,
     // the initial sets grown by every ring added so far (the predictions only lose cells
     // besides).
-    let mut reachable = undetected.clone();
-    reachable.or_assign(&targets);
-    let others_seen: Vec<CellSet> = (0..depth)
-        .map(|d| {
-            if input.others.is_empty() {
-                return CellSet::empty(&grid);
-            }
-            for _ in 0..(reach(d + 1) - reach(d)) as usize {
-                reachable = reachable.dilate(&grid, 0.0);
-            }
-            seen_by_others(
-                params,
-                &grid,
-                input.others,
-                d * per..(d + 1) * per,
-                obstacles,
-                &mut predictor,
-                &reachable,
-            )
-        })
-        .collect();
+    let others_seen: Vec<CellSet> = if input.others.is_empty() {
+        vec![CellSet::empty(&grid); depth]
+    } else {
+        let mut reachable = undetected.clone();
+        reachable.or_assign(&targets);
+        let reachable: Vec<CellSet> = (0..depth)
+            .map(|d| {
+                for _ in 0..(reach(d + 1) - reach(d)) as usize {
+                    reachable = reachable.dilate(&grid, 0.0);
+                }
+                reachable.clone()
+            })
+            .collect();
+        let periods: Vec<(usize, CellSet)> = reachable.into_iter().enumerate().collect();
+        in_parallel(
+            &periods,
+            params.parallel,
+            &grid,
+            &mut predictor,
+            |(d, reachable), predictor| {
+                seen_by_others(
+                    params,
+                    &grid,
+                    input.others,
+                    d * per..(d + 1) * per,
+                    obstacles,
+                    predictor,
+                    reachable,
+                )
+            },
+        )
+    };
     // Where the others' plans leave their view centres, per CVS step of this horizon.
     let others_centres: Vec<Vec<Point2>> = input
         .others
@@ -158,17 +206,10 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     for seen in &others_seen {
         attractive.and_not_assign(seen);
     }
-    let distance = DistanceMap::new(&grid, &attractive);
     let fov_area = footprint_area(params, &input.state);
     let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
-    // The value of sets of `area` cells (`X̄`'s, the targets') with `edge` boundary cells.
-    let value = |area: (u64, u64), edge: (u64, u64)| {
-        let area = area.0 as f64 + sp.target_weight * area.1 as f64;
-        let edge = edge.0 as f64 + sp.target_weight * edge.1 as f64;
-        area * grid.cell_area() + edge * growth_m2_per_cell
-    };
 
-    let mut beam = vec![Node {
+    let root = Node {
         increments: Vec::new(),
         state: input.state,
         poses: Vec::new(),
@@ -176,6 +217,8 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         targets,
         value_sum: 0.0,
         stray_m: 0.0,
+        centre: Point2::origin(),
+        crowding: 0.0,
         rank: 0.0,
         cost: Cost {
             area_m2: 0.0,
@@ -183,116 +226,39 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
             hidden_m2: 0.0,
             total: 0.0,
         },
-    }];
+    };
+    let period = |d: usize| Period {
+        params,
+        grid,
+        obstacles,
+        seen_ahead: &others_seen[d],
+        rings: (reach(d + 1) - reach(d)) as usize,
+        index: d,
+        last: d + 1 == depth,
+        hidden: &hidden,
+        others_centres: &others_centres,
+        fov_area,
+        growth_m2_per_cell,
+    };
+    // The distance map ranks the children only: made while the first period's are expanded.
+    let (distance, first) = join_if(
+        params.parallel,
+        || DistanceMap::new(&grid, &attractive),
+        || period(0).expand_beam(std::slice::from_ref(&root), params.parallel, &mut predictor),
+    );
+    let mut first = Some(first);
+    let mut beam = Vec::new();
     let mut sequences = 0;
     let mut excluded = 0;
-    for (d, seen_ahead) in others_seen.iter().enumerate() {
-        let rings = (reach(d + 1) - reach(d)) as usize;
-        let last = d + 1 == depth;
-        let mut children = Vec::with_capacity(beam.len() * params.increments.len());
-        for node in &beam {
-            let (mut u0, mut t0) = (node.undetected.clone(), node.targets.clone());
-            for _ in 0..rings {
-                // Radius 0 adds exactly the 8 neighbours: one ring of cells.
-                u0 = u0.dilate(&grid, 0.0);
-                t0 = t0.dilate(&grid, 0.0);
-            }
-            u0.and_not_assign(seen_ahead);
-            t0.and_not_assign(seen_ahead);
-            // Only the ground of the grown sets can change them.
-            let mut relevant = u0.clone();
-            relevant.or_assign(&t0);
-            // A child's sets differ from these only on the rows its views meet, and their
-            // boundaries only there and on the rows next to them: counted again there only.
-            let edges0 = (boundary_count(&u0), boundary_count(&t0));
-            // The views of the children's first poses, by pose: the increments the yaw rate
-            // cannot reach in one CVS step (the large turns to either side) fly the same
-            // first step, whose view is computed once.
-            let mut first_views: Vec<(CameraPose, CellSet)> =
-                Vec::with_capacity(params.increments.len());
-            for &inc in &params.increments {
-                let yaw_ref = node.state.yaw + inc;
-                let mut state = node.state;
-                let mut poses = node.poses.clone();
-                let mut seen = CellSet::empty(&grid);
-                let mut stray_m = node.stray_m;
-                for step in 0..per {
-                    let pose;
-                    (state, pose) = fly_step(params, state, yaw_ref);
-                    stray_m = stray_m.max(stray(&params.region, &state.position));
-                    if step == 0 {
-                        let known = first_views.iter().position(|(p, _)| same_pose(p, &pose));
-                        let i = known.unwrap_or_else(|| {
-                            let mut view = CellSet::empty(&grid);
-                            predictor.add_visible_ground_within(
-                                &mut view,
-                                &grid,
-                                &params.camera,
-                                &pose,
-                                obstacles,
-                                &relevant,
-                            );
-                            first_views.push((pose, view));
-                            first_views.len() - 1
-                        });
-                        seen.or_assign(&first_views[i].1);
-                    } else {
-                        predictor.add_visible_ground_within(
-                            &mut seen,
-                            &grid,
-                            &params.camera,
-                            &pose,
-                            obstacles,
-                            &relevant,
-                        );
-                    }
-                    poses.push(pose);
-                }
-                let mut u = u0.clone();
-                u.and_not_assign(&seen);
-                let mut t = t0.clone();
-                t.and_not_assign(&seen);
-                let changed = occupied_rows(&seen);
-                let edges = (
-                    recount_boundary(edges0.0, &u0, &u, changed),
-                    recount_boundary(edges0.1, &t0, &t, changed),
-                );
-                let value_sum = node.value_sum + value((u.count(), t.count()), edges);
-                let centre = poses.last().map_or(Point2::new(0.0, 0.0), |p| {
-                    view::view_centre(&params.camera, p)
-                });
-                let distance_m = distance.at(&centre);
-                let crowding =
-                    spread_charge(sp.spread_m, fov_area, &centre, &others_centres, poses.len());
-                let hidden_m2 = if last {
-                    (u.intersection_count(&hidden) + t.intersection_count(&hidden)) as f64
-                        * grid.cell_area()
-                } else {
-                    0.0
-                };
-                let mean = value_sum / (d + 1) as f64;
-                let rank = mean + params.lambda * distance_m + crowding + params.kappa * hidden_m2;
-                let mut increments = node.increments.clone();
-                increments.push(inc);
-                children.push(Node {
-                    increments,
-                    state,
-                    poses,
-                    undetected: u,
-                    targets: t,
-                    value_sum,
-                    stray_m,
-                    rank,
-                    cost: Cost {
-                        area_m2: mean,
-                        distance_m,
-                        hidden_m2,
-                        total: rank,
-                    },
-                });
-            }
+    for d in 0..depth {
+        let mut children = match first.take() {
+            Some(children) => children,
+            None => period(d).expand_beam(&beam, params.parallel, &mut predictor),
+        };
+        for child in &mut children {
+            child.rank_by(&distance, params);
         }
-        if last {
+        if d + 1 == depth {
             sequences = children.len();
             excluded = children.iter().filter(|c| c.stray_m > 0.0).count();
         }
@@ -311,6 +277,224 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         .next()
         .map(|node| (node.increments, node.cost, node.poses));
     decision(input, best, sequences, excluded)
+}
+
+/// One period of the beam search: what every child of the beam's nodes is valued against.
+struct Period<'a> {
+    params: &'a GuidanceParams,
+    grid: GroundGrid,
+    obstacles: &'a [ObstacleCell],
+    /// The ground the UAVs ahead in the token will see in this period.
+    seen_ahead: &'a CellSet,
+    /// Rings of cells the sets grow by in this period.
+    rings: usize,
+    /// The period's index in the lookahead (0 for the first).
+    index: usize,
+    last: bool,
+    hidden: &'a CellSet,
+    others_centres: &'a [Vec<Point2>],
+    fov_area: f64,
+    /// The future growth charged per boundary cell, m².
+    growth_m2_per_cell: f64,
+}
+
+impl Period<'_> {
+    /// The value of sets of `area` cells (`X̄`'s, the targets') with `edge` boundary cells.
+    fn value(&self, area: (u64, u64), edge: (u64, u64)) -> f64 {
+        let w = self.params.setfleet.target_weight;
+        let area = area.0 as f64 + w * area.1 as f64;
+        let edge = edge.0 as f64 + w * edge.1 as f64;
+        area * self.grid.cell_area() + edge * self.growth_m2_per_cell
+    }
+
+    /// The children of every node of `beam`, in the order of the nodes and then of the
+    /// increments. In `parallel`, each node's increments are split in two halves (the turns
+    /// to either side, which share first views), expanded as separate jobs. Each child
+    /// depends on its node and increment only, so the children, and the decision, are the
+    /// same either way.
+    fn expand_beam(
+        &self,
+        beam: &[Node],
+        parallel: bool,
+        predictor: &mut GroundPredictor,
+    ) -> Vec<Node> {
+        let increments = &self.params.increments[..];
+        let chunk = if parallel {
+            increments.len().div_ceil(2)
+        } else {
+            increments.len()
+        };
+        let work: Vec<(&Node, &[f64])> = beam
+            .iter()
+            .flat_map(|node| {
+                increments
+                    .chunks(chunk.max(1))
+                    .map(move |incs| (node, incs))
+            })
+            .collect();
+        in_parallel(
+            &work,
+            parallel,
+            &self.grid,
+            predictor,
+            |&(node, incs), predictor| self.expand(node, incs, predictor),
+        )
+        .into_iter()
+        .flatten()
+        .collect()
+    }
+
+    /// The children of `node` by the increments `increments`, in their order.
+    fn expand(
+        &self,
+        node: &Node,
+        increments: &[f64],
+        predictor: &mut GroundPredictor,
+    ) -> Vec<Node> {
+        let params = self.params;
+        let sp = &params.setfleet;
+        let grid = self.grid;
+        let per = params.steps_per_period as usize;
+        let (mut u0, mut t0) = (node.undetected.clone(), node.targets.clone());
+        for _ in 0..self.rings {
+            // Radius 0 adds exactly the 8 neighbours: one ring of cells.
+            u0 = u0.dilate(&grid, 0.0);
+            t0 = t0.dilate(&grid, 0.0);
+        }
+        u0.and_not_assign(self.seen_ahead);
+        t0.and_not_assign(self.seen_ahead);
+        // Only the ground of the grown sets can change them.
+        let mut relevant = u0.clone();
+        relevant.or_assign(&t0);
+        // A child's sets differ from these only on the rows its views meet, and their
+        // boundaries only there and on the rows next to them: counted again there only.
+        let edges0 = (boundary_count(&u0), boundary_count(&t0));
+        // The views of the children's first poses, by pose: the increments the yaw rate
+        // cannot reach in one CVS step (the large turns to either side) fly the same
+        // first step, whose view is computed once.
+        let mut first_views: Vec<(CameraPose, CellSet)> = Vec::with_capacity(increments.len());
+        let mut children = Vec::with_capacity(increments.len());
+        for &inc in increments {
+            let yaw_ref = node.state.yaw + inc;
+            let mut state = node.state;
+            let mut poses = node.poses.clone();
+            let mut seen = CellSet::empty(&grid);
+            let mut stray_m = node.stray_m;
+            for step in 0..per {
+                let pose;
+                (state, pose) = fly_step(params, state, yaw_ref);
+                stray_m = stray_m.max(stray(&params.region, &state.position));
+                if step == 0 {
+                    let known = first_views.iter().position(|(p, _)| same_pose(p, &pose));
+                    let i = known.unwrap_or_else(|| {
+                        let mut view = CellSet::empty(&grid);
+                        predictor.add_visible_ground_within(
+                            &mut view,
+                            &grid,
+                            &params.camera,
+                            &pose,
+                            self.obstacles,
+                            &relevant,
+                        );
+                        first_views.push((pose, view));
+                        first_views.len() - 1
+                    });
+                    seen.or_assign(&first_views[i].1);
+                } else {
+                    predictor.add_visible_ground_within(
+                        &mut seen,
+                        &grid,
+                        &params.camera,
+                        &pose,
+                        self.obstacles,
+                        &relevant,
+                    );
+                }
+                poses.push(pose);
+            }
+            let mut u = u0.clone();
+            u.and_not_assign(&seen);
+            let mut t = t0.clone();
+            t.and_not_assign(&seen);
+            let changed = occupied_rows(&seen);
+            let edges = (
+                recount_boundary(edges0.0, &u0, &u, changed),
+                recount_boundary(edges0.1, &t0, &t, changed),
+            );
+            let value_sum = node.value_sum + self.value((u.count(), t.count()), edges);
+            let centre = poses.last().map_or(Point2::new(0.0, 0.0), |p| {
+                view::view_centre(&params.camera, p)
+            });
+            let crowding = spread_charge(
+                sp.spread_m,
+                self.fov_area,
+                &centre,
+                self.others_centres,
+                poses.len(),
+            );
+            let hidden_m2 = if self.last {
+                (u.intersection_count(self.hidden) + t.intersection_count(self.hidden)) as f64
+                    * grid.cell_area()
+            } else {
+                0.0
+            };
+            let mut increments = node.increments.clone();
+            increments.push(inc);
+            children.push(Node {
+                increments,
+                state,
+                poses,
+                undetected: u,
+                targets: t,
+                value_sum,
+                stray_m,
+                centre,
+                crowding,
+                rank: 0.0,
+                cost: Cost {
+                    area_m2: value_sum / (self.index + 1) as f64,
+                    distance_m: 0.0,
+                    hidden_m2,
+                    total: 0.0,
+                },
+            });
+        }
+        children
+    }
+}
+
+/// `(a(), b())`, side by side on rayon's pool when `parallel`.
+fn join_if<A: Send, B: Send>(
+    parallel: bool,
+    a: impl FnOnce() -> A + Send,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    if parallel {
+        rayon::join(a, b)
+    } else {
+        (a(), b())
+    }
+}
+
+/// `task` applied to every item, in the order of the items: on this thread with `predictor`
+/// unless `parallel`, else on rayon's pool, each job with a predictor of its own for `grid`.
+fn in_parallel<T: Sync, R: Send>(
+    items: &[T],
+    parallel: bool,
+    grid: &GroundGrid,
+    predictor: &mut GroundPredictor,
+    task: impl Fn(&T, &mut GroundPredictor) -> R + Sync,
+) -> Vec<R> {
+    if !parallel || items.len() < 2 {
+        return items.iter().map(|item| task(item, predictor)).collect();
+    }
+    items
+        .par_iter()
+        .map_init(
+            || GroundPredictor::new(grid),
+            |predictor, item| task(item, predictor),
+        )
+        .collect()
 }
 
 /// Ground of `relevant` the UAVs ahead in the token will see during the CVS steps `steps` of
@@ -460,6 +644,36 @@ fn occupied_rows(set: &CellSet) -> Option<(u32, u32)> {
     Some((first, last))
 }
 
+/// `row[x] <- min(row[x], next[x] + a, next[x - 1] + b, next[x + 1] + b)`: the neighbours of a
+/// row in the row passed just before.
+fn relax_from_row(row: &mut [f32], next: &[f32], a: f32, b: f32) {
+    let n = row.len();
+    for x in 0..n {
+        let mut v = row[x].min(next[x] + a);
+        if x > 0 {
+            v = v.min(next[x - 1] + b);
+        }
+        if x + 1 < n {
+            v = v.min(next[x + 1] + b);
+        }
+        row[x] = v;
+    }
+}
+
+/// `row[x] <- min(row[x], row[x - 1] + a)`, left to right.
+fn scan_forward(row: &mut [f32], a: f32) {
+    for x in 1..row.len() {
+        row[x] = row[x].min(row[x - 1] + a);
+    }
+}
+
+/// `row[x] <- min(row[x], row[x + 1] + a)`, right to left.
+fn scan_backward(row: &mut [f32], a: f32) {
+    for x in (0..row.len().saturating_sub(1)).rev() {
+        row[x] = row[x].min(row[x + 1] + a);
+    }
+}
+
 /// Distance from every planning cell to the nearest cell of a set (chamfer 3-4 distance, within
 /// about 8 % of the Euclidean distance), metres.
 struct DistanceMap {
@@ -481,41 +695,29 @@ impl DistanceMap {
             grid.cell_m as f32,
             grid.cell_m as f32 * std::f32::consts::SQRT_2,
         );
-        for y in 0..ny {
-            for x in 0..nx {
-                let mut v = d[y * nx + x];
-                if x > 0 {
-                    v = v.min(d[y * nx + x - 1] + a);
-                }
-                if y > 0 {
-                    v = v.min(d[(y - 1) * nx + x] + a);
-                    if x > 0 {
-                        v = v.min(d[(y - 1) * nx + x - 1] + b);
-                    }
-                    if x + 1 < nx {
-                        v = v.min(d[(y - 1) * nx + x + 1] + b);
-                    }
-                }
-                d[y * nx + x] = v;
-            }
+        // Each pass takes, at every cell, the least of its value and of its neighbours' already
+        // passed plus the step to them. The neighbours of the previous row are taken first over
+        // the whole row, then the one before in the row, in a scan: the same minimum of the
+        // same sums, so the same values as cell by cell, with a shorter chain of dependent
+        // operations.
+        if ny == 0 {
+            return Self {
+                grid: *grid,
+                metres: d,
+                empty: true,
+            };
         }
-        for y in (0..ny).rev() {
-            for x in (0..nx).rev() {
-                let mut v = d[y * nx + x];
-                if x + 1 < nx {
-                    v = v.min(d[y * nx + x + 1] + a);
-                }
-                if y + 1 < ny {
-                    v = v.min(d[(y + 1) * nx + x] + a);
-                    if x + 1 < nx {
-                        v = v.min(d[(y + 1) * nx + x + 1] + b);
-                    }
-                    if x > 0 {
-                        v = v.min(d[(y + 1) * nx + x - 1] + b);
-                    }
-                }
-                d[y * nx + x] = v;
-            }
+        scan_forward(&mut d[..nx], a);
+        for y in 1..ny {
+            let (done, row) = d.split_at_mut(y * nx);
+            relax_from_row(&mut row[..nx], &done[(y - 1) * nx..], a, b);
+            scan_forward(&mut row[..nx], a);
+        }
+        scan_backward(&mut d[(ny - 1) * nx..], a);
+        for y in (0..ny - 1).rev() {
+            let (row, done) = d.split_at_mut((y + 1) * nx);
+            relax_from_row(&mut row[y * nx..], &done[..nx], a, b);
+            scan_backward(&mut row[y * nx..], a);
         }
         Self {
             grid: *grid,
@@ -668,6 +870,136 @@ mod tests {
             &[super::super::tests::watching_the_south()],
         );
         assert!(d.increments[0] > 0.0, "{d:?}");
+    }
+
+    /// The chamfer distance computed cell by cell, each pass in scan order (the map's
+    /// definition).
+    fn reference_distances(grid: &GroundGrid, set: &CellSet) -> Vec<f32> {
+        let (nx, ny) = (grid.nx as usize, grid.ny as usize);
+        let mut d = vec![f32::INFINITY; nx * ny];
+        for (x, y) in set.iter() {
+            d[y as usize * nx + x as usize] = 0.0;
+        }
+        let (a, b) = (
+            grid.cell_m as f32,
+            grid.cell_m as f32 * std::f32::consts::SQRT_2,
+        );
+        let at = |d: &[f32], x: usize, y: usize| d[y * nx + x];
+        for y in 0..ny {
+            for x in 0..nx {
+                let mut v = at(&d, x, y);
+                if x > 0 {
+                    v = v.min(at(&d, x - 1, y) + a);
+                }
+                if y > 0 {
+                    v = v.min(at(&d, x, y - 1) + a);
+                    if x > 0 {
+                        v = v.min(at(&d, x - 1, y - 1) + b);
+                    }
+                    if x + 1 < nx {
+                        v = v.min(at(&d, x + 1, y - 1) + b);
+                    }
+                }
+                d[y * nx + x] = v;
+            }
+        }
+        for y in (0..ny).rev() {
+            for x in (0..nx).rev() {
+                let mut v = at(&d, x, y);
+                if x + 1 < nx {
+                    v = v.min(at(&d, x + 1, y) + a);
+                }
+                if y + 1 < ny {
+                    v = v.min(at(&d, x, y + 1) + a);
+                    if x + 1 < nx {
+                        v = v.min(at(&d, x + 1, y + 1) + b);
+                    }
+                    if x > 0 {
+                        v = v.min(at(&d, x - 1, y + 1) + b);
+                    }
+                }
+                d[y * nx + x] = v;
+            }
+        }
+        d
+    }
+
+    proptest::proptest! {
+        /// The map's row-wise passes give the cell-by-cell passes' values, bit for bit.
+        #[test]
+        fn the_distance_map_has_the_values_of_the_cell_by_cell_passes(
+            half in 1.0_f64..40.0,
+            cell in proptest::sample::select(vec![0.5, 1.0, 2.5]),
+            discs in proptest::collection::vec(
+                (-50.0_f64..50.0, -50.0_f64..50.0, 0.0_f64..8.0), 0..5),
+        ) {
+            let grid = GroundGrid::new(half, cell);
+            let mut set = CellSet::empty(&grid);
+            for (x, y, r) in discs {
+                set.fill_disc(&grid, Point2::new(x, y), r, Coverage::Outer);
+            }
+            let map = DistanceMap::new(&grid, &set);
+            let reference = reference_distances(&grid, &set);
+            proptest::prop_assert_eq!(map.metres.len(), reference.len());
+            for (got, want) in map.metres.iter().zip(&reference) {
+                proptest::prop_assert_eq!(got.to_bits(), want.to_bits());
+            }
+        }
+    }
+
+    /// Sharing the beam with rayon's pool decides exactly as one thread does, with buildings
+    /// casting shadows and plans of UAVs ahead in the token.
+    #[test]
+    fn the_pool_decides_as_one_thread() {
+        let parallel = params();
+        assert!(parallel.parallel);
+        let serial = GuidanceParams {
+            parallel: false,
+            ..parallel.clone()
+        };
+        let sets = [
+            blob(&parallel, Point2::new(40.0, 60.0), 25.0),
+            blob(&parallel, Point2::new(-70.0, -20.0), 10.0),
+            blob(&parallel, Point2::new(10.0, -90.0), 15.0),
+        ];
+        let sets: Vec<&CellSet> = sets.iter().collect();
+        let hidden = blob(&parallel, Point2::new(-30.0, 30.0), 20.0);
+        // A block of buildings of uneven heights north-east and a tower south-west.
+        let mut obstacles = Vec::new();
+        for i in 0..6 {
+            for j in 0..4 {
+                let (x, y) = (20.0 + 5.0 * f64::from(i), 20.0 + 5.0 * f64::from(j));
+                obstacles.push(ObstacleCell {
+                    rect: protocol::grid::Rect {
+                        min: Point2::new(x, y),
+                        max: Point2::new(x + 5.0, y + 5.0),
+                    },
+                    height_m: 8.0 + 3.0 * f64::from((i * 7 + j * 3) % 5),
+                });
+            }
+        }
+        obstacles.push(ObstacleCell {
+            rect: protocol::grid::Rect {
+                min: Point2::new(-40.0, -40.0),
+                max: Point2::new(-35.0, -35.0),
+            },
+            height_m: 45.0,
+        });
+        let others = [super::super::tests::watching_the_south()];
+        for (yaw, others) in [(0.0, &others[..0]), (2.0, &others[..]), (-1.0, &others[..])] {
+            let input = PlanningInput {
+                uav: 1,
+                state: UavState {
+                    position: Point3::new(-10.0, 5.0, 60.0),
+                    yaw,
+                },
+                sets: &sets,
+                recently_hidden: &hidden,
+                obstacles: &obstacles,
+                others,
+            };
+            assert_eq!(plan(&parallel, &input), plan(&serial, &input));
+        }
     }
 
     #[test]

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use protocol::camera::{Camera, CameraModel, CameraPose};
 use protocol::grid::{GroundGrid, Rect};
-use protocol::math::{Point2, Point3, convex_hull};
+use protocol::math::{Point2, Point3, convex_hull_into};
 use protocol::raster::{CellSet, Coverage};
 
 use crate::occupancy::{OccupancyMap, OemStatus};
@@ -36,14 +36,25 @@ impl ObstacleCell {
 /// Ground shadow of an obstacle seen from `eye`: the convex hull of its footprint and of its
 /// top face projected from the eye onto the ground. `None` if the eye is not above the top.
 pub fn shadow(eye: &Point3, obstacle: &ObstacleCell) -> Option<Vec<Point2>> {
-    let scale = shadow_scale(eye, obstacle)?;
+    let mut hull = Vec::new();
+    shadow_into(eye, obstacle, &mut hull).then_some(hull)
+}
+
+/// [`shadow`] written into `hull` (cleared first), without allocating once it has room;
+/// false (and `hull` empty) if the eye is not above the top.
+fn shadow_into(eye: &Point3, obstacle: &ObstacleCell, hull: &mut Vec<Point2>) -> bool {
+    let Some(scale) = shadow_scale(eye, obstacle) else {
+        hull.clear();
+        return false;
+    };
     let corners = obstacle.rect.corners();
     let mut pts = [Point2::origin(); 8];
     for (i, c) in corners.iter().enumerate() {
         pts[2 * i] = *c;
         pts[2 * i + 1] = project(eye, c, scale);
     }
-    Some(convex_hull(&pts))
+    convex_hull_into(&mut pts, hull);
+    true
 }
 
 /// The factor that projects the obstacle's top from `eye` onto the ground, if the eye is above
@@ -144,6 +155,8 @@ pub struct GroundPredictor {
     visible: CellSet,
     /// The shadows of the pose being predicted; empty between calls.
     shadows: CellSet,
+    /// The hull of the shadow being rasterised.
+    hull: Vec<Point2>,
     /// The footprints rasterised so far, by pose, on the grid named (when asked to remember
     /// them).
     footprints: Option<(GroundGrid, BTreeMap<[u64; 4], FootprintRaster>)>,
@@ -163,6 +176,7 @@ impl GroundPredictor {
         Self {
             visible: CellSet::empty(grid),
             shadows: CellSet::empty(grid),
+            hull: Vec::with_capacity(9),
             footprints: None,
         }
     }
@@ -310,10 +324,10 @@ impl GroundPredictor {
                 && overlaps(&b, &footprint.fov_box)
                 && overlaps(&b, &window)
                 && let Some(rows) = rows_to_cover(grid, &b, &self.visible, &self.shadows, &cells)
-                && let Some(hull) = shadow(&pose.position, o)
+                && shadow_into(&pose.position, o, &mut self.hull)
             {
                 self.shadows
-                    .fill_convex_polygon_rows(grid, &hull, Coverage::Outer, rows);
+                    .fill_convex_polygon_rows(grid, &self.hull, Coverage::Outer, rows);
                 shadowed = Some(shadowed.map_or(rows, |(a, b)| (a.min(rows.0), b.max(rows.1))));
             }
         }
