@@ -290,9 +290,13 @@ struct Period<'a> {
     rings: usize,
     /// The period's index in the lookahead (0 for the first).
     index: usize,
+    /// Whether it is the lookahead's last period, whose sets in occluded ground are charged.
     last: bool,
+    /// The ground occluded in the last periods (coarse).
     hidden: &'a CellSet,
+    /// The others' planned view centres, per CVS step.
     others_centres: &'a [Vec<Point2>],
+    /// The area of the UAV's field of view, m² (the most a crowded view is charged).
     fov_area: f64,
     /// The future growth charged per boundary cell, m².
     growth_m2_per_cell: f64,
