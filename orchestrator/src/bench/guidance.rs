@@ -196,8 +196,9 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
         .find(|&k| timed.decisions.get(k) != one_thread.decisions.get(k))
     {
         anyhow::bail!(
-            "the setfleet planner decided differently on one thread (decision {k}): {:?} \
-             against {:?}",
+            "the setfleet planner decided differently on one thread (decision {k}), a bug: its \
+             decisions must not depend on threads; run `cargo test -p uav-agent \
+             the_pool_decides_as_one_thread` and report both: {:?} against {:?}",
             one_thread.decisions.get(k),
             timed.decisions.get(k)
         );

@@ -704,24 +704,19 @@ impl DistanceMap {
         // the whole row, then the one before in the row, in a scan: the same minimum of the
         // same sums, so the same values as cell by cell, with a shorter chain of dependent
         // operations.
-        if ny == 0 {
-            return Self {
-                grid: *grid,
-                metres: d,
-                empty: true,
-            };
-        }
-        scan_forward(&mut d[..nx], a);
-        for y in 1..ny {
-            let (done, row) = d.split_at_mut(y * nx);
-            relax_from_row(&mut row[..nx], &done[(y - 1) * nx..], a, b);
-            scan_forward(&mut row[..nx], a);
-        }
-        scan_backward(&mut d[(ny - 1) * nx..], a);
-        for y in (0..ny - 1).rev() {
-            let (row, done) = d.split_at_mut((y + 1) * nx);
-            relax_from_row(&mut row[y * nx..], &done[..nx], a, b);
-            scan_backward(&mut row[y * nx..], a);
+        if ny > 0 {
+            scan_forward(&mut d[..nx], a);
+            for y in 1..ny {
+                let (done, row) = d.split_at_mut(y * nx);
+                relax_from_row(&mut row[..nx], &done[(y - 1) * nx..], a, b);
+                scan_forward(&mut row[..nx], a);
+            }
+            scan_backward(&mut d[(ny - 1) * nx..], a);
+            for y in (0..ny - 1).rev() {
+                let (row, done) = d.split_at_mut((y + 1) * nx);
+                relax_from_row(&mut row[y * nx..], &done[..nx], a, b);
+                scan_backward(&mut row[y * nx..], a);
+            }
         }
         Self {
             grid: *grid,
