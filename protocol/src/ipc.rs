@@ -599,5 +599,8 @@ mod tests {
         let run = RunId::new("cfg-test").unwrap();
         let config = run_config(&run).unwrap();
         assert_eq!(config.global.prefix.to_string(), run.file_prefix());
+        let host = run.in_domain(2);
+        let config = run_config(&host).unwrap();
+        assert_eq!(config.global.prefix.to_string(), "iox2_sf_cfg-test.h2_");
     }
 }

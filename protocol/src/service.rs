@@ -33,8 +33,18 @@ pub enum RunIdError {
 
 /// The id of one run: prefixes every service and every shared-memory file of the run, so runs
 /// and tests never see each other.
+///
+/// A run spread over several hosts has one iceoryx2 *domain* per host. On real machines the
+/// domains are apart anyway; hosts simulated on one machine ([`RunId::in_domain`]) keep
+/// theirs apart by the file prefix alone: host `k`'s files start with
+/// `iox2_sf_{run}.h{k}_` (a run id never holds a `.`), so its processes share no service,
+/// node or file with the other hosts' and meet them only through the bridge. Service names, the run tag and the text of
+/// the id are the same on every host.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
-pub struct RunId(String);
+pub struct RunId {
+    id: String,
+    domain: Option<u16>,
+}
 
 impl RunId {
     /// Longest accepted id.
@@ -51,31 +61,69 @@ impl RunId {
         {
             return Err(RunIdError::Character(c));
         }
-        Ok(Self(id.to_owned()))
+        Ok(Self {
+            id: id.to_owned(),
+            domain: None,
+        })
+    }
+
+    /// The same run in the iceoryx2 domain of simulated host `host` (see the type's docs).
+    pub fn in_domain(&self, host: u16) -> RunId {
+        RunId {
+            id: self.id.clone(),
+            domain: Some(host),
+        }
+    }
+
+    /// The simulated host whose domain this is, if any.
+    pub fn domain(&self) -> Option<u16> {
+        self.domain
     }
 
     /// The id as text.
     pub fn as_str(&self) -> &str {
-        &self.0
+        &self.id
     }
 
     /// A 64-bit tag (FNV-1a of the id) stamped on every message, so a message of another run
     /// is recognised and dropped.
     pub fn tag(&self) -> u64 {
-        self.0.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+        self.id.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
             (h ^ b as u64).wrapping_mul(0x100_0000_01b3)
         })
     }
 
-    /// Prefix of every iceoryx2 file of this run: [`FILE_PREFIX`], the id, `_`.
+    /// Prefix of every iceoryx2 file of this run: [`FILE_PREFIX`], the id, `_`; in a
+    /// simulated host's domain, `.h{host}` comes before the `_`.
     pub fn file_prefix(&self) -> String {
-        format!("{FILE_PREFIX}{}_", self.0)
+        format!("{FILE_PREFIX}{}_", self.domain_id())
+    }
+
+    /// The id followed by the domain, as file names carry it: `{id}` or `{id}.h{host}`.
+    fn domain_id(&self) -> String {
+        match self.domain {
+            None => self.id.clone(),
+            Some(host) => format!("{}.h{host}", self.id),
+        }
+    }
+
+    /// Reads [`RunId::domain_id`] back: an id, or an id and a domain.
+    pub fn from_domain_id(text: &str) -> Option<RunId> {
+        match text.split_once(".h") {
+            None => RunId::new(text).ok(),
+            Some((id, host)) => {
+                let host: u16 = host.parse().ok()?;
+                (text.ends_with(&format!(".h{host}")))
+                    .then(|| RunId::new(id).ok().map(|r| r.in_domain(host)))
+                    .flatten()
+            }
+        }
     }
 }
 
 impl fmt::Display for RunId {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
+        f.write_str(&self.id)
     }
 }
 
@@ -151,5 +199,22 @@ mod tests {
             RunId::new("a").unwrap().tag(),
             RunId::new("b").unwrap().tag()
         );
+    }
+
+    #[test]
+    fn a_domain_changes_the_files_only() {
+        let run = RunId::new("t-1").unwrap();
+        let host = run.in_domain(2);
+        assert_eq!(host.domain(), Some(2));
+        assert_eq!(host.tag(), run.tag());
+        assert_eq!(host.to_string(), "t-1");
+        assert_eq!(estimate(&host, 1).as_str(), estimate(&run, 1).as_str());
+        assert_eq!(host.file_prefix(), "iox2_sf_t-1.h2_");
+        assert_ne!(host, run);
+        assert_eq!(RunId::from_domain_id("t-1.h2"), Some(host));
+        assert_eq!(RunId::from_domain_id("t-1"), Some(run));
+        for bad in ["t-1.h", "t-1.h02", "t-1.hx", "t.1", "t-1.h2.h3", ""] {
+            assert_eq!(RunId::from_domain_id(bad), None, "{bad}");
+        }
     }
 }

@@ -6,6 +6,7 @@ mod bench;
 mod chaos;
 mod cli;
 mod frames;
+mod hosts;
 mod recovery;
 mod render;
 mod resources;

@@ -32,11 +32,15 @@ use protocol::service::RunId;
 
 /// The binaries the tests run, the packages that build them and the features the tests need
 /// (the agent's fault-injection hooks, which shipped builds leave out).
-const BINARIES: [(&str, &str, &str); 3] = [
+const BINARIES: [(&str, &str, &str); 4] = [
     ("world-server", "world-server", ""),
     ("uav-agent", "uav-agent", "test-hooks"),
     ("fleet", "orchestrator", ""),
+    ("fleet-bridge", "bridge", ""),
 ];
+
+/// Most simulated hosts a test's run uses: their domains' files are checked and removed too.
+pub const MAX_TEST_HOSTS: u16 = 4;
 
 /// Longest wait for a process that should end on its own.
 pub const EXIT_TIMEOUT: Duration = Duration::from_secs(120);
@@ -136,15 +140,27 @@ impl TestRun {
         path
     }
 
-    /// The run's files still in `/dev/shm` and under iceoryx2's root.
+    /// The run and its simulated hosts' domains (`fleet run --hosts`).
+    pub fn domains(&self) -> Vec<RunId> {
+        std::iter::once(self.run.clone())
+            .chain((1..MAX_TEST_HOSTS).map(|h| self.run.in_domain(h)))
+            .collect()
+    }
+
+    /// The run's files (in every domain) still in `/dev/shm` and under iceoryx2's root.
     pub fn ipc_files(&self) -> Vec<PathBuf> {
-        ipc::run_files(&self.run).unwrap_or_default()
+        self.domains()
+            .iter()
+            .flat_map(|run| ipc::run_files(run).unwrap_or_default())
+            .collect()
     }
 }
 
 impl Drop for TestRun {
     fn drop(&mut self) {
-        let _ = ipc::remove_run_files(&self.run);
+        for run in self.domains() {
+            let _ = ipc::remove_run_files(&run);
+        }
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }

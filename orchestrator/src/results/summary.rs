@@ -102,6 +102,8 @@ pub struct Summary {
     pub faults: Vec<FaultRecord>,
     /// The `--chaos` seed (`null` without `--chaos`).
     pub chaos_seed: Option<u64>,
+    /// Hosts the processes were spread over (`fleet run --hosts`; 1: one host, no bridge).
+    pub hosts: u16,
     /// The largest resync of a restarted or resumed agent, steps (`null` when none was
     /// measured; see [`crate::run::faults`]).
     pub resync_steps_max: Option<u64>,
@@ -375,6 +377,7 @@ impl Summary {
             time_all_identified_any_s,
             faults: record.faults.records().to_vec(),
             chaos_seed: record.config.chaos_seed,
+            hosts: record.config.layout.hosts,
             resync_steps_max,
             resync_steps_mean,
             agents,

@@ -1,6 +1,8 @@
 //! The run's child processes: the world-server and one `uav-agent` per UAV, found next to the
-//! `fleet` executable. Their stdout and stderr are appended to `logs/world.log` and
-//! `logs/agent-<i>.log` (a restarted agent appends to its predecessor's log). Every child is
+//! `fleet` executable, and on a run over several hosts one `fleet-bridge` per host
+//! ([`super::hosts`]). Their stdout and stderr are appended to `logs/world.log`,
+//! `logs/agent-<i>.log` (a restarted agent appends to its predecessor's log) and
+//! `logs/bridge-h<k>.log`. Every child is
 //! killed when its handle is dropped, and dies with `fleet` (the children set
 //! `PR_SET_PDEATHSIG`).
 //!
@@ -28,6 +30,8 @@ use protocol::service::RunId;
 use tokio::process::{Child, Command};
 use world_server::server::StepMode;
 
+use super::hosts::HostLayout;
+
 /// Paths of the binaries `fleet` starts.
 #[derive(Clone, Debug)]
 pub struct Binaries {
@@ -35,6 +39,8 @@ pub struct Binaries {
     pub world: PathBuf,
     /// `uav-agent`.
     pub agent: PathBuf,
+    /// `fleet-bridge`, if it was built (needed only by runs over several hosts).
+    pub bridge: Option<PathBuf>,
 }
 
 impl Binaries {
@@ -59,6 +65,7 @@ impl Binaries {
         Ok(Binaries {
             world: find("world-server")?,
             agent: find("uav-agent")?,
+            bridge: find("fleet-bridge").ok(),
         })
     }
 }
@@ -75,10 +82,12 @@ pub struct AgentExit {
 /// A child process that ended, with the kernel's account of it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ExitedProcess {
-    /// The UAV of an agent, `None` for the world-server.
+    /// The UAV of an agent, `None` for the world-server and bridges.
     pub uav: Option<u32>,
     /// An agent's process number among its UAV's (1 for the first, 2 after a restart, ...).
     pub incarnation: Option<u32>,
+    /// The host of a bridge, `None` for the world-server and agents.
+    pub bridge_host: Option<u16>,
     /// Its pid.
     pub pid: Option<u32>,
     /// How it ended (`None` if it could not be reaped).
@@ -95,8 +104,11 @@ pub struct Children {
     logs: PathBuf,
     checkpoints: PathBuf,
     mode: StepMode,
+    layout: HostLayout,
     world: Option<Child>,
     agents: BTreeMap<u32, Agent>,
+    /// The bridges by host, on a run over several hosts.
+    bridges: BTreeMap<u16, Child>,
     incarnations: u64,
     /// Agent processes started per UAV.
     uav_incarnations: BTreeMap<u32, u32>,
@@ -154,7 +166,7 @@ const REAP_POLL: Duration = Duration::from_millis(10);
 
 impl Children {
     /// No process yet; `scenario` is the file every child reads, `logs` the log directory,
-    /// `checkpoints` the agents' checkpoint directory.
+    /// `checkpoints` the agents' checkpoint directory, `layout` where the agents run.
     pub fn new(
         run: RunId,
         binaries: Binaries,
@@ -162,6 +174,7 @@ impl Children {
         logs: PathBuf,
         checkpoints: PathBuf,
         mode: StepMode,
+        layout: HostLayout,
     ) -> Children {
         Children {
             run,
@@ -170,8 +183,10 @@ impl Children {
             logs,
             checkpoints,
             mode,
+            layout,
             world: None,
             agents: BTreeMap::new(),
+            bridges: BTreeMap::new(),
             incarnations: 0,
             uav_incarnations: BTreeMap::new(),
             exited: Vec::new(),
@@ -191,6 +206,7 @@ impl Children {
         self.exited.push(ExitedProcess {
             uav: None,
             incarnation: None,
+            bridge_host: None,
             pid,
             status: exit.map(|(s, _)| s),
             usage: exit.and_then(|(_, u)| u),
@@ -207,6 +223,7 @@ impl Children {
         self.exited.push(ExitedProcess {
             uav: Some(uav),
             incarnation: Some(agent.uav_incarnation),
+            bridge_host: None,
             pid,
             status: exit.map(|(s, _)| s),
             usage: exit.and_then(|(_, u)| u),
@@ -235,18 +252,23 @@ impl Children {
             .with_context(|| format!("cannot start {}", program.display()))
     }
 
-    fn common_args(&self) -> Vec<OsString> {
-        vec![
+    /// The arguments every child of host `host` is started with.
+    fn common_args(&self, host: u16) -> Vec<OsString> {
+        let mut args: Vec<OsString> = vec![
             "--run-id".into(),
             self.run.as_str().into(),
             "--scenario".into(),
             self.scenario.clone().into_os_string(),
-        ]
+        ];
+        if let Some(domain) = self.layout.domain_arg(host) {
+            args.extend(["--domain".into(), domain.to_string().into()]);
+        }
+        args
     }
 
     /// Starts the world-server, which waits for the agents' and the observer's hellos.
     pub fn spawn_world(&mut self) -> anyhow::Result<()> {
-        let mut args = self.common_args();
+        let mut args = self.common_args(0);
         args.push("--wait-observer".into());
         match self.mode {
             StepMode::Lockstep => args.extend(["--mode".into(), "lockstep".into()]),
@@ -313,7 +335,7 @@ impl Children {
 
     /// Starts (or restarts) agent `uav`.
     pub fn spawn_agent(&mut self, uav: u32) -> anyhow::Result<()> {
-        let mut args = self.common_args();
+        let mut args = self.common_args(self.layout.host_of(uav));
         args.extend(["--id".into(), uav.to_string().into()]);
         args.extend([
             "--checkpoint-dir".into(),
@@ -428,6 +450,78 @@ impl Children {
             if agent.stopped {
                 continue_agent(uav, agent);
             }
+        }
+    }
+
+    /// Starts the bridge of every host, host 0's first (a Zenoh router listening on
+    /// `listen`), then the others (clients connecting to it), with the links' TLS files in
+    /// `tls` when given. Nothing on a run of one host.
+    pub fn spawn_bridges(
+        &mut self,
+        listen: &str,
+        connect: &str,
+        tls: Option<&Path>,
+    ) -> anyhow::Result<()> {
+        if !self.layout.is_distributed() {
+            return Ok(());
+        }
+        let program = self.binaries.bridge.clone().context(
+            "cannot find fleet-bridge next to fleet; build every binary with `cargo build --bins`",
+        )?;
+        for host in 0..self.layout.hosts {
+            let mut args = self.common_args(host);
+            let name = HostLayout::name(host);
+            args.extend(["--host".into(), name.clone().into()]);
+            let agents: Vec<String> = self
+                .layout
+                .agents_on(host)
+                .iter()
+                .map(u32::to_string)
+                .collect();
+            args.extend(["--agents".into(), agents.join(",").into()]);
+            if host == 0 {
+                args.extend(["--world".into(), "--listen".into(), listen.into()]);
+            } else {
+                args.extend(["--connect".into(), connect.into()]);
+            }
+            if let Some(dir) = tls {
+                args.extend(["--tls".into(), dir.as_os_str().to_owned()]);
+            }
+            let child = self.spawn(&program, args, &format!("bridge-{name}.log"))?;
+            self.bridges.insert(host, child);
+        }
+        Ok(())
+    }
+
+    /// Stops the bridges (SIGTERM, then SIGKILL after `grace`), once every other process of
+    /// the run is gone.
+    pub async fn stop_bridges(&mut self, grace: Duration) {
+        for child in self.bridges.values() {
+            if let Some(pid) = child.id() {
+                send_signal(pid, libc::SIGTERM);
+            }
+        }
+        for (host, mut child) in std::mem::take(&mut self.bridges) {
+            let pid = child.id();
+            let mut exit = reap(&mut child, grace).await;
+            if exit.is_none() {
+                tracing::warn!(host, "bridge did not stop on SIGTERM: killed");
+                let _ = child.start_kill();
+                exit = reap(&mut child, Duration::from_secs(5)).await;
+            }
+            if let Some((status, _)) = exit
+                && !status.success()
+            {
+                tracing::warn!(host, %status, "bridge exited with an error");
+            }
+            self.exited.push(ExitedProcess {
+                uav: None,
+                incarnation: None,
+                bridge_host: Some(host),
+                pid,
+                status: exit.map(|(s, _)| s),
+                usage: exit.and_then(|(_, u)| u),
+            });
         }
     }
 

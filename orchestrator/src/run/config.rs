@@ -11,6 +11,7 @@ use protocol::service::RunId;
 use world_server::server::StepMode;
 
 use super::chaos;
+use super::hosts::HostLayout;
 use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
 
@@ -53,6 +54,11 @@ pub struct RunArgs {
     /// minute of simulated time).
     #[arg(long, value_name = "N", requires = "chaos")]
     pub chaos_faults: Option<u32>,
+    /// Spreads the processes over this many simulated hosts: host 0 runs the world-server,
+    /// the observer and the first agents, the others the rest of the agents, each in its own
+    /// iceoryx2 domain; a Zenoh bridge per host joins them over loopback TLS.
+    #[arg(long, default_value_t = 1)]
+    pub hosts: u16,
     /// Output directory (default: `runs/<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -208,6 +214,8 @@ pub struct RunConfig {
     pub variant: Variant,
     /// The `--chaos` seed, if the faults include a chaos schedule.
     pub chaos_seed: Option<u64>,
+    /// Where the processes run.
+    pub layout: HostLayout,
 }
 
 impl RunArgs {
@@ -264,6 +272,7 @@ impl RunArgs {
             // The schedule is built around the explicit faults; this checks it is consistent.
             faults = check_faults(&faults, &scenario)?;
         }
+        let layout = HostLayout::new(self.hosts, scenario.uavs.count).map_err(UsageError)?;
         Ok(RunConfig {
             scenario,
             mode,
@@ -274,6 +283,7 @@ impl RunArgs {
             progress_bar: std::io::IsTerminal::is_terminal(&std::io::stderr()),
             variant: self.variant,
             chaos_seed: self.chaos,
+            layout,
         })
     }
 }

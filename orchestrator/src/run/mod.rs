@@ -25,6 +25,7 @@ pub mod chaos;
 pub mod children;
 pub mod config;
 pub mod faults;
+pub mod hosts;
 pub mod progress;
 pub mod resources;
 pub mod stale;
@@ -215,7 +216,16 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         logs.clone(),
         checkpoints,
         config.mode,
+        config.layout,
     );
+    if config.layout.is_distributed() {
+        let port = free_loopback_port()?;
+        children.spawn_bridges(
+            &format!("tcp/127.0.0.1:{port}"),
+            &format!("tcp/127.0.0.1:{port}"),
+            None,
+        )?;
+    }
     children.spawn_world()?;
     let mut failure = None;
     for uav in 0..config.scenario.uavs.count {
@@ -256,8 +266,9 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
                     }
                     let mut restarted = 0;
                     for due in plan.due(time_s) {
+                        let host_run = config.layout.run_on(run, config.layout.host_of(due.uav));
                         let effective =
-                            apply_fault(&mut children, run, due, &mut resumes).await;
+                            apply_fault(&mut children, &host_run, due, &mut resumes).await;
                         plan.applied(due.index, step, time_s, effective);
                         if effective && due.kind == FaultKind::Restart {
                             restarted |= protocol::wire::uav_bit(due.uav);
@@ -350,7 +361,13 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     children.terminate_agents();
     children.wait_agents(EXIT_GRACE).await;
     children.kill_agents().await;
-    let leftover_files = clean_run_files(run);
+    children.stop_bridges(EXIT_GRACE).await;
+    let leftover_files = config
+        .layout
+        .runs(run)
+        .iter()
+        .map(clean_run_files)
+        .sum();
     if let Some(report) = &observer
         && report.end != observe::ObserverEnd::EndOfRun
         && !interrupted
@@ -393,6 +410,13 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     })
 }
 
+/// A TCP port on the loopback that nothing listens on now, for the world host's bridge.
+fn free_loopback_port() -> anyhow::Result<u16> {
+    let listener = std::net::TcpListener::bind(("127.0.0.1", 0))
+        .context("cannot find a free loopback port for the bridges")?;
+    Ok(listener.local_addr()?.port())
+}
+
 /// Creates `dir`, emptied of what an earlier run into the same output directory left (an
 /// agent must never resume from another run's checkpoint; it would refuse it anyway).
 fn fresh_dir(dir: &std::path::Path) -> anyhow::Result<()> {
@@ -417,7 +441,8 @@ fn own_usage_since(
     })
 }
 
-/// Applies one fault; whether it took effect. A pause's SIGCONT joins `resumes`.
+/// Applies one fault to an agent of `run` (the run in its host's domain); whether it took
+/// effect. A pause's SIGCONT joins `resumes`.
 async fn apply_fault(
     children: &mut Children,
     run: &protocol::service::RunId,

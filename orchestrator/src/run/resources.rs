@@ -27,7 +27,7 @@ use super::children::ExitedProcess;
 /// One process of the run.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct ProcessResources {
-    /// `orchestrator`, `world` or `agent`.
+    /// `orchestrator`, `world`, `agent` or `bridge`.
     pub role: &'static str,
     /// An agent's UAV.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -106,8 +106,8 @@ impl Resources {
                 child(p, phases)
             })
             .collect();
-        // The world first, then the agents in order.
-        children.sort_by_key(|p| (p.uav.is_some(), p.uav, p.incarnation));
+        // The world first, then the agents in order, then the bridges.
+        children.sort_by_key(|p| (p.role == "bridge", p.uav.is_some(), p.uav, p.incarnation));
         processes.extend(children);
         let totals = ResourceTotals::of(&processes, run);
         Resources { processes, totals }
@@ -201,7 +201,11 @@ fn child(p: &ExitedProcess, phases: Option<&PhaseTimes>) -> ProcessResources {
     };
     let phases = phases.cloned().unwrap_or_default();
     ProcessResources {
-        role: if p.uav.is_some() { "agent" } else { "world" },
+        role: match (p.uav, p.bridge_host) {
+            (Some(_), _) => "agent",
+            (None, Some(_)) => "bridge",
+            (None, None) => "world",
+        },
         uav: p.uav,
         incarnation: p.incarnation,
         end,
@@ -295,6 +299,7 @@ mod tests {
             ExitedProcess {
                 uav: Some(0),
                 incarnation: Some(1),
+                bridge_host: None,
                 pid: Some(10),
                 status: None,
                 usage: Some(usage(3.0)),
@@ -302,6 +307,7 @@ mod tests {
             ExitedProcess {
                 uav: None,
                 incarnation: None,
+                bridge_host: None,
                 pid: Some(11),
                 status: None,
                 usage: Some(usage(5.0)),

@@ -34,6 +34,7 @@ use clap::Args;
 
 use crate::Outcome;
 use crate::run::config::{RunConfig, new_run_id};
+use crate::run::hosts::HostLayout;
 use crate::run::runtime;
 use crate::usage::{ScenarioArgs, UsageError};
 pub use crate::variant::Variant;
@@ -176,6 +177,7 @@ impl SweepArgs {
                 index,
                 label: format!("{}/{} {} seed {seed}", n + 1, mine.len(), variant.name()),
                 config: RunConfig {
+                    layout: HostLayout::single(scenario.uavs.count),
                     scenario,
                     mode: StepMode::Lockstep,
                     faults: Vec::new(),

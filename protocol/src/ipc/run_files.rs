@@ -42,13 +42,14 @@ pub fn is_global_segment(file_name: &str) -> bool {
     file_name.ends_with(&suffix)
 }
 
-/// The run a setfleet iceoryx2 file belongs to: the shortest run id after whose prefix
-/// iceoryx2's own naming follows. `None` for a file that is not setfleet's.
+/// The run a setfleet iceoryx2 file belongs to, in its domain if it has one
+/// ([`RunId::in_domain`]): the shortest run id after whose prefix iceoryx2's own naming
+/// follows. `None` for a file that is not setfleet's.
 pub fn run_of_file(file_name: &str) -> Option<RunId> {
     let rest = file_name.strip_prefix(FILE_PREFIX)?;
     rest.match_indices('_').find_map(|(i, _)| {
         if iceoryx_name_follows(&rest[i + 1..]) {
-            RunId::new(&rest[..i]).ok()
+            RunId::from_domain_id(&rest[..i])
         } else {
             None
         }
@@ -94,15 +95,22 @@ pub fn run_files(run: &RunId) -> io::Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-/// Every run that has files in `/dev/shm` or under iceoryx2's root directory, by id.
+/// Every run (each simulated host's domain apart) that has files in `/dev/shm` or under
+/// iceoryx2's root directory, by id.
 pub fn runs_with_files() -> io::Result<Vec<RunId>> {
     let mut ids = BTreeSet::new();
     visit_iceoryx_files(|_, name| {
         if let Some(run) = run_of_file(name) {
-            ids.insert(run.as_str().to_owned());
+            ids.insert((run.as_str().to_owned(), run.domain()));
         }
     })?;
-    Ok(ids.iter().filter_map(|id| RunId::new(id).ok()).collect())
+    Ok(ids
+        .into_iter()
+        .filter_map(|(id, domain)| {
+            let run = RunId::new(&id).ok()?;
+            Some(domain.map_or_else(|| run.clone(), |d| run.in_domain(d)))
+        })
+        .collect())
 }
 
 /// Last resort once every process of `run` ended: deletes the run's files in `/dev/shm` and
@@ -182,6 +190,18 @@ mod tests {
         assert_eq!(run("iox2_other_x.service"), None);
         assert_eq!(run("iox2_sf_nothing"), None);
         assert_eq!(run("iox2_sf_bench-ipc-7-5_abc.service"), None);
+        let host = run_of_file(&format!("iox2_sf_a_b.h3_{HASH}.service")).unwrap();
+        assert_eq!(host, RunId::new("a_b").unwrap().in_domain(3));
+    }
+
+    #[test]
+    fn a_host_domain_has_files_of_its_own() {
+        let a = RunId::new("a").unwrap();
+        let name = format!("iox2_sf_a.h1_{HASH}.service");
+        assert!(!belongs_to_run(&name, &a));
+        assert!(belongs_to_run(&name, &a.in_domain(1)));
+        assert!(!belongs_to_run(&name, &a.in_domain(11)));
+        assert!(!belongs_to_run(&format!("iox2_sf_a_{HASH}.service"), &a.in_domain(1)));
     }
 
     #[test]

@@ -28,6 +28,10 @@ struct Args {
     /// Run id of the run to join.
     #[arg(long)]
     run_id: RunId,
+    /// Simulated host whose iceoryx2 domain to join (`fleet run --hosts`): its processes meet
+    /// the other hosts' only through the Zenoh bridge (default: the run's one domain).
+    #[arg(long)]
+    domain: Option<u16>,
     /// This agent's UAV index (0-based).
     #[arg(long)]
     id: u32,
@@ -67,7 +71,11 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let mut config = AgentConfig::new(args.run_id, args.id, scenario);
+    let run_id = match args.domain {
+        Some(host) => args.run_id.in_domain(host),
+        None => args.run_id,
+    };
+    let mut config = AgentConfig::new(run_id, args.id, scenario);
     config.timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms);
     config.world_timeout = args
         .world_timeout_ms

@@ -25,6 +25,10 @@ struct Args {
     /// Run id: prefixes every service and shared-memory file of the run.
     #[arg(long)]
     run_id: RunId,
+    /// Simulated host whose iceoryx2 domain to join (`fleet run --hosts`): its processes meet
+    /// the other hosts' only through the Zenoh bridge (default: the run's one domain).
+    #[arg(long)]
+    domain: Option<u16>,
     /// Scenario TOML file (default: the paper's scenario).
     #[arg(long)]
     scenario: Option<PathBuf>,
@@ -85,7 +89,11 @@ fn main() -> ExitCode {
         },
     };
     let timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms);
-    let mut config = ServerConfig::new(args.run_id, scenario, &timeouts);
+    let run_id = match args.domain {
+        Some(host) => args.run_id.in_domain(host),
+        None => args.run_id,
+    };
+    let mut config = ServerConfig::new(run_id, scenario, &timeouts);
     if let Some(agents) = args.agents {
         config.expected_agents = agents;
     }

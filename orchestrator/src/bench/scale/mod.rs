@@ -32,6 +32,7 @@ use world_server::server::StepMode;
 use crate::Outcome;
 use crate::results::summary::Summary;
 use crate::run::config::{RunConfig, default_out_dir, new_run_id};
+use crate::run::hosts::HostLayout;
 use crate::run::{execute, runtime, write_results};
 use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
@@ -178,6 +179,7 @@ impl BenchScaleArgs {
                     progress_bar: false,
                     variant: self.variant,
                     chaos_seed: None,
+                    layout: HostLayout::single(uavs),
                 },
             });
         }
