@@ -35,7 +35,6 @@ pub mod outbound;
 pub mod plan;
 pub mod report;
 pub mod security;
-pub mod session;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;

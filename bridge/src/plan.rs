@@ -1,9 +1,64 @@
 //! Which of a run's processes live on this host, and what the bridge therefore forwards.
 
 use std::collections::BTreeSet;
+use std::fmt;
+use std::str::FromStr;
 
 use protocol::ipc::RunNode;
 use protocol::service::RunId;
+
+use crate::security::{AccessPolicy, AccessPolicyError, HostName};
+
+/// A host and its agents, written `NAME=UAVS` (e.g. `h1=2,3`; `h0=` for a host without
+/// agents): how the command line names the hosts of a run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct HostShare {
+    /// The host's name (its certificate's common name).
+    pub name: HostName,
+    /// Its agents.
+    pub agents: BTreeSet<u32>,
+}
+
+impl FromStr for HostShare {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (name, uavs) = s
+            .split_once('=')
+            .ok_or_else(|| format!("{s:?}: expected NAME=UAVS, e.g. h1=2,3"))?;
+        let name = HostName::new(name).map_err(|e| format!("{s:?}: {e}"))?;
+        let agents = uavs
+            .split(',')
+            .filter(|u| !u.is_empty())
+            .map(|u| {
+                u.trim()
+                    .parse::<u32>()
+                    .map_err(|_| format!("{s:?}: {u:?} is not a UAV index"))
+            })
+            .collect::<Result<BTreeSet<u32>, String>>()?;
+        Ok(HostShare { name, agents })
+    }
+}
+
+impl fmt::Display for HostShare {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let uavs: Vec<String> = self.agents.iter().map(u32::to_string).collect();
+        write!(f, "{}={}", self.name.as_str(), uavs.join(","))
+    }
+}
+
+/// The access policy of a run whose hosts are `members`, the world host first: it is the
+/// relay (the router) and publishes the world's topics; each host publishes its agents'.
+pub fn access_policy(run: &RunId, members: &[HostShare]) -> Result<AccessPolicy, AccessPolicyError> {
+    let mut policy = AccessPolicy::new(run);
+    if let Some(world) = members.first() {
+        policy = policy.world_host(&world.name)?.relay_host(&world.name);
+    }
+    for m in members {
+        let uavs: Vec<u32> = m.agents.iter().copied().collect();
+        policy = policy.agent_host(&m.name, &uavs)?;
+    }
+    Ok(policy)
+}
 
 /// One host's share of a run.
 ///
@@ -73,6 +128,18 @@ impl HostPlan {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn host_shares_read_and_print() {
+        let share: HostShare = "uav-box=2,3".parse().unwrap();
+        assert_eq!(share.agents, BTreeSet::from([2, 3]));
+        assert_eq!(share.to_string(), "uav-box=2,3");
+        let empty: HostShare = "h0=".parse().unwrap();
+        assert!(empty.agents.is_empty());
+        for bad in ["h1", "h1=x", "h/1=2", "=2", "ca=1"] {
+            assert!(bad.parse::<HostShare>().is_err(), "{bad}");
+        }
+    }
 
     #[test]
     fn a_host_knows_its_nodes_and_the_others() {

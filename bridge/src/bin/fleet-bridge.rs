@@ -1,21 +1,22 @@
 //! `fleet-bridge`: joins one host's share of a setfleet run to the other hosts over Zenoh
-//! (usually started by `fleet run --hosts` or `fleet host`).
+//! (started by `fleet run` on the world host and by `fleet host` on the others).
 //!
 //! Exit codes: 0 stopped by SIGTERM/SIGINT, 1 the bridge failed (no router, bad
 //! certificates, ports that cannot be opened), 2 bad arguments or scenario.
 
-use std::collections::BTreeSet;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
 
-use bridge::plan::HostPlan;
+use bridge::plan::{self, HostPlan, HostShare};
+use bridge::security::{HostName, HostTlsFiles, LinkMode, LinkPlan, zenoh_config};
 use clap::Parser;
 use protocol::process::{self, Role};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 
-/// Forwards a run's iceoryx2 services between this host and the others over Zenoh.
+/// Forwards a run's iceoryx2 services between this host and the others over Zenoh, on
+/// mutually authenticated TLS links.
 #[derive(Debug, Parser)]
 #[command(name = "fleet-bridge", version)]
 struct Args {
@@ -25,28 +26,28 @@ struct Args {
     /// Simulated host whose iceoryx2 domain to join (default: the run's one domain).
     #[arg(long)]
     domain: Option<u16>,
-    /// This host's name (its certificate's common name).
+    /// This host's name: one of the `--member`s, and its certificate's common name.
     #[arg(long)]
-    host: String,
+    host: HostName,
+    /// Every host of the run and its agents, the world host first (repeatable), e.g.
+    /// `--member h0=0,1 --member h1=2,3`. The world host's bridge is the Zenoh router.
+    #[arg(long, value_name = "NAME=UAVS", required = true)]
+    member: Vec<HostShare>,
     /// Scenario TOML file (the same as the other processes').
     #[arg(long)]
     scenario: Option<PathBuf>,
     /// Overrides a scenario key (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
-    /// UAVs whose agents run on this host, comma-separated.
-    #[arg(long, value_delimiter = ',')]
-    agents: Vec<u32>,
-    /// The world-server and the observer run on this host: the bridge is the Zenoh router
-    /// that the other hosts connect to.
-    #[arg(long)]
-    world: bool,
-    /// Zenoh endpoint to listen on, e.g. `tcp/0.0.0.0:7447` (the world host).
-    #[arg(long)]
+    /// Zenoh endpoint the world host listens on, e.g. `tls/0.0.0.0:7447`.
+    #[arg(long, value_name = "ENDPOINT", conflicts_with = "connect")]
     listen: Vec<String>,
-    /// Zenoh endpoint of the world host to connect to, e.g. `tcp/10.0.0.1:7447`.
-    #[arg(long)]
+    /// Zenoh endpoint of the world host to connect to, e.g. `tls/10.0.0.1:7447`.
+    #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
+    /// Directory of the fleet's certificates: `ca.pem`, `HOST.pem` and `HOST.key`.
+    #[arg(long, value_name = "DIR")]
+    tls: PathBuf,
 }
 
 fn main() -> ExitCode {
@@ -54,25 +55,7 @@ fn main() -> ExitCode {
         Ok(args) => args,
         Err(code) => return code,
     };
-    let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("fleet-bridge: bad scenario: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    let run = match args.domain {
-        Some(host) => args.run_id.in_domain(host),
-        None => args.run_id,
-    };
-    let plan = HostPlan {
-        run,
-        host: args.host,
-        fleet: scenario.uavs.count,
-        agents: args.agents.iter().copied().collect::<BTreeSet<u32>>(),
-        world: args.world,
-    };
-    let config = match bridge::session::plain_config(plan.world, &args.listen, &args.connect) {
+    let (plan, config) = match configure(&args) {
         Ok(c) => c,
         Err(e) => {
             eprintln!("fleet-bridge: {e}");
@@ -93,4 +76,52 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// The host's plan and its Zenoh configuration, or what is wrong with the arguments.
+fn configure(args: &Args) -> Result<(HostPlan, zenoh::Config), String> {
+    let scenario = Scenario::load(args.scenario.as_deref(), &args.overrides)
+        .map_err(|e| format!("bad scenario: {e}"))?;
+    let run = match args.domain {
+        Some(host) => args.run_id.in_domain(host),
+        None => args.run_id.clone(),
+    };
+    let me = args
+        .member
+        .iter()
+        .position(|m| m.name == args.host)
+        .ok_or_else(|| format!("--host {}: not among the --members", args.host.as_str()))?;
+    let world = me == 0;
+    let plan = HostPlan {
+        run,
+        host: args.host.as_str().to_owned(),
+        fleet: scenario.uavs.count,
+        agents: args.member[me].agents.clone(),
+        world,
+    };
+    let link = LinkPlan {
+        mode: if world {
+            LinkMode::Router
+        } else {
+            LinkMode::Client
+        },
+        listen: args.listen.clone(),
+        connect: args.connect.clone(),
+    };
+    let tls = HostTlsFiles::in_dir(&args.tls, &args.host);
+    let policy = plan::access_policy(&args.run_id, &args.member).map_err(|e| e.to_string())?;
+    let mut config = zenoh_config(&link, Some(&tls), Some(&policy)).map_err(|e| e.to_string())?;
+    if !world {
+        // A host may start before the world host: keep trying to reach it.
+        config
+            .insert_json5("connect/timeout_ms", "-1")
+            .and_then(|()| {
+                config.insert_json5(
+                    "connect/retry",
+                    "{ period_init_ms: 50, period_max_ms: 1000, period_increase_factor: 2 }",
+                )
+            })
+            .map_err(|e| format!("cannot configure the connection: {e}"))?;
+    }
+    Ok((plan, config))
 }

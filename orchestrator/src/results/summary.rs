@@ -377,7 +377,7 @@ impl Summary {
             time_all_identified_any_s,
             faults: record.faults.records().to_vec(),
             chaos_seed: record.config.chaos_seed,
-            hosts: record.config.layout.hosts,
+            hosts: record.config.layout.hosts().len() as u16,
             resync_steps_max,
             resync_steps_mean,
             agents,

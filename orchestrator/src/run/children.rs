@@ -86,8 +86,8 @@ pub struct ExitedProcess {
     pub uav: Option<u32>,
     /// An agent's process number among its UAV's (1 for the first, 2 after a restart, ...).
     pub incarnation: Option<u32>,
-    /// The host of a bridge, `None` for the world-server and agents.
-    pub bridge_host: Option<u16>,
+    /// The host of a bridge (its name), `None` for the world-server and agents.
+    pub bridge_host: Option<String>,
     /// Its pid.
     pub pid: Option<u32>,
     /// How it ended (`None` if it could not be reaped).
@@ -453,42 +453,44 @@ impl Children {
         }
     }
 
-    /// Starts the bridge of every host, host 0's first (a Zenoh router listening on
-    /// `listen`), then the others (clients connecting to it), with the links' TLS files in
-    /// `tls` when given. Nothing on a run of one host.
-    pub fn spawn_bridges(
-        &mut self,
-        listen: &str,
-        connect: &str,
-        tls: Option<&Path>,
-    ) -> anyhow::Result<()> {
+    /// Starts the bridge of every host started here: host 0's (the Zenoh router, listening
+    /// on `endpoint`) or the other hosts' (clients connecting to `endpoint`), with the
+    /// fleet's certificates in `tls`. Nothing on a run of one host.
+    pub fn spawn_bridges(&mut self, endpoint: &str, tls: &Path) -> anyhow::Result<()> {
         if !self.layout.is_distributed() {
             return Ok(());
         }
         let program = self.binaries.bridge.clone().context(
             "cannot find fleet-bridge next to fleet; build every binary with `cargo build --bins`",
         )?;
-        for host in 0..self.layout.hosts {
-            let mut args = self.common_args(host);
-            let name = HostLayout::name(host);
-            args.extend(["--host".into(), name.clone().into()]);
-            let agents: Vec<String> = self
-                .layout
-                .agents_on(host)
-                .iter()
-                .map(u32::to_string)
-                .collect();
-            args.extend(["--agents".into(), agents.join(",").into()]);
-            if host == 0 {
-                args.extend(["--world".into(), "--listen".into(), listen.into()]);
-            } else {
-                args.extend(["--connect".into(), connect.into()]);
+        // Every bridge knows every host's role, for the access control; the world host first.
+        let members: Vec<OsString> = (0..self.layout.hosts().len() as u16)
+            .map(|h| {
+                let agents: Vec<String> = self
+                    .layout
+                    .agents_on(h)
+                    .iter()
+                    .map(u32::to_string)
+                    .collect();
+                let name = self.layout.hosts()[usize::from(h)].name.as_str();
+                format!("{name}={}", agents.join(",")).into()
+            })
+            .collect();
+        for (h, host) in self.layout.hosts().iter().enumerate() {
+            if !host.here {
+                continue;
             }
-            if let Some(dir) = tls {
-                args.extend(["--tls".into(), dir.as_os_str().to_owned()]);
+            let h = h as u16;
+            let mut args = self.common_args(h);
+            let name = host.name.as_str();
+            args.extend(["--host".into(), name.into(), "--tls".into(), tls.into()]);
+            for m in &members {
+                args.extend(["--member".into(), m.clone()]);
             }
+            let side = if h == 0 { "--listen" } else { "--connect" };
+            args.extend([side.into(), endpoint.into()]);
             let child = self.spawn(&program, args, &format!("bridge-{name}.log"))?;
-            self.bridges.insert(host, child);
+            self.bridges.insert(h, child);
         }
         Ok(())
     }
@@ -502,22 +504,23 @@ impl Children {
             }
         }
         for (host, mut child) in std::mem::take(&mut self.bridges) {
+            let host = self.layout.hosts()[usize::from(host)].name.as_str().to_owned();
             let pid = child.id();
             let mut exit = reap(&mut child, grace).await;
             if exit.is_none() {
-                tracing::warn!(host, "bridge did not stop on SIGTERM: killed");
+                tracing::warn!(%host, "bridge did not stop on SIGTERM: killed");
                 let _ = child.start_kill();
                 exit = reap(&mut child, Duration::from_secs(5)).await;
             }
             if let Some((status, _)) = exit
                 && !status.success()
             {
-                tracing::warn!(host, %status, "bridge exited with an error");
+                tracing::warn!(%host, %status, "bridge exited with an error");
             }
             self.exited.push(ExitedProcess {
                 uav: None,
                 incarnation: None,
-                bridge_host: Some(host),
+                bridge_host: Some(host.clone()),
                 pid,
                 status: exit.map(|(s, _)| s),
                 usage: exit.and_then(|(_, u)| u),

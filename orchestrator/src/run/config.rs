@@ -11,7 +11,7 @@ use protocol::service::RunId;
 use world_server::server::StepMode;
 
 use super::chaos;
-use super::hosts::HostLayout;
+use super::hosts::{HostLayout, RemoteHost};
 use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
 
@@ -57,17 +57,30 @@ pub struct RunArgs {
     /// Spreads the processes over this many simulated hosts: host 0 runs the world-server,
     /// the observer and the first agents, the others the rest of the agents, each in its own
     /// iceoryx2 domain; a Zenoh bridge per host joins them over loopback TLS.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, conflicts_with = "remote")]
     pub hosts: u16,
+    /// Agents that run on another machine (repeatable), e.g. `h1=2,3`: this machine runs the
+    /// world-server, the observer and the other agents, and `fleet host --host h1 --agents
+    /// 2,3` on that machine runs these. Needs `--listen`, `--tls` and `--run-id`.
+    #[arg(long, value_name = "NAME=UAVS", requires_all = ["listen", "tls", "run_id"])]
+    pub remote: Vec<RemoteHost>,
+    /// Where this machine's bridge listens for the other hosts, e.g. `tls/0.0.0.0:7447`
+    /// (default with `--hosts`: a free loopback port).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Option<String>,
+    /// Directory of the fleet's certificates (`fleet certs`): `ca.pem` and this host's
+    /// `h0.pem` and `h0.key` (default with `--hosts`: made for the run in `OUT/certs`).
+    #[arg(long, value_name = "DIR")]
+    pub tls: Option<PathBuf>,
     /// Output directory (default: `runs/<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Exit with code 1 when a guarantee violation was seen.
     #[arg(long)]
     pub strict: bool,
-    /// Run id, prefix of every service and shared-memory file (default: generated). For
-    /// tests and debugging.
-    #[arg(long, hide = true)]
+    /// Run id, prefix of every service and shared-memory file (default: generated). A run
+    /// with `--remote` hosts needs one: `fleet host` joins the run by it.
+    #[arg(long)]
     pub run_id: Option<RunId>,
 }
 
@@ -216,6 +229,10 @@ pub struct RunConfig {
     pub chaos_seed: Option<u64>,
     /// Where the processes run.
     pub layout: HostLayout,
+    /// Where host 0's bridge listens (`None`: a free loopback port, on simulated hosts).
+    pub listen: Option<String>,
+    /// The fleet's certificates (`None`: made for the run, on simulated hosts).
+    pub tls: Option<PathBuf>,
 }
 
 impl RunArgs {
@@ -272,7 +289,19 @@ impl RunArgs {
             // The schedule is built around the explicit faults; this checks it is consistent.
             faults = check_faults(&faults, &scenario)?;
         }
-        let layout = HostLayout::new(self.hosts, scenario.uavs.count).map_err(UsageError)?;
+        let layout = if self.remote.is_empty() {
+            HostLayout::simulated(self.hosts, scenario.uavs.count)
+        } else {
+            HostLayout::with_remotes(scenario.uavs.count, &self.remote)
+        }
+        .map_err(UsageError)?;
+        if let Some(f) = faults.iter().find(|f| !layout.is_here(f.uav)) {
+            return Err(UsageError(format!(
+                "--fault {f}: UAV {} runs on another machine; faults apply to this machine's \
+                 agents",
+                f.uav
+            )));
+        }
         Ok(RunConfig {
             scenario,
             mode,
@@ -284,6 +313,8 @@ impl RunArgs {
             variant: self.variant,
             chaos_seed: self.chaos,
             layout,
+            listen: self.listen.clone(),
+            tls: self.tls.clone(),
         })
     }
 }

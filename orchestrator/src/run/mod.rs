@@ -30,6 +30,7 @@ pub mod progress;
 pub mod resources;
 pub mod stale;
 
+use std::path::PathBuf;
 use std::process::ExitStatus;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -216,19 +217,22 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         logs.clone(),
         checkpoints,
         config.mode,
-        config.layout,
+        config.layout.clone(),
     );
     if config.layout.is_distributed() {
-        let port = free_loopback_port()?;
-        children.spawn_bridges(
-            &format!("tcp/127.0.0.1:{port}"),
-            &format!("tcp/127.0.0.1:{port}"),
-            None,
-        )?;
+        let endpoint = match &config.listen {
+            Some(e) => e.clone(),
+            None => format!("tls/127.0.0.1:{}", free_loopback_port()?),
+        };
+        let tls = match &config.tls {
+            Some(dir) => dir.clone(),
+            None => run_certificates(&config.layout, out)?,
+        };
+        children.spawn_bridges(&endpoint, &tls)?;
     }
     children.spawn_world()?;
     let mut failure = None;
-    for uav in 0..config.scenario.uavs.count {
+    for uav in (0..config.scenario.uavs.count).filter(|&u| config.layout.is_here(u)) {
         if let Err(e) = children.spawn_agent(uav) {
             failure = Some(format!("{e:#}"));
             break;
@@ -408,6 +412,20 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         leftover_files,
         resources,
     })
+}
+
+/// A fleet authority and a certificate for every simulated host, made for this run in
+/// `OUT/certs` (nothing of it outlives its use but the files, which a new run replaces).
+fn run_certificates(layout: &hosts::HostLayout, out: &std::path::Path) -> anyhow::Result<PathBuf> {
+    let dir = out.join("certs");
+    let names: Vec<String> = layout
+        .hosts()
+        .iter()
+        .map(|h| h.name.as_str().to_owned())
+        .collect();
+    bridge::security::write_fleet_certs(&dir, &names, &[], true)
+        .with_context(|| format!("cannot make the run's certificates in {}", dir.display()))?;
+    Ok(dir)
 }
 
 /// A TCP port on the loopback that nothing listens on now, for the world host's bridge.

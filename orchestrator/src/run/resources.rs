@@ -201,7 +201,7 @@ fn child(p: &ExitedProcess, phases: Option<&PhaseTimes>) -> ProcessResources {
     };
     let phases = phases.cloned().unwrap_or_default();
     ProcessResources {
-        role: match (p.uav, p.bridge_host) {
+        role: match (p.uav, &p.bridge_host) {
             (Some(_), _) => "agent",
             (None, Some(_)) => "bridge",
             (None, None) => "world",

@@ -187,6 +187,8 @@ impl SweepArgs {
                     progress_bar,
                     variant,
                     chaos_seed: None,
+                    listen: None,
+                    tls: None,
                 },
             });
         }

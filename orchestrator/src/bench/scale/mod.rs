@@ -179,6 +179,8 @@ impl BenchScaleArgs {
                     progress_bar: false,
                     variant: self.variant,
                     chaos_seed: None,
+                    listen: None,
+                    tls: None,
                     layout: HostLayout::single(uavs),
                 },
             });
