@@ -20,6 +20,10 @@ pub struct Cli {
 pub enum FleetCommand {
     /// Run the fleet once: world-server and agents as processes; results into `--out`.
     Run(crate::run::config::RunArgs),
+    /// Join a run of another machine with some of its agents (`fleet run --remote`).
+    Host(crate::host_cmd::HostArgs),
+    /// Make a fleet authority and a TLS certificate for each host.
+    Certs(crate::host_cmd::CertsArgs),
     /// Run every variant on seeds 1..=N and write the paper's Table I layout.
     Sweep(crate::sweep::SweepArgs),
     /// Render one UAV's camera frame at a given time as pictures.

@@ -30,6 +30,7 @@
 
 pub mod bench;
 pub mod cli;
+pub mod host_cmd;
 pub mod observe;
 pub mod pictures;
 pub mod render_cmd;
@@ -75,6 +76,11 @@ pub fn run(cli: Cli) -> Outcome {
             Ok(config) => return finish(run::run(&config)),
             Err(e) => return bad_input(e),
         },
+        FleetCommand::Host(args) => match args.validate() {
+            Ok(config) => return finish(host_cmd::run(&config)),
+            Err(e) => return bad_input(e),
+        },
+        FleetCommand::Certs(args) => host_cmd::certs(&args),
         FleetCommand::Sweep(args) => match args.merge_config() {
             Some(merge) => return finish(sweep::merge(&merge)),
             None => match args.validate() {

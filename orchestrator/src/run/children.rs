@@ -495,6 +495,13 @@ impl Children {
         Ok(())
     }
 
+    /// Whether every bridge started is still running.
+    pub fn bridges_running(&mut self) -> bool {
+        self.bridges
+            .values_mut()
+            .all(|child| matches!(child.try_wait(), Ok(None)))
+    }
+
     /// Stops the bridges (SIGTERM, then SIGKILL after `grace`), once every other process of
     /// the run is gone.
     pub async fn stop_bridges(&mut self, grace: Duration) {

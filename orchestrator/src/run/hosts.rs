@@ -156,6 +156,11 @@ impl HostLayout {
         Ok(layout)
     }
 
+    /// Names host 0 (the world host, of a joining host's layout).
+    pub fn rename_world_host(&mut self, name: HostName) {
+        self.hosts[0].name = name;
+    }
+
     /// The hosts, host 0 first.
     pub fn hosts(&self) -> &[Host] {
         &self.hosts
