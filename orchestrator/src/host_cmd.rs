@@ -4,10 +4,9 @@
 //! On the world host, `fleet run --remote h1=2,3 --listen tls/0.0.0.0:7447 --tls certs
 //! --run-id demo` runs the world-server, the observer and agents 0 and 1, and waits for the
 //! others' hellos. On machine `h1`, `fleet host --run-id demo --host h1 --agents 2,3
-//! --connect tls/WORLD_ADDR:7447 --tls certs --scenario scenario.toml` starts this
-//! machine's bridge, waits until it reaches the world host, then starts agents 2 and 3; it
-//! ends when they do (at the end of the run). The scenario must be the world host's:
-//! `fleet run` writes it to `OUT/scenario.toml`.
+//! --connect tls/WORLD_ADDR:7447 --tls certs` starts this machine's bridge, waits until it
+//! reaches the world host, then starts agents 2 and 3; it ends when they do (at the end of
+//! the run). The scenario must be the world host's: the same scenario flags resolve to it.
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
@@ -24,9 +23,10 @@ use world_server::server::StepMode;
 
 use crate::Outcome;
 use crate::run::children::{Binaries, Children};
-use crate::run::config::default_out_dir;
+use crate::run::config::{default_out_dir, resolve_scenario};
 use crate::run::hosts::HostLayout;
 use crate::usage::{ScenarioArgs, UsageError};
+use crate::variant::Variant;
 
 /// `fleet host`.
 #[derive(Debug, Args)]
@@ -51,9 +51,22 @@ pub struct HostArgs {
     /// The world host's name (its certificate's common name).
     #[arg(long, default_value = "h0")]
     pub world_host: HostName,
-    /// The run's scenario: the world host's `OUT/scenario.toml`.
+    /// The run's scenario, with the same `--scenario`, `--set`, `--variant`, `--seed`,
+    /// `--duration` and `--uavs` as the world host's `fleet run` (or its `OUT/scenario.toml`).
     #[command(flatten)]
     pub scenario: ScenarioArgs,
+    /// The guidance variant (as the world host's).
+    #[arg(long, value_enum, default_value_t = Variant::Paper)]
+    pub variant: Variant,
+    /// Overrides the scenario's `seed` (as the world host's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Overrides the scenario's `duration_s` (as the world host's).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Overrides the scenario's `uavs.count` (as the world host's).
+    #[arg(long)]
+    pub uavs: Option<u32>,
     /// Output directory for the logs and checkpoints (default: `runs/host-<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -76,7 +89,13 @@ pub struct HostConfig {
 impl HostArgs {
     /// Checks the arguments against the scenario.
     pub fn validate(&self) -> Result<HostConfig, UsageError> {
-        let scenario = self.scenario.load()?;
+        let scenario = resolve_scenario(
+            &self.scenario,
+            self.variant,
+            self.seed,
+            self.duration,
+            self.uavs,
+        )?;
         let agents: BTreeSet<u32> = self.agents.iter().copied().collect();
         if self.host == self.world_host {
             return Err(UsageError(format!(

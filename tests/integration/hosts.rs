@@ -130,3 +130,150 @@ fn an_agent_killed_and_restarted_on_another_host_rejoins() {
     let r = bridge_report(&out_dir, 0);
     assert!(r["proxies_created"].as_u64() >= Some(3), "{r}");
 }
+
+/// A free TCP port on the loopback.
+fn free_port() -> u16 {
+    let listener = std::net::TcpListener::bind(("127.0.0.1", 0)).expect("a free port");
+    listener.local_addr().expect("its address").port()
+}
+
+/// An intruder's session to the world host's bridge at `port`: TLS that trusts the fleet's
+/// authority (its certificate is public), presenting `identity` (a certificate and key of
+/// another authority) or no certificate at all.
+fn intruder_config(port: u16, ca: &Path, identity: Option<&Path>) -> zenoh::Config {
+    let mut config = zenoh::Config::default();
+    let mut set = |key: &str, value: Value| {
+        config
+            .insert_json5(key, &value.to_string())
+            .unwrap_or_else(|e| panic!("{key}: {e}"));
+    };
+    set("mode", serde_json::json!("peer"));
+    set(
+        "connect/endpoints",
+        serde_json::json!([format!("tls/127.0.0.1:{port}")]),
+    );
+    set("listen/endpoints", serde_json::json!([]));
+    set("scouting/multicast/enabled", serde_json::json!(false));
+    set("transport/link/tls/root_ca_certificate", serde_json::json!(ca));
+    match identity {
+        Some(dir) => {
+            set("transport/link/tls/enable_mtls", serde_json::json!(true));
+            set(
+                "transport/link/tls/connect_certificate",
+                serde_json::json!(dir.join("h1.pem")),
+            );
+            set(
+                "transport/link/tls/connect_private_key",
+                serde_json::json!(dir.join("h1.key")),
+            );
+        }
+        None => set("transport/link/tls/enable_mtls", serde_json::json!(false)),
+    }
+    config
+}
+
+/// What an intruder forges: an estimate and a token of UAV 0 and the end of the run, each a
+/// well-formed envelope, as a peer would send them.
+fn forgeries(run: &protocol::service::RunId) -> Vec<(String, Vec<u8>)> {
+    use protocol::wire::{WireHeader, WireKind};
+    let mut out = Vec::new();
+    for (key, kind) in [
+        (bridge::keys::estimate(run, 0), WireKind::Estimate),
+        (bridge::keys::token(run, 0), WireKind::Token),
+    ] {
+        let payload = [0u8; 16];
+        let header = WireHeader::new(kind, run.tag(), 0, 1, payload.len() as u32, 0);
+        let mut bytes = Vec::new();
+        bridge::envelope::encode_wire(&header, &payload, &mut bytes);
+        out.push((key, bytes));
+    }
+    out.push((bridge::keys::end_of_run(run), Vec::new()));
+    out
+}
+
+#[test]
+fn intruders_without_the_fleets_certificate_are_refused_and_change_nothing() {
+    use zenoh::Wait;
+    // The reference: the same run on one host.
+    let reference = {
+        let t = TestRun::new("hosts-ref");
+        let file = t.write("scenario.toml", &scenario(20.0));
+        let out_dir = t.dir.join("out");
+        let out = finish(
+            &t,
+            ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &[])),
+        );
+        assert!(out.status.success(), "{}", stderr(&out));
+        std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv")
+    };
+
+    let t = TestRun::new("hosts-intruder");
+    let file = t.write("scenario.toml", &scenario(20.0));
+    let out_dir = t.dir.join("out");
+    let port = free_port();
+    let listen = format!("tls/127.0.0.1:{port}");
+    let mut fleet = ChildGuard::spawn(&mut fleet_run(
+        &t,
+        &file,
+        &out_dir,
+        &["--hosts", "2", "--listen", &listen],
+    ));
+    let ca = out_dir.join("certs/ca.pem");
+    wait_until("the run's certificates", EXIT_TIMEOUT, || ca.exists());
+    // An impostor: a certificate that claims host h1 from an authority of its own.
+    let impostor = t.dir.join("impostor");
+    bridge::security::write_fleet_certs(&impostor, &["h1".to_owned()], &[], false)
+        .expect("the impostor's certificates");
+    let sessions: Vec<zenoh::Session> = [None, Some(impostor.as_path())]
+        .into_iter()
+        .map(|identity| {
+            zenoh::open(intruder_config(port, &ca, identity))
+                .wait()
+                .expect("an intruder's session opens (it has no link yet)")
+        })
+        .collect();
+    // Forge for as long as the run lasts: every attempt to connect is refused.
+    let forged = forgeries(&t.run);
+    let mut attempts = 0;
+    while fleet.is_running() {
+        for s in &sessions {
+            for (key, bytes) in &forged {
+                let _ = s.put(key, bytes.clone()).wait();
+            }
+        }
+        attempts += 1;
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(attempts > 10, "the run ended before the intruders tried");
+    for s in sessions {
+        assert_eq!(
+            s.info().routers_zid().wait().count() + s.info().peers_zid().wait().count(),
+            0,
+            "an intruder got a link"
+        );
+    }
+    let out = finish(&t, fleet);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let s = summary(&out_dir);
+    assert_eq!(s["violations"], 0, "{s}");
+    for a in s["agents"].as_array().expect("agents") {
+        assert_eq!(a["messages_dropped"], 0, "a forgery reached an agent: {a}");
+    }
+    assert_eq!(
+        std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv"),
+        reference,
+        "the intruders changed the run"
+    );
+    for host in 0..2 {
+        let r = bridge_report(&out_dir, host);
+        assert_eq!(r["refused"], serde_json::json!({}), "host {host}: {r}");
+    }
+    // The world host's bridge logged each refusal.
+    let log = std::fs::read_to_string(out_dir.join("logs/bridge-h0.log")).expect("log");
+    for refusal in ["peer sent no certificates", "UnknownIssuer"] {
+        assert!(
+            log.lines().any(|l| l.contains(refusal)),
+            "no {refusal:?} in the world host's bridge log"
+        );
+    }
+}

@@ -235,24 +235,42 @@ pub struct RunConfig {
     pub tls: Option<PathBuf>,
 }
 
+/// The scenario of a run: the file, then the variant's settings, the `--set`s, and the
+/// `--seed`, `--duration` and `--uavs` flags, which are overrides like any other, so the
+/// scenario's checks name the key and its range. `fleet run` and `fleet host` resolve it
+/// alike, so the same flags give every host the same scenario.
+pub fn resolve_scenario(
+    scenario: &ScenarioArgs,
+    variant: Variant,
+    seed: Option<u64>,
+    duration: Option<f64>,
+    uavs: Option<u32>,
+) -> Result<Scenario, UsageError> {
+    let mut overrides = variant.with_user_overrides(&scenario.overrides);
+    if let Some(seed) = seed {
+        overrides.push(format!("seed={seed}"));
+    }
+    if let Some(d) = duration {
+        overrides.push(format!("duration_s={d:?}"));
+    }
+    if let Some(n) = uavs {
+        overrides.push(format!("uavs.count={n}"));
+    }
+    Scenario::load(scenario.scenario.as_deref(), &overrides)
+        .map_err(|e| UsageError(format!("bad scenario: {e}")))
+}
+
 impl RunArgs {
     /// Loads the scenario, applies the overrides and checks the faults against the fleet and
     /// the run's duration.
     pub fn validate(&self) -> Result<RunConfig, UsageError> {
-        let mut overrides = self.variant.with_user_overrides(&self.scenario.overrides);
-        // The dedicated flags are overrides like any other, so the scenario's checks name
-        // the key and its range.
-        if let Some(seed) = self.seed {
-            overrides.push(format!("seed={seed}"));
-        }
-        if let Some(d) = self.duration {
-            overrides.push(format!("duration_s={d:?}"));
-        }
-        if let Some(n) = self.uavs {
-            overrides.push(format!("uavs.count={n}"));
-        }
-        let scenario = Scenario::load(self.scenario.scenario.as_deref(), &overrides)
-            .map_err(|e| UsageError(format!("bad scenario: {e}")))?;
+        let scenario = resolve_scenario(
+            &self.scenario,
+            self.variant,
+            self.seed,
+            self.duration,
+            self.uavs,
+        )?;
         let mode = match self.mode {
             ModeArg::Lockstep => StepMode::Lockstep,
             ModeArg::Realtime => {
