@@ -18,8 +18,9 @@
 //!   sends arrives anywhere.
 //! - **The access control** (Zenoh's ACL) limits what a fleet host may do to its role. A host
 //!   is known by its certificate's Common Name, its host name, which only the fleet authority
-//!   can vouch for. A receiving host drops any publication its sender may not make, so a
-//!   compromised agent host can forge no other host's estimates, nor frames, nor truth.
+//!   can vouch for. The host at the receiving end of a link (the router, in the bridge's
+//!   layout) drops any publication its sender may not make, so a compromised agent host can
+//!   forge no other host's estimates, nor frames.
 //!   (Zenoh checks again on the sending side, but a malicious host controls its own sending
 //!   side: the receiver's check is the one that protects.)
 //!
@@ -50,13 +51,11 @@
 //! | key expression                    | published by                 | built by |
 //! |-----------------------------------|------------------------------|----------|
 //! | `setfleet/{run}/uav/{i}/cvs`      | world host                   | [`keys::frame`](crate::keys::frame) |
-//! | `setfleet/{run}/truth`            | world host                   | |
 //! | `setfleet/{run}/world/**`         | world host                   | [`keys::end_of_run`](crate::keys::end_of_run) |
-//! | `setfleet/{run}/observer/**`      | world host                   | |
 //! | `setfleet/{run}/uav/{i}/cmd`      | host running UAV `i`         | [`keys::command`](crate::keys::command) |
 //! | `setfleet/{run}/uav/{i}/estimate` | host running UAV `i`         | [`keys::estimate`](crate::keys::estimate) |
 //! | `setfleet/{run}/guidance/{i}`     | host running UAV `i`         | [`keys::token`](crate::keys::token) |
-//! | `setfleet/{run}/alive/{host}/**`  | liveliness tokens of `host`  | [`keys::alive`](crate::keys::alive) |
+//! | `setfleet/{run}/alive/{host}/{node}` | liveliness of `host`'s own processes | [`keys::alive`](crate::keys::alive) |
 //! | `setfleet/{run}/**`, `.../alive/**` | the relay (router), relaying | |
 //!
 //! Every host named in the [`AccessPolicy`] may subscribe to `setfleet/{run}/**` and watch

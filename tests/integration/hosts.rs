@@ -197,7 +197,7 @@ fn intruders_without_the_fleets_certificate_are_refused_and_change_nothing() {
     // The reference: the same run on one host.
     let reference = {
         let t = TestRun::new("hosts-ref");
-        let file = t.write("scenario.toml", &scenario(20.0));
+        let file = t.write("scenario.toml", &scenario(10.0));
         let out_dir = t.dir.join("out");
         let out = finish(
             &t,
@@ -208,7 +208,7 @@ fn intruders_without_the_fleets_certificate_are_refused_and_change_nothing() {
     };
 
     let t = TestRun::new("hosts-intruder");
-    let file = t.write("scenario.toml", &scenario(20.0));
+    let file = t.write("scenario.toml", &scenario(10.0));
     let out_dir = t.dir.join("out");
     let port = free_port();
     let listen = format!("tls/127.0.0.1:{port}");
@@ -222,8 +222,12 @@ fn intruders_without_the_fleets_certificate_are_refused_and_change_nothing() {
     wait_until("the run's certificates", EXIT_TIMEOUT, || ca.exists());
     // An impostor: a certificate that claims host h1 from an authority of its own.
     let impostor = t.dir.join("impostor");
-    bridge::security::write_fleet_certs(&impostor, &["h1".to_owned()], &[], false)
-        .expect("the impostor's certificates");
+    let authority = bridge::security::FleetAuthority::generate("impostor").expect("authority");
+    let h1 = bridge::security::HostName::new("h1").expect("name");
+    let id = authority.issue_host(&h1, &[]).expect("the impostor's certificate");
+    std::fs::create_dir_all(&impostor).expect("impostor dir");
+    std::fs::write(impostor.join("h1.pem"), &id.cert_pem).expect("cert");
+    std::fs::write(impostor.join("h1.key"), &id.key_pem).expect("key");
     let sessions: Vec<zenoh::Session> = [None, Some(impostor.as_path())]
         .into_iter()
         .map(|identity| {
@@ -270,7 +274,7 @@ fn intruders_without_the_fleets_certificate_are_refused_and_change_nothing() {
     }
     // The world host's bridge logged each refusal.
     let log = std::fs::read_to_string(out_dir.join("logs/bridge-h0.log")).expect("log");
-    for refusal in ["peer sent no certificates", "UnknownIssuer"] {
+    for refusal in ["peer sent no certificates", "invalid peer certificate: UnknownIssuer"] {
         assert!(
             log.lines().any(|l| l.contains(refusal)),
             "no {refusal:?} in the world host's bridge log"

@@ -3,6 +3,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
+use protocol::ipc::RunNode;
 use protocol::service::RunId;
 use protocol::wire::MAX_UAVS;
 use serde_json::{Value, json};
@@ -52,12 +53,13 @@ fn under(run: &RunId, rest: &str) -> String {
 /// Who may publish what in one run, by host role; converted by [`AccessPolicy::to_json`] into
 /// Zenoh's `access_control` section.
 ///
-/// - the **world host** (world-server and observer) publishes frames, truth, world events and
-///   the observer's messages;
+/// - the **world host** (world-server and observer) publishes frames and world events (the end
+///   of the run), and announces the world-server and the observer alive;
 /// - an **agent host** running UAVs `S` publishes, for each `i` in `S`, UAV `i`'s commands,
-///   estimates and guidance token;
-/// - **every host** named here may subscribe to the whole run, declare liveliness tokens under
-///   its own name and watch everyone's;
+///   estimates and guidance token, and announces agent `i` alive;
+/// - **every host** named here may subscribe to the whole run and watch everyone's liveliness;
+///   it declares liveliness tokens only under its own name and only for its own processes, so
+///   no host can make another host's process look alive;
 /// - a **relay host**, the Zenoh router the other hosts connect to, forwards everyone's
 ///   messages and tokens: the others accept anything of the run from it. It is trusted with
 ///   the whole run (a relay can forge anything), and it is where the roles are enforced: it
@@ -169,12 +171,7 @@ impl AccessPolicy {
         }
         let mut keys = Vec::new();
         if rights.world {
-            keys.extend([
-                under(run, "uav/*/cvs"),
-                under(run, "truth"),
-                under(run, "world/**"),
-                under(run, "observer/**"),
-            ]);
+            keys.extend([under(run, "uav/*/cvs"), under(run, "world/**")]);
         }
         for &uav in &rights.uavs {
             keys.extend([
@@ -186,12 +183,30 @@ impl AccessPolicy {
         keys
     }
 
-    /// The liveliness tokens `host` may declare: its own (every host's for the relay).
+    /// The liveliness tokens `host` may declare: its own processes' under its own name
+    /// (every host's for the relay).
     pub fn tokens(&self, host: &HostName) -> Vec<String> {
+        let run = &self.run;
+        let name = host.as_str();
         match self.hosts.get(host) {
             None => Vec::new(),
-            Some(rights) if rights.relay => vec![keys::all_alive(&self.run)],
-            Some(_) => vec![under(&self.run, &format!("alive/{host}/**"))],
+            Some(rights) if rights.relay => vec![keys::all_alive(run)],
+            Some(rights) => {
+                let mut tokens = Vec::new();
+                if rights.world {
+                    tokens.extend([
+                        keys::alive(run, name, RunNode::WORLD),
+                        keys::alive(run, name, RunNode::OBSERVER),
+                    ]);
+                }
+                tokens.extend(
+                    rights
+                        .uavs
+                        .iter()
+                        .map(|&u| keys::alive(run, name, &RunNode::agent_name(u))),
+                );
+                tokens
+            }
         }
     }
 
@@ -321,12 +336,7 @@ mod tests {
         let p = policy();
         assert_eq!(
             p.publications(&host("world")),
-            [
-                "setfleet/r/uav/*/cvs",
-                "setfleet/r/truth",
-                "setfleet/r/world/**",
-                "setfleet/r/observer/**"
-            ]
+            ["setfleet/r/uav/*/cvs", "setfleet/r/world/**"]
         );
         assert_eq!(
             p.publications(&host("h1")),
@@ -341,7 +351,14 @@ mod tests {
         );
         assert_eq!(p.publications(&host("relay")), ["setfleet/r/**"]);
         assert!(p.publications(&host("stranger")).is_empty());
-        assert_eq!(p.tokens(&host("h1")), ["setfleet/r/alive/h1/**"]);
+        assert_eq!(
+            p.tokens(&host("h1")),
+            ["setfleet/r/alive/h1/agent-0", "setfleet/r/alive/h1/agent-1"]
+        );
+        assert_eq!(
+            p.tokens(&host("world")),
+            ["setfleet/r/alive/world/world", "setfleet/r/alive/world/observer"]
+        );
         assert_eq!(p.tokens(&host("relay")), ["setfleet/r/alive/**"]);
         assert!(p.tokens(&host("stranger")).is_empty());
     }
