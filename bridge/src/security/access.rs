@@ -393,7 +393,7 @@ mod tests {
             .unwrap()
             .agent_host(&host("h1"), &[1])
             .unwrap();
-        assert_eq!(both.publications(&host("world")).len(), 4 + 3);
+        assert_eq!(both.publications(&host("world")).len(), 2 + 3);
         assert_eq!(both.publications(&host("h1")).len(), 6);
     }
 
