@@ -345,7 +345,12 @@ mod tests {
         assert_eq!(got.header, sent.header);
         assert_eq!(got.boxes(), sent.boxes());
         assert_eq!(got.labels[..20], sent.labels[..20]);
-        let bits = |f: &CvsFrame| f.depth[..20].iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        let bits = |f: &CvsFrame| {
+            f.depth[..20]
+                .iter()
+                .map(|d| d.to_bits())
+                .collect::<Vec<_>>()
+        };
         assert_eq!(bits(&got), bits(&sent));
         assert_eq!(got.checksum(), sent.header.checksum);
     }

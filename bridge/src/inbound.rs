@@ -86,10 +86,7 @@ impl Ports {
                 command_services.push(service);
             }
             let service = node.open_estimate(uav)?;
-            estimates.insert(
-                uav,
-                RunNode::wire_publisher(&service, WIRE_INITIAL_BYTES)?,
-            );
+            estimates.insert(uav, RunNode::wire_publisher(&service, WIRE_INITIAL_BYTES)?);
         }
         let token = RunNode::wire_publisher(&node.open_guidance()?, WIRE_INITIAL_BYTES)?;
         let agent_wakes = plan
@@ -332,7 +329,11 @@ impl Proxies {
             return;
         }
         if !plan.is_remote_node(node) {
-            tracing::warn!(host, node, "liveliness of an unknown or local process ignored");
+            tracing::warn!(
+                host,
+                node,
+                "liveliness of an unknown or local process ignored"
+            );
             counters.refused("alive", "unknown_node");
             return;
         }

@@ -121,7 +121,10 @@ fn subscribe(
 ) -> Result<Vec<Box<dyn std::any::Any>>, BridgeError> {
     let run = &plan.run;
     let root = keys::run_root(run);
-    let mut data_keys = vec![format!("{root}/uav/*/estimate"), format!("{root}/guidance/*")];
+    let mut data_keys = vec![
+        format!("{root}/uav/*/estimate"),
+        format!("{root}/guidance/*"),
+    ];
     if plan.world {
         data_keys.push(format!("{root}/uav/*/cmd"));
     } else {

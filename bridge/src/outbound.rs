@@ -124,18 +124,29 @@ impl<'a> Outbound<'a> {
                 let service = node.open_cvs(uav)?;
                 frames.push(Route {
                     uav,
-                    from: service.subscriber_builder().create().map_err(IpcOpenError::from)?,
+                    from: service
+                        .subscriber_builder()
+                        .create()
+                        .map_err(IpcOpenError::from)?,
                     to: publisher(session, keys::frame(run, uav))?,
                 });
                 services._frames.push(service);
             }
             let wake = node.open_agent_wake(uav)?;
-            listeners.push(wake.listener_builder().create().map_err(IpcOpenError::from)?);
+            listeners.push(
+                wake.listener_builder()
+                    .create()
+                    .map_err(IpcOpenError::from)?,
+            );
             services._events.push(wake);
         }
         if !plan.world {
             for wake in [node.open_world_wake()?, node.open_observer_wake()?] {
-                listeners.push(wake.listener_builder().create().map_err(IpcOpenError::from)?);
+                listeners.push(
+                    wake.listener_builder()
+                        .create()
+                        .map_err(IpcOpenError::from)?,
+                );
                 services._events.push(wake);
             }
         }
@@ -147,7 +158,10 @@ impl<'a> Outbound<'a> {
                 let service = node.open_cmd(uav)?;
                 commands.push(Route {
                     uav,
-                    from: service.subscriber_builder().create().map_err(IpcOpenError::from)?,
+                    from: service
+                        .subscriber_builder()
+                        .create()
+                        .map_err(IpcOpenError::from)?,
                     to: publisher(session, keys::command(run, uav))?,
                 });
                 services._commands.push(service);
@@ -155,14 +169,20 @@ impl<'a> Outbound<'a> {
             let service = node.open_estimate(uav)?;
             estimates.push(Route {
                 uav,
-                from: service.subscriber_builder().create().map_err(IpcOpenError::from)?,
+                from: service
+                    .subscriber_builder()
+                    .create()
+                    .map_err(IpcOpenError::from)?,
                 to: publisher(session, keys::estimate(run, uav))?,
             });
             services._wire.push(service);
             tokens_out.insert(uav, publisher(session, keys::token(run, uav))?);
         }
         let guidance = node.open_guidance()?;
-        let tokens_in = guidance.subscriber_builder().create().map_err(IpcOpenError::from)?;
+        let tokens_in = guidance
+            .subscriber_builder()
+            .create()
+            .map_err(IpcOpenError::from)?;
         services._wire.push(guidance);
         let end_of_run = if plan.world {
             Some(publisher(session, keys::end_of_run(run))?)

@@ -48,7 +48,10 @@ impl fmt::Display for HostShare {
 
 /// The access policy of a run whose hosts are `members`, the world host first: it is the
 /// relay (the router) and publishes the world's topics; each host publishes its agents'.
-pub fn access_policy(run: &RunId, members: &[HostShare]) -> Result<AccessPolicy, AccessPolicyError> {
+pub fn access_policy(
+    run: &RunId,
+    members: &[HostShare],
+) -> Result<AccessPolicy, AccessPolicyError> {
     let mut policy = AccessPolicy::new(run);
     if let Some(world) = members.first() {
         policy = policy.world_host(&world.name)?.relay_host(&world.name);

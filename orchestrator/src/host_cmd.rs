@@ -103,13 +103,9 @@ impl HostArgs {
                 self.host
             )));
         }
-        let mut layout = HostLayout::joining(
-            scenario.uavs.count,
-            self.host.clone(),
-            &agents,
-            self.domain,
-        )
-        .map_err(UsageError)?;
+        let mut layout =
+            HostLayout::joining(scenario.uavs.count, self.host.clone(), &agents, self.domain)
+                .map_err(UsageError)?;
         layout.rename_world_host(self.world_host.clone());
         Ok(HostConfig {
             run: self.run_id.clone(),
@@ -194,7 +190,8 @@ async fn serve(config: &HostConfig) -> anyhow::Result<Outcome> {
     } else if !stop.load(Ordering::Relaxed) {
         eprintln!(
             "fleet host: the bridge ended before it reached the world host; see {}",
-            logs.join(format!("bridge-{}.log", config.layout.hosts()[1].name)).display()
+            logs.join(format!("bridge-{}.log", config.layout.hosts()[1].name))
+                .display()
         );
         outcome = Outcome::Failed;
     }

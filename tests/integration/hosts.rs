@@ -47,8 +47,8 @@ fn summary(out: &Path) -> Value {
 
 /// The last line of a bridge's log: its report.
 fn bridge_report(out: &Path, host: u16) -> Value {
-    let log = std::fs::read_to_string(out.join(format!("logs/bridge-h{host}.log")))
-        .expect("bridge log");
+    let log =
+        std::fs::read_to_string(out.join(format!("logs/bridge-h{host}.log"))).expect("bridge log");
     let last = log.lines().last().expect("a report line");
     serde_json::from_str(last).unwrap_or_else(|e| panic!("bridge report {last:?}: {e}"))
 }
@@ -95,8 +95,14 @@ fn two_and_four_hosts_give_the_results_of_one_host_byte_for_byte() {
         }
         csvs.push(std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv"));
     }
-    assert_eq!(csvs[0], csvs[1], "2 hosts: timeseries.csv differs from 1 host");
-    assert_eq!(csvs[0], csvs[2], "4 hosts: timeseries.csv differs from 1 host");
+    assert_eq!(
+        csvs[0], csvs[1],
+        "2 hosts: timeseries.csv differs from 1 host"
+    );
+    assert_eq!(
+        csvs[0], csvs[2],
+        "4 hosts: timeseries.csv differs from 1 host"
+    );
 }
 
 #[test]
@@ -154,7 +160,10 @@ fn intruder_config(port: u16, ca: &Path, identity: Option<&Path>) -> zenoh::Conf
     );
     set("listen/endpoints", serde_json::json!([]));
     set("scouting/multicast/enabled", serde_json::json!(false));
-    set("transport/link/tls/root_ca_certificate", serde_json::json!(ca));
+    set(
+        "transport/link/tls/root_ca_certificate",
+        serde_json::json!(ca),
+    );
     match identity {
         Some(dir) => {
             set("transport/link/tls/enable_mtls", serde_json::json!(true));
@@ -224,7 +233,9 @@ fn intruders_without_the_fleets_certificate_are_refused_and_change_nothing() {
     let impostor = t.dir.join("impostor");
     let authority = bridge::security::FleetAuthority::generate("impostor").expect("authority");
     let h1 = bridge::security::HostName::new("h1").expect("name");
-    let id = authority.issue_host(&h1, &[]).expect("the impostor's certificate");
+    let id = authority
+        .issue_host(&h1, &[])
+        .expect("the impostor's certificate");
     std::fs::create_dir_all(&impostor).expect("impostor dir");
     std::fs::write(impostor.join("h1.pem"), &id.cert_pem).expect("cert");
     std::fs::write(impostor.join("h1.key"), &id.key_pem).expect("key");
@@ -274,7 +285,10 @@ fn intruders_without_the_fleets_certificate_are_refused_and_change_nothing() {
     }
     // The world host's bridge logged each refusal.
     let log = std::fs::read_to_string(out_dir.join("logs/bridge-h0.log")).expect("log");
-    for refusal in ["peer sent no certificates", "invalid peer certificate: UnknownIssuer"] {
+    for refusal in [
+        "peer sent no certificates",
+        "invalid peer certificate: UnknownIssuer",
+    ] {
         assert!(
             log.lines().any(|l| l.contains(refusal)),
             "no {refusal:?} in the world host's bridge log"

@@ -357,7 +357,10 @@ mod tests {
         );
         assert_eq!(
             p.tokens(&host("world")),
-            ["setfleet/r/alive/world/world", "setfleet/r/alive/world/observer"]
+            [
+                "setfleet/r/alive/world/world",
+                "setfleet/r/alive/world/observer"
+            ]
         );
         assert_eq!(p.tokens(&host("relay")), ["setfleet/r/alive/**"]);
         assert!(p.tokens(&host("stranger")).is_empty());

@@ -511,7 +511,10 @@ impl Children {
             }
         }
         for (host, mut child) in std::mem::take(&mut self.bridges) {
-            let host = self.layout.hosts()[usize::from(host)].name.as_str().to_owned();
+            let host = self.layout.hosts()[usize::from(host)]
+                .name
+                .as_str()
+                .to_owned();
             let pid = child.id();
             let mut exit = reap(&mut child, grace).await;
             if exit.is_none() {

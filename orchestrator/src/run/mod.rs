@@ -366,12 +366,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     children.wait_agents(EXIT_GRACE).await;
     children.kill_agents().await;
     children.stop_bridges(EXIT_GRACE).await;
-    let leftover_files = config
-        .layout
-        .runs(run)
-        .iter()
-        .map(clean_run_files)
-        .sum();
+    let leftover_files = config.layout.runs(run).iter().map(clean_run_files).sum();
     if let Some(report) = &observer
         && report.end != observe::ObserverEnd::EndOfRun
         && !interrupted

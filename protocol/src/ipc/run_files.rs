@@ -201,7 +201,10 @@ mod tests {
         assert!(!belongs_to_run(&name, &a));
         assert!(belongs_to_run(&name, &a.in_domain(1)));
         assert!(!belongs_to_run(&name, &a.in_domain(11)));
-        assert!(!belongs_to_run(&format!("iox2_sf_a_{HASH}.service"), &a.in_domain(1)));
+        assert!(!belongs_to_run(
+            &format!("iox2_sf_a_{HASH}.service"),
+            &a.in_domain(1)
+        ));
     }
 
     #[test]
