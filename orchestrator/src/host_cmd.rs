@@ -23,10 +23,9 @@ use world_server::server::StepMode;
 
 use crate::Outcome;
 use crate::run::children::{Binaries, Children};
-use crate::run::config::{default_out_dir, resolve_scenario};
+use crate::run::config::{RunScenarioArgs, default_out_dir};
 use crate::run::hosts::HostLayout;
-use crate::usage::{ScenarioArgs, UsageError};
-use crate::variant::Variant;
+use crate::usage::UsageError;
 
 /// `fleet host`.
 #[derive(Debug, Args)]
@@ -51,22 +50,10 @@ pub struct HostArgs {
     /// The world host's name (its certificate's common name).
     #[arg(long, default_value = "h0")]
     pub world_host: HostName,
-    /// The run's scenario, with the same `--scenario`, `--set`, `--variant`, `--seed`,
-    /// `--duration` and `--uavs` as the world host's `fleet run` (or its `OUT/scenario.toml`).
+    /// The run's scenario: the same `--scenario`, `--set`, `--variant`, `--seed`,
+    /// `--duration` and `--uavs` as the world host's `fleet run`.
     #[command(flatten)]
-    pub scenario: ScenarioArgs,
-    /// The guidance variant (as the world host's).
-    #[arg(long, value_enum, default_value_t = Variant::Paper)]
-    pub variant: Variant,
-    /// Overrides the scenario's `seed` (as the world host's).
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Overrides the scenario's `duration_s` (as the world host's).
-    #[arg(long)]
-    pub duration: Option<f64>,
-    /// Overrides the scenario's `uavs.count` (as the world host's).
-    #[arg(long)]
-    pub uavs: Option<u32>,
+    pub choice: RunScenarioArgs,
     /// Output directory for the logs and checkpoints (default: `runs/host-<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -89,13 +76,7 @@ pub struct HostConfig {
 impl HostArgs {
     /// Checks the arguments against the scenario.
     pub fn validate(&self) -> Result<HostConfig, UsageError> {
-        let scenario = resolve_scenario(
-            &self.scenario,
-            self.variant,
-            self.seed,
-            self.duration,
-            self.uavs,
-        )?;
+        let scenario = self.choice.resolve()?;
         let agents: BTreeSet<u32> = self.agents.iter().copied().collect();
         if self.host == self.world_host {
             return Err(UsageError(format!(

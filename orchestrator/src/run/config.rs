@@ -15,9 +15,10 @@ use super::hosts::{HostLayout, RemoteHost};
 use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
 
-/// `fleet run`.
+/// The flags that make a run's scenario, shared by `fleet run` and `fleet host` so that the
+/// same flags give every host the same scenario.
 #[derive(Debug, Clone, Args)]
-pub struct RunArgs {
+pub struct RunScenarioArgs {
     /// The scenario.
     #[command(flatten)]
     pub scenario: ScenarioArgs,
@@ -34,6 +35,34 @@ pub struct RunArgs {
     /// Overrides the scenario's `uavs.count`.
     #[arg(long)]
     pub uavs: Option<u32>,
+}
+
+impl RunScenarioArgs {
+    /// The scenario: the file, then the variant's settings, the `--set`s, and the `--seed`,
+    /// `--duration` and `--uavs` flags, which are overrides like any other, so the scenario's
+    /// checks name the key and its range.
+    pub fn resolve(&self) -> Result<Scenario, UsageError> {
+        let mut overrides = self.variant.with_user_overrides(&self.scenario.overrides);
+        if let Some(seed) = self.seed {
+            overrides.push(format!("seed={seed}"));
+        }
+        if let Some(d) = self.duration {
+            overrides.push(format!("duration_s={d:?}"));
+        }
+        if let Some(n) = self.uavs {
+            overrides.push(format!("uavs.count={n}"));
+        }
+        Scenario::load(self.scenario.scenario.as_deref(), &overrides)
+            .map_err(|e| UsageError(format!("bad scenario: {e}")))
+    }
+}
+
+/// `fleet run`.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// The scenario and the flags that change it.
+    #[command(flatten)]
+    pub choice: RunScenarioArgs,
     /// How the world steps: lockstep (deterministic) or realtime.
     #[arg(long, value_enum, default_value_t = ModeArg::Lockstep)]
     pub mode: ModeArg,
@@ -235,42 +264,11 @@ pub struct RunConfig {
     pub tls: Option<PathBuf>,
 }
 
-/// The scenario of a run: the file, then the variant's settings, the `--set`s, and the
-/// `--seed`, `--duration` and `--uavs` flags, which are overrides like any other, so the
-/// scenario's checks name the key and its range. `fleet run` and `fleet host` resolve it
-/// alike, so the same flags give every host the same scenario.
-pub fn resolve_scenario(
-    scenario: &ScenarioArgs,
-    variant: Variant,
-    seed: Option<u64>,
-    duration: Option<f64>,
-    uavs: Option<u32>,
-) -> Result<Scenario, UsageError> {
-    let mut overrides = variant.with_user_overrides(&scenario.overrides);
-    if let Some(seed) = seed {
-        overrides.push(format!("seed={seed}"));
-    }
-    if let Some(d) = duration {
-        overrides.push(format!("duration_s={d:?}"));
-    }
-    if let Some(n) = uavs {
-        overrides.push(format!("uavs.count={n}"));
-    }
-    Scenario::load(scenario.scenario.as_deref(), &overrides)
-        .map_err(|e| UsageError(format!("bad scenario: {e}")))
-}
-
 impl RunArgs {
     /// Loads the scenario, applies the overrides and checks the faults against the fleet and
     /// the run's duration.
     pub fn validate(&self) -> Result<RunConfig, UsageError> {
-        let scenario = resolve_scenario(
-            &self.scenario,
-            self.variant,
-            self.seed,
-            self.duration,
-            self.uavs,
-        )?;
+        let scenario = self.choice.resolve()?;
         let mode = match self.mode {
             ModeArg::Lockstep => StepMode::Lockstep,
             ModeArg::Realtime => {
@@ -328,7 +326,7 @@ impl RunArgs {
             strict: self.strict,
             run_id: self.run_id.clone().unwrap_or_else(|| new_run_id(0)),
             progress_bar: std::io::IsTerminal::is_terminal(&std::io::stderr()),
-            variant: self.variant,
+            variant: self.choice.variant,
             chaos_seed: self.chaos,
             layout,
             listen: self.listen.clone(),
