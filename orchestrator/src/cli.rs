@@ -48,7 +48,8 @@ pub struct BenchArgs {
 pub enum BenchKind {
     /// CVS frame rendering (ray casts), per thread count.
     Render(crate::bench::render::BenchRenderArgs),
-    /// Moving frames, estimates and the token between processes (iceoryx2 vs a Unix socket).
+    /// Moving frames, estimates and the token between processes (iceoryx2, Zenoh over TCP and
+    /// TLS, and a Unix socket).
     Ipc(crate::bench::ipc::BenchIpcArgs),
     /// One estimator step per frame, its phases, message sizes and fusion.
     Estimator(crate::bench::estimator::BenchEstimatorArgs),

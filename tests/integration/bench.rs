@@ -1,5 +1,5 @@
-//! `fleet bench ipc` runs every case in child processes, writes a report with every headline
-//! key and leaves no iceoryx2 file behind.
+//! `fleet bench ipc` runs every case in child processes (the Zenoh ones over TCP and TLS),
+//! writes a report with every headline key and leaves no iceoryx2 file behind.
 
 use std::process::Command;
 
@@ -16,6 +16,28 @@ const IPC_KEYS: [&str; 8] = [
     "estimate_msgs_per_s",
     "token_round_us",
 ];
+
+/// The Zenoh cases and their headline keys' stem: `{stem}_p50_us`, `{stem}_p99_us`.
+const ZENOH_CASES: [(&str, &str); 4] = [
+    ("zenoh-frame-tcp", "zenoh_frame_tcp"),
+    ("zenoh-frame-tls", "zenoh_frame_tls"),
+    ("zenoh-estimate-tcp", "zenoh_estimate_tcp"),
+    ("zenoh-estimate-tls", "zenoh_estimate_tls"),
+];
+
+/// Zenoh's rates, all positive numbers.
+const ZENOH_RATE_KEYS: [&str; 4] = [
+    "zenoh_frames_per_s_tcp",
+    "zenoh_frames_per_s_tls",
+    "zenoh_estimate_msgs_per_s_tcp",
+    "zenoh_estimate_msgs_per_s_tls",
+];
+
+fn positive(json: &serde_json::Value, key: &str) -> f64 {
+    let v = json[key].as_f64().unwrap_or(f64::NAN);
+    assert!(v.is_finite() && v > 0.0, "{key} = {:?}", json[key]);
+    v
+}
 
 #[test]
 fn bench_ipc_reports_every_key_and_cleans_up() {
@@ -49,7 +71,10 @@ fn bench_ipc_reports_every_key_and_cleans_up() {
         "socket-1sub",
         "estimates",
         "token-round",
-    ] {
+    ]
+    .into_iter()
+    .chain(ZENOH_CASES.map(|(case, _)| case))
+    {
         assert!(stdout.contains(case), "the table lacks {case}: {stdout}");
     }
     let text = std::fs::read_to_string(&out_file).expect("the report was written");
@@ -61,12 +86,32 @@ fn bench_ipc_reports_every_key_and_cleans_up() {
             .as_str()
             .is_some_and(|c| c.contains("bench ipc"))
     );
-    for key in IPC_KEYS {
-        let v = json[key].as_f64().unwrap_or(f64::NAN);
-        assert!(v.is_finite() && v > 0.0, "{key} = {:?}", json[key]);
+    for key in IPC_KEYS.into_iter().chain(ZENOH_RATE_KEYS) {
+        positive(&json, key);
     }
     assert!(json["frame_p99_us"].as_f64() >= json["frame_p50_us"].as_f64());
-    assert_eq!(json["cases"].as_array().map(Vec::len), Some(5));
+    let cases = json["cases"]
+        .as_array()
+        .expect("the report lists its cases");
+    assert_eq!(cases.len(), 9);
+    for (name, stem) in ZENOH_CASES {
+        let p50 = positive(&json, &format!("{stem}_p50_us"));
+        assert!(positive(&json, &format!("{stem}_p99_us")) >= p50, "{stem}");
+        assert!(json[format!("{stem}_resent")].as_u64().is_some(), "{stem}");
+        let case = cases
+            .iter()
+            .find(|c| c["name"] == name)
+            .unwrap_or_else(|| panic!("no case {name}"));
+        let bytes = case["metrics"]["msg_bytes"].as_f64().unwrap_or(0.0);
+        // The frame is 864,000 bytes of pixels and its header; the estimate a few KB.
+        let expected = if name.contains("frame") {
+            864_000.0..866_000.0
+        } else {
+            100.0..1e6
+        };
+        assert!(expected.contains(&bytes), "{name}: {bytes} bytes");
+        assert_eq!(case["metrics"]["p50_us"].as_f64(), Some(p50), "{name}");
+    }
     let prefix = format!("iox2_sf_bench-ipc-{pid}-");
     let left: Vec<String> = std::fs::read_dir("/dev/shm")
         .map(|d| {

@@ -13,6 +13,7 @@ use super::super::estimator::FleetSim;
 use super::children::ChildSet;
 use super::message::ChildReport;
 use super::roles::Role;
+use super::zenoh_link::{self, ZenohTransport};
 
 /// Longest wait for a child to open its ports.
 const READY_TIMEOUT: Duration = Duration::from_secs(30);
@@ -25,6 +26,8 @@ pub(super) struct CaseSpec<'a> {
     pub(super) children: Vec<(String, Role, u32)>,
     /// `--peers` of every child.
     pub(super) peers: u32,
+    /// The Zenoh link of a Zenoh case (its router gets a free loopback port).
+    pub(super) zenoh: Option<ZenohTransport>,
 }
 
 /// Arguments shared by every child of the bench.
@@ -37,6 +40,8 @@ pub(super) struct Shared<'a> {
     pub(super) socket: &'a Path,
     /// The file holding the estimate message.
     pub(super) message: &'a Path,
+    /// The fleet's certificates of the Zenoh cases over TLS.
+    pub(super) certs: &'a Path,
 }
 
 /// Runs one case in fresh children; fails if any message failed its content check.
@@ -45,8 +50,17 @@ pub(super) fn run_case(
     spec: &CaseSpec<'_>,
 ) -> anyhow::Result<Vec<ChildReport>> {
     let mut set = ChildSet::new();
+    let zenoh = match spec.zenoh {
+        Some(transport) => vec![
+            "--transport".to_owned(),
+            transport.as_arg().to_owned(),
+            "--port".to_owned(),
+            zenoh_link::free_port()?.to_string(),
+        ],
+        None => Vec::new(),
+    };
     for (name, role, index) in &spec.children {
-        let args = vec![
+        let mut args = vec![
             "--run".to_owned(),
             shared.run.to_string(),
             "--role".to_owned(),
@@ -61,7 +75,10 @@ pub(super) fn run_case(
             shared.socket.display().to_string(),
             "--message".to_owned(),
             shared.message.display().to_string(),
+            "--certs".to_owned(),
+            shared.certs.display().to_string(),
         ];
+        args.extend(zenoh.iter().cloned());
         set.spawn_ready(name, &args, READY_TIMEOUT)
             .with_context(|| format!("case {}", spec.name))?;
     }
@@ -129,6 +146,7 @@ mod tests {
             bytes: messages * 10,
             elapsed_ns,
             corrupt: 0,
+            resent: 0,
         };
         let reports = [
             r(vec![1000, 3000], 100, 1_000_000_000),

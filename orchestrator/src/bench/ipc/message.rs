@@ -42,6 +42,62 @@ pub struct Ack {
     pub ok: u32,
 }
 
+impl Stamp {
+    /// Bytes of [`Stamp::to_le_bytes`].
+    pub const BYTES: usize = 24;
+
+    /// The stamp as little-endian fields, for a transport without user headers (a Zenoh
+    /// attachment).
+    pub fn to_le_bytes(&self) -> [u8; Self::BYTES] {
+        let mut b = [0u8; Self::BYTES];
+        b[..8].copy_from_slice(&self.seq.to_le_bytes());
+        b[8..16].copy_from_slice(&self.sent_mono_ns.to_le_bytes());
+        b[16..20].copy_from_slice(&self.sender.to_le_bytes());
+        b[20..].copy_from_slice(&self.phase.to_le_bytes());
+        b
+    }
+
+    /// Reads [`Stamp::to_le_bytes`]; `None` if `bytes` is not [`Stamp::BYTES`] long.
+    pub fn from_le_bytes(bytes: &[u8]) -> Option<Stamp> {
+        let b: &[u8; Self::BYTES] = bytes.try_into().ok()?;
+        let (seq, rest) = b.split_first_chunk::<8>()?;
+        let (sent, rest) = rest.split_first_chunk::<8>()?;
+        let (sender, phase) = rest.split_first_chunk::<4>()?;
+        Some(Stamp {
+            seq: u64::from_le_bytes(*seq),
+            sent_mono_ns: u64::from_le_bytes(*sent),
+            sender: u32::from_le_bytes(*sender),
+            phase: u32::from_le_bytes(phase.try_into().ok()?),
+        })
+    }
+}
+
+impl Ack {
+    /// Bytes of [`Ack::to_le_bytes`].
+    pub const BYTES: usize = 16;
+
+    /// The ack as little-endian fields, for a transport of bytes (Zenoh).
+    pub fn to_le_bytes(&self) -> [u8; Self::BYTES] {
+        let mut b = [0u8; Self::BYTES];
+        b[..8].copy_from_slice(&self.seq.to_le_bytes());
+        b[8..12].copy_from_slice(&self.subscriber.to_le_bytes());
+        b[12..].copy_from_slice(&self.ok.to_le_bytes());
+        b
+    }
+
+    /// Reads [`Ack::to_le_bytes`]; `None` if `bytes` is not [`Ack::BYTES`] long.
+    pub fn from_le_bytes(bytes: &[u8]) -> Option<Ack> {
+        let b: &[u8; Self::BYTES] = bytes.try_into().ok()?;
+        let (seq, rest) = b.split_first_chunk::<8>()?;
+        let (subscriber, ok) = rest.split_first_chunk::<4>()?;
+        Some(Ack {
+            seq: u64::from_le_bytes(*seq),
+            subscriber: u32::from_le_bytes(*subscriber),
+            ok: u32::from_le_bytes(ok.try_into().ok()?),
+        })
+    }
+}
+
 /// The latency phase of a case.
 pub const PHASE_LATENCY: u32 = 0;
 /// The rate phase of a case.
@@ -61,6 +117,9 @@ pub struct ChildReport {
     pub elapsed_ns: u64,
     /// Messages whose content check failed.
     pub corrupt: u64,
+    /// Messages sent again because their ack did not come (Zenoh cases: a link that dropped).
+    #[serde(default)]
+    pub resent: u64,
 }
 
 /// `CLOCK_MONOTONIC`, ns: one clock for every process of the machine.
@@ -113,6 +172,25 @@ mod tests {
         assert_eq!(a.pixel_count(), FRAME_MAX_PIXELS);
         assert_eq!(a.checksum(), a.header.checksum);
         assert_ne!(a.header.checksum, b.header.checksum);
+    }
+
+    #[test]
+    fn stamps_and_acks_round_trip_through_bytes() {
+        let stamp = Stamp {
+            seq: u64::MAX - 1,
+            sent_mono_ns: 123_456_789,
+            sender: 3,
+            phase: PHASE_RATE,
+        };
+        assert_eq!(Stamp::from_le_bytes(&stamp.to_le_bytes()), Some(stamp));
+        assert_eq!(Stamp::from_le_bytes(&stamp.to_le_bytes()[1..]), None);
+        let ack = Ack {
+            seq: 7,
+            subscriber: 2,
+            ok: 1,
+        };
+        assert_eq!(Ack::from_le_bytes(&ack.to_le_bytes()), Some(ack));
+        assert_eq!(Ack::from_le_bytes(&[0u8; 17]), None);
     }
 
     #[test]

@@ -7,8 +7,16 @@
 //!   checksum) and sends it; each subscriber takes it and verifies the checksum.
 //! - `socket-1sub`: the same frame over a Unix domain socket, bincode-encoded
 //!   ([`protocol::codec`]) and length-prefixed: the baseline a user would otherwise pick.
+//! - `zenoh-frame-tcp`, `zenoh-frame-tls`: the same frame from one host's bridge to another's
+//!   over Zenoh on loopback, set up as `fleet-bridge` sets up its sessions ([`zenoh_link`]): a
+//!   router listening, a client connecting, the bridge's publisher QoS, the frame in the
+//!   bridge's envelope ([`bridge::envelope::encode_frame`], decoded with `decode_frame_into`
+//!   and its checksum verified). Over plain TCP, and over mutually authenticated TLS with the
+//!   run's access policy (certificates made for the bench, hosts `h0` and `h1`).
 //! - `estimates`: a real estimate message (built by running the fleet in-process for a few
 //!   steps) all-to-all among 4 processes, round after round.
+//! - `zenoh-estimate-tcp`, `zenoh-estimate-tls`: that estimate message in the bridge's
+//!   envelope ([`bridge::envelope::encode_wire`]) from the router to the client, as the frame.
 //! - `token`: the guidance token ([`protocol::wire::GuidanceToken`], encoded as the agents
 //!   encode it) passed around 4 processes over the run's guidance service, each process taking
 //!   its turn with [`uav_agent::guidance::TokenRing`] and appending a plan; the latency is the
@@ -27,6 +35,12 @@
 //! it includes writing each frame in place and checking it. Every wake-up is an iceoryx2 event
 //! waited for with a `WaitSet` (the socket baseline blocks in `read`), never a busy poll.
 //!
+//! The Zenoh cases measure one way, from the send start (the frame written, before encoding)
+//! to the decoded message; their acks come back over iceoryx2, not over the Zenoh link,
+//! because Zenoh 1.10.2's TLS link is unsound when both of its directions are busy (see
+//! [`zenoh_link`]). A message Zenoh loses (a TLS link that dropped and reconnected) is sent
+//! again after 100 ms without an ack and counted (`resent`); its latency counts the loss.
+//!
 //! The run has its own [`RunId`](protocol::service::RunId) (its own iceoryx2 prefix); its
 //! files are removed at the end.
 
@@ -39,14 +53,16 @@ mod report;
 pub mod roles;
 mod services;
 mod socket;
+mod zenoh_link;
 
 use protocol::frame::CvsFrame;
 
 use super::BenchReport;
 use bench_run::{RunFiles, remove_stale_runs};
 use measure::{CaseSpec, Shared, latency_us, rate, run_case, typical_estimate};
-use report::{Headline, case};
+use report::{Headline, ZenohFigures, ZenohHeadline, case};
 use roles::Role;
+use zenoh_link::{Payload, ZenohTransport};
 
 pub use config::{BenchIpcArgs, BenchIpcConfig};
 pub use message::{
@@ -68,11 +84,14 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
     let message = dir.join("estimate.bin");
     std::fs::write(&message, &estimate)?;
     let socket = dir.join("frame.sock");
+    let certs = dir.join("certs");
+    zenoh_link::write_certs(&certs)?;
     let shared = Shared {
         run,
         iterations: config.iterations,
         socket: &socket,
         message: &message,
+        certs: &certs,
     };
     let frame_bytes = std::mem::size_of::<CvsFrame>();
     let n = config.iterations;
@@ -90,6 +109,7 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
                 name: &name,
                 children,
                 peers: subs,
+                zenoh: None,
             },
         )?;
         let (subs_reports, pub_report) = reports.split_at(subs as usize);
@@ -118,6 +138,7 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
                 ("socket-sub".to_owned(), Role::SocketSubscriber, 0),
             ],
             peers: 1,
+            zenoh: None,
         },
     )?;
     let base_lat = latency_us(&reports[1..])?;
@@ -133,6 +154,8 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         base_bps,
         frame_bytes,
     ));
+    let zenoh_frame_tcp = zenoh_case(&shared, &mut report, Payload::Frame, ZenohTransport::Tcp)?;
+    let zenoh_frame_tls = zenoh_case(&shared, &mut report, Payload::Frame, ZenohTransport::Tls)?;
 
     let fleet_children = |prefix: &str, role: Role| -> Vec<(String, Role, u32)> {
         (0..FLEET)
@@ -145,6 +168,7 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
             name: "estimates",
             children: fleet_children("estimates", Role::Estimates),
             peers: FLEET,
+            zenoh: None,
         },
     )?;
     let est_lat = latency_us(&reports)?;
@@ -160,6 +184,10 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         est_bps,
         estimate.len(),
     ));
+    let zenoh_estimate_tcp =
+        zenoh_case(&shared, &mut report, Payload::Estimate, ZenohTransport::Tcp)?;
+    let zenoh_estimate_tls =
+        zenoh_case(&shared, &mut report, Payload::Estimate, ZenohTransport::Tls)?;
 
     let reports = run_case(
         &shared,
@@ -167,6 +195,7 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
             name: "token",
             children: fleet_children("token", Role::Token),
             peers: FLEET,
+            zenoh: None,
         },
     )?;
     let token_lat = latency_us(&reports)?;
@@ -193,9 +222,81 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         estimates: (est_lat, est_mps),
         estimate_bytes: estimate.len(),
         token_round: token_lat,
+        zenoh: ZenohHeadline {
+            frame_tcp: zenoh_frame_tcp,
+            frame_tls: zenoh_frame_tls,
+            estimate_tcp: zenoh_estimate_tcp,
+            estimate_tls: zenoh_estimate_tls,
+        },
         frame_bytes,
         iterations: n,
     }
     .summary();
     Ok(report)
+}
+
+/// Runs the Zenoh case of `payload` over `transport` (a router publishing to a client), adds
+/// its row to `report` and returns its figures.
+fn zenoh_case(
+    shared: &Shared<'_>,
+    report: &mut BenchReport,
+    payload: Payload,
+    transport: ZenohTransport,
+) -> anyhow::Result<ZenohFigures> {
+    let (what, publisher, subscriber) = match payload {
+        Payload::Frame => (
+            "frame",
+            Role::ZenohFramePublisher,
+            Role::ZenohFrameSubscriber,
+        ),
+        Payload::Estimate => (
+            "estimate",
+            Role::ZenohEstimatePublisher,
+            Role::ZenohEstimateSubscriber,
+        ),
+    };
+    let name = format!("zenoh-{what}-{}", transport.as_arg());
+    let reports = run_case(
+        shared,
+        &CaseSpec {
+            name: &name,
+            // The router listens before the client connects.
+            children: vec![
+                (format!("{name}-pub"), publisher, 0),
+                (format!("{name}-sub"), subscriber, 0),
+            ],
+            peers: 1,
+            zenoh: Some(transport),
+        },
+    )?;
+    let (pub_report, sub_reports) = reports.split_at(1);
+    let lat = latency_us(sub_reports)?;
+    let (mps, bps) = rate(pub_report);
+    let size = pub_report
+        .first()
+        .map_or(0, |r| r.bytes / r.messages.max(1));
+    let resent: u64 = pub_report.iter().map(|r| r.resent).sum();
+    let link = match transport {
+        ZenohTransport::Tcp => "tcp",
+        ZenohTransport::Tls => "tls, mutual authentication, access control",
+    };
+    let mut row = case(
+        &name,
+        &[
+            ("transport", format!("zenoh {link}").into()),
+            ("topology", "router -> client, loopback".into()),
+            ("acks", "iceoryx2".into()),
+        ],
+        &lat,
+        mps,
+        bps,
+        size as usize,
+    );
+    row.metrics.push("resent", resent as f64);
+    report.cases.push(row);
+    Ok(ZenohFigures {
+        latency: lat,
+        rate: mps,
+        resent,
+    })
 }

@@ -31,6 +31,71 @@ pub(super) fn case(
     }
 }
 
+/// What a Zenoh case measured.
+pub(super) struct ZenohFigures {
+    /// Latency, us.
+    pub(super) latency: Stats,
+    /// Messages per second of the rate phase.
+    pub(super) rate: f64,
+    /// Messages sent again because Zenoh lost them.
+    pub(super) resent: u64,
+}
+
+/// The Zenoh cases.
+pub(super) struct ZenohHeadline {
+    /// The frame over TCP.
+    pub(super) frame_tcp: ZenohFigures,
+    /// The frame over TLS.
+    pub(super) frame_tls: ZenohFigures,
+    /// The estimate over TCP.
+    pub(super) estimate_tcp: ZenohFigures,
+    /// The estimate over TLS.
+    pub(super) estimate_tls: ZenohFigures,
+}
+
+/// Median latency of a frame over Zenoh on loopback the bridge aims at, us.
+const GOAL_ZENOH_FRAME_P50_US: f64 = 2000.0;
+/// Median latency of an estimate over Zenoh on loopback the bridge aims at, us.
+const GOAL_ZENOH_ESTIMATE_P50_US: f64 = 300.0;
+
+impl ZenohHeadline {
+    /// `zenoh_{frame,estimate}_{tcp,tls}_{p50_us,p99_us,resent}`,
+    /// `zenoh_frames_per_s_{tcp,tls}`, `zenoh_estimate_msgs_per_s_{tcp,tls}` and the goals.
+    fn insert_into(&self, sum: &mut BTreeMap<String, serde_json::Value>) {
+        let cases = [
+            ("frame", "tcp", "zenoh_frames_per_s_tcp", &self.frame_tcp),
+            ("frame", "tls", "zenoh_frames_per_s_tls", &self.frame_tls),
+            (
+                "estimate",
+                "tcp",
+                "zenoh_estimate_msgs_per_s_tcp",
+                &self.estimate_tcp,
+            ),
+            (
+                "estimate",
+                "tls",
+                "zenoh_estimate_msgs_per_s_tls",
+                &self.estimate_tls,
+            ),
+        ];
+        for (what, link, rate_key, figures) in cases {
+            let prefix = format!("zenoh_{what}_{link}");
+            sum.insert(format!("{prefix}_p50_us"), figures.latency.median.into());
+            sum.insert(format!("{prefix}_p99_us"), figures.latency.p99.into());
+            sum.insert(format!("{prefix}_resent"), figures.resent.into());
+            sum.insert(rate_key.into(), figures.rate.into());
+        }
+        sum.insert(
+            "goal_zenoh_frame_p50_us".into(),
+            GOAL_ZENOH_FRAME_P50_US.into(),
+        );
+        sum.insert(
+            "goal_zenoh_estimate_p50_us".into(),
+            GOAL_ZENOH_ESTIMATE_P50_US.into(),
+        );
+    }
+}
+
 /// The headline figures of a bench: each case's latency and rate.
 pub(super) struct Headline {
     /// The frame to one subscriber: latency, frames per second.
@@ -45,6 +110,8 @@ pub(super) struct Headline {
     pub(super) estimate_bytes: usize,
     /// Latency of a whole token round.
     pub(super) token_round: Stats,
+    /// The Zenoh cases.
+    pub(super) zenoh: ZenohHeadline,
     /// Size of a frame, bytes.
     pub(super) frame_bytes: usize,
     /// Messages per case and phase.
@@ -80,6 +147,7 @@ impl Headline {
         sum.insert("iterations".into(), self.iterations.into());
         sum.insert("goal_frame_p50_us".into(), 100.0.into());
         sum.insert("goal_speedup".into(), 15.0.into());
+        self.zenoh.insert_into(&mut sum);
         sum
     }
 }

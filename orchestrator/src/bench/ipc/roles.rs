@@ -32,6 +32,7 @@ use super::message::{
 };
 use super::services::BenchServices;
 use super::socket::{self, SocketFrame};
+use super::zenoh_link::{self, Payload, ZenohTransport};
 
 /// Longest wait for a peer's message, an ack or the parent's `go`.
 pub const IDLE: Duration = Duration::from_secs(10);
@@ -53,6 +54,14 @@ pub enum Role {
     Estimates,
     /// Takes its turns in the guidance token ring.
     Token,
+    /// A Zenoh router that sends bridge-encoded frames to a client (it listens).
+    ZenohFramePublisher,
+    /// A Zenoh client that receives bridge-encoded frames, checks and acknowledges them.
+    ZenohFrameSubscriber,
+    /// A Zenoh router that sends bridge-encoded estimates to a client (it listens).
+    ZenohEstimatePublisher,
+    /// A Zenoh client that receives bridge-encoded estimates, checks and acknowledges them.
+    ZenohEstimateSubscriber,
 }
 
 impl Role {
@@ -65,6 +74,10 @@ impl Role {
             Role::SocketSubscriber => "socket-subscriber",
             Role::Estimates => "estimates",
             Role::Token => "token",
+            Role::ZenohFramePublisher => "zenoh-frame-publisher",
+            Role::ZenohFrameSubscriber => "zenoh-frame-subscriber",
+            Role::ZenohEstimatePublisher => "zenoh-estimate-publisher",
+            Role::ZenohEstimateSubscriber => "zenoh-estimate-subscriber",
         }
     }
 }
@@ -93,6 +106,15 @@ pub struct BenchChildArgs {
     /// The estimate message file.
     #[arg(long)]
     pub message: PathBuf,
+    /// The Zenoh link of the Zenoh roles.
+    #[arg(long, value_enum, default_value_t = ZenohTransport::Tcp)]
+    pub transport: ZenohTransport,
+    /// The loopback port the Zenoh router listens on.
+    #[arg(long, default_value_t = 0)]
+    pub port: u16,
+    /// The fleet's certificates of the Zenoh roles over TLS (`fleet certs`' layout).
+    #[arg(long)]
+    pub certs: PathBuf,
 }
 
 /// Runs the child's role and prints its report.
@@ -113,6 +135,10 @@ pub fn run(args: &BenchChildArgs) -> anyhow::Result<()> {
         Role::SocketSubscriber => socket_subscriber(args),
         Role::Estimates => estimates(&run, args),
         Role::Token => token(&run, args),
+        Role::ZenohFramePublisher => zenoh_link::publisher(&run, args, Payload::Frame),
+        Role::ZenohFrameSubscriber => zenoh_link::subscriber(&run, args, Payload::Frame),
+        Role::ZenohEstimatePublisher => zenoh_link::publisher(&run, args, Payload::Estimate),
+        Role::ZenohEstimateSubscriber => zenoh_link::subscriber(&run, args, Payload::Estimate),
     }
     .with_context(|| format!("{} {}", args.role.as_arg(), args.index))?;
     let mut out = std::io::stdout().lock();
@@ -122,7 +148,7 @@ pub fn run(args: &BenchChildArgs) -> anyhow::Result<()> {
 }
 
 /// Says `ready` and waits for `go`.
-fn ready_then_go() -> anyhow::Result<()> {
+pub(super) fn ready_then_go() -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
     writeln!(out, "{READY}")?;
     out.flush()?;
@@ -247,6 +273,7 @@ fn frame_phases(
         bytes: n * std::mem::size_of::<CvsFrame>() as u64,
         elapsed_ns: start.elapsed().as_nanos() as u64,
         corrupt,
+        resent: 0,
     })
 }
 
