@@ -131,7 +131,7 @@ async fn serve(config: &HostConfig) -> anyhow::Result<Outcome> {
         StepMode::Lockstep,
         config.layout.clone(),
     );
-    children.spawn_bridges(&config.connect, &config.tls)?;
+    children.spawn_bridges(&config.connect, Some(&config.tls))?;
     let local = config.layout.run_on(&config.run, 1);
     eprintln!(
         "fleet host: waiting for the world host at {} (logs in {})",

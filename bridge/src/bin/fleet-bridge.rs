@@ -46,8 +46,12 @@ struct Args {
     #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
     /// Directory of the fleet's certificates: `ca.pem`, `HOST.pem` and `HOST.key`.
-    #[arg(long, value_name = "DIR")]
-    tls: PathBuf,
+    #[arg(long, value_name = "DIR", required_unless_present = "insecure")]
+    tls: Option<PathBuf>,
+    /// Plain TCP links without authentication nor access control (`tcp/` endpoints), for
+    /// tests on one machine only.
+    #[arg(long, conflicts_with = "tls")]
+    insecure: bool,
 }
 
 fn main() -> ExitCode {
@@ -108,9 +112,13 @@ fn configure(args: &Args) -> Result<(HostPlan, zenoh::Config), String> {
         listen: args.listen.clone(),
         connect: args.connect.clone(),
     };
-    let tls = HostTlsFiles::in_dir(&args.tls, &args.host);
+    let tls = args
+        .tls
+        .as_ref()
+        .map(|dir| HostTlsFiles::in_dir(dir, &args.host));
     let policy = plan::access_policy(&args.run_id, &args.member).map_err(|e| e.to_string())?;
-    let mut config = zenoh_config(&link, Some(&tls), Some(&policy)).map_err(|e| e.to_string())?;
+    let policy = tls.as_ref().map(|_| &policy);
+    let mut config = zenoh_config(&link, tls.as_ref(), policy).map_err(|e| e.to_string())?;
     if !world {
         // A host may start before the world host: keep trying to reach it.
         config

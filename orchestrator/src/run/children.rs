@@ -455,8 +455,9 @@ impl Children {
 
     /// Starts the bridge of every host started here: host 0's (the Zenoh router, listening
     /// on `endpoint`) or the other hosts' (clients connecting to `endpoint`), with the
-    /// fleet's certificates in `tls`. Nothing on a run of one host.
-    pub fn spawn_bridges(&mut self, endpoint: &str, tls: &Path) -> anyhow::Result<()> {
+    /// fleet's certificates in `tls` (none: plain TCP, for tests). Nothing on a run of one
+    /// host.
+    pub fn spawn_bridges(&mut self, endpoint: &str, tls: Option<&Path>) -> anyhow::Result<()> {
         if !self.layout.is_distributed() {
             return Ok(());
         }
@@ -483,7 +484,11 @@ impl Children {
             let h = h as u16;
             let mut args = self.common_args(h);
             let name = host.name.as_str();
-            args.extend(["--host".into(), name.into(), "--tls".into(), tls.into()]);
+            args.extend(["--host".into(), name.into()]);
+            match tls {
+                Some(dir) => args.extend(["--tls".into(), dir.into()]),
+                None => args.push("--insecure".into()),
+            }
             for m in &members {
                 args.extend(["--member".into(), m.clone()]);
             }

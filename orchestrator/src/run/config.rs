@@ -101,6 +101,10 @@ pub struct RunArgs {
     /// `h0.pem` and `h0.key` (default with `--hosts`: made for the run in `OUT/certs`).
     #[arg(long, value_name = "DIR")]
     pub tls: Option<PathBuf>,
+    /// Simulated hosts talk over plain loopback TCP, without TLS nor access control: for
+    /// determinism tests (Zenoh 1.10.2's TLS link can drop under traffic both ways).
+    #[arg(long, hide = true, conflicts_with_all = ["tls", "remote"])]
+    pub insecure_links: bool,
     /// Output directory (default: `runs/<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -262,6 +266,8 @@ pub struct RunConfig {
     pub listen: Option<String>,
     /// The fleet's certificates (`None`: made for the run, on simulated hosts).
     pub tls: Option<PathBuf>,
+    /// Plain TCP between simulated hosts (tests).
+    pub insecure_links: bool,
 }
 
 impl RunArgs {
@@ -331,6 +337,7 @@ impl RunArgs {
             layout,
             listen: self.listen.clone(),
             tls: self.tls.clone(),
+            insecure_links: self.insecure_links,
         })
     }
 }

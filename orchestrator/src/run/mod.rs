@@ -220,15 +220,17 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         config.layout.clone(),
     );
     if config.layout.is_distributed() {
+        let protocol = if config.insecure_links { "tcp" } else { "tls" };
         let endpoint = match &config.listen {
             Some(e) => e.clone(),
-            None => format!("tls/127.0.0.1:{}", free_loopback_port()?),
+            None => format!("{protocol}/127.0.0.1:{}", free_loopback_port()?),
         };
         let tls = match &config.tls {
-            Some(dir) => dir.clone(),
-            None => run_certificates(&config.layout, out)?,
+            _ if config.insecure_links => None,
+            Some(dir) => Some(dir.clone()),
+            None => Some(run_certificates(&config.layout, out)?),
         };
-        children.spawn_bridges(&endpoint, &tls)?;
+        children.spawn_bridges(&endpoint, tls.as_deref())?;
     }
     children.spawn_world()?;
     let mut failure = None;

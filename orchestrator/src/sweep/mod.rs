@@ -189,6 +189,7 @@ impl SweepArgs {
                     chaos_seed: None,
                     listen: None,
                     tls: None,
+                    insecure_links: false,
                 },
             });
         }

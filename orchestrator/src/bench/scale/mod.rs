@@ -181,6 +181,7 @@ impl BenchScaleArgs {
                     chaos_seed: None,
                     listen: None,
                     tls: None,
+                    insecure_links: false,
                     layout: HostLayout::single(uavs),
                 },
             });
