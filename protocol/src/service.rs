@@ -107,7 +107,8 @@ impl RunId {
         }
     }
 
-    /// Reads [`RunId::domain_id`] back: an id, or an id and a domain.
+    /// Reads back the part of a file name between [`FILE_PREFIX`] and `_`: `{id}` or
+    /// `{id}.h{host}`, as [`RunId::file_prefix`] writes it.
     pub fn from_domain_id(text: &str) -> Option<RunId> {
         match text.split_once(".h") {
             None => RunId::new(text).ok(),
