@@ -8,7 +8,7 @@
 //! - `socket-1sub`: the same frame over a Unix domain socket, bincode-encoded
 //!   ([`protocol::codec`]) and length-prefixed: the baseline a user would otherwise pick.
 //! - `zenoh-frame-tcp`, `zenoh-frame-tls`: the same frame from one host's bridge to another's
-//!   over Zenoh on loopback, set up as `fleet-bridge` sets up its sessions ([`zenoh_link`]): a
+//!   over Zenoh on loopback, set up as `fleet-bridge` sets up its sessions (module `zenoh_link`): a
 //!   router listening, a client connecting, the bridge's publisher QoS, the frame in the
 //!   bridge's envelope ([`bridge::envelope::encode_frame`], decoded with `decode_frame_into`
 //!   and its checksum verified). Over plain TCP, and over mutually authenticated TLS with the
@@ -38,7 +38,7 @@
 //! The Zenoh cases measure one way, from the send start (the frame written, before encoding)
 //! to the decoded message; their acks come back over iceoryx2, not over the Zenoh link,
 //! because Zenoh 1.10.2's TLS link is unsound when both of its directions are busy (see
-//! [`zenoh_link`]). A message Zenoh loses (a TLS link that dropped and reconnected) is sent
+//! `zenoh_link`). A message Zenoh loses (a TLS link that dropped and reconnected) is sent
 //! again after 100 ms without an ack and counted (`resent`); its latency counts the loss.
 //!
 //! The run has its own [`RunId`](protocol::service::RunId) (its own iceoryx2 prefix); its
