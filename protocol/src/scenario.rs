@@ -12,10 +12,14 @@
 //!
 //! [comms]
 //! range_m = 150.0             # inf: perfect links
+//! loss = 0.1                  # each message lost on a link with this probability
+//! latency_ms = 250.0          # estimates fused this much later (whole CVS periods)
 //! ```
 //!
+//! The `[comms]` keys and their ranges are tabled in [`CommsConfig`].
+//!
 //! Any key can be overridden as `KEY=VALUE`, the value written in TOML (`guidance.kappa=0`,
-//! `uavs.altitudes_m=[80,90]`, `guidance.use_map=false`, `comms.range_m=inf`); overrides apply
+//! `uavs.altitudes_m=[80,90]`, `guidance.use_map=false`, `comms.range_m=inf`, `comms.loss=0.3`); overrides apply
 //! in order, after the file:
 //!
 //! ```
@@ -44,6 +48,8 @@ use crate::grid::GroundGrid;
 
 mod overrides;
 mod validate;
+
+pub use validate::MAX_LATENCY_MS;
 
 use overrides::Override;
 
@@ -316,12 +322,27 @@ impl Planner {
     pub const NAMES: [&'static str; 2] = ["paper", "setfleet"];
 }
 
-/// `[comms]`.
+/// `[comms]`: the simulated radio links between agents. Every message still crosses the IPC
+/// (or the bridge); the receiving agent decides, by the same rules the observer applies, whether
+/// the radio carried it (`uav_agent::agent::radio`).
+///
+/// | key | default | accepted | meaning |
+/// |---|---|---|---|
+/// | `range_m` | `inf` | `0 < value <= inf` | an estimate is fused only when the sender's camera (as it sent) is within this horizontal distance of the receiver's (as it fuses) |
+/// | `loss` | `0.0` | `0 <= value <= 1` | probability that the radio loses one message on one link (estimates and tokens alike), drawn from `seed`, the kind of message, the sender, the receiver and the step: the same seed loses the same messages |
+/// | `latency_ms` | `0.0` | `0 <= value <= 10000` | an estimate of step `k` is fused at the receiver's first step whose time is at least `t(k) + latency`, `ceil(latency / cvs_period_s)` steps later, dilated by that lag; tokens are not delayed (the ring's hops take no simulated time, like the planners' computing) |
+///
+/// `latency_ms` is bounded because every receiver, and the observer, holds the estimates in
+/// flight: 10 s is 20 steps of the default scenario's estimates.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CommsConfig {
     /// Link range, metres; infinite for perfect links.
     pub range_m: f64,
+    /// Probability that a message is lost on one link, in `[0, 1]`.
+    pub loss: f64,
+    /// Delay of an estimate on a link, milliseconds (rounded up to whole CVS periods).
+    pub latency_ms: f64,
 }
 
 impl Default for Scenario {
@@ -434,6 +455,8 @@ impl Default for CommsConfig {
     fn default() -> Self {
         Self {
             range_m: f64::INFINITY,
+            loss: 0.0,
+            latency_ms: 0.0,
         }
     }
 }

@@ -12,7 +12,7 @@ use crate::camera::CameraPose;
 use crate::raster::delta::SetCode;
 
 /// Version of every message layout in this module and in [`crate::frame`].
-pub const PROTOCOL_VERSION: u32 = 4;
+pub const PROTOCOL_VERSION: u32 = 5;
 /// Targets a truth message can hold.
 pub const TRUTH_MAX_TARGETS: usize = 64;
 /// UAVs a truth message can hold, and the largest fleet.
@@ -329,6 +329,11 @@ pub struct AgentStats {
     pub decisions: u64,
     /// Decisions taken after waiting out a silent token holder.
     pub token_timeouts: u64,
+    /// Peer estimates the simulated radio lost on the way to this agent (`comms.loss`), of
+    /// the steps up to this estimate's.
+    pub estimates_lost: u64,
+    /// Tokens the simulated radio lost on the way to this agent.
+    pub tokens_lost: u64,
 }
 
 /// Agent -> peers and observers: the agent's sets after correction at a step.

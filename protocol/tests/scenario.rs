@@ -118,6 +118,61 @@ fn overrides_of_each_kind() {
 }
 
 #[test]
+fn lossy_slow_links_are_set_from_the_command_line_and_checked() {
+    let default = Scenario::default();
+    assert_eq!((default.comms.loss, default.comms.latency_ms), (0.0, 0.0));
+    let s = with_overrides(&["comms.loss=0.3", "comms.latency_ms=250"]).unwrap();
+    assert_eq!((s.comms.loss, s.comms.latency_ms), (0.3, 250.0));
+    let s = Scenario::from_toml_str("[comms]\nloss = 1\nlatency_ms = 0\n").unwrap();
+    assert_eq!(s.comms.loss, 1.0);
+    for (text, key, says) in [
+        ("comms.loss=nan", "comms.loss", "0 <= value <= 1"),
+        ("comms.loss=-0.1", "comms.loss", "0 <= value <= 1"),
+        ("comms.loss=1.5", "comms.loss", "0 <= value <= 1"),
+        ("comms.loss=inf", "comms.loss", "0 <= value <= 1"),
+        (
+            "comms.latency_ms=-1",
+            "comms.latency_ms",
+            "0 <= value <= 10000",
+        ),
+        (
+            "comms.latency_ms=inf",
+            "comms.latency_ms",
+            "0 <= value <= 10000",
+        ),
+        (
+            "comms.latency_ms=nan",
+            "comms.latency_ms",
+            "0 <= value <= 10000",
+        ),
+        (
+            "comms.latency_ms=20000",
+            "comms.latency_ms",
+            "0 <= value <= 10000",
+        ),
+    ] {
+        let e = with_overrides(&[text]).unwrap_err();
+        assert!(
+            matches!(&e, ScenarioError::OutOfRange { key: k, .. } if k == key),
+            "{text}: {e:?}"
+        );
+        let message = e.to_string();
+        assert!(
+            message.contains(key) && message.contains(says),
+            "{text}: {message}"
+        );
+    }
+    let e = with_overrides(&["comms.loss=\"high\""]).unwrap_err();
+    assert!(
+        matches!(&e, ScenarioError::WrongType { key, .. } if key == "comms.loss"),
+        "{e:?}"
+    );
+    // The resolved scenario keeps them.
+    let s = with_overrides(&["comms.loss=0.125", "comms.latency_ms=1500"]).unwrap();
+    assert_eq!(Scenario::from_toml_str(&s.to_toml_string()).unwrap(), s);
+}
+
+#[test]
 fn unknown_nested_key_is_named_with_the_valid_keys() {
     let err = Scenario::from_toml_str("[guidance]\nkapa = 0\n").unwrap_err();
     match &err {

@@ -132,16 +132,20 @@ fn without_wall_clock(mut v: Value) -> Value {
 
 #[test]
 fn the_same_seed_in_lockstep_gives_the_same_results() {
-    // `paper`, `kappa0` and `nomap` share the paper's planner; `setfleet` has its own.
-    for variant in ["paper", "setfleet"] {
+    // `paper`, `kappa0` and `nomap` share the paper's planner; `setfleet` has its own. Lossy,
+    // slow links lose the same messages with the same seed (drawn from it, never from timing)
+    // and never wait for them.
+    let lossy = ["--set", "comms.loss=0.3", "--set", "comms.latency_ms=700"];
+    for (variant, links) in [("paper", &[][..]), ("setfleet", &[]), ("paper", &lossy[..])] {
         let results: Vec<(Value, String)> = (0..2)
             .map(|_| {
                 let t = TestRun::new("run-determinism");
                 let file = t.write("scenario.toml", &scenario(20.0, 2));
                 let out_dir = t.dir.join("out");
+                let args = [&["--variant", variant][..], links].concat();
                 let out = finish(
                     &t,
-                    ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &["--variant", variant])),
+                    ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &args)),
                 );
                 assert!(out.status.success(), "{variant}: {}", stderr(&out));
                 let csv = std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv");
@@ -150,12 +154,20 @@ fn the_same_seed_in_lockstep_gives_the_same_results() {
             .collect();
         assert_eq!(
             results[0].1, results[1].1,
-            "{variant}: timeseries.csv differs"
+            "{variant} {links:?}: timeseries.csv differs"
         );
         assert_eq!(
             results[0].0, results[1].0,
-            "{variant}: summary.json differs"
+            "{variant} {links:?}: summary.json differs"
         );
+        if !links.is_empty() {
+            let agents = results[0].0["agents"].as_array().expect("agents");
+            let lost: u64 = agents
+                .iter()
+                .map(|a| a["estimates_lost"].as_u64().unwrap())
+                .sum();
+            assert!(lost > 0, "the lossy runs lost nothing");
+        }
     }
 }
 

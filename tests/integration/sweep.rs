@@ -206,3 +206,68 @@ fn an_interrupted_jobs_sweep_stops_every_run_and_leaves_nothing() {
         assert_eq!(s["timing"]["leftover_ipc_files"], 0, "{s}");
     }
 }
+
+#[test]
+fn an_axis_sweep_compares_the_values_of_a_key() {
+    let t = TestRun::new("sweep-axis");
+    t.write("scenario.toml", SCENARIO);
+    let out_dir = t.dir.join("out");
+    let mut cmd = Command::new(binary("fleet"));
+    cmd.arg("sweep")
+        .arg("--scenario")
+        .arg(t.dir.join("scenario.toml"))
+        .args(["--seeds", "2", "--variants", "paper", "--duration", "4"])
+        .args(["--axis", "comms.loss=0,0.5", "--jobs", "2", "--out"])
+        .arg(&out_dir);
+    let out = ChildGuard::spawn(&mut cmd)
+        .wait_timeout(EXIT_TIMEOUT * 3)
+        .expect("the axis sweep did not end in time");
+    assert_nothing_left(&t);
+    assert!(out.status.success(), "{}", stderr(&out));
+    // Each value is a sweep directory of its own, whose runs have that value.
+    for (value, loss) in [("0", 0.0), ("0.5", 0.5)] {
+        let dir = out_dir.join(format!("comms.loss={value}"));
+        let table = json(&dir.join("table.json"));
+        assert_eq!(table["seeds"], serde_json::json!([1, 2]), "{table}");
+        for seed in [1, 2] {
+            let run = dir.join(format!("paper/seed-{seed}"));
+            let s = json(&run.join("summary.json"));
+            assert_eq!(s["violations"], 0, "{s}");
+            let scenario = std::fs::read_to_string(run.join("scenario.toml")).expect("scenario");
+            assert!(scenario.contains(&format!("loss = {loss:?}")), "{scenario}");
+        }
+    }
+    let axis = json(&out_dir.join("axis.json"));
+    assert_eq!(axis["key"], "comms.loss");
+    assert_eq!(axis["values"], serde_json::json!(["0", "0.5"]));
+    let lost = &axis["metrics"]["paper"];
+    assert_eq!(lost[0]["estimates_lost_share"]["mean"], 0.0, "{axis}");
+    assert!(
+        lost[1]["estimates_lost_share"]["mean"].as_f64().unwrap() > 0.0,
+        "{axis}"
+    );
+    assert_eq!(lost[1]["violations"]["mean"], 0.0, "{axis}");
+    let md = std::fs::read_to_string(out_dir.join("axis.md")).expect("axis.md");
+    assert!(
+        md.contains("| metric | comms.loss = 0 | comms.loss = 0.5 |"),
+        "{md}"
+    );
+    for picture in ["axis.png", "metrics.png"] {
+        let bytes = std::fs::read(out_dir.join(picture)).expect(picture);
+        assert!(bytes.starts_with(b"\x89PNG"), "{picture}");
+    }
+    // The comparison is rebuilt from the runs as written, by a merge.
+    let merged = t.dir.join("merged");
+    let mut cmd = Command::new(binary("fleet"));
+    cmd.args(["sweep", "--merge"])
+        .arg(&out_dir)
+        .args(["--axis", "comms.loss=0,0.5", "--out"])
+        .arg(&merged);
+    let out = tests::run_to_end(&mut cmd);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(
+        without_wall_clock(json(&merged.join("axis.json"))),
+        without_wall_clock(axis)
+    );
+    assert!(merged.join("comms.loss=0.5/table.md").is_file());
+}

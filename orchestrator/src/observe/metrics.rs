@@ -4,10 +4,13 @@
 //!
 //! **Per agent.** The paper defines every set metric for one UAV on its own fused sets. For each
 //! agent `i` that published an estimate of step `k`, [`FusedSets::of_agent`] rebuilds what `i`
-//! holds after its step-`k` fusion: its own estimate fused with the same-step estimates of the
-//! peers it fuses, in the order it fuses them (ascending UAV id), with the agents' own law
-//! ([`PeerEstimate::fuse`]) and, with a finite `comms.range_m`, only the peers in range by the
-//! agents' own rule ([`in_comms_range`]). [`SetMetrics::measure`] then gives UA, OA, explored,
+//! holds after its step-`k` fusion: its own estimate fused with the estimates of the peers it
+//! fuses at that step, in the order it fuses them (ascending UAV id), with the agents' own law
+//! ([`PeerEstimate::fuse`]). Which peers' estimates those are is the agents' own rule
+//! ([`Radio`]): the estimates of step `k - d` (`d` the link latency in steps, 0 by default;
+//! older estimates are dilated by the law), each only if the radio delivered it to `i`
+//! ([`Radio::delivers`], drawn from the seed, the link and the step: the observer draws the same)
+//! and its sender was in range ([`Radio::in_range`]). [`SetMetrics::measure`] then gives UA, OA, explored,
 //! target-set area, localisation error and identified count of those sets, and
 //! [`AgentSpread::over`] their mean over agents and their worst agent.
 //!
@@ -31,7 +34,7 @@ use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
 use protocol::raster::CellSet;
 use protocol::wire::{AgentStats, TargetTruth};
-use uav_agent::agent::in_comms_range;
+use uav_agent::agent::radio::{LinkKind, Radio};
 use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::{self, EstimateInbox};
 use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate};
@@ -156,34 +159,40 @@ impl FusedSets {
         }
     }
 
-    /// Agent `own.uav()`'s sets after its fusion of its step, among `all` the estimates of
-    /// that step (see [`fused_peers`]).
+    /// Agent `own.uav()`'s sets after its fusion of its step, among `sent` the estimates sent
+    /// `radio.latency_steps()` steps before it (see [`fused_peers`]).
     pub fn of_agent(
         own: &ObservedEstimate,
-        all: &[ObservedEstimate],
+        sent: &[ObservedEstimate],
         config: &EstimatorConfig,
-        range_m: f64,
+        radio: &Radio,
     ) -> FusedSets {
-        FusedSets::fuse(own, fused_peers(own, all, range_m), config)
+        FusedSets::fuse(own, fused_peers(own, sent, radio), config)
     }
 
-    /// [`FusedSets::of_agent`] of every agent of `all`, in `all`'s order. Agents that fuse the
-    /// same estimates (in lockstep with unlimited links, every agent fuses every other) share
-    /// one fusion: on estimates of one step the law meets and joins sets, so the result does
-    /// not depend on whose estimate it starts from; only `H̄`, which starts from each agent's
-    /// own, is built per agent. A shared fusion that met an empty intersection (then the union
-    /// is kept, which depends on the order) or another grid is not shared: each agent of it
-    /// is fused on its own.
+    /// [`FusedSets::of_agent`] of every agent of `all` (the estimates of one step), in `all`'s
+    /// order, among `sent` (the estimates of `radio.latency_steps()` steps before: `all` itself
+    /// without latency). Without latency, agents that fuse the same estimates (in lockstep
+    /// with perfect links, every agent fuses every other) share one fusion: on estimates of one
+    /// step the law meets and joins sets, so the result does not depend on whose estimate it
+    /// starts from; only `H̄`, which starts from each agent's own, is built per agent. A shared
+    /// fusion that met an empty intersection (then the union is kept, which depends on the
+    /// order) or another grid is not shared: each agent of it is fused on its own. With
+    /// latency the peers' estimates are older than the agent's own and are dilated by the law
+    /// as they are fused into it: each agent is fused on its own, as it fuses.
     pub fn of_agents(
         all: &[ObservedEstimate],
+        sent: &[ObservedEstimate],
         config: &EstimatorConfig,
-        range_m: f64,
+        radio: &Radio,
     ) -> Vec<FusedSets> {
         let mut shared: BTreeMap<Vec<u32>, Option<PeerEstimate>> = BTreeMap::new();
         all.iter()
             .map(|own| {
-                // The peers are of `own`'s step ([`fused_peers`]).
-                let peers: Vec<&ObservedEstimate> = fused_peers(own, all, range_m).collect();
+                let peers: Vec<&ObservedEstimate> = fused_peers(own, sent, radio).collect();
+                if peers.iter().any(|p| p.step() != own.step()) {
+                    return FusedSets::fuse(own, peers, config);
+                }
                 let mut group: Vec<&ObservedEstimate> = peers.clone();
                 group.push(own);
                 group.sort_by_key(|e| e.uav());
@@ -215,20 +224,24 @@ fn fuse_in_order(group: &[&ObservedEstimate], config: &EstimatorConfig) -> Optio
     Some(fused)
 }
 
-/// The estimates among `all` that agent `own.uav()` fuses at its step, in its order: the
-/// other agents' estimates of the same step whose sender is within `range_m`
-/// ([`in_comms_range`]), by ascending UAV id (as the agent keeps its peers).
+/// The estimates among `sent` that agent `own.uav()` fuses at its step `k`, in its order: the
+/// other agents' estimates of step `k - d` (`d = radio.latency_steps()`) that the radio
+/// delivered to it ([`Radio::delivers`]) from a sender in range ([`Radio::in_range`]: the
+/// sender's pose as it sent, the agent's as it fuses), by ascending UAV id (as the agent keeps
+/// its peers). None before step `d`.
 pub fn fused_peers<'a>(
     own: &'a ObservedEstimate,
-    all: &'a [ObservedEstimate],
-    range_m: f64,
+    sent: &'a [ObservedEstimate],
+    radio: &'a Radio,
 ) -> impl Iterator<Item = &'a ObservedEstimate> + 'a {
-    let mut peers: Vec<&ObservedEstimate> = all
+    let from = own.step().checked_sub(radio.latency_steps());
+    let mut peers: Vec<&ObservedEstimate> = sent
         .iter()
         .filter(move |p| {
             p.uav() != own.uav()
-                && p.step() == own.step()
-                && in_comms_range(range_m, own.estimate.pose, p.estimate.pose)
+                && Some(p.step()) == from
+                && radio.delivers(LinkKind::Estimate, p.uav(), own.uav(), p.step())
+                && radio.in_range(own.estimate.pose, p.estimate.pose)
         })
         .collect();
     peers.sort_by_key(|p| p.uav());
@@ -594,7 +607,7 @@ pub(crate) mod tests {
             for peer in all.iter().filter(|p| p.uav() != own.uav()) {
                 state.fuse(&peer.estimate, &cfg);
             }
-            let observed = FusedSets::of_agent(own, &all, &cfg, f64::INFINITY);
+            let observed = FusedSets::of_agent(own, &all, &cfg, &Radio::perfect());
             assert_eq!(
                 &*observed.undetected,
                 state.undetected.cells(),
@@ -656,10 +669,13 @@ pub(crate) mod tests {
             .insert(7, set(&[(8, 8)]).into());
         for estimates in [&all, &clashing] {
             for range in [f64::INFINITY, 100.0] {
-                let shared = FusedSets::of_agents(estimates, &cfg, range);
-                for (own, fused) in estimates.iter().zip(&shared) {
-                    let alone = FusedSets::of_agent(own, estimates, &cfg, range);
-                    assert_eq!(fused, &alone, "agent {} at range {range}", own.uav());
+                for loss in [0.0, 0.5] {
+                    let radio = Radio::perfect().with_range(range).with_loss(7, loss);
+                    let shared = FusedSets::of_agents(estimates, estimates, &cfg, &radio);
+                    for (own, fused) in estimates.iter().zip(&shared) {
+                        let alone = FusedSets::of_agent(own, estimates, &cfg, &radio);
+                        assert_eq!(fused, &alone, "agent {} at {radio:?}", own.uav());
+                    }
                 }
             }
         }
@@ -676,7 +692,7 @@ pub(crate) mod tests {
         let b = estimate(1, b_undetected, &[]);
         let all = [a, b];
         for own in &all {
-            let fused = FusedSets::of_agent(own, &all, &cfg, f64::INFINITY);
+            let fused = FusedSets::of_agent(own, &all, &cfg, &Radio::perfect());
             assert_eq!(
                 *fused.targets[&4],
                 set(&[(5, 5)]),
@@ -714,17 +730,19 @@ pub(crate) mod tests {
         let measure = |range: f64| -> Vec<SetMetrics> {
             all.iter()
                 .map(|own| {
-                    SetMetrics::measure(&FusedSets::of_agent(own, &all, &cfg, range), &[], &g)
+                    let radio = Radio::perfect().with_range(range);
+                    SetMetrics::measure(&FusedSets::of_agent(own, &all, &cfg, &radio), &[], &g)
                 })
                 .collect()
         };
+        let near_links = Radio::perfect().with_range(100.0);
         assert_eq!(
-            fused_peers(&all[0], &all, 100.0)
+            fused_peers(&all[0], &all, &near_links)
                 .map(ObservedEstimate::uav)
                 .collect::<Vec<_>>(),
             vec![1]
         );
-        assert_eq!(fused_peers(&all[2], &all, 100.0).count(), 0);
+        assert_eq!(fused_peers(&all[2], &all, &near_links).count(), 0);
         let near = measure(100.0);
         let perfect = measure(f64::INFINITY);
         // Agents 0 and 1 removed each other's column; agent 2 only its own.
@@ -740,6 +758,123 @@ pub(crate) mod tests {
         assert_eq!((spread.worst.ua, spread.worst.explored), (0.9, 0.1));
         let all_to_all = AgentSpread::over(&perfect).unwrap();
         assert!(spread.mean.ua > all_to_all.mean.ua);
+    }
+
+    /// Four agents, each with scattered sets of its own, at `step`.
+    fn scattered_fleet(step: u64, salt: u64) -> Vec<ObservedEstimate> {
+        (0..4u32)
+            .map(|uav| {
+                let seed = u64::from(uav) * 10 + salt;
+                let mut e = blank(&grid(), uav, step);
+                e.estimate.pose = at(10.0 * f64::from(uav));
+                e.estimate.undetected = scattered(seed + 1, 0.8).into();
+                e.estimate.explored = scattered(seed + 2, 0.3).into();
+                e.estimate.hidden = scattered(seed + 3, 0.1).into();
+                e.unseen = scattered(seed + 4, 0.2);
+                e.estimate.targets = [(1, scattered(seed + 5, 0.9).into())].into();
+                e
+            })
+            .collect()
+    }
+
+    /// An agent's state as it published `own`.
+    fn state_of(own: &ObservedEstimate, cfg: &EstimatorConfig) -> EstimatorState {
+        let e = &own.estimate;
+        let mut state = EstimatorState::new(cfg);
+        state.step = e.step;
+        state.undetected = ReachSet::with_cells((*e.undetected).clone());
+        state.targets = e
+            .targets
+            .iter()
+            .map(|(id, s)| (*id, ReachSet::with_cells((**s).clone())))
+            .collect();
+        state.obstacle_free = (*e.obstacle_free).clone();
+        state.explored = (*e.explored).clone();
+        state.hidden = (*e.hidden).clone();
+        state
+            .hidden_history
+            .record(e.step, &own.unseen, &CellSet::empty(&cfg.grid));
+        state
+    }
+
+    #[test]
+    fn on_lossy_links_each_agent_measures_the_estimates_its_radio_delivered() {
+        let cfg = config();
+        let all = scattered_fleet(3, 0);
+        let radio = Radio::perfect().with_loss(11, 0.5);
+        let mut lost = 0;
+        for own in &all {
+            let delivered: Vec<u32> = all
+                .iter()
+                .map(ObservedEstimate::uav)
+                .filter(|&j| j != own.uav())
+                .filter(|&j| radio.delivers(LinkKind::Estimate, j, own.uav(), 3))
+                .collect();
+            lost += 3 - delivered.len();
+            let peers: Vec<u32> = fused_peers(own, &all, &radio)
+                .map(ObservedEstimate::uav)
+                .collect();
+            assert_eq!(peers, delivered, "agent {}", own.uav());
+            // The agent: its own state, then what the radio delivered, ascending.
+            let mut state = state_of(own, &cfg);
+            for peer in all.iter().filter(|p| delivered.contains(&p.uav())) {
+                state.fuse(&peer.estimate, &cfg);
+            }
+            let observed = FusedSets::of_agent(own, &all, &cfg, &radio);
+            assert_eq!(&*observed.undetected, state.undetected.cells());
+            assert_eq!(*observed.explored, state.explored);
+            assert_eq!(&observed.unseen, state.hidden_history.unseen());
+        }
+        assert!(
+            lost > 0 && lost < 12,
+            "the seed loses some and not all: {lost}"
+        );
+        // At full loss an agent fuses nothing but its own estimate.
+        let deaf = Radio::perfect().with_loss(11, 1.0);
+        assert!(
+            all.iter()
+                .all(|own| fused_peers(own, &all, &deaf).count() == 0)
+        );
+    }
+
+    #[test]
+    fn with_latency_each_agent_fuses_the_estimates_sent_that_many_steps_before() {
+        let cfg = config();
+        let before = scattered_fleet(5, 100);
+        let now = scattered_fleet(7, 200);
+        let radio = Radio::perfect().with_latency_steps(2).with_loss(3, 0.3);
+        let fused = FusedSets::of_agents(&now, &before, &cfg, &radio);
+        let mut fused_any = false;
+        for (own, observed) in now.iter().zip(&fused) {
+            let mut state = state_of(own, &cfg);
+            for peer in fused_peers(own, &before, &radio) {
+                assert_eq!(peer.step(), 5);
+                let report = state.fuse(&peer.estimate, &cfg);
+                assert_eq!(report.step_lag, 2, "dilated by the latency");
+                fused_any = true;
+            }
+            assert_eq!(&*observed.undetected, state.undetected.cells());
+            let cells: BTreeMap<u32, SharedSet> = state
+                .targets
+                .iter()
+                .map(|(id, s)| (*id, Arc::new(s.cells().clone())))
+                .collect();
+            assert_eq!(observed.targets, cells);
+            assert_eq!(&observed.unseen, state.hidden_history.unseen());
+            assert_eq!(observed, &FusedSets::of_agent(own, &before, &cfg, &radio));
+        }
+        assert!(fused_any);
+        // Estimates of any other step are not fused, and nothing before step d.
+        assert!(
+            now.iter()
+                .all(|own| fused_peers(own, &now, &radio).count() == 0)
+        );
+        let early = scattered_fleet(1, 0);
+        assert!(
+            early
+                .iter()
+                .all(|own| fused_peers(own, &early, &radio).count() == 0)
+        );
     }
 
     #[test]

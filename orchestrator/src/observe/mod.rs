@@ -17,7 +17,9 @@
 //!
 //! What is measured ([`metrics`] has the details):
 //! - **per agent**, on the sets that agent holds after its own fusion of the step (its
-//!   estimate fused with those of the peers it fuses, by the agents' law and range rule):
+//!   estimate fused with those of the peers it fuses, by the agents' law and the agents' own
+//!   radio: range, loss and latency, [`uav_agent::agent::radio`]; with a latency of `d`
+//!   steps the observer keeps the estimates of the last `d` steps it measured):
 //!   explored, UA, OA, target-set area, localisation error, identified count
 //!   ([`StepMetrics::agents`]), summarised as the mean over agents ([`StepMetrics::mean`])
 //!   and the worst agent ([`StepMetrics::worst`]);
@@ -55,7 +57,9 @@ use protocol::wire::{
     unix_now_ns,
 };
 use tokio::sync::mpsc::UnboundedSender;
+use uav_agent::agent::radio::Radio;
 use uav_agent::estimator::EstimatorConfig;
+use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::EstimateInbox;
 use uav_agent::occupancy::OccupancyMap;
 
@@ -179,6 +183,9 @@ pub struct ObserverReport {
     pub dropped: BTreeMap<String, u64>,
     /// The last measured step's fused sets of one agent.
     pub final_state: Option<FinalState>,
+    /// Per agent, its last measured step and its `X̄` after that step's fusion as the
+    /// observer rebuilt it: an agent whose run ended there holds the same set.
+    pub final_undetected: BTreeMap<u32, (u64, SharedSet)>,
     /// The fleet's map: every map update of every estimate merged.
     pub oem: OccupancyMap,
     /// Each UAV's ground track (x, y) per step.
@@ -309,6 +316,8 @@ fn observe(
         .context("cannot wait on the observer's wake-up event")?;
     let estimator = EstimatorConfig::from_scenario(&config.scenario);
     let mut observer = Observer {
+        radio: Radio::from_scenario(&config.scenario),
+        sent: BTreeMap::new(),
         config,
         run_tag: config.run.tag(),
         ports: &ports,
@@ -322,6 +331,7 @@ fn observe(
             comms: Comms::default(),
             dropped: BTreeMap::new(),
             final_state: None,
+            final_undetected: BTreeMap::new(),
             oem: OccupancyMap::new(estimator.oem_grid),
             tracks: vec![Vec::new(); uavs as usize],
             stepping: None,
@@ -353,6 +363,11 @@ struct Observer<'a> {
     truths: VecDeque<TruthState>,
     /// Decoded estimates per agent, by step, not yet measured.
     store: BTreeMap<u32, BTreeMap<u64, ObservedEstimate>>,
+    /// The agents' links.
+    radio: Radio,
+    /// With a latency of `d` steps, the estimates of the last `d` steps measured, by step:
+    /// those the agents fuse in the next `d` steps.
+    sent: BTreeMap<u64, Vec<ObservedEstimate>>,
     /// The agents' last sets, the bases of their deltas.
     inbox: EstimateInbox,
     next_fault: usize,
@@ -634,10 +649,20 @@ impl Observer<'_> {
                 );
             }
         }
-        let range_m = self.config.scenario.comms.range_m;
         let mut agents = BTreeMap::new();
-        let all_fused = FusedSets::of_agents(&estimates, &self.estimator, range_m);
+        let d = self.radio.latency_steps();
+        let sent: &[ObservedEstimate] = if d == 0 {
+            &estimates
+        } else {
+            k.checked_sub(d)
+                .and_then(|from| self.sent.get(&from))
+                .map_or(&[], Vec::as_slice)
+        };
+        let all_fused = FusedSets::of_agents(&estimates, sent, &self.estimator, &self.radio);
         for (own, fused) in estimates.iter().zip(all_fused) {
+            self.report
+                .final_undetected
+                .insert(own.uav(), (k, fused.undetected.clone()));
             agents.insert(
                 own.uav(),
                 SetMetrics::measure(&fused, truth.targets(), &grid),
@@ -654,6 +679,13 @@ impl Observer<'_> {
             }
         }
         let spread = AgentSpread::over(agents.values());
+        let estimate_count = estimates.len() as u32;
+        let identified_any = identified_ids(&estimates).len() as u32;
+        if d > 0 {
+            // Kept for the steps `k + 1 ..= k + d`, which fuse them.
+            self.sent.insert(k, estimates);
+            self.sent = self.sent.split_off(&k.saturating_add(1).saturating_sub(d));
+        }
         for u in truth.uavs() {
             if let Some(track) = self.report.tracks.get_mut(u.id as usize) {
                 track.push([u.position[0], u.position[1]]);
@@ -673,8 +705,8 @@ impl Observer<'_> {
             step: k,
             time_s: truth.time_s,
             live_agents,
-            estimates: estimates.len() as u32,
-            identified_any: identified_ids(&estimates).len() as u32,
+            estimates: estimate_count,
+            identified_any,
             mean: spread.map(|s| s.mean),
             worst: spread.map(|s| s.worst),
             agents,

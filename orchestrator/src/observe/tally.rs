@@ -148,6 +148,16 @@ impl AgentTally {
         self.sum(|i| i.stats.token_timeouts)
     }
 
+    /// Peer estimates the simulated radio lost on their way to the agent (`comms.loss`).
+    pub fn estimates_lost(&self) -> u64 {
+        self.sum(|i| i.stats.estimates_lost)
+    }
+
+    /// Tokens the simulated radio lost on their way to the agent.
+    pub fn tokens_lost(&self) -> u64 {
+        self.sum(|i| i.stats.tokens_lost)
+    }
+
     /// Incarnations seen (1 + restarts that published).
     pub fn incarnations(&self) -> usize {
         self.incarnations.len()
@@ -172,6 +182,8 @@ mod tests {
         e.stats = AgentStats {
             frames,
             estimates_received: 2 * frames,
+            estimates_lost: frames / 2,
+            tokens_lost: frames / 4,
             ..AgentStats::default()
         };
         e
@@ -189,6 +201,7 @@ mod tests {
         assert_eq!(t.steps_processed(), 7);
         assert_eq!(t.estimates_sent(), 7);
         assert_eq!(t.estimates_received(), 14);
+        assert_eq!((t.estimates_lost(), t.tokens_lost()), (2 + 1, 1));
         assert_eq!(t.incarnations(), 2);
         assert_eq!(t.incarnation_starts(), vec![0, 0]);
         assert_eq!(t.last_step, Some(4));

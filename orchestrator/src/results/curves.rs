@@ -196,6 +196,16 @@ pub fn mean_sd(values: &[f64]) -> Option<(f64, f64)> {
 /// Writes a sweep's `metrics.png`: UA and OA over time per variant, mean over seeds with a
 /// ±1 standard deviation band.
 pub fn draw_sweep(variants: &[(String, Vec<Vec<StepMetrics>>)], path: &Path) -> anyhow::Result<()> {
+    draw_bands(variants, "variant", path)
+}
+
+/// UA and OA over time per group of runs (named `what` in the title: a variant, the value of a
+/// swept key), mean over the group's runs with a ±1 standard deviation band.
+pub fn draw_bands(
+    variants: &[(String, Vec<Vec<StepMetrics>>)],
+    what: &str,
+    path: &Path,
+) -> anyhow::Result<()> {
     let root = BitMapBackend::new(path, (1000, 760)).into_drawing_area();
     root.fill(&WHITE)?;
     let seeds = variants
@@ -204,7 +214,7 @@ pub fn draw_sweep(variants: &[(String, Vec<Vec<StepMetrics>>)], path: &Path) -> 
         .max()
         .unwrap_or(0);
     let root = root.titled(
-        &format!("UA and OA per variant: mean and ±1 sd over {seeds} seeds"),
+        &format!("UA and OA per {what}: mean and ±1 sd over {seeds} seeds"),
         (FONT, 20),
     )?;
     let panels = root.split_evenly((2, 1));

@@ -140,6 +140,18 @@ pub struct AgentSummary {
     pub decisions: u64,
     /// Decisions taken after waiting out a silent token holder.
     pub token_timeouts: u64,
+    /// Peer estimates the simulated radio lost on their way to the agent (`comms.loss`), as
+    /// of its last estimate.
+    pub estimates_lost: u64,
+    /// Tokens the simulated radio lost on their way to the agent.
+    pub tokens_lost: u64,
+    /// Fingerprint ([`protocol::raster::CellSet::digest`]) of the agent's `X̄` after its last
+    /// measured step's fusion, as the observer rebuilt it: the agent's own report
+    /// (`final_undetected_digest` in its log) holds the same value when the observer
+    /// reproduced its fusions exactly and the run ended at that step.
+    pub final_undetected_digest: Option<u64>,
+    /// That step.
+    pub final_measured_step: Option<u64>,
     /// Restarts injected.
     pub restarts: u64,
     /// The set metrics of this agent's own fused sets.
@@ -301,6 +313,7 @@ impl Summary {
         let agents = (0..scenario.uavs.count)
             .map(|uav| {
                 let t = observer.and_then(|o| o.agents.get(&uav));
+                let last = observer.and_then(|o| o.final_undetected.get(&uav));
                 AgentSummary {
                     uav,
                     steps_processed: t.map_or(0, |t| t.steps_processed()),
@@ -310,6 +323,10 @@ impl Summary {
                     messages_dropped: t.map_or(0, |t| t.messages_dropped()),
                     decisions: t.map_or(0, |t| t.decisions()),
                     token_timeouts: t.map_or(0, |t| t.token_timeouts()),
+                    estimates_lost: t.map_or(0, |t| t.estimates_lost()),
+                    tokens_lost: t.map_or(0, |t| t.tokens_lost()),
+                    final_undetected_digest: last.map(|(_, set)| set.digest()),
+                    final_measured_step: last.map(|(step, _)| *step),
                     restarts: record.faults.restarts(uav),
                     metrics: per_agent.get(&uav).cloned().unwrap_or_default(),
                 }
@@ -488,13 +505,22 @@ impl Summary {
         }
         if !self.agents.is_empty() {
             writeln!(out)?;
-            writeln!(
+            // Lossy links (`comms.loss`): what the radio lost on the way to each agent.
+            let lossy = self
+                .agents
+                .iter()
+                .any(|a| a.estimates_lost + a.tokens_lost > 0);
+            write!(
                 out,
                 "  {:>3}  {:>6}  {:>6}  {:>8}  {:>9}  {:>8}",
                 "UAV", "steps", "sent", "received", "decisions", "restarts"
             )?;
+            if lossy {
+                write!(out, "  {:>15}", "lost est./tok.")?;
+            }
+            writeln!(out)?;
             for a in &self.agents {
-                writeln!(
+                write!(
                     out,
                     "  {:>3}  {:>6}  {:>6}  {:>8}  {:>9}  {:>8}",
                     a.uav,
@@ -504,6 +530,11 @@ impl Summary {
                     a.decisions,
                     a.restarts
                 )?;
+                if lossy {
+                    let lost = format!("{}/{}", a.estimates_lost, a.tokens_lost);
+                    write!(out, "  {lost:>15}")?;
+                }
+                writeln!(out)?;
             }
         }
         print_resources(&self.resources, out)

@@ -22,6 +22,9 @@ use crate::variant::Variant;
 pub struct MergeConfig {
     /// The sweep directories read.
     pub sources: Vec<PathBuf>,
+    /// The key and values of an axis sweep (`--axis`): each value's runs are read under
+    /// `KEY=V/` of every source, and the values compared ([`super::axis`]).
+    pub axis: Option<super::Axis>,
     /// Output directory.
     pub out: PathBuf,
 }
@@ -30,6 +33,8 @@ pub struct MergeConfig {
 pub(super) struct FoundRun {
     /// Its value of every row of the table.
     pub values: Vec<Option<f64>>,
+    /// Its value of every radio row of an axis table ([`super::axis`]).
+    pub radio: Vec<Option<f64>>,
     /// Its metrics per step.
     pub series: Vec<StepMetrics>,
     /// Where it was read.
@@ -103,11 +108,81 @@ pub(super) fn write_table(table: &Table, curves: &Curves, out: &Path) -> anyhow:
 /// for one variant but present for another is listed as missing; the sources' failed runs
 /// are carried over.
 pub fn merge(config: &MergeConfig) -> anyhow::Result<Outcome> {
+    for dir in &config.sources {
+        anyhow::ensure!(dir.is_dir(), "{} is not a sweep directory", dir.display());
+    }
+    if let Some(axis) = &config.axis {
+        return merge_axis(config, axis);
+    }
+    let (runs, failed, listed) = gather(&config.sources)?;
+    anyhow::ensure!(
+        !runs.is_empty(),
+        "no run found under the merged directories (expected <variant>/seed-<n>/summary.json)"
+    );
+    let variants = columns(&runs, listed);
+    let (table, curves) = assemble(runs, &variants, failed, true);
+    let code = if table.failed_runs.is_empty() {
+        Outcome::Success
+    } else {
+        Outcome::Failed
+    };
+    write_table(&table, &curves, &config.out)?;
+    Ok(code)
+}
+
+/// `fleet sweep --merge DIR... --axis KEY=V1,...`: each value's runs from `KEY=V/` of every
+/// source (a source without it has none), its table under `out/KEY=V/`, and the values
+/// compared in `out` ([`super::axis`]).
+fn merge_axis(config: &MergeConfig, axis: &super::Axis) -> anyhow::Result<Outcome> {
+    let mut levels = Vec::new();
+    let mut failed = Vec::new();
+    let mut listed = Vec::new();
+    for i in 0..axis.values.len() {
+        let dirs: Vec<PathBuf> = config
+            .sources
+            .iter()
+            .map(|d| d.join(axis.setting(i)))
+            .filter(|d| d.is_dir())
+            .collect();
+        let (runs, level_failed, level_listed) = gather(&dirs)?;
+        levels.push(runs);
+        failed.push(level_failed);
+        listed.extend(level_listed);
+    }
+    anyhow::ensure!(
+        levels.iter().any(|l| !l.is_empty()),
+        "no run found under the merged directories (expected {}=<value>/<variant>/seed-<n>/summary.json)",
+        axis.key
+    );
+    let mut variants: Vec<Variant> = Vec::new();
+    for level in &levels {
+        for v in columns(level, listed.clone()) {
+            if !variants.contains(&v) {
+                variants.push(v);
+            }
+        }
+    }
+    let write = super::axis::Levels {
+        axis,
+        variants: &variants,
+        shard: None,
+        flag_missing: true,
+    };
+    let table = write.write(levels, failed, &config.out)?;
+    Ok(if table.failed_runs.is_empty() {
+        Outcome::Success
+    } else {
+        Outcome::Failed
+    })
+}
+
+/// The runs under `<variant>/seed-<n>/` of every directory of `dirs`, the failed runs their
+/// `table.json` list, and the variants they list in order.
+fn gather(dirs: &[PathBuf]) -> anyhow::Result<(FoundRuns, Vec<String>, Vec<Variant>)> {
     let mut runs = FoundRuns::new();
     let mut failed = Vec::new();
     let mut listed = Vec::new();
-    for dir in &config.sources {
-        anyhow::ensure!(dir.is_dir(), "{} is not a sweep directory", dir.display());
+    for dir in dirs {
         if let Ok(text) = std::fs::read_to_string(dir.join("table.json")) {
             let table: serde_json::Value = serde_json::from_str(&text)
                 .with_context(|| format!("{}: table.json is not JSON", dir.display()))?;
@@ -133,24 +208,19 @@ pub fn merge(config: &MergeConfig) -> anyhow::Result<Outcome> {
             }
         }
     }
-    anyhow::ensure!(
-        !runs.is_empty(),
-        "no run found under the merged directories (expected <variant>/seed-<n>/summary.json)"
-    );
+    Ok((runs, failed, listed))
+}
+
+/// The columns of a merged table: the variants that have runs, in the order the sources'
+/// tables list them, then in [`Variant::ALL`]'s.
+fn columns(runs: &FoundRuns, listed: Vec<Variant>) -> Vec<Variant> {
     let mut variants: Vec<Variant> = Vec::new();
     for v in listed.into_iter().chain(Variant::ALL) {
         if !variants.contains(&v) && runs.keys().any(|k| k.0 == v) {
             variants.push(v);
         }
     }
-    let (table, curves) = assemble(runs, &variants, failed, true);
-    let code = if table.failed_runs.is_empty() {
-        Outcome::Success
-    } else {
-        Outcome::Failed
-    };
-    write_table(&table, &curves, &config.out)?;
-    Ok(code)
+    variants
 }
 
 /// The `seed-<n>` directories under `dir` (none when `dir` does not exist), in seed order.
@@ -194,6 +264,7 @@ pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Resul
         .with_context(|| format!("{}: timeseries.csv", dir.display()))?;
     Ok(FoundRun {
         values: row_values_json(&summary),
+        radio: super::axis::radio_values(&summary),
         series,
         source: dir.to_owned(),
     })
@@ -243,6 +314,7 @@ mod tests {
         fake_run(&b, Variant::Nomap, 2, 0.9);
         let config = MergeConfig {
             sources: vec![a.clone(), b.clone()],
+            axis: None,
             out: out.clone(),
         };
         // nomap has no seed 1: the table says so and the merge reports a failure.

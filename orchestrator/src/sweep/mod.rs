@@ -19,9 +19,14 @@
 //! A sweep builds its own table the same way, from its runs' files as written, so its values
 //! are those a merge reads.
 //!
+//! `--axis KEY=V1,V2,...` runs the whole sweep at every value of one scenario key (e.g. the
+//! radio's `comms.loss=0,0.1,0.3,0.5`) and compares the values ([`axis`]): each value's runs
+//! and table under `KEY=V/`, the comparison in `axis.md`, `axis.json` and `axis.png`.
+//!
 //! The variants are those of [`crate::variant`]: `nomap`, `kappa0`, `paper` (the paper's
 //! Table I columns) and `setfleet` (the project's planner).
 
+pub mod axis;
 pub mod collect;
 pub mod jobs;
 pub mod shard;
@@ -38,6 +43,7 @@ use crate::run::hosts::HostLayout;
 use crate::run::runtime;
 use crate::usage::{ScenarioArgs, UsageError};
 pub use crate::variant::Variant;
+pub use axis::Axis;
 use collect::{FoundRuns, assemble, read_run, write_table};
 pub use collect::{MergeConfig, merge};
 use jobs::RunEnd;
@@ -75,7 +81,13 @@ pub struct SweepArgs {
     /// Output directory (default: `runs/sweep-<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Runs the sweep at every value of one scenario key, e.g. `comms.loss=0,0.1,0.3,0.5`:
+    /// each value's runs and table under `KEY=V/`, and `axis.md`, `axis.json`, `axis.png`
+    /// comparing the values (the value wins over a `--set` of the same key).
+    #[arg(long, value_name = "KEY=V1,V2,...")]
+    pub axis: Option<Axis>,
     /// Runs nothing: builds the table and picture from the runs of these sweep directories.
+    /// With `--axis KEY=V1,...`, each value's runs are read under `DIR/KEY=V/`.
     #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration", "variants", "scenario", "overrides", "jobs", "shard"])]
     pub merge: Vec<PathBuf>,
 }
@@ -87,6 +99,8 @@ pub struct PlannedRun {
     pub variant: Variant,
     /// Its seed.
     pub seed: u64,
+    /// The index of its value of the sweep's `--axis` (0 without one).
+    pub level: usize,
     /// Its place in the whole sweep's list (variant-major), from 0: its shard is this
     /// modulo the number of shards.
     pub index: usize,
@@ -99,8 +113,10 @@ pub struct PlannedRun {
 /// A validated `fleet sweep`: one run configuration per (variant, seed) of its shard.
 #[derive(Debug, Clone)]
 pub struct SweepConfig {
-    /// The shard's runs in order: variant-major.
+    /// The shard's runs in order: value-major (with `--axis`), then variant-major.
     pub runs: Vec<PlannedRun>,
+    /// The key and values swept (`--axis`).
+    pub axis: Option<Axis>,
     /// Variants in column order.
     pub variants: Vec<Variant>,
     /// Runs at once.
@@ -144,22 +160,27 @@ impl SweepArgs {
             .unwrap_or_else(|| crate::run::config::default_out_dir("sweep-"));
         // Bars of several runs at once would overwrite each other: log lines then.
         let progress_bar = self.jobs == 1 && std::io::IsTerminal::is_terminal(&std::io::stderr());
+        let levels = self.axis.as_ref().map_or(1, |a| a.values.len());
         let mut all = Vec::new();
-        for &variant in &variants {
-            for seed in 1..=u64::from(seeds) {
-                all.push((variant, seed));
+        for level in 0..levels {
+            for &variant in &variants {
+                for seed in 1..=u64::from(seeds) {
+                    all.push((level, variant, seed));
+                }
             }
         }
         let total_runs = all.len();
-        let mine: Vec<(usize, Variant, u64)> = all
+        let mine: Vec<(usize, usize, Variant, u64)> = all
             .into_iter()
             .enumerate()
             .filter(|(i, _)| shard.holds(*i))
-            .map(|(i, (v, s))| (i, v, s))
+            .map(|(i, (l, v, s))| (i, l, v, s))
             .collect();
         let mut runs = Vec::with_capacity(mine.len());
-        for (n, &(index, variant, seed)) in mine.iter().enumerate() {
+        for (n, &(index, level, variant, seed)) in mine.iter().enumerate() {
             let mut overrides = variant.with_user_overrides(&self.scenario.overrides);
+            let setting = self.axis.as_ref().map(|a| a.setting(level));
+            overrides.extend(setting.clone());
             overrides.push(format!("seed={seed}"));
             if let Some(d) = self.duration {
                 overrides.push(format!("duration_s={d:?}"));
@@ -171,17 +192,27 @@ impl SweepArgs {
             .load()?;
             // The run's place in the whole sweep: distinct across shards too.
             let sequence = u32::try_from(index).unwrap_or(u32::MAX);
+            let base = setting
+                .as_ref()
+                .map_or_else(|| out.clone(), |s| out.join(s));
+            let at = setting.map(|s| format!("{s} ")).unwrap_or_default();
             runs.push(PlannedRun {
                 variant,
                 seed,
+                level,
                 index,
-                label: format!("{}/{} {} seed {seed}", n + 1, mine.len(), variant.name()),
+                label: format!(
+                    "{}/{} {at}{} seed {seed}",
+                    n + 1,
+                    mine.len(),
+                    variant.name()
+                ),
                 config: RunConfig {
                     layout: HostLayout::single(scenario.uavs.count),
                     scenario,
                     mode: StepMode::Lockstep,
                     faults: Vec::new(),
-                    out: out.join(variant.name()).join(format!("seed-{seed}")),
+                    out: base.join(variant.name()).join(format!("seed-{seed}")),
                     strict: false,
                     run_id: new_run_id(sequence),
                     progress_bar,
@@ -195,6 +226,7 @@ impl SweepArgs {
         }
         Ok(SweepConfig {
             runs,
+            axis: self.axis.clone(),
             variants,
             jobs: self.jobs as usize,
             shard: self.shard,
@@ -207,6 +239,7 @@ impl SweepArgs {
     pub fn merge_config(&self) -> Option<MergeConfig> {
         (!self.merge.is_empty()).then(|| MergeConfig {
             sources: self.merge.clone(),
+            axis: self.axis.clone(),
             out: self
                 .out
                 .clone()
@@ -229,7 +262,8 @@ pub fn run(config: &SweepConfig) -> anyhow::Result<Outcome> {
             config.total_runs
         );
     }
-    let mut found = FoundRuns::new();
+    let levels = config.axis.as_ref().map_or(1, |a| a.values.len());
+    let mut found: Vec<FoundRuns> = (0..levels).map(|_| FoundRuns::new()).collect();
     let mut failed: Vec<(usize, String)> = Vec::new();
     let interrupted = runtime()?.block_on(jobs::run_all(&config.runs, config.jobs, |i, end| {
         let run = &config.runs[i];
@@ -251,7 +285,7 @@ pub fn run(config: &SweepConfig) -> anyhow::Result<Outcome> {
                 );
                 match read_run(&run.config.out, run.variant, run.seed) {
                     Ok(r) => {
-                        found.insert((run.variant, run.seed), r);
+                        found[run.level].insert((run.variant, run.seed), r);
                         !failed
                     }
                     Err(e) => {
@@ -275,10 +309,30 @@ pub fn run(config: &SweepConfig) -> anyhow::Result<Outcome> {
     } else {
         Outcome::Failed
     };
-    let failed = failed.into_iter().map(|f| f.1).collect();
-    let (mut table, curves) = assemble(found, &config.variants, failed, false);
-    table.shard = config.shard.map(|s| s.to_string());
-    write_table(&table, &curves, &config.out)?;
+    let Some(axis) = &config.axis else {
+        let failed = failed.into_iter().map(|f| f.1).collect();
+        let found = found.pop().unwrap_or_default();
+        let (mut table, curves) = assemble(found, &config.variants, failed, false);
+        table.shard = config.shard.map(|s| s.to_string());
+        write_table(&table, &curves, &config.out)?;
+        return Ok(code);
+    };
+    let failed_at: Vec<Vec<String>> = (0..levels)
+        .map(|level| {
+            failed
+                .iter()
+                .filter(|(i, _)| config.runs[*i].level == level)
+                .map(|(_, name)| name.clone())
+                .collect()
+        })
+        .collect();
+    let levels = axis::Levels {
+        axis,
+        variants: &config.variants,
+        shard: config.shard,
+        flag_missing: false,
+    };
+    levels.write(found, failed_at, &config.out)?;
     Ok(code)
 }
 
@@ -380,6 +434,56 @@ mod tests {
         assert_eq!(c.runs.len(), 3);
         assert!(c.runs[2].config.run_id.as_str().ends_with("-11"));
         assert!(c.runs[1].label.starts_with("2/3 "), "{}", c.runs[1].label);
+    }
+
+    #[test]
+    fn an_axis_runs_the_sweep_at_every_value_of_its_key() {
+        let w = Wrap::try_parse_from([
+            "x",
+            "--seeds",
+            "2",
+            "--variants",
+            "paper",
+            "--axis",
+            "comms.loss=0,0.5",
+            "--set",
+            "comms.loss=0.9",
+            "--out",
+            "o",
+        ])
+        .unwrap();
+        let c = w.sweep.validate().unwrap();
+        assert_eq!(c.runs.len(), 4);
+        let r = &c.runs[3];
+        assert_eq!((r.level, r.seed, r.index), (1, 2, 3));
+        assert_eq!(
+            r.config.scenario.comms.loss, 0.5,
+            "the axis wins over --set"
+        );
+        assert_eq!(c.runs[0].config.scenario.comms.loss, 0.0);
+        assert_eq!(r.config.out, PathBuf::from("o/comms.loss=0.5/paper/seed-2"));
+        assert!(
+            r.label.contains("comms.loss=0.5 paper seed 2"),
+            "{}",
+            r.label
+        );
+        assert_eq!(c.axis.as_ref().map(|a| a.values.len()), Some(2));
+        // A value out of the key's range, or a key the scenario does not have, runs nothing.
+        for (axis, says) in [
+            ("comms.loss=0,2", "comms.loss"),
+            ("comms.lost=0,1", "unknown key `comms.lost`"),
+        ] {
+            let w = Wrap::try_parse_from(["x", "--seeds", "1", "--axis", axis]).unwrap();
+            let e = w.sweep.validate().unwrap_err().0;
+            assert!(e.contains(says), "{axis}: {e}");
+        }
+        assert!(Wrap::try_parse_from(["x", "--seeds", "1", "--axis", "comms.loss"]).is_err());
+        let w = Wrap::try_parse_from(["x", "--merge", "a", "--axis", "comms.loss=0,1"]).unwrap();
+        let merge = w.sweep.merge_config().unwrap();
+        assert_eq!(
+            merge.axis.map(|a| a.values),
+            Some(vec!["0".into(), "1".into()])
+        );
     }
 
     #[test]

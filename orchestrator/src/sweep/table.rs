@@ -22,7 +22,8 @@ pub struct Cell {
 }
 
 impl Cell {
-    fn of(values: Vec<Option<f64>>) -> Cell {
+    /// The statistics of the values of each seed (`None` where a run has none).
+    pub(super) fn of(values: Vec<Option<f64>>) -> Cell {
         let present: Vec<f64> = values.iter().flatten().copied().collect();
         let stats = mean_sd(&present);
         Cell {
@@ -35,10 +36,10 @@ impl Cell {
 
 /// One row of the table: the `table.json` key, the label in `table.md`, the factor to
 /// display it with, and where it comes from in a run's summary.
-struct Row {
-    key: &'static str,
-    label: &'static str,
-    scale: f64,
+pub(super) struct Row {
+    pub(super) key: &'static str,
+    pub(super) label: &'static str,
+    pub(super) scale: f64,
     value: fn(&Summary) -> Option<f64>,
 }
 
@@ -46,7 +47,7 @@ struct Row {
 pub(super) const ROW_COUNT: usize = ROWS.len();
 
 /// The metrics of the table, in row order.
-const ROWS: [Row; 11] = [
+pub(super) const ROWS: [Row; 11] = [
     Row {
         key: "ua_final",
         label: "UA, undetected-set area (%)",
@@ -196,7 +197,8 @@ impl Table {
     }
 }
 
-fn seed_range(seeds: &[u64]) -> String {
+/// "seeds 1..=5", "seed 3" or "no seed".
+pub(super) fn seed_range(seeds: &[u64]) -> String {
     match (seeds.first(), seeds.last()) {
         (Some(a), Some(b)) if a != b => format!("seeds {a}..={b}"),
         (Some(a), _) => format!("seed {a}"),
@@ -216,7 +218,8 @@ pub(super) fn row_values_json(summary: &serde_json::Value) -> Vec<Option<f64>> {
         .collect()
 }
 
-fn format_cell(cell: &Cell, scale: f64) -> String {
+/// "mean ± sd" of a cell, times `scale`, or "-".
+pub(super) fn format_cell(cell: &Cell, scale: f64) -> String {
     match (cell.mean, cell.sd) {
         (Some(m), Some(sd)) => {
             let digits = if scale == 100.0 || m.abs() < 10.0 {

@@ -39,6 +39,9 @@ const MAX_BEAM_WIDTH: u32 = 64;
 const MAX_GROWTH_HORIZON_S: f64 = 600.0;
 /// Smallest image side, pixels.
 const MIN_IMAGE_SIDE: u32 = 8;
+/// Longest link latency, milliseconds: every receiver and the observer hold the estimates in
+/// flight, so a latency is memory (10 s is 20 steps of estimates by default).
+pub const MAX_LATENCY_MS: f64 = 10_000.0;
 /// Relative tolerance of "a whole number of CVS periods".
 const PERIOD_MULTIPLE_TOLERANCE: f64 = 1e-9;
 
@@ -366,7 +369,14 @@ impl Scenario {
         self.validate_timing()?;
         self.validate_estimator()?;
         self.validate_guidance()?;
-        Interval::open_closed(0.0, f64::INFINITY).check("comms.range_m", self.comms.range_m)
+        self.validate_comms()
+    }
+
+    fn validate_comms(&self) -> Result<(), ScenarioError> {
+        let comms = &self.comms;
+        Interval::open_closed(0.0, f64::INFINITY).check("comms.range_m", comms.range_m)?;
+        Interval::closed(0.0, 1.0).check("comms.loss", comms.loss)?;
+        Interval::closed(0.0, MAX_LATENCY_MS).check("comms.latency_ms", comms.latency_ms)
     }
 
     fn validate_region(&self) -> Result<(), ScenarioError> {
@@ -755,6 +765,16 @@ mod tests {
             ("guidance.spread_m", |s| s.guidance.spread_m = f64::NAN),
             ("comms.range_m", |s| s.comms.range_m = 0.0),
             ("comms.range_m", |s| s.comms.range_m = f64::NAN),
+            ("comms.loss", |s| s.comms.loss = f64::NAN),
+            ("comms.loss", |s| s.comms.loss = -0.01),
+            ("comms.loss", |s| s.comms.loss = 1.01),
+            ("comms.loss", |s| s.comms.loss = f64::INFINITY),
+            ("comms.latency_ms", |s| s.comms.latency_ms = f64::NAN),
+            ("comms.latency_ms", |s| s.comms.latency_ms = -1.0),
+            ("comms.latency_ms", |s| s.comms.latency_ms = f64::INFINITY),
+            ("comms.latency_ms", |s| {
+                s.comms.latency_ms = MAX_LATENCY_MS + 1.0
+            }),
             ("seed", |s| s.seed = u64::MAX),
         ];
         for (key, edit) in cases {
@@ -810,6 +830,11 @@ mod tests {
         s.guidance.horizon = 4;
         s.guidance.kappa = 0.0;
         s.comms.range_m = 1.0;
+        s.comms.loss = 1.0;
+        s.comms.latency_ms = MAX_LATENCY_MS;
+        assert_eq!(s.validate().map_err(|e| e.to_string()), Ok(()));
+        s.comms.loss = 0.0;
+        s.comms.latency_ms = 0.0;
         assert_eq!(s.validate().map_err(|e| e.to_string()), Ok(()));
     }
 

@@ -33,11 +33,23 @@
 //! deltas against the previous message ([`message`]); a peer's estimate that cannot be
 //! rebuilt (a missed message) is dropped, not awaited, and whole sets are asked of its sender.
 //!
-//! With a finite `comms.range_m`, an agent fuses only the estimates of peers whose camera was
-//! within range at that step (links are simulated by the receiver).
+//! The radio between agents is simulated by the receiver ([`radio`]): every estimate and
+//! token crosses the IPC, and the receiving agent decides from the scenario's seed whether the
+//! radio lost it (`comms.loss`), when it arrives (`comms.latency_ms`) and whether its sender
+//! was in range (`comms.range_m`). A lost estimate is not read and not awaited: the agent
+//! knows at once that it will not come. A lost token is taken as its sender having passed the
+//! turn with a plan this agent will not see: the ring skips it at once, as it does a holder
+//! whose wait ran out ([`TokenRing::receive`]), so a lossy run waits for nothing it will not
+//! get and stays reproducible. With loss, estimates carry whole sets, never deltas: a delta
+//! against a lost message could not be rebuilt, and each later one of the chain would fail
+//! until whole sets came (the map keeps its deltas: they only add knowledge, see
+//! [`message`]). An estimate of step `k` is fused at step `k + d` (`d` the latency in steps),
+//! dilated by `d` steps; the agent still awaits (bounded) every peer's step-`k` message at
+//! step `k`, so what it fuses at each step does not depend on timing.
 
 pub mod checkpoint;
 mod links;
+pub mod radio;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
@@ -45,7 +57,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
-use protocol::camera::CameraPose;
 use protocol::codec::{self, EncodeError};
 use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
@@ -66,6 +77,8 @@ use crate::estimator::{
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use checkpoint::{CheckpointFile, CheckpointFlusher, Owner};
 use links::{LinkError, Links};
+pub use radio::in_comms_range;
+use radio::{LinkKind, Radio};
 
 /// How an agent runs.
 #[derive(Clone, Debug)]
@@ -197,6 +210,10 @@ pub struct AgentReport {
     pub estimates_received: u64,
     /// Peer estimates out of comms range, not fused.
     pub estimates_out_of_range: u64,
+    /// Peer estimates the simulated radio lost (`comms.loss`), not read.
+    pub estimates_lost: u64,
+    /// Tokens the simulated radio lost: their senders were skipped at once.
+    pub tokens_lost: u64,
     /// Messages dropped, by reason.
     pub dropped: BTreeMap<String, u64>,
     /// Guidance decisions taken.
@@ -293,6 +310,7 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         .attach_notification(&links.wake)
         .map_err(IpcOpenError::from)?;
     let estimator_config = EstimatorConfig::from_scenario(&config.scenario);
+    let radio = Radio::from_scenario(&config.scenario);
     let incarnation = incarnation();
     let checkpoint = config.checkpoint.clone().map(|path| {
         CheckpointFile::new(
@@ -315,16 +333,20 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         }
         Some(Ok(None)) | None => Estimator::new(estimator_config.clone()),
     };
+    let outbox =
+        message::EstimateOutbox::new(config.uav, incarnation, estimator_config.oem_full_every);
     let mut agent = Agent {
         run_tag: config.run_id.tag(),
         incarnation,
-        outbox: message::EstimateOutbox::new(
-            config.uav,
-            incarnation,
-            estimator_config.oem_full_every,
-        )
-        .with_set_deltas(),
+        // A delta against a message the radio lost rebuilds nothing: whole sets under loss.
+        outbox: if radio.is_lossy() {
+            outbox
+        } else {
+            outbox.with_set_deltas()
+        },
         inbox: message::EstimateInbox::new(),
+        radio,
+        lost_by_step: BTreeMap::new(),
         estimator,
         checkpoint_flusher: checkpoint.clone().and_then(|file| {
             CheckpointFlusher::start(file)
@@ -376,23 +398,6 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
     })
 }
 
-/// Whether an agent whose camera is at `receiver` fuses an estimate sent from `sender` (the
-/// poses of the same step) over links of range `range_m`: always with an infinite range,
-/// else when the cameras are within `range_m` of each other horizontally. An unknown pose is
-/// out of every finite range. The observer applies the same rule to reproduce what each
-/// agent fused.
-pub fn in_comms_range(
-    range_m: f64,
-    receiver: Option<CameraPose>,
-    sender: Option<CameraPose>,
-) -> bool {
-    range_m.is_infinite()
-        || match (receiver, sender) {
-            (Some(a), Some(b)) => (a.position - b.position).xy().norm() <= range_m,
-            _ => false,
-        }
-}
-
 /// A number that grows at each start of an agent process (the wall clock in nanoseconds), so
 /// the world and the peers tell a restarted agent from its predecessor and ignore the latter.
 fn incarnation() -> u64 {
@@ -403,6 +408,9 @@ fn incarnation() -> u64 {
 struct PeerInfo {
     /// Newest step fused from this peer.
     fused_step: Option<u64>,
+    /// Newest step whose message from this peer was handled: queued, lost by the radio or
+    /// dropped for want of its base. What [`Agent::gather`] awaits.
+    heard_step: Option<u64>,
     incarnation: Option<u64>,
     /// Estimates received ahead of this agent's step.
     pending: Vec<PeerEstimate>,
@@ -423,6 +431,12 @@ struct Agent<'a> {
     outbox: message::EstimateOutbox,
     /// The peers' sets, the bases of their deltas.
     inbox: message::EstimateInbox,
+    /// The simulated links ([`radio`]).
+    radio: Radio,
+    /// Estimates the radio lost, by step, not yet counted in the report: they are counted
+    /// once the agent has gathered their step, so the counters its estimates carry do not
+    /// depend on when a peer's message of the next step came in.
+    lost_by_step: BTreeMap<u64, u64>,
     /// The step from which the next estimate carries the whole map (a peer (re)joined).
     full_map_from: Option<u64>,
     guidance: GuidanceParams,
@@ -568,6 +582,9 @@ impl Agent<'_> {
             tracing::warn!(step = k, "frame of another run or UAV dropped");
             return Ok(());
         }
+        // Every token of the rounds before this frame was sent before the world sent it: read
+        // them now, so the counters this step's estimate carries do not depend on timing.
+        self.drain_tokens();
         let mut yaw_ref = None;
         let mut acked = false;
         let guidance_step = k.is_multiple_of(self.guidance.steps_per_period as u64);
@@ -696,6 +713,8 @@ impl Agent<'_> {
             messages_dropped: self.report.dropped.values().sum(),
             decisions: self.report.decisions,
             token_timeouts: self.report.token_timeouts,
+            estimates_lost: self.report.estimates_lost,
+            tokens_lost: self.report.tokens_lost,
         };
         msg.want_whole = self.inbox.wanted();
         let bytes = message::to_bytes(&msg)?;
@@ -724,7 +743,7 @@ impl Agent<'_> {
             let missing = self.awaited_peers().iter().any(|j| {
                 self.peers
                     .get(j)
-                    .and_then(|p| p.fused_step)
+                    .and_then(|p| p.heard_step)
                     .is_none_or(|s| s < k)
             });
             if !missing || self.stopping() || self.end_of_run {
@@ -770,7 +789,14 @@ impl Agent<'_> {
                 let parsed = message::from_bytes(sample.payload());
                 drop(sample);
                 match parsed {
-                    Ok(m) if m.uav == sender => self.read_peer(&m),
+                    Ok(m) if m.uav == sender => {
+                        let me = self.config.uav;
+                        if self.radio.delivers(LinkKind::Estimate, sender, me, m.step) {
+                            self.read_peer(&m);
+                        } else {
+                            self.lose_estimate(&m);
+                        }
+                    }
                     Ok(m) => self.drop_message(
                         DropReason::Sender,
                         "estimate",
@@ -780,6 +806,16 @@ impl Agent<'_> {
                 }
             }
         }
+    }
+
+    /// Takes note of an estimate the radio lost: it is not read (nor its request for whole
+    /// sets, nor its incarnation), and not awaited any longer.
+    fn lose_estimate(&mut self, m: &EstimateMsg) {
+        let info = self.peers.entry(m.uav).or_default();
+        if info.incarnation.is_none_or(|i| m.incarnation >= i) {
+            info.heard_step = info.heard_step.max(Some(m.step));
+        }
+        *self.lost_by_step.entry(m.step).or_default() += 1;
     }
 
     /// Rebuilds a peer's estimate and queues it. One that cannot be rebuilt for want of its
@@ -797,6 +833,7 @@ impl Agent<'_> {
                     let info = self.peers.entry(m.uav).or_default();
                     if info.incarnation.is_none_or(|i| i == m.incarnation) {
                         info.fused_step = Some(info.fused_step.map_or(m.step, |s| s.max(m.step)));
+                        info.heard_step = info.heard_step.max(Some(m.step));
                     }
                 }
                 self.drop_message(reason, "estimate", &e.to_string());
@@ -823,23 +860,31 @@ impl Agent<'_> {
             info.incarnation = Some(p.incarnation);
             info.fused_step = None;
         }
+        info.heard_step = info.heard_step.max(Some(p.step));
         info.pending.push(p);
     }
 
-    /// Fuses every queued estimate of a step up to `k` (older ones are dilated by the fusion).
+    /// Fuses every queued estimate that has arrived by step `k` (of step `k - d` and older
+    /// with a latency of `d` steps; older ones than `k` are dilated by the fusion), in
+    /// ascending order of peer, and counts the lost estimates of the steps up to `k`.
     fn fuse_pending(&mut self, k: u64) {
         let my_pose = self.estimator.state().pose;
-        let range = self.config.scenario.comms.range_m;
+        let radio = self.radio;
+        let later = self.lost_by_step.split_off(&k.saturating_add(1));
+        let lost = std::mem::replace(&mut self.lost_by_step, later);
+        self.report.estimates_lost += lost.values().sum::<u64>();
         for info in self.peers.values_mut() {
-            let (ready, later): (Vec<_>, Vec<_>) =
-                info.pending.drain(..).partition(|p| p.step <= k);
+            let (ready, later): (Vec<_>, Vec<_>) = info
+                .pending
+                .drain(..)
+                .partition(|p| radio.arrived(p.step, k));
             info.pending = later;
             for p in ready {
                 if info.fused_step.is_some_and(|s| s >= p.step) {
                     continue;
                 }
                 info.fused_step = Some(p.step);
-                if in_comms_range(range, my_pose, p.pose) {
+                if radio.in_range(my_pose, p.pose) {
                     self.estimator.fuse(&p);
                     self.report.estimates_received += 1;
                 } else {
@@ -870,7 +915,17 @@ impl Agent<'_> {
             let parsed: Result<GuidanceToken, _> = codec::decode(sample.payload());
             drop(sample);
             match parsed {
-                Ok(token) => self.ring.observe(token),
+                Ok(token) => {
+                    let (sender, me) = (header.sender, self.config.uav);
+                    let delivered = self
+                        .radio
+                        .delivers(LinkKind::Token, sender, me, header.step);
+                    if !delivered {
+                        self.report.tokens_lost += 1;
+                        tracing::debug!(round = token.round, sender, "token lost by the radio");
+                    }
+                    self.ring.receive(token, sender, delivered);
+                }
                 Err(e) => self.drop_message(DropReason::Malformed, "token", &e.to_string()),
             }
         }

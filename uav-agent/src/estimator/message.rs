@@ -19,6 +19,14 @@
 //! rebuilt from a wrong base is refused, never fused: the fused sets are exactly those a
 //! receiver of whole sets fuses.
 //!
+//! On lossy links (`comms.loss > 0`, [`crate::agent::radio`]) agents send whole sets in every
+//! message: a receiver whose radio lost a message could place none of the deltas after it
+//! until whole sets came, so what it fused would depend on its history of losses, not only on
+//! which messages reached it. The map keeps its scheme there: its cells merge by a join (ground
+//! wins, else the taller obstacle), so a change carried by a lost message only comes later, with
+//! the next whole map (every `oem_full_every` messages) or the cell's next change; it never makes
+//! a receiver's map wrong, and the map feeds the guidance only, never the guaranteed sets.
+//!
 //! Whatever a peer sends is validated: a set on another grid, a malformed set or delta, a map
 //! cell out of range, a duplicated target are typed errors, never a panic.
 

@@ -27,6 +27,18 @@
 //!   holder with a fresh bounded wait, so takeovers too happen one at a time. (Waits that
 //!   started at different times may still run out at different times: then two UAVs can
 //!   decide concurrently, and the merge keeps both plans.)
+//! - **Lost tokens.** On lossy links (`comms.loss`) the receiver decides whether the radio
+//!   carried a token ([`TokenRing::receive`]). A lost token still says one thing for sure: its
+//!   sender decided (only a UAV that decided sends one). Its sender is then skipped at once for
+//!   the rest of the round, as a silent holder is, and its plan stays unknown here (a later
+//!   token that carries it still brings it). Since every agent skips a UAV only once it has
+//!   decided, the holder each agent computes is the same one as on perfect links, one UAV
+//!   at a time; a holder that lost every earlier token decides around no plans. So a round
+//!   ends with every live agent deciding once, without waiting for anything, and what each
+//!   decides around is the plans of the tokens delivered to it: the same in every run with
+//!   the same seed, as long as a token reaches every agent before any token sent because of
+//!   it (on one host a token is in every queue once sent; across hosts the bridges' in-order
+//!   links through one router keep that order).
 //! - **Once per round.** An agent decides at most once per round, and not in a round older
 //!   than one it decided in. An agent that comes back or joins late (the round complete
 //!   without it) is still the holder once the others have decided, and decides once, around
@@ -204,6 +216,18 @@ impl TokenRing {
         match self.state_mut(token.round) {
             Some(state) => state.merge(token),
             None => self.stale_tokens += 1,
+        }
+    }
+
+    /// Takes note of a token that came over a link that may lose it: merged when the radio
+    /// `delivered` it ([`TokenRing::observe`]); otherwise `sender` decided with a plan this
+    /// agent will not see, and is skipped at once for the rest of the round, as a holder whose
+    /// wait ran out is ([`TokenRing::holder_silent`]), so nobody waits for it.
+    pub fn receive(&mut self, token: GuidanceToken, sender: u32, delivered: bool) {
+        if delivered {
+            self.observe(token);
+        } else {
+            self.holder_silent(token.round, sender);
         }
     }
 

@@ -298,6 +298,7 @@ mod tests {
     use std::sync::Arc;
 
     use protocol::raster::Coverage;
+    use uav_agent::agent::radio::Radio;
     use uav_agent::occupancy::OccupancyMap;
     use world_server::World;
 
@@ -453,7 +454,7 @@ mod tests {
         for est in sim.estimators() {
             oem.merge(&est.state().oem);
         }
-        let sets = FusedSets::of_agent(&observed[0], &observed, &config, f64::INFINITY);
+        let sets = FusedSets::of_agent(&observed[0], &observed, &config, &Radio::perfect());
         // Traffic does not depend on the UAVs: a second world gives the cars of the last frame.
         let mut shadow = World::new(&scenario).unwrap();
         for _ in 0..steps - 1 {

@@ -1,0 +1,647 @@
+//! `fleet sweep --axis KEY=V1,V2,...`: the same sweep at every value of one scenario key (the
+//! radio's loss `comms.loss=0,0.1,0.3,0.5`, its latency, its range, or any other key), and
+//! how the final metrics change along it.
+//!
+//! The runs of value `V` go under `KEY=V/<variant>/seed-<n>/`, so each `KEY=V/` directory is
+//! a sweep directory of its own, with its `table.json`, `table.md` and `metrics.png` (and
+//! `fleet sweep --merge` reads it like any sweep). Beside them the sweep writes:
+//!
+//! - `axis.json` and `axis.md`: per variant, one row per final metric of the sweep's table
+//!   ([`super::table`]) plus the radio's rows (the share of peer estimates and
+//!   of tokens the radio lost, measured, and the estimates' traffic), one column per value,
+//!   mean ± sample standard deviation over the seeds;
+//! - `axis.png`: UA, localisation error, target-set area and the measured loss against the
+//!   value (mean with ±1 sd bars, a line per variant);
+//! - `metrics.png`: UA and OA over time per value (and variant), mean and ±1 sd over seeds.
+//!
+//! A value is applied as the override `KEY=V` after the variant's and the user's `--set`
+//! overrides (so it wins over a `--set` of the same key), and checked like any override: a
+//! value out of the key's range is refused before anything runs.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::str::FromStr;
+
+use anyhow::Context as _;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use serde::Serialize;
+
+use super::Shard;
+use super::collect::{FoundRuns, assemble, write_table};
+use super::table::{Cell, ROWS, format_cell, seed_range};
+use crate::observe::StepMetrics;
+use crate::pictures::{FONT, palette};
+use crate::results::curves::draw_bands;
+use crate::variant::Variant;
+
+/// Most values an axis takes.
+pub const MAX_AXIS_VALUES: usize = 32;
+
+/// A scenario key and the values a sweep runs it at.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Axis {
+    /// The dotted scenario key, e.g. `comms.loss`.
+    pub key: String,
+    /// Its values, as `--set` writes them, in the table's column order.
+    pub values: Vec<String>,
+}
+
+/// Why `--axis` could not be read.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("--axis {text}: {reason} (expected KEY=V1,V2,... e.g. comms.loss=0,0.1,0.3,0.5)")]
+pub struct AxisParseError {
+    text: String,
+    reason: String,
+}
+
+impl FromStr for Axis {
+    type Err = AxisParseError;
+
+    fn from_str(text: &str) -> Result<Axis, AxisParseError> {
+        let fail = |reason: &str| AxisParseError {
+            text: text.to_owned(),
+            reason: reason.to_owned(),
+        };
+        let (key, values) = text.split_once('=').ok_or_else(|| fail("no `=`"))?;
+        let key = key.trim();
+        let dotted = !key.is_empty()
+            && key.split('.').all(|part| {
+                !part.is_empty() && part.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            });
+        if !dotted {
+            return Err(fail("the key is not a dotted scenario key"));
+        }
+        let values: Vec<String> = values.split(',').map(|v| v.trim().to_owned()).collect();
+        if values.iter().any(String::is_empty) {
+            return Err(fail("a value is empty"));
+        }
+        // A value names a directory: no path separators, no brackets or quotes (an axis takes
+        // single numbers, words or booleans).
+        let plain = |v: &String| {
+            v.chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '+' | '_'))
+        };
+        if !values.iter().all(plain) {
+            return Err(fail(
+                "values are single numbers, words or booleans (letters, digits, . - + _)",
+            ));
+        }
+        if values.len() > MAX_AXIS_VALUES {
+            return Err(fail(&format!("at most {MAX_AXIS_VALUES} values")));
+        }
+        for (i, v) in values.iter().enumerate() {
+            if values[..i].contains(v) {
+                return Err(fail(&format!("{v} is given twice")));
+            }
+        }
+        Ok(Axis {
+            key: key.to_owned(),
+            values,
+        })
+    }
+}
+
+impl Axis {
+    /// The override and the directory of value `i`: `KEY=V`.
+    pub fn setting(&self, i: usize) -> String {
+        format!("{}={}", self.key, self.values[i])
+    }
+
+    /// Value `i` as a number, if every value is one: the x of the picture.
+    fn numeric(&self) -> Option<Vec<f64>> {
+        self.values
+            .iter()
+            .map(|v| v.parse::<f64>().ok().filter(|x| x.is_finite()))
+            .collect()
+    }
+}
+
+/// A row of the axis table that the sweep's table does not have: read from a run's summary.
+struct RadioRow {
+    key: &'static str,
+    label: &'static str,
+    scale: f64,
+    value: fn(&serde_json::Value) -> Option<f64>,
+}
+
+/// The radio's rows: what the links lost, measured from the agents' counters, and what the
+/// estimates cost (under loss they carry whole sets).
+const RADIO_ROWS: [RadioRow; 3] = [
+    RadioRow {
+        key: "estimates_lost_share",
+        label: "peer estimates lost by the radio (%)",
+        scale: 100.0,
+        value: |s| {
+            let agents = s["agents"].as_array()?;
+            let sum = |k: &str| agents.iter().filter_map(|a| a[k].as_u64()).sum::<u64>();
+            let lost = sum("estimates_lost");
+            let heard = lost + sum("estimates_received");
+            (heard > 0).then(|| lost as f64 / heard as f64)
+        },
+    },
+    RadioRow {
+        key: "tokens_lost_share",
+        label: "tokens lost by the radio (%)",
+        scale: 100.0,
+        value: |s| {
+            let agents = s["agents"].as_array()?;
+            let lost: u64 = agents
+                .iter()
+                .filter_map(|a| a["tokens_lost"].as_u64())
+                .sum();
+            // Every token sent (the observer sees each once) goes to every other agent.
+            let sent = s["comms"]["tokens"]["messages"].as_u64()?;
+            let links = sent * s["uavs"].as_u64()?.saturating_sub(1);
+            (links > 0).then(|| lost as f64 / links as f64)
+        },
+    },
+    RadioRow {
+        key: "estimate_kb_per_s",
+        label: "estimates sent, kB per simulated s",
+        scale: 1.0,
+        value: |s| {
+            let bytes = s["comms"]["estimates"]["bytes"].as_f64()?;
+            let sim_s = s["sim_s"].as_f64().filter(|t| *t > 0.0)?;
+            Some(bytes / sim_s / 1e3)
+        },
+    },
+];
+
+/// A run's values of the radio rows, from its `summary.json`.
+pub(super) fn radio_values(summary: &serde_json::Value) -> Vec<Option<f64>> {
+    RADIO_ROWS.iter().map(|row| (row.value)(summary)).collect()
+}
+
+/// `axis.json`: per variant and value, the statistics over seeds of every row.
+#[derive(Clone, Debug, Serialize)]
+pub struct AxisTable {
+    /// The scenario key.
+    pub key: String,
+    /// Its values, in column order.
+    pub values: Vec<String>,
+    /// Seeds run per variant and value.
+    pub seeds: Vec<u64>,
+    /// Variants.
+    pub variants: Vec<Variant>,
+    /// `metrics[variant][i][row]`: the cells of value `i`.
+    pub metrics: BTreeMap<&'static str, Vec<BTreeMap<&'static str, Cell>>>,
+    /// Runs that failed or were interrupted, as `KEY=V/variant/seed-n`.
+    pub failed_runs: Vec<String>,
+}
+
+impl AxisTable {
+    /// The table of the runs of every value (`levels[i]`: the runs of value `i`).
+    pub(super) fn build(
+        axis: &Axis,
+        variants: &[Variant],
+        levels: &[FoundRuns],
+        failed_runs: Vec<String>,
+    ) -> AxisTable {
+        let seeds: Vec<u64> = levels
+            .iter()
+            .flat_map(|runs| runs.keys().map(|k| k.1))
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        let metrics = variants
+            .iter()
+            .map(|&variant| {
+                let columns = levels
+                    .iter()
+                    .map(|runs| {
+                        let run = |seed: &u64| runs.get(&(variant, *seed));
+                        let mut cells = BTreeMap::new();
+                        for (i, row) in ROWS.iter().enumerate() {
+                            let values = seeds.iter().map(|s| run(s).and_then(|r| r.values[i]));
+                            cells.insert(row.key, Cell::of(values.collect()));
+                        }
+                        for (i, row) in RADIO_ROWS.iter().enumerate() {
+                            let values = seeds.iter().map(|s| run(s).and_then(|r| r.radio[i]));
+                            cells.insert(row.key, Cell::of(values.collect()));
+                        }
+                        cells
+                    })
+                    .collect();
+                (variant.name(), columns)
+            })
+            .collect();
+        AxisTable {
+            key: axis.key.clone(),
+            values: axis.values.clone(),
+            seeds,
+            variants: variants.to_vec(),
+            metrics,
+            failed_runs,
+        }
+    }
+
+    /// Per variant, the metrics as rows and the values as columns, in Markdown.
+    pub fn to_markdown(&self) -> String {
+        let mut md = String::new();
+        let _ = writeln!(
+            md,
+            "Final metrics against `{}`, mean ± standard deviation over {} seeds ({}); the set \
+             metrics are each agent's own, averaged over agents unless marked worst agent.",
+            self.key,
+            self.seeds.len(),
+            seed_range(&self.seeds)
+        );
+        let rows = ROWS
+            .iter()
+            .map(|r| (r.key, r.label, r.scale))
+            .chain(RADIO_ROWS.iter().map(|r| (r.key, r.label, r.scale)));
+        let rows: Vec<(&str, &str, f64)> = rows.collect();
+        for variant in &self.variants {
+            let name = variant.name();
+            let _ = writeln!(md, "\n### {name}\n");
+            let heads: Vec<String> = self
+                .values
+                .iter()
+                .map(|v| format!("{} = {v}", self.key))
+                .collect();
+            let _ = writeln!(md, "| metric | {} |", heads.join(" | "));
+            let _ = writeln!(md, "|---|{}", "---:|".repeat(heads.len()));
+            for &(key, label, scale) in &rows {
+                let cells: Vec<String> = (0..self.values.len())
+                    .map(|i| {
+                        self.cell(name, i, key)
+                            .map_or_else(|| "-".into(), |c| format_cell(c, scale))
+                    })
+                    .collect();
+                let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
+            }
+        }
+        if !self.failed_runs.is_empty() {
+            let _ = writeln!(
+                md,
+                "\nRuns that did not complete: {}",
+                self.failed_runs.join(", ")
+            );
+        }
+        md
+    }
+
+    fn cell(&self, variant: &str, i: usize, key: &str) -> Option<&Cell> {
+        self.metrics.get(variant)?.get(i)?.get(key)
+    }
+}
+
+/// The curves of every value of the axis (and variant), by name, for `metrics.png`.
+type AxisCurves = Vec<(String, Vec<Vec<StepMetrics>>)>;
+
+/// How the results of an axis sweep (or of a merge of axis sweeps) are written.
+pub(super) struct Levels<'a> {
+    /// The key and its values.
+    pub axis: &'a Axis,
+    /// The variants, in column order.
+    pub variants: &'a [Variant],
+    /// The share of the sweep the runs are (`--shard`).
+    pub shard: Option<Shard>,
+    /// Whether a (value, variant, seed) without a run is listed as missing (a merge).
+    pub flag_missing: bool,
+}
+
+impl Levels<'_> {
+    /// Writes each value's table under `out/KEY=V/` (a sweep directory of its own), then the
+    /// comparison of the values into `out`; `found[i]` and `failed[i]` are value `i`'s runs
+    /// and failed runs.
+    pub(super) fn write(
+        &self,
+        found: Vec<FoundRuns>,
+        failed: Vec<Vec<String>>,
+        out: &Path,
+    ) -> anyhow::Result<AxisTable> {
+        let mut table = AxisTable::build(self.axis, self.variants, &found, Vec::new());
+        let mut curves = Vec::new();
+        for (level, (runs, failed)) in found.into_iter().zip(failed).enumerate() {
+            let setting = self.axis.setting(level);
+            let (mut level_table, level_curves) =
+                assemble(runs, self.variants, failed, self.flag_missing);
+            level_table.shard = self.shard.map(|s| s.to_string());
+            write_table(&level_table, &level_curves, &out.join(&setting))?;
+            let failed = level_table.failed_runs.iter();
+            table
+                .failed_runs
+                .extend(failed.map(|f| format!("{setting}/{f}")));
+            for (variant, runs) in level_curves {
+                let name = if self.variants.len() == 1 {
+                    setting.clone()
+                } else {
+                    format!("{variant} {setting}")
+                };
+                curves.push((name, runs));
+            }
+        }
+        write(&table, self.axis, &curves, out)?;
+        Ok(table)
+    }
+}
+
+/// Writes `axis.json`, `axis.md`, `axis.png` and `metrics.png` into `out` and prints the
+/// table.
+fn write(table: &AxisTable, axis: &Axis, curves: &AxisCurves, out: &Path) -> anyhow::Result<()> {
+    let json = serde_json::to_string_pretty(table)? + "\n";
+    std::fs::write(out.join("axis.json"), json).context("cannot write axis.json")?;
+    let md = table.to_markdown();
+    std::fs::write(out.join("axis.md"), &md).context("cannot write axis.md")?;
+    if !table.seeds.is_empty() {
+        draw(table, axis, &out.join("axis.png"))?;
+    }
+    if curves.iter().any(|(_, runs)| !runs.is_empty()) {
+        draw_bands(curves, &axis.key, &out.join("metrics.png"))?;
+    }
+    println!("{md}\nresults in {}", out.display());
+    Ok(())
+}
+
+/// One panel of `axis.png`: a row of the table, scaled.
+struct Panel {
+    caption: &'static str,
+    y_desc: &'static str,
+    key: &'static str,
+    scale: f64,
+    /// Where the legend goes (away from where the curves usually are).
+    legend: SeriesLabelPosition,
+}
+
+const PANELS: [Panel; 4] = [
+    Panel {
+        caption: "UA, undetected-set area (final)",
+        y_desc: "% of the region",
+        key: "ua_final",
+        scale: 100.0,
+        legend: SeriesLabelPosition::LowerRight,
+    },
+    Panel {
+        caption: "localisation error (mean over the run)",
+        y_desc: "m",
+        key: "loc_error_mean_m",
+        scale: 1.0,
+        legend: SeriesLabelPosition::LowerRight,
+    },
+    Panel {
+        caption: "target-set area (mean over the run)",
+        y_desc: "% of the region",
+        key: "target_set_area_mean",
+        scale: 100.0,
+        legend: SeriesLabelPosition::LowerRight,
+    },
+    Panel {
+        caption: "peer estimates lost by the radio (measured)",
+        y_desc: "%",
+        key: "estimates_lost_share",
+        scale: 100.0,
+        legend: SeriesLabelPosition::UpperLeft,
+    },
+];
+
+/// `axis.png`: a panel per row of [`PANELS`] against the axis's values, a line per variant
+/// through the means, bars of ±1 standard deviation.
+fn draw(table: &AxisTable, axis: &Axis, path: &Path) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (1100, 820)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let root = root.titled(
+        &format!(
+            "final metrics against {}: mean and ±1 sd over {} seeds ({})",
+            axis.key,
+            table.seeds.len(),
+            seed_range(&table.seeds)
+        ),
+        (FONT, 19),
+    )?;
+    for (area, panel) in root.split_evenly((2, 2)).iter().zip(&PANELS) {
+        draw_panel(area, panel, table, axis)?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+fn draw_panel(
+    area: &DrawingArea<BitMapBackend<'_>, Shift>,
+    panel: &Panel,
+    table: &AxisTable,
+    axis: &Axis,
+) -> anyhow::Result<()> {
+    // Numbers on a numeric axis; otherwise the values one unit apart, named.
+    let xs: Vec<f64> = axis
+        .numeric()
+        .unwrap_or_else(|| (0..axis.values.len()).map(|i| i as f64).collect());
+    let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let margin = ((hi - lo) * 0.06).max(0.05);
+    // Per variant (its index), the points: x, mean and sd, scaled.
+    type Points = Vec<(f64, f64, f64)>;
+    let series: Vec<(usize, Points)> = table
+        .variants
+        .iter()
+        .enumerate()
+        .map(|(v, variant)| {
+            let points = xs
+                .iter()
+                .enumerate()
+                .filter_map(|(i, &x)| {
+                    let cell = table.cell(variant.name(), i, panel.key)?;
+                    let (mean, sd) = (cell.mean?, cell.sd?);
+                    Some((x, mean * panel.scale, sd * panel.scale))
+                })
+                .collect();
+            (v, points)
+        })
+        .collect();
+    let top = series
+        .iter()
+        .flat_map(|(_, p)| p.iter().map(|&(_, m, sd)| m + sd))
+        .fold(0.0_f64, f64::max);
+    let y_top = if top > 0.0 { top * 1.15 } else { 1.0 };
+    let mut chart = ChartBuilder::on(area)
+        .caption(panel.caption, (FONT, 16))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(60)
+        .build_cartesian_2d(lo - margin..hi + margin, 0.0..y_top)?;
+    let named = axis.numeric().is_none();
+    let names = axis.values.clone();
+    chart
+        .configure_mesh()
+        .x_desc(axis.key.as_str())
+        .y_desc(panel.y_desc)
+        .x_label_formatter(&|x| {
+            if named {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 {
+                    return names.get(i as usize).cloned().unwrap_or_default();
+                }
+                return String::new();
+            }
+            // Rounded, so that 0.3 reads 0.3 and not 0.30000000000000004.
+            format!("{}", (x * 1e6).round() / 1e6)
+        })
+        .label_style((FONT, 12))
+        .draw()?;
+    for (v, points) in &series {
+        let colour = palette(*v);
+        let line: Vec<(f64, f64)> = points.iter().map(|&(x, m, _)| (x, m)).collect();
+        let name = table.variants[*v].name();
+        chart
+            .draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))?
+            .label(name)
+            .legend(move |(px, py)| {
+                PathElement::new(vec![(px, py), (px + 22, py)], colour.stroke_width(2))
+            });
+        // ±1 sd bars with caps (plotters' error bars are a feature the workspace leaves out).
+        let cap = margin * 0.25;
+        chart.draw_series(points.iter().flat_map(|&(x, m, sd)| {
+            let (lo, hi) = ((m - sd).max(0.0), m + sd);
+            [
+                vec![(x, lo), (x, hi)],
+                vec![(x - cap, lo), (x + cap, lo)],
+                vec![(x - cap, hi), (x + cap, hi)],
+            ]
+            .map(|line| PathElement::new(line, colour.stroke_width(2)))
+        }))?;
+        chart.draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+        chart.draw_series(points.iter().map(|&(x, m, _)| {
+            EmptyElement::at((x, m))
+                + Text::new(short(m), (7, -17), (FONT, 12).into_font().color(&BLACK))
+        }))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(panel.legend.clone())
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 12))
+        .draw()?;
+    Ok(())
+}
+
+/// A value in 3 significant digits at most.
+fn short(v: f64) -> String {
+    if v.abs() >= 100.0 {
+        format!("{v:.0}")
+    } else if v.abs() >= 10.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.2}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::collect::FoundRun;
+    use super::*;
+
+    #[test]
+    fn axes_are_parsed_and_bad_ones_named() {
+        let a: Axis = "comms.loss=0, 0.1,0.3,0.5".parse().unwrap();
+        assert_eq!(a.key, "comms.loss");
+        assert_eq!(a.values, ["0", "0.1", "0.3", "0.5"]);
+        assert_eq!(a.setting(2), "comms.loss=0.3");
+        assert_eq!(a.numeric(), Some(vec![0.0, 0.1, 0.3, 0.5]));
+        let words: Axis = "estimator.sets=cells,reach".parse().unwrap();
+        assert_eq!(words.numeric(), None);
+        for (bad, says) in [
+            ("comms.loss", "no `=`"),
+            ("=0,1", "dotted scenario key"),
+            ("comms..loss=1", "dotted scenario key"),
+            ("comms.loss=0,,1", "a value is empty"),
+            ("comms.loss=", "a value is empty"),
+            ("comms.loss=0.1,0.1", "0.1 is given twice"),
+            ("uavs.altitudes_m=[80,90]", "single numbers"),
+            ("comms.loss=../x", "single numbers"),
+        ] {
+            let e = bad.parse::<Axis>().unwrap_err().to_string();
+            assert!(e.contains(says) && e.contains("--axis"), "{bad}: {e}");
+        }
+        let many = format!(
+            "seed={}",
+            (0..40).map(|i| i.to_string()).collect::<Vec<_>>().join(",")
+        );
+        assert!(
+            many.parse::<Axis>()
+                .unwrap_err()
+                .to_string()
+                .contains("at most")
+        );
+    }
+
+    fn summary(ua: f64, lost: u64, received: u64) -> serde_json::Value {
+        serde_json::json!({
+            "ua_final": ua,
+            "uavs": 2,
+            "sim_s": 10.0,
+            "agents": [
+                {"estimates_lost": lost, "estimates_received": received, "tokens_lost": 1},
+                {"estimates_lost": lost, "estimates_received": received, "tokens_lost": 0},
+            ],
+            "comms": {"tokens": {"messages": 4}, "estimates": {"bytes": 20000}},
+        })
+    }
+
+    fn run(s: &serde_json::Value) -> FoundRun {
+        FoundRun {
+            values: super::super::table::row_values_json(s),
+            radio: radio_values(s),
+            series: Vec::new(),
+            source: std::path::PathBuf::new(),
+        }
+    }
+
+    #[test]
+    fn the_axis_table_has_a_column_per_value_with_the_radio_rows() {
+        let axis: Axis = "comms.loss=0,0.5".parse().unwrap();
+        let mut none = FoundRuns::new();
+        none.insert((Variant::Paper, 1), run(&summary(0.2, 0, 10)));
+        none.insert((Variant::Paper, 2), run(&summary(0.4, 0, 10)));
+        let mut half = FoundRuns::new();
+        half.insert((Variant::Paper, 1), run(&summary(0.5, 5, 5)));
+        let table = AxisTable::build(&axis, &[Variant::Paper], &[none, half], vec![]);
+        assert_eq!(table.seeds, vec![1, 2]);
+        let ua = table.cell("paper", 0, "ua_final").unwrap();
+        assert!((ua.mean.unwrap() - 0.3).abs() < 1e-12);
+        let lost = table.cell("paper", 1, "estimates_lost_share").unwrap();
+        assert_eq!(
+            (lost.mean, lost.values.clone()),
+            (Some(0.5), vec![Some(0.5), None])
+        );
+        let tokens = table.cell("paper", 1, "tokens_lost_share").unwrap();
+        assert_eq!(tokens.mean, Some(0.25), "1 of 4 tokens x 1 other agent");
+        let kb = table.cell("paper", 0, "estimate_kb_per_s").unwrap();
+        assert_eq!(kb.mean, Some(2.0));
+        let md = table.to_markdown();
+        assert!(
+            md.contains("| metric | comms.loss = 0 | comms.loss = 0.5 |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| UA, undetected-set area (%) | 30.00 ± 14.14 | 50.00 ± 0.00 |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| peer estimates lost by the radio (%) | 0.00 ± 0.00 | 50.00 ± 0.00 |"),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn the_axis_picture_is_drawn() {
+        crate::pictures::register_fonts().unwrap();
+        let dir = std::env::temp_dir().join(format!("setfleet-axis-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for text in ["comms.loss=0,0.5", "estimator.sets=cells,reach"] {
+            let axis: Axis = text.parse().unwrap();
+            let mut a = FoundRuns::new();
+            a.insert((Variant::Paper, 1), run(&summary(0.2, 0, 10)));
+            let mut b = FoundRuns::new();
+            b.insert((Variant::Paper, 1), run(&summary(0.4, 5, 5)));
+            let table = AxisTable::build(&axis, &[Variant::Paper], &[a, b], vec![]);
+            let path = dir.join("axis.png");
+            draw(&table, &axis, &path).unwrap();
+            let bytes = std::fs::read(&path).unwrap();
+            assert!(bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000);
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,125 @@
+//! Lossy, slow radio links between agents (`comms.loss`, `comms.latency_ms`) in whole
+//! lockstep runs: messages are lost, nothing waits for them, the guarantee holds, and the
+//! observer measures exactly what each agent fused. (The same seed giving the same results
+//! under loss is in `run::the_same_seed_in_lockstep_gives_the_same_results`.)
+
+use std::path::Path;
+use std::process::Command;
+
+use serde_json::Value;
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary};
+
+/// 3 UAVs over the tests' small region, 30 s.
+const SCENARIO: &str = "seed = 3\nduration_s = 30.0\n\n[region]\nhalf_extent_m = 100.0\n\n\
+                        [targets]\ncount = 4\n\n[uavs]\ncount = 3\n\n[camera]\nrows = 120\n\
+                        cols = 160\n";
+const STEPS: u64 = 60;
+
+/// Runs `fleet run --strict` with `overrides` to its end (bounded) and returns its summary.
+fn run(t: &TestRun, overrides: &[&str]) -> Value {
+    let file = t.write("scenario.toml", SCENARIO);
+    let out = t.dir.join("out");
+    let mut cmd = Command::new(binary("fleet"));
+    cmd.args(["run", "--strict", "--run-id", t.run.as_str(), "--scenario"])
+        .arg(&file)
+        .arg("--out")
+        .arg(&out);
+    for o in overrides {
+        cmd.args(["--set", o]);
+    }
+    let done = ChildGuard::spawn(&mut cmd)
+        .wait_timeout(EXIT_TIMEOUT)
+        .unwrap_or_else(|| panic!("a lossy run did not end within {EXIT_TIMEOUT:?}"));
+    assert!(
+        done.status.success(),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
+    serde_json::from_str(&text).expect("summary.json is JSON")
+}
+
+/// Agent `uav`'s own report: the last JSON line of its log.
+fn agent_report(out: &Path, uav: u64) -> Value {
+    let log = std::fs::read_to_string(out.join(format!("logs/agent-{uav}.log"))).expect("log");
+    let line = log
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{') && l.contains("final_undetected_digest"))
+        .unwrap_or_else(|| panic!("no report in agent {uav}'s log:\n{log}"));
+    serde_json::from_str(line).expect("the report is JSON")
+}
+
+/// The checks every lossy run passes: all steps run, no violation, and each agent's `X̄`
+/// after its last fusion is the one the observer rebuilt for it (the observer draws the same
+/// losses and fuses the same estimates).
+fn assert_complete_and_exact(t: &TestRun, s: &Value) {
+    assert_eq!(s["steps"], STEPS, "{s}");
+    assert_eq!(s["violations"], 0, "{s}");
+    for a in s["agents"].as_array().expect("agents") {
+        assert_eq!(a["steps_processed"], STEPS, "{a}");
+        let uav = a["uav"].as_u64().expect("uav");
+        let own = agent_report(&t.dir.join("out"), uav);
+        assert_eq!(own["final_step"], STEPS - 1, "{own}");
+        assert_eq!(a["final_measured_step"], STEPS - 1, "{a}");
+        assert_eq!(
+            a["final_undetected_digest"], own["final_undetected_digest"],
+            "agent {uav}: the observer did not fuse what the agent fused"
+        );
+        // The summary has the counters of the agent's last estimate, sent before its last
+        // step's losses were counted.
+        let (summary, report) = (a["estimates_lost"].as_u64(), own["estimates_lost"].as_u64());
+        assert!(summary <= report, "{a} / {own}");
+    }
+}
+
+#[test]
+fn lossy_links_lose_messages_never_the_guarantee_and_nothing_waits_for_them() {
+    let t = TestRun::new("radio-loss");
+    let s = run(&t, &["comms.loss=0.3"]);
+    assert_complete_and_exact(&t, &s);
+    let agents = s["agents"].as_array().expect("agents");
+    let sum = |key: &str| -> u64 { agents.iter().map(|a| a[key].as_u64().unwrap()).sum() };
+    let (lost, fused) = (sum("estimates_lost"), sum("estimates_received"));
+    // Each agent hears 2 peers at each of the 59 steps its last estimate counts.
+    assert_eq!(lost + fused, 3 * 2 * (STEPS - 1), "{s}");
+    let share = lost as f64 / (lost + fused) as f64;
+    assert!(
+        (0.2..0.4).contains(&share),
+        "{lost} of {} lost",
+        lost + fused
+    );
+    assert!(sum("tokens_lost") > 0, "{s}");
+    // A lost token is its sender's turn passed: no holder was waited out.
+    assert_eq!(sum("token_timeouts"), 0, "{s}");
+    for a in agents {
+        assert_eq!(a["decisions"], 10, "one decision per guidance period: {a}");
+    }
+    // The default links lose nothing.
+    let t = TestRun::new("radio-perfect");
+    let s = run(&t, &[]);
+    assert_complete_and_exact(&t, &s);
+    let agents = s["agents"].as_array().expect("agents");
+    assert!(
+        agents
+            .iter()
+            .all(|a| a["estimates_lost"] == 0 && a["tokens_lost"] == 0)
+    );
+}
+
+#[test]
+fn late_estimates_are_fused_late_and_measured_as_fused() {
+    let t = TestRun::new("radio-latency");
+    // 1.2 s is 3 steps of 0.5 s; half the messages lost too.
+    let s = run(&t, &["comms.latency_ms=1200", "comms.loss=0.5"]);
+    assert_complete_and_exact(&t, &s);
+    let agents = s["agents"].as_array().expect("agents");
+    let sum = |key: &str| -> u64 { agents.iter().map(|a| a[key].as_u64().unwrap()).sum() };
+    // Lost: those of steps 0..=58; fused: those of steps 0..=55 (3 steps late), delivered.
+    let (lost, fused) = (sum("estimates_lost"), sum("estimates_received"));
+    assert!(lost > 0 && fused > 0, "{s}");
+    assert!(
+        lost + fused < 3 * 2 * (STEPS - 1),
+        "the last 3 steps are in flight: {s}"
+    );
+}
