@@ -13,7 +13,7 @@
 //!   host 0 (world host)                         host 1
 //!   world-server, observer, agents 0, 1         agents 2, 3
 //!        |  iceoryx2                                 |  iceoryx2
-//!   bridge (Zenoh router) <==== TLS over TCP ====> bridge (Zenoh client)
+//!   bridge (Zenoh router) <==== QUIC (TLS 1.3) ===> bridge (Zenoh client)
 //! ```
 //!
 //! The world host's bridge is a Zenoh router that listens; the others are clients that

@@ -1,4 +1,5 @@
-//! The bridge's security: the fleet's certificates, mutually authenticated TLS links and
+//! The bridge's security: the fleet's certificates, mutually authenticated TLS links (QUIC by
+//! default, or TLS over TCP: [`SECURE_PROTOCOLS`]) and
 //! Zenoh's access control, so that only the fleet's hosts join a run and each publishes only
 //! what its role allows.
 //!
@@ -111,7 +112,7 @@
 //! let tls = HostTlsFiles::in_dir(Path::new("certs"), &world);
 //! let link = LinkPlan {
 //!     mode: LinkMode::Router,
-//!     listen: vec!["tls/0.0.0.0:7447".into()],
+//!     listen: vec!["quic/0.0.0.0:7447".into()],
 //!     connect: vec![],
 //! };
 //! let session = zenoh::open(security::zenoh_config(&link, Some(&tls), Some(&policy))?).wait()?;
@@ -122,7 +123,7 @@
 //! ```
 //!
 //! **Agent host `h1` (a client)**: the same policy, its own files, and
-//! `LinkPlan { mode: LinkMode::Client, listen: vec![], connect: vec!["tls/10.0.0.1:7447".into()] }`
+//! `LinkPlan { mode: LinkMode::Client, listen: vec![], connect: vec!["quic/10.0.0.1:7447".into()] }`
 //! (the address must be one of the router's certificate names).
 
 mod access;
@@ -141,4 +142,4 @@ pub use cert_files::{
     TlsFilesError, add_host_cert, write_fleet_certs,
 };
 pub use host::{HostName, HostNameError};
-pub use link::{ConfigBuildError, LinkMode, LinkPlan, zenoh_config};
+pub use link::{ConfigBuildError, LinkMode, LinkPlan, SECURE_PROTOCOLS, zenoh_config};

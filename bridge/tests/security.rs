@@ -1,5 +1,6 @@
 //! The bridge's security end to end, on loopback: certificates made at test time in a temp
-//! dir, real Zenoh sessions over TLS, each test on its own port.
+//! dir, real Zenoh sessions over each secure protocol (QUIC and TLS over TCP, both with the
+//! fleet's certificates), each test on its own port.
 //!
 //! Absence is never inferred from waiting: a forged message is sent *before* a legitimate
 //! marker on the same link, so once the marker has arrived the forgery had its chance; an
@@ -7,7 +8,7 @@
 
 use std::fs;
 use std::io::{self, Write};
-use std::net::TcpListener;
+use std::net::{TcpListener, UdpSocket};
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -17,7 +18,7 @@ use std::time::{Duration, Instant};
 use bridge::keys;
 use bridge::security::{
     AccessPolicy, CertWriteError, FleetAuthority, HostName, HostNameError, HostTlsFiles, LinkMode,
-    LinkPlan, TlsFilesError, add_host_cert, write_fleet_certs, zenoh_config,
+    LinkPlan, SECURE_PROTOCOLS, TlsFilesError, add_host_cert, write_fleet_certs, zenoh_config,
 };
 use protocol::service::RunId;
 use zenoh::Wait;
@@ -53,9 +54,24 @@ impl Drop for TempDir {
     }
 }
 
-fn free_port() -> u16 {
-    let listener = TcpListener::bind("127.0.0.1:0").expect("a free loopback port");
-    listener.local_addr().expect("a bound address").port()
+/// An endpoint of `protocol` on a loopback port nothing uses now (UDP for QUIC, TCP for TLS).
+fn free_endpoint(protocol: &str) -> String {
+    let port = if protocol == "quic" {
+        let socket = UdpSocket::bind("127.0.0.1:0").expect("a free loopback port");
+        socket.local_addr().expect("a bound address").port()
+    } else {
+        let listener = TcpListener::bind("127.0.0.1:0").expect("a free loopback port");
+        listener.local_addr().expect("a bound address").port()
+    };
+    format!("{protocol}/127.0.0.1:{port}")
+}
+
+/// The Zenoh crate that logs a link's refusals.
+fn link_crate(protocol: &str) -> &'static str {
+    match protocol {
+        "quic" => "zenoh_link_commons::quic",
+        _ => "zenoh_link_tls",
+    }
 }
 
 /// Everything Zenoh logs at WARN and above, for every test of this binary.
@@ -98,9 +114,11 @@ fn find_log(needles: &[&str]) -> Option<String> {
 }
 
 /// A fleet as the bridge lays it out: the world host is the router (and relay), agents `h1`
-/// (UAV 1) and `h2` (UAV 2) are its clients; certificates in a temp dir.
+/// (UAV 1) and `h2` (UAV 2) are its clients; certificates in a temp dir; the router's
+/// endpoint.
 struct Fleet {
     dir: TempDir,
+    endpoint: String,
     run: RunId,
     world: HostName,
     h1: HostName,
@@ -109,11 +127,13 @@ struct Fleet {
 }
 
 impl Fleet {
-    fn new(tag: &str) -> Self {
-        let dir = TempDir::new(tag);
+    /// A fleet whose links use `protocol` (`quic` or `tls`).
+    fn new(tag: &str, protocol: &str) -> Self {
+        let tag = format!("{tag}-{protocol}");
+        let dir = TempDir::new(&tag);
         let hosts = ["world", "h1", "h2"].map(str::to_owned);
         write_fleet_certs(&dir.0, &hosts, &[], false).expect("the fleet's certificates");
-        let run = RunId::new(tag).expect("a valid run id");
+        let run = RunId::new(&tag).expect("a valid run id");
         let [world, h1, h2] = hosts.map(|h| HostName::new(&h).expect("a valid host name"));
         let policy = AccessPolicy::new(&run)
             .world_host(&world)
@@ -122,6 +142,7 @@ impl Fleet {
             .expect("a valid policy");
         Self {
             dir,
+            endpoint: free_endpoint(protocol),
             run,
             world,
             h1,
@@ -134,11 +155,11 @@ impl Fleet {
         HostTlsFiles::in_dir(&self.dir.0, host)
     }
 
-    /// The world host's router, listening on `port`, with the fleet's ACL.
-    fn router(&self, port: u16) -> zenoh::Session {
+    /// The world host's router, listening on the fleet's endpoint, with the fleet's ACL.
+    fn router(&self) -> zenoh::Session {
         let plan = LinkPlan {
             mode: LinkMode::Router,
-            listen: vec![endpoint(port)],
+            listen: vec![self.endpoint.clone()],
             connect: vec![],
         };
         open(
@@ -147,26 +168,21 @@ impl Fleet {
         )
     }
 
-    /// A client of the router on `port`, with the fleet's ACL or, as a compromised host would
-    /// run, none.
-    fn client(&self, host: &HostName, port: u16, acl: bool) -> zenoh::Session {
+    /// A client of the router, with the fleet's ACL or, as a compromised host would run, none.
+    fn client(&self, host: &HostName, acl: bool) -> zenoh::Session {
         let acl = acl.then_some(&self.policy);
         open(
-            zenoh_config(&client(port), Some(&self.files(host)), acl)
+            zenoh_config(&client(&self.endpoint), Some(&self.files(host)), acl)
                 .expect("a client's configuration"),
         )
     }
 }
 
-fn endpoint(port: u16) -> String {
-    format!("tls/127.0.0.1:{port}")
-}
-
-fn client(port: u16) -> LinkPlan {
+fn client(endpoint: &str) -> LinkPlan {
     LinkPlan {
         mode: LinkMode::Client,
         listen: vec![],
-        connect: vec![endpoint(port)],
+        connect: vec![endpoint.to_owned()],
     }
 }
 
@@ -246,76 +262,91 @@ fn links(session: &zenoh::Session) -> usize {
 /// authority reloaded from `ca.pem` and `ca.key`.
 #[test]
 fn fleet_hosts_with_mutual_tls_exchange_puts_both_ways() {
-    let dir = TempDir::new("mtls");
-    write_fleet_certs(&dir.0, &["world".to_owned()], &[], false).unwrap();
-    add_host_cert(&dir.0, "h1", &[], false).unwrap();
-    let run = RunId::new("mtls").unwrap();
-    let world = HostName::new("world").unwrap();
-    let h1 = HostName::new("h1").unwrap();
-    let policy = AccessPolicy::new(&run)
-        .world_host(&world)
-        .unwrap()
-        .relay_host(&world)
-        .agent_host(&h1, &[1])
-        .unwrap();
-    let port = free_port();
-    let router = LinkPlan {
-        mode: LinkMode::Router,
-        listen: vec![endpoint(port)],
-        connect: vec![],
-    };
-    let world_files = HostTlsFiles::in_dir(&dir.0, &world);
-    let h1_files = HostTlsFiles::in_dir(&dir.0, &h1);
+    for protocol in SECURE_PROTOCOLS {
+        let dir = TempDir::new(&format!("mtls-{protocol}"));
+        write_fleet_certs(&dir.0, &["world".to_owned()], &[], false).unwrap();
+        add_host_cert(&dir.0, "h1", &[], false).unwrap();
+        let run = RunId::new("mtls").unwrap();
+        let world = HostName::new("world").unwrap();
+        let h1 = HostName::new("h1").unwrap();
+        let policy = AccessPolicy::new(&run)
+            .world_host(&world)
+            .unwrap()
+            .relay_host(&world)
+            .agent_host(&h1, &[1])
+            .unwrap();
+        let endpoint = free_endpoint(protocol);
+        let router = LinkPlan {
+            mode: LinkMode::Router,
+            listen: vec![endpoint.clone()],
+            connect: vec![],
+        };
+        let world_files = HostTlsFiles::in_dir(&dir.0, &world);
+        let h1_files = HostTlsFiles::in_dir(&dir.0, &h1);
 
-    let world_session = open(zenoh_config(&router, Some(&world_files), Some(&policy)).unwrap());
-    let h1_session = open(zenoh_config(&client(port), Some(&h1_files), Some(&policy)).unwrap());
-    let estimates = world_session
-        .declare_subscriber(keys::estimate(&run, 1))
-        .wait()
-        .unwrap();
-    let frames = h1_session
-        .declare_subscriber(keys::frame(&run, 1))
-        .wait()
-        .unwrap();
+        let world_session = open(zenoh_config(&router, Some(&world_files), Some(&policy)).unwrap());
+        let h1_session =
+            open(zenoh_config(&client(&endpoint), Some(&h1_files), Some(&policy)).unwrap());
+        let estimates = world_session
+            .declare_subscriber(keys::estimate(&run, 1))
+            .wait()
+            .unwrap();
+        let frames = h1_session
+            .declare_subscriber(keys::frame(&run, 1))
+            .wait()
+            .unwrap();
 
-    put_until_received(
-        &h1_session,
-        &keys::estimate(&run, 1),
-        "estimate",
-        &[&estimates],
-    );
-    put_until_received(&world_session, &keys::frame(&run, 1), "frame", &[&frames]);
+        put_until_received(
+            &h1_session,
+            &keys::estimate(&run, 1),
+            "estimate",
+            &[&estimates],
+        );
+        put_until_received(&world_session, &keys::frame(&run, 1), "frame", &[&frames]);
+    }
 }
 
 /// The TLS settings zenoh_config writes: the host's files on both sides of a link, mutual
-/// authentication, name verification, TLS only.
+/// authentication, name verification, the endpoint's protocol only (QUIC and TLS over TCP
+/// read the same settings).
 #[test]
 fn tls_config_presents_the_host_certificate_both_ways() {
-    let fleet = Fleet::new("tlsconf");
-    let files = fleet.files(&fleet.h1);
-    let config = zenoh_config(&client(free_port()), Some(&files), Some(&fleet.policy)).unwrap();
-    let get = |key: &str| config.get_json(&format!("transport/link/{key}")).unwrap();
-    let quoted = |path: &Path| serde_json::json!(path).to_string();
-    assert_eq!(get("tls/root_ca_certificate"), quoted(&files.ca));
-    assert_eq!(get("tls/listen_certificate"), quoted(&files.cert));
-    assert_eq!(get("tls/connect_certificate"), quoted(&files.cert));
-    assert_eq!(get("tls/listen_private_key"), quoted(&files.key));
-    assert_eq!(get("tls/connect_private_key"), quoted(&files.key));
-    assert_eq!(get("tls/enable_mtls"), "true");
-    assert_eq!(get("tls/verify_name_on_connect"), "true");
-    assert_eq!(get("protocols"), r#"["tls"]"#);
-    assert_eq!(
-        config
-            .get_json("access_control/default_permission")
-            .unwrap(),
-        r#""deny""#
-    );
-    let tcp = LinkPlan {
-        mode: LinkMode::Client,
-        listen: vec![],
-        connect: vec!["tcp/127.0.0.1:7447".to_owned()],
+    for protocol in SECURE_PROTOCOLS {
+        let fleet = Fleet::new("tlsconf", protocol);
+        let files = fleet.files(&fleet.h1);
+        let config =
+            zenoh_config(&client(&fleet.endpoint), Some(&files), Some(&fleet.policy)).unwrap();
+        let get = |key: &str| config.get_json(&format!("transport/link/{key}")).unwrap();
+        let quoted = |path: &Path| serde_json::json!(path).to_string();
+        assert_eq!(get("tls/root_ca_certificate"), quoted(&files.ca));
+        assert_eq!(get("tls/listen_certificate"), quoted(&files.cert));
+        assert_eq!(get("tls/connect_certificate"), quoted(&files.cert));
+        assert_eq!(get("tls/listen_private_key"), quoted(&files.key));
+        assert_eq!(get("tls/connect_private_key"), quoted(&files.key));
+        assert_eq!(get("tls/enable_mtls"), "true");
+        assert_eq!(get("tls/verify_name_on_connect"), "true");
+        assert_eq!(get("protocols"), format!("[{protocol:?}]"));
+        assert_eq!(
+            config
+                .get_json("access_control/default_permission")
+                .unwrap(),
+            r#""deny""#
+        );
+        let tcp = LinkPlan {
+            mode: LinkMode::Client,
+            listen: vec![],
+            connect: vec!["tcp/127.0.0.1:7447".to_owned()],
+        };
+        assert!(zenoh_config(&tcp, Some(&files), None).is_err());
+    }
+    let fleet = Fleet::new("mixed", "quic");
+    let mixed = LinkPlan {
+        mode: LinkMode::Router,
+        listen: vec![fleet.endpoint.clone()],
+        connect: vec!["tls/127.0.0.1:7447".to_owned()],
     };
-    assert!(zenoh_config(&tcp, Some(&files), None).is_err());
+    let err = zenoh_config(&mixed, Some(&fleet.files(&fleet.world)), None).unwrap_err();
+    assert!(err.to_string().contains("different protocols"), "{err}");
 }
 
 /// Opens a stranger that dials the fleet's router with settings of its own, puts on a key the
@@ -323,18 +354,18 @@ fn tls_config_presents_the_host_certificate_both_ways() {
 /// link and nothing it put arrived, while a fleet host's puts did.
 fn intruder_is_refused(
     tag: &str,
-    intruder: impl FnOnce(&Fleet, u16) -> zenoh::Config,
+    protocol: &str,
+    intruder: impl FnOnce(&Fleet) -> zenoh::Config,
     refusal: &str,
 ) {
     logs();
-    let fleet = Fleet::new(tag);
-    let port = free_port();
-    let world = fleet.router(port);
+    let fleet = Fleet::new(tag, protocol);
+    let world = fleet.router();
     let estimates = world
         .declare_subscriber(keys::estimate(&fleet.run, 1))
         .wait()
         .expect("a subscriber");
-    let h1 = fleet.client(&fleet.h1, port, true);
+    let h1 = fleet.client(&fleet.h1, true);
     put_until_received(
         &h1,
         &keys::estimate(&fleet.run, 1),
@@ -343,15 +374,19 @@ fn intruder_is_refused(
     );
 
     // A peer retries its connection in the background, so the stranger keeps trying.
-    let stranger = open(intruder(&fleet, port));
+    let stranger = open(intruder(&fleet));
     let start = Instant::now();
     let mut line = None;
     while line.is_none() && start.elapsed() < DEADLINE {
         put(&stranger, &keys::estimate(&fleet.run, 1), "forged");
         std::thread::sleep(POLL);
-        line = find_log(&["zenoh_link_tls", refusal]);
+        line = find_log(&[link_crate(protocol), refusal]);
     }
-    let line = line.unwrap_or_else(|| panic!("the router never logged {refusal:?}"));
+    let line = line.unwrap_or_else(|| {
+        let logged =
+            String::from_utf8_lossy(&logs().0.lock().expect("the log buffer")).into_owned();
+        panic!("the router never logged {refusal:?} ({protocol}); it logged:\n{logged}")
+    });
     assert!(line.contains("WARN"), "{line}");
     eprintln!("the router logged: {line}");
 
@@ -366,68 +401,74 @@ fn intruder_is_refused(
     assert!(seen[0].iter().all(|s| !s.contains("forged")), "{seen:?}");
 }
 
-fn stranger_plan(port: u16) -> LinkPlan {
+fn stranger_plan(endpoint: &str) -> LinkPlan {
     LinkPlan {
         mode: LinkMode::Peer,
         listen: vec![],
-        connect: vec![endpoint(port)],
+        connect: vec![endpoint.to_owned()],
     }
 }
 
 /// A stranger that trusts the fleet's CA (public) but presents no certificate is refused.
 #[test]
 fn intruder_without_certificate_cannot_connect() {
-    intruder_is_refused(
-        "nocert",
-        |fleet, port| {
-            // No certificate to give: built by hand, as zenoh_config always presents one.
-            let mut config = zenoh::Config::default();
-            let ca = fleet.files(&fleet.world).ca;
-            for (key, value) in [
-                ("mode", r#""peer""#.to_owned()),
-                (
-                    "connect/endpoints",
-                    serde_json::json!(stranger_plan(port).connect).to_string(),
-                ),
-                ("listen/endpoints", "[]".to_owned()),
-                ("scouting/multicast/enabled", "false".to_owned()),
-                (
-                    "transport/link/tls/root_ca_certificate",
-                    serde_json::json!(ca).to_string(),
-                ),
-                ("transport/link/tls/enable_mtls", "false".to_owned()),
-            ] {
-                config.insert_json5(key, &value).unwrap();
-            }
-            config
-        },
-        "peer sent no certificates",
-    );
+    for protocol in SECURE_PROTOCOLS {
+        intruder_is_refused(
+            "nocert",
+            protocol,
+            |fleet| {
+                // No certificate to give: built by hand, as zenoh_config always presents one.
+                let mut config = zenoh::Config::default();
+                let ca = fleet.files(&fleet.world).ca;
+                for (key, value) in [
+                    ("mode", r#""peer""#.to_owned()),
+                    (
+                        "connect/endpoints",
+                        serde_json::json!(stranger_plan(&fleet.endpoint).connect).to_string(),
+                    ),
+                    ("listen/endpoints", "[]".to_owned()),
+                    ("scouting/multicast/enabled", "false".to_owned()),
+                    (
+                        "transport/link/tls/root_ca_certificate",
+                        serde_json::json!(ca).to_string(),
+                    ),
+                    ("transport/link/tls/enable_mtls", "false".to_owned()),
+                ] {
+                    config.insert_json5(key, &value).unwrap();
+                }
+                config
+            },
+            "peer sent no certificates",
+        );
+    }
 }
 
 /// A stranger with a certificate of another authority is refused, even though its certificate
 /// claims a fleet host's name (`h1`) and it trusts the fleet's CA.
 #[test]
 fn intruder_with_certificate_of_another_authority_cannot_connect() {
-    intruder_is_refused(
-        "foreign",
-        |fleet, port| {
-            let foreign = FleetAuthority::generate("impostor").unwrap();
-            let id = foreign.issue_host(&fleet.h1, &[]).unwrap();
-            let dir = fleet.dir.0.join("impostor");
-            fs::create_dir(&dir).unwrap();
-            let files = HostTlsFiles {
-                ca: fleet.files(&fleet.world).ca,
-                cert: dir.join("h1.pem"),
-                key: dir.join("h1.key"),
-            };
-            fs::write(&files.cert, &id.cert_pem).unwrap();
-            fs::write(&files.key, &id.key_pem).unwrap();
-            fs::set_permissions(&files.key, fs::Permissions::from_mode(0o600)).unwrap();
-            zenoh_config(&stranger_plan(port), Some(&files), None).unwrap()
-        },
-        "invalid peer certificate: UnknownIssuer",
-    );
+    for protocol in SECURE_PROTOCOLS {
+        intruder_is_refused(
+            "foreign",
+            protocol,
+            |fleet| {
+                let foreign = FleetAuthority::generate("impostor").unwrap();
+                let id = foreign.issue_host(&fleet.h1, &[]).unwrap();
+                let dir = fleet.dir.0.join("impostor");
+                fs::create_dir(&dir).unwrap();
+                let files = HostTlsFiles {
+                    ca: fleet.files(&fleet.world).ca,
+                    cert: dir.join("h1.pem"),
+                    key: dir.join("h1.key"),
+                };
+                fs::write(&files.cert, &id.cert_pem).unwrap();
+                fs::write(&files.key, &id.key_pem).unwrap();
+                fs::set_permissions(&files.key, fs::Permissions::from_mode(0o600)).unwrap();
+                zenoh_config(&stranger_plan(&fleet.endpoint), Some(&files), None).unwrap()
+            },
+            "invalid peer certificate: UnknownIssuer",
+        );
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -437,19 +478,18 @@ fn intruder_with_certificate_of_another_authority_cannot_connect() {
 /// compromised host would) puts forged messages, then a legitimate marker, on its one link to
 /// the router. Returns what the world host (the router's own subscriber) and `h2` (a client,
 /// served by the router's relay) received of the whole run.
-fn forgeries_received(tag: &str, acl: bool) -> [Vec<String>; 2] {
-    let mut fleet = Fleet::new(tag);
+fn forgeries_received(tag: &str, protocol: &str, acl: bool) -> [Vec<String>; 2] {
+    let mut fleet = Fleet::new(tag, protocol);
     if !acl {
         // Nobody checks: ACL off everywhere (zenoh_config takes none).
         fleet.policy = AccessPolicy::new(&fleet.run);
     }
-    let port = free_port();
     let world = if acl {
-        fleet.router(port)
+        fleet.router()
     } else {
         let plan = LinkPlan {
             mode: LinkMode::Router,
-            listen: vec![endpoint(port)],
+            listen: vec![fleet.endpoint.clone()],
             connect: vec![],
         };
         open(
@@ -462,12 +502,12 @@ fn forgeries_received(tag: &str, acl: bool) -> [Vec<String>; 2] {
         .declare_subscriber(&everything)
         .wait()
         .expect("a subscriber");
-    let h2 = fleet.client(&fleet.h2, port, acl);
+    let h2 = fleet.client(&fleet.h2, acl);
     let at_h2 = h2
         .declare_subscriber(&everything)
         .wait()
         .expect("a subscriber");
-    let h1 = fleet.client(&fleet.h1, port, false);
+    let h1 = fleet.client(&fleet.h1, false);
     let run = &fleet.run;
 
     let [mut world_seen, mut h2_seen]: [Vec<String>; 2] =
@@ -494,12 +534,12 @@ fn forgeries_received(tag: &str, acl: bool) -> [Vec<String>; 2] {
 /// subscribers nor the other clients get it, and relays the ones inside.
 #[test]
 fn acl_refuses_publications_outside_the_senders_role() {
-    for seen in forgeries_received("acl", true) {
-        assert!(seen.iter().all(|s| !s.contains("forged")), "{seen:?}");
-        assert!(
-            seen.contains(&"setfleet/acl/uav/1/estimate legit".to_owned()),
-            "{seen:?}"
-        );
+    for protocol in SECURE_PROTOCOLS {
+        for seen in forgeries_received("acl", protocol, true) {
+            assert!(seen.iter().all(|s| !s.contains("forged")), "{seen:?}");
+            let legit = format!("setfleet/acl-{protocol}/uav/1/estimate legit");
+            assert!(seen.contains(&legit), "{seen:?}");
+        }
     }
 }
 
@@ -507,19 +547,19 @@ fn acl_refuses_publications_outside_the_senders_role() {
 /// that stops them, not the way the test sends them.
 #[test]
 fn without_acl_the_same_forgeries_arrive() {
-    for seen in forgeries_received("noacl", false) {
-        for forged in [
-            "setfleet/noacl/uav/0/estimate forged estimate of UAV 0",
-            "setfleet/noacl/guidance/0 forged guidance of UAV 0",
-            "setfleet/noacl/uav/2/estimate forged estimate of UAV 2",
-            "setfleet/noacl/uav/1/cvs forged frame",
-            "setfleet/noacl/truth forged truth",
-            "setfleet/noacl/world/end forged end of run",
-        ] {
-            assert!(
-                seen.contains(&forged.to_owned()),
-                "{forged:?} missing from {seen:?}"
-            );
+    for protocol in SECURE_PROTOCOLS {
+        for seen in forgeries_received("noacl", protocol, false) {
+            for forged in [
+                "uav/0/estimate forged estimate of UAV 0",
+                "guidance/0 forged guidance of UAV 0",
+                "uav/2/estimate forged estimate of UAV 2",
+                "uav/1/cvs forged frame",
+                "truth forged truth",
+                "world/end forged end of run",
+            ] {
+                let forged = format!("setfleet/noacl-{protocol}/{forged}");
+                assert!(seen.contains(&forged), "{forged:?} missing from {seen:?}");
+            }
         }
     }
 }
@@ -528,43 +568,44 @@ fn without_acl_the_same_forgeries_arrive() {
 /// ones to the other clients. Under its own name it may announce only its own processes.
 #[test]
 fn acl_refuses_liveliness_tokens_under_another_hosts_name() {
-    let fleet = Fleet::new("tokens");
-    let port = free_port();
-    let world = fleet.router(port);
-    let all_alive = keys::all_alive(&fleet.run);
-    let at_world = world
-        .liveliness()
-        .declare_subscriber(&all_alive)
-        .wait()
-        .unwrap();
-    let estimates = world
-        .declare_subscriber(keys::estimate(&fleet.run, 1))
-        .wait()
-        .unwrap();
-    let h2 = fleet.client(&fleet.h2, port, true);
-    let at_h2 = h2
-        .liveliness()
-        .declare_subscriber(&all_alive)
-        .history(true)
-        .wait()
-        .unwrap();
-    let h1 = fleet.client(&fleet.h1, port, false);
-    put_until_received(&h1, &keys::estimate(&fleet.run, 1), "linked", &[&estimates]);
+    for protocol in SECURE_PROTOCOLS {
+        let fleet = Fleet::new("tokens", protocol);
+        let world = fleet.router();
+        let all_alive = keys::all_alive(&fleet.run);
+        let at_world = world
+            .liveliness()
+            .declare_subscriber(&all_alive)
+            .wait()
+            .unwrap();
+        let estimates = world
+            .declare_subscriber(keys::estimate(&fleet.run, 1))
+            .wait()
+            .unwrap();
+        let h2 = fleet.client(&fleet.h2, true);
+        let at_h2 = h2
+            .liveliness()
+            .declare_subscriber(&all_alive)
+            .history(true)
+            .wait()
+            .unwrap();
+        let h1 = fleet.client(&fleet.h1, false);
+        put_until_received(&h1, &keys::estimate(&fleet.run, 1), "linked", &[&estimates]);
 
-    let forged = keys::alive(&fleet.run, fleet.world.as_str(), "world");
-    let not_its_own = [
-        keys::alive(&fleet.run, fleet.h1.as_str(), "world"),
-        keys::alive(&fleet.run, fleet.h1.as_str(), "agent-2"),
-    ];
-    let own = keys::alive(&fleet.run, fleet.h1.as_str(), "agent-1");
-    let forged_tokens: Vec<_> = std::iter::once(&forged)
-        .chain(&not_its_own)
-        .map(|key| h1.liveliness().declare_token(key).wait().unwrap())
-        .collect();
-    let own_token = h1.liveliness().declare_token(&own).wait().unwrap();
-    assert_eq!(receive_until(&at_world, &own, ""), [format!("{own} ")]);
-    assert_eq!(receive_until(&at_h2, &own, ""), [format!("{own} ")]);
-    drop((forged_tokens, own_token));
+        let forged = keys::alive(&fleet.run, fleet.world.as_str(), "world");
+        let not_its_own = [
+            keys::alive(&fleet.run, fleet.h1.as_str(), "world"),
+            keys::alive(&fleet.run, fleet.h1.as_str(), "agent-2"),
+        ];
+        let own = keys::alive(&fleet.run, fleet.h1.as_str(), "agent-1");
+        let forged_tokens: Vec<_> = std::iter::once(&forged)
+            .chain(&not_its_own)
+            .map(|key| h1.liveliness().declare_token(key).wait().unwrap())
+            .collect();
+        let own_token = h1.liveliness().declare_token(&own).wait().unwrap();
+        assert_eq!(receive_until(&at_world, &own, ""), [format!("{own} ")]);
+        assert_eq!(receive_until(&at_h2, &own, ""), [format!("{own} ")]);
+        drop((forged_tokens, own_token));
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -738,6 +779,6 @@ fn unusable_tls_files_are_named() {
         })
     ));
     // zenoh_config checks the files before Zenoh would.
-    assert!(zenoh_config(&client(free_port()), Some(&missing), None).is_err());
+    assert!(zenoh_config(&client(&free_endpoint("quic")), Some(&missing), None).is_err());
     files.check().unwrap();
 }

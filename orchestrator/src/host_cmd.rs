@@ -1,10 +1,10 @@
 //! `fleet host`: this machine joins a run of another machine with some of its agents, and
 //! `fleet certs`: the fleet's certificates.
 //!
-//! On the world host, `fleet run --remote h1=2,3 --listen tls/0.0.0.0:7447 --tls certs
+//! On the world host, `fleet run --remote h1=2,3 --listen quic/0.0.0.0:7447 --tls certs
 //! --run-id demo` runs the world-server, the observer and agents 0 and 1, and waits for the
 //! others' hellos. On machine `h1`, `fleet host --run-id demo --host h1 --agents 2,3
-//! --connect tls/WORLD_ADDR:7447 --tls certs` starts this machine's bridge, waits until it
+//! --connect quic/WORLD_ADDR:7447 --tls certs` starts this machine's bridge, waits until it
 //! reaches the world host, then starts agents 2 and 3; it ends when they do (at the end of
 //! the run). The scenario must be the world host's: the same scenario flags resolve to it.
 
@@ -40,7 +40,7 @@ pub struct HostArgs {
     /// `--remote HOST=UAVS`).
     #[arg(long, value_delimiter = ',', required = true)]
     pub agents: Vec<u32>,
-    /// The world host's bridge, e.g. `tls/10.0.0.1:7447` (its address must be one of the
+    /// The world host's bridge, e.g. `quic/10.0.0.1:7447` (its address must be one of the
     /// names in its certificate: `fleet certs --san`).
     #[arg(long, value_name = "ENDPOINT")]
     pub connect: String,

@@ -16,7 +16,7 @@ use protocol::scenario::Scenario;
 use protocol::service::RunId;
 
 /// Forwards a run's iceoryx2 services between this host and the others over Zenoh, on
-/// mutually authenticated TLS links.
+/// mutually authenticated, encrypted links (QUIC or TLS over TCP).
 #[derive(Debug, Parser)]
 #[command(name = "fleet-bridge", version)]
 struct Args {
@@ -39,10 +39,11 @@ struct Args {
     /// Overrides a scenario key (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
-    /// Zenoh endpoint the world host listens on, e.g. `tls/0.0.0.0:7447`.
+    /// Zenoh endpoint the world host listens on, e.g. `quic/0.0.0.0:7447` (QUIC) or
+    /// `tls/0.0.0.0:7447` (TLS over TCP).
     #[arg(long, value_name = "ENDPOINT", conflicts_with = "connect")]
     listen: Vec<String>,
-    /// Zenoh endpoint of the world host to connect to, e.g. `tls/10.0.0.1:7447`.
+    /// Zenoh endpoint of the world host to connect to, e.g. `quic/10.0.0.1:7447`.
     #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
     /// Directory of the fleet's certificates: `ca.pem`, `HOST.pem` and `HOST.key`.

@@ -85,7 +85,7 @@ pub struct RunArgs {
     pub chaos_faults: Option<u32>,
     /// Spreads the processes over this many simulated hosts: host 0 runs the world-server,
     /// the observer and the first agents, the others the rest of the agents, each in its own
-    /// iceoryx2 domain; a Zenoh bridge per host joins them over loopback TLS.
+    /// iceoryx2 domain; a Zenoh bridge per host joins them over loopback QUIC (TLS 1.3).
     #[arg(long, default_value_t = 1, conflicts_with = "remote")]
     pub hosts: u16,
     /// Agents that run on another machine (repeatable), e.g. `h1=2,3`: this machine runs the
@@ -93,16 +93,16 @@ pub struct RunArgs {
     /// 2,3` on that machine runs these. Needs `--listen`, `--tls` and `--run-id`.
     #[arg(long, value_name = "NAME=UAVS", requires_all = ["listen", "tls", "run_id"])]
     pub remote: Vec<RemoteHost>,
-    /// Where this machine's bridge listens for the other hosts, e.g. `tls/0.0.0.0:7447`
-    /// (default with `--hosts`: a free loopback port).
+    /// Where this machine's bridge listens for the other hosts, e.g. `quic/0.0.0.0:7447`
+    /// (`tls/...` for TLS over TCP; default with `--hosts`: a free loopback UDP port).
     #[arg(long, value_name = "ENDPOINT")]
     pub listen: Option<String>,
     /// Directory of the fleet's certificates (`fleet certs`): `ca.pem` and this host's
     /// `h0.pem` and `h0.key` (default with `--hosts`: made for the run in `OUT/certs`).
     #[arg(long, value_name = "DIR")]
     pub tls: Option<PathBuf>,
-    /// Simulated hosts talk over plain loopback TCP, without TLS nor access control: for
-    /// determinism tests (Zenoh 1.10.2's TLS link can drop under traffic both ways).
+    /// Simulated hosts talk over plain loopback TCP, without TLS nor access control (the
+    /// issue's "Zenoh over loopback TCP"; tests compare it with the secure default).
     #[arg(long, hide = true, conflicts_with_all = ["tls", "remote"])]
     pub insecure_links: bool,
     /// Output directory (default: `runs/<UTC timestamp>`).

@@ -220,10 +220,12 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         config.layout.clone(),
     );
     if config.layout.is_distributed() {
-        let protocol = if config.insecure_links { "tcp" } else { "tls" };
         let endpoint = match &config.listen {
             Some(e) => e.clone(),
-            None => format!("{protocol}/127.0.0.1:{}", free_loopback_port()?),
+            None if config.insecure_links => {
+                format!("tcp/127.0.0.1:{}", free_loopback_port(Transport::Tcp)?)
+            }
+            None => format!("quic/127.0.0.1:{}", free_loopback_port(Transport::Udp)?),
         };
         let tls = match &config.tls {
             _ if config.insecure_links => None,
@@ -425,11 +427,25 @@ fn run_certificates(layout: &hosts::HostLayout, out: &std::path::Path) -> anyhow
     Ok(dir)
 }
 
-/// A TCP port on the loopback that nothing listens on now, for the world host's bridge.
-fn free_loopback_port() -> anyhow::Result<u16> {
-    let listener = std::net::TcpListener::bind(("127.0.0.1", 0))
-        .context("cannot find a free loopback port for the bridges")?;
-    Ok(listener.local_addr()?.port())
+/// What the world host's bridge listens with on the loopback.
+#[derive(Clone, Copy)]
+enum Transport {
+    /// Plain TCP (`--insecure-links`).
+    Tcp,
+    /// UDP, for QUIC.
+    Udp,
+}
+
+/// A loopback port of `transport` that nothing uses now, for the world host's bridge.
+fn free_loopback_port(transport: Transport) -> anyhow::Result<u16> {
+    let address = ("127.0.0.1", 0);
+    let bound = match transport {
+        Transport::Tcp => std::net::TcpListener::bind(address).and_then(|l| l.local_addr()),
+        Transport::Udp => std::net::UdpSocket::bind(address).and_then(|s| s.local_addr()),
+    };
+    Ok(bound
+        .context("cannot find a free loopback port for the bridges")?
+        .port())
 }
 
 /// Creates `dir`, emptied of what an earlier run into the same output directory left (an

@@ -40,7 +40,7 @@ pub(super) struct Shared<'a> {
     pub(super) socket: &'a Path,
     /// The file holding the estimate message.
     pub(super) message: &'a Path,
-    /// The fleet's certificates of the Zenoh cases over TLS.
+    /// The fleet's certificates of the Zenoh cases over QUIC and TLS.
     pub(super) certs: &'a Path,
 }
 
@@ -55,7 +55,7 @@ pub(super) fn run_case(
             "--transport".to_owned(),
             transport.as_arg().to_owned(),
             "--port".to_owned(),
-            zenoh_link::free_port()?.to_string(),
+            zenoh_link::free_port(transport)?.to_string(),
         ],
         None => Vec::new(),
     };

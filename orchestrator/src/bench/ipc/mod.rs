@@ -7,15 +7,17 @@
 //!   checksum) and sends it; each subscriber takes it and verifies the checksum.
 //! - `socket-1sub`: the same frame over a Unix domain socket, bincode-encoded
 //!   ([`protocol::codec`]) and length-prefixed: the baseline a user would otherwise pick.
-//! - `zenoh-frame-tcp`, `zenoh-frame-tls`: the same frame from one host's bridge to another's
+//! - `zenoh-frame-tcp`, `zenoh-frame-tls`, `zenoh-frame-quic`: the same frame from one host's
+//!   bridge to another's
 //!   over Zenoh on loopback, set up as `fleet-bridge` sets up its sessions (module `zenoh_link`): a
 //!   router listening, a client connecting, the bridge's publisher QoS, the frame in the
 //!   bridge's envelope ([`bridge::envelope::encode_frame`], decoded with `decode_frame_into`
-//!   and its checksum verified). Over plain TCP, and over mutually authenticated TLS with the
-//!   run's access policy (certificates made for the bench, hosts `h0` and `h1`).
+//!   and its checksum verified). Over plain TCP, and over mutually authenticated TLS over TCP
+//!   and QUIC (the bridge's default) with the run's access policy (certificates made for the
+//!   bench, hosts `h0` and `h1`).
 //! - `estimates`: a real estimate message (built by running the fleet in-process for a few
 //!   steps) all-to-all among 4 processes, round after round.
-//! - `zenoh-estimate-tcp`, `zenoh-estimate-tls`: that estimate message in the bridge's
+//! - `zenoh-estimate-tcp`, `-tls`, `-quic`: that estimate message in the bridge's
 //!   envelope ([`bridge::envelope::encode_wire`]) from the router to the client, as the frame.
 //! - `token`: the guidance token ([`protocol::wire::GuidanceToken`], encoded as the agents
 //!   encode it) passed around 4 processes over the run's guidance service, each process taking
@@ -154,8 +156,11 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         base_bps,
         frame_bytes,
     ));
-    let zenoh_frame_tcp = zenoh_case(&shared, &mut report, Payload::Frame, ZenohTransport::Tcp)?;
-    let zenoh_frame_tls = zenoh_case(&shared, &mut report, Payload::Frame, ZenohTransport::Tls)?;
+    let mut zenoh = ZenohHeadline::default();
+    for transport in ZenohTransport::ALL {
+        let figures = zenoh_case(&shared, &mut report, Payload::Frame, transport)?;
+        zenoh.cases.push(("frame", transport, figures));
+    }
 
     let fleet_children = |prefix: &str, role: Role| -> Vec<(String, Role, u32)> {
         (0..FLEET)
@@ -184,10 +189,10 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         est_bps,
         estimate.len(),
     ));
-    let zenoh_estimate_tcp =
-        zenoh_case(&shared, &mut report, Payload::Estimate, ZenohTransport::Tcp)?;
-    let zenoh_estimate_tls =
-        zenoh_case(&shared, &mut report, Payload::Estimate, ZenohTransport::Tls)?;
+    for transport in ZenohTransport::ALL {
+        let figures = zenoh_case(&shared, &mut report, Payload::Estimate, transport)?;
+        zenoh.cases.push(("estimate", transport, figures));
+    }
 
     let reports = run_case(
         &shared,
@@ -222,12 +227,7 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         estimates: (est_lat, est_mps),
         estimate_bytes: estimate.len(),
         token_round: token_lat,
-        zenoh: ZenohHeadline {
-            frame_tcp: zenoh_frame_tcp,
-            frame_tls: zenoh_frame_tls,
-            estimate_tcp: zenoh_estimate_tcp,
-            estimate_tls: zenoh_estimate_tls,
-        },
+        zenoh,
         frame_bytes,
         iterations: n,
     }
@@ -276,14 +276,13 @@ fn zenoh_case(
         .first()
         .map_or(0, |r| r.bytes / r.messages.max(1));
     let resent: u64 = pub_report.iter().map(|r| r.resent).sum();
-    let link = match transport {
-        ZenohTransport::Tcp => "tcp",
-        ZenohTransport::Tls => "tls, mutual authentication, access control",
-    };
     let mut row = case(
         &name,
         &[
-            ("transport", format!("zenoh {link}").into()),
+            (
+                "transport",
+                format!("zenoh {}", transport.description()).into(),
+            ),
             ("topology", "router -> client, loopback".into()),
             ("acks", "iceoryx2".into()),
         ],

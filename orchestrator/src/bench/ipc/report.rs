@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 
 use super::super::{BenchCase, Metrics, Stats};
+use super::zenoh_link::ZenohTransport;
 
 /// A case's row: its parameters, latency percentiles, rates and message size.
 pub(super) fn case(
@@ -41,16 +42,11 @@ pub(super) struct ZenohFigures {
     pub(super) resent: u64,
 }
 
-/// The Zenoh cases.
+/// The Zenoh cases: what was sent (`frame`, `estimate`), over which link, and its figures.
+#[derive(Default)]
 pub(super) struct ZenohHeadline {
-    /// The frame over TCP.
-    pub(super) frame_tcp: ZenohFigures,
-    /// The frame over TLS.
-    pub(super) frame_tls: ZenohFigures,
-    /// The estimate over TCP.
-    pub(super) estimate_tcp: ZenohFigures,
-    /// The estimate over TLS.
-    pub(super) estimate_tls: ZenohFigures,
+    /// Each case, in the bench's order.
+    pub(super) cases: Vec<(&'static str, ZenohTransport, ZenohFigures)>,
 }
 
 /// Median latency of a frame over Zenoh on loopback the bridge aims at, us.
@@ -59,31 +55,21 @@ const GOAL_ZENOH_FRAME_P50_US: f64 = 2000.0;
 const GOAL_ZENOH_ESTIMATE_P50_US: f64 = 300.0;
 
 impl ZenohHeadline {
-    /// `zenoh_{frame,estimate}_{tcp,tls}_{p50_us,p99_us,resent}`,
-    /// `zenoh_frames_per_s_{tcp,tls}`, `zenoh_estimate_msgs_per_s_{tcp,tls}` and the goals.
+    /// `zenoh_{frame,estimate}_{tcp,tls,quic}_{p50_us,p99_us,resent}`,
+    /// `zenoh_frames_per_s_{tcp,tls,quic}`, `zenoh_estimate_msgs_per_s_{tcp,tls,quic}` and
+    /// the goals.
     fn insert_into(&self, sum: &mut BTreeMap<String, serde_json::Value>) {
-        let cases = [
-            ("frame", "tcp", "zenoh_frames_per_s_tcp", &self.frame_tcp),
-            ("frame", "tls", "zenoh_frames_per_s_tls", &self.frame_tls),
-            (
-                "estimate",
-                "tcp",
-                "zenoh_estimate_msgs_per_s_tcp",
-                &self.estimate_tcp,
-            ),
-            (
-                "estimate",
-                "tls",
-                "zenoh_estimate_msgs_per_s_tls",
-                &self.estimate_tls,
-            ),
-        ];
-        for (what, link, rate_key, figures) in cases {
+        for (what, transport, figures) in &self.cases {
+            let link = transport.as_arg();
             let prefix = format!("zenoh_{what}_{link}");
+            let rate_key = match *what {
+                "frame" => format!("zenoh_frames_per_s_{link}"),
+                _ => format!("zenoh_{what}_msgs_per_s_{link}"),
+            };
             sum.insert(format!("{prefix}_p50_us"), figures.latency.median.into());
             sum.insert(format!("{prefix}_p99_us"), figures.latency.p99.into());
             sum.insert(format!("{prefix}_resent"), figures.resent.into());
-            sum.insert(rate_key.into(), figures.rate.into());
+            sum.insert(rate_key, figures.rate.into());
         }
         sum.insert(
             "goal_zenoh_frame_p50_us".into(),
