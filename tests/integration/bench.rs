@@ -1,4 +1,4 @@
-//! `fleet bench ipc` runs every case in child processes (the Zenoh ones over TCP and TLS),
+//! `fleet bench ipc` runs every case in child processes (the Zenoh ones over TCP, TLS and QUIC),
 //! writes a report with every headline key and leaves no iceoryx2 file behind.
 
 use std::process::Command;
@@ -18,19 +18,23 @@ const IPC_KEYS: [&str; 8] = [
 ];
 
 /// The Zenoh cases and their headline keys' stem: `{stem}_p50_us`, `{stem}_p99_us`.
-const ZENOH_CASES: [(&str, &str); 4] = [
+const ZENOH_CASES: [(&str, &str); 6] = [
     ("zenoh-frame-tcp", "zenoh_frame_tcp"),
     ("zenoh-frame-tls", "zenoh_frame_tls"),
+    ("zenoh-frame-quic", "zenoh_frame_quic"),
     ("zenoh-estimate-tcp", "zenoh_estimate_tcp"),
     ("zenoh-estimate-tls", "zenoh_estimate_tls"),
+    ("zenoh-estimate-quic", "zenoh_estimate_quic"),
 ];
 
 /// Zenoh's rates, all positive numbers.
-const ZENOH_RATE_KEYS: [&str; 4] = [
+const ZENOH_RATE_KEYS: [&str; 6] = [
     "zenoh_frames_per_s_tcp",
     "zenoh_frames_per_s_tls",
+    "zenoh_frames_per_s_quic",
     "zenoh_estimate_msgs_per_s_tcp",
     "zenoh_estimate_msgs_per_s_tls",
+    "zenoh_estimate_msgs_per_s_quic",
 ];
 
 fn positive(json: &serde_json::Value, key: &str) -> f64 {
@@ -93,7 +97,7 @@ fn bench_ipc_reports_every_key_and_cleans_up() {
     let cases = json["cases"]
         .as_array()
         .expect("the report lists its cases");
-    assert_eq!(cases.len(), 9);
+    assert_eq!(cases.len(), 5 + ZENOH_CASES.len());
     for (name, stem) in ZENOH_CASES {
         let p50 = positive(&json, &format!("{stem}_p50_us"));
         assert!(positive(&json, &format!("{stem}_p99_us")) >= p50, "{stem}");

@@ -588,21 +588,7 @@ pub(crate) mod tests {
         }
         for own in &all {
             // The agent: its state as published, then the peers fused in its order.
-            let e = &own.estimate;
-            let mut state = EstimatorState::new(&cfg);
-            state.step = e.step;
-            state.undetected = ReachSet::with_cells((*e.undetected).clone());
-            state.targets = e
-                .targets
-                .iter()
-                .map(|(id, s)| (*id, ReachSet::with_cells((**s).clone())))
-                .collect();
-            state.obstacle_free = (*e.obstacle_free).clone();
-            state.explored = (*e.explored).clone();
-            state.hidden = (*e.hidden).clone();
-            state
-                .hidden_history
-                .record(e.step, &own.unseen, &CellSet::empty(&cfg.grid));
+            let mut state = state_of(own, &cfg);
             assert_eq!(state.hidden_history.unseen(), &own.unseen);
             for peer in all.iter().filter(|p| p.uav() != own.uav()) {
                 state.fuse(&peer.estimate, &cfg);

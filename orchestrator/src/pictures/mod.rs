@@ -63,6 +63,20 @@ pub fn palette(i: usize) -> RGBColor {
     COLOURS[i % COLOURS.len()]
 }
 
+/// A value with about three significant digits, as pictures label their points.
+pub fn short_number(v: f64) -> String {
+    let a = v.abs();
+    if a >= 100.0 || a == 0.0 {
+        format!("{v:.0}")
+    } else if a >= 10.0 {
+        format!("{v:.1}")
+    } else if a >= 1.0 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -32,7 +32,7 @@ use super::Shard;
 use super::collect::{FoundRuns, assemble, write_table};
 use super::table::{Cell, ROWS, format_cell, seed_range};
 use crate::observe::StepMetrics;
-use crate::pictures::{FONT, palette};
+use crate::pictures::{FONT, palette, short_number};
 use crate::results::curves::draw_bands;
 use crate::variant::Variant;
 
@@ -504,7 +504,11 @@ fn draw_panel(
         chart.draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
         chart.draw_series(points.iter().map(|&(x, m, _)| {
             EmptyElement::at((x, m))
-                + Text::new(short(m), (7, -17), (FONT, 12).into_font().color(&BLACK))
+                + Text::new(
+                    short_number(m),
+                    (7, -17),
+                    (FONT, 12).into_font().color(&BLACK),
+                )
         }))?;
     }
     chart
@@ -515,17 +519,6 @@ fn draw_panel(
         .label_font((FONT, 12))
         .draw()?;
     Ok(())
-}
-
-/// A value in 3 significant digits at most.
-fn short(v: f64) -> String {
-    if v.abs() >= 100.0 {
-        format!("{v:.0}")
-    } else if v.abs() >= 10.0 {
-        format!("{v:.1}")
-    } else {
-        format!("{v:.2}")
-    }
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@ use plotters::prelude::*;
 
 use super::ScaleConfig;
 use super::report::{GOAL_RTF_16, RowStatus, ScaleRow};
-use crate::pictures::{FONT, palette};
+use crate::pictures::{FONT, palette, short_number};
 
 /// One panel: its points (fleet size, value) and how its y axis reads.
 struct Panel {
@@ -156,7 +156,7 @@ fn draw_panel(
         })
         .y_label_formatter(&|v| {
             let value = if log_y { 10f64.powf(*v) } else { *v };
-            short(value)
+            short_number(value)
         })
         .label_style((FONT, 13))
         .draw()?;
@@ -184,7 +184,11 @@ fn draw_panel(
             // Each value beside its point, up and to the right of the marker.
             .map(|&(n, v)| {
                 EmptyElement::at((x(n), y(v)))
-                    + Text::new(short(v), (7, -17), (FONT, 12).into_font().color(&BLACK))
+                    + Text::new(
+                        short_number(v),
+                        (7, -17),
+                        (FONT, 12).into_font().color(&BLACK),
+                    )
             }),
     )?;
     if !panel.marks.is_empty() {
@@ -197,20 +201,6 @@ fn draw_panel(
             .draw()?;
     }
     Ok(())
-}
-
-/// A value with about three significant digits.
-fn short(v: f64) -> String {
-    let a = v.abs();
-    if a >= 100.0 || a == 0.0 {
-        format!("{v:.0}")
-    } else if a >= 10.0 {
-        format!("{v:.1}")
-    } else if a >= 1.0 {
-        format!("{v:.2}")
-    } else {
-        format!("{v:.3}")
-    }
 }
 
 #[cfg(test)]
@@ -237,8 +227,8 @@ mod tests {
         let linear = y_range(&panel(false, vec![(1, 10.0)]));
         assert_eq!(linear.start, 0.0);
         assert!(linear.end > 10.0);
-        assert_eq!(short(0.0812), "0.081");
-        assert_eq!(short(16.49), "16.5");
-        assert_eq!(short(1234.0), "1234");
+        assert_eq!(short_number(0.0812), "0.081");
+        assert_eq!(short_number(16.49), "16.5");
+        assert_eq!(short_number(1234.0), "1234");
     }
 }
