@@ -202,28 +202,24 @@ pub fn draw_sweep(variants: &[(String, Vec<Vec<StepMetrics>>)], path: &Path) -> 
 /// UA and OA over time per group of runs (named `what` in the title: a variant, the value of a
 /// swept key), mean over the group's runs with a ±1 standard deviation band.
 pub fn draw_bands(
-    variants: &[(String, Vec<Vec<StepMetrics>>)],
+    groups: &[(String, Vec<Vec<StepMetrics>>)],
     what: &str,
     path: &Path,
 ) -> anyhow::Result<()> {
     let root = BitMapBackend::new(path, (1000, 760)).into_drawing_area();
     root.fill(&WHITE)?;
-    let seeds = variants
-        .iter()
-        .map(|(_, runs)| runs.len())
-        .max()
-        .unwrap_or(0);
+    let seeds = groups.iter().map(|(_, runs)| runs.len()).max().unwrap_or(0);
     let root = root.titled(
         &format!("UA and OA per {what}: mean and ±1 sd over {seeds} seeds"),
         (FONT, 20),
     )?;
     let panels = root.split_evenly((2, 1));
-    let t = variants
+    let t = groups
         .iter()
         .flat_map(|(_, runs)| runs.iter().map(|r| t_max(r)))
         .fold(1e-9, f64::max);
     let metric = |f: fn(&SetMetrics) -> f64| -> Vec<Curve> {
-        variants
+        groups
             .iter()
             .enumerate()
             .map(|(i, (name, runs))| {
