@@ -57,8 +57,10 @@ pub struct HostArgs {
     /// Output directory for the logs and checkpoints (default: `runs/host-<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// The iceoryx2 domain to use, for several hosts on one machine (tests).
-    #[arg(long, hide = true)]
+    /// The iceoryx2 domain to use (1 or more) when the world host is this same machine, to
+    /// try several hosts on one machine; without it, this host's processes would share the
+    /// world host's domain and its bridge could not open its ports.
+    #[arg(long, value_name = "N")]
     pub domain: Option<u16>,
 }
 
