@@ -77,7 +77,9 @@ fn run_on_hosts(hosts: u16, extra: &[&str]) -> (String, Value) {
     for a in s["agents"].as_array().expect("agents") {
         assert_eq!(a["steps_processed"], 20, "{hosts} hosts: {a}");
     }
-    for host in (0..hosts).filter(|_| hosts > 1) {
+    // One host runs no bridge.
+    let bridges = if hosts > 1 { hosts } else { 0 };
+    for host in 0..bridges {
         let r = bridge_report(&out_dir, host);
         assert_eq!(r["refused"], serde_json::json!({}), "host {host}: {r}");
         assert!(

@@ -25,17 +25,22 @@ const SWEEP: [&str; 6] = [
 ];
 const RUNS: [(&str, u64); 4] = [("paper", 1), ("paper", 2), ("setfleet", 1), ("setfleet", 2)];
 
-/// `fleet sweep` of the test scenario into `out` with `extra` arguments, run to its end; no
-/// process of it is left after.
+/// `fleet sweep` of the test scenario into `out` with the test's seeds and variants
+/// ([`SWEEP`]) and `extra` arguments, run to its end; no process of it is left after.
 fn sweep(t: &TestRun, out: &Path, extra: &[&str]) -> Output {
+    sweep_with(t, out, &[SWEEP.as_slice(), extra].concat())
+}
+
+/// `fleet sweep` of the test scenario into `out` with `args`, run to its end; no process of it
+/// is left after.
+fn sweep_with(t: &TestRun, out: &Path, args: &[&str]) -> Output {
     let mut cmd = Command::new(binary("fleet"));
     cmd.arg("sweep")
         .arg("--scenario")
         .arg(t.dir.join("scenario.toml"))
-        .args(SWEEP)
+        .args(args)
         .arg("--out")
-        .arg(out)
-        .args(extra);
+        .arg(out);
     let out = ChildGuard::spawn(&mut cmd)
         .wait_timeout(EXIT_TIMEOUT * 3)
         .unwrap_or_else(|| panic!("{cmd:?} did not end in time"));
@@ -212,17 +217,22 @@ fn an_axis_sweep_compares_the_values_of_a_key() {
     let t = TestRun::new("sweep-axis");
     t.write("scenario.toml", SCENARIO);
     let out_dir = t.dir.join("out");
-    let mut cmd = Command::new(binary("fleet"));
-    cmd.arg("sweep")
-        .arg("--scenario")
-        .arg(t.dir.join("scenario.toml"))
-        .args(["--seeds", "2", "--variants", "paper", "--duration", "4"])
-        .args(["--axis", "comms.loss=0,0.5", "--jobs", "2", "--out"])
-        .arg(&out_dir);
-    let out = ChildGuard::spawn(&mut cmd)
-        .wait_timeout(EXIT_TIMEOUT * 3)
-        .expect("the axis sweep did not end in time");
-    assert_nothing_left(&t);
+    let out = sweep_with(
+        &t,
+        &out_dir,
+        &[
+            "--seeds",
+            "2",
+            "--variants",
+            "paper",
+            "--duration",
+            "4",
+            "--axis",
+            "comms.loss=0,0.5",
+            "--jobs",
+            "2",
+        ],
+    );
     assert!(out.status.success(), "{}", stderr(&out));
     // Each value is a sweep directory of its own, whose runs have that value.
     for (value, loss) in [("0", 0.0), ("0.5", 0.5)] {

@@ -427,17 +427,17 @@ fn run_certificates(layout: &hosts::HostLayout, out: &std::path::Path) -> anyhow
     Ok(dir)
 }
 
-/// What the world host's bridge listens with on the loopback.
+/// What a bridge (or the ipc bench's router) listens with on the loopback.
 #[derive(Clone, Copy)]
-enum Transport {
+pub(crate) enum Transport {
     /// Plain TCP (`--insecure-links`).
     Tcp,
     /// UDP, for QUIC.
     Udp,
 }
 
-/// A loopback port of `transport` that nothing uses now, for the world host's bridge.
-fn free_loopback_port(transport: Transport) -> anyhow::Result<u16> {
+/// A loopback port of `transport` that nothing uses now, for a bridge to listen on.
+pub(crate) fn free_loopback_port(transport: Transport) -> anyhow::Result<u16> {
     let address = ("127.0.0.1", 0);
     let bound = match transport {
         Transport::Tcp => std::net::TcpListener::bind(address).and_then(|l| l.local_addr()),

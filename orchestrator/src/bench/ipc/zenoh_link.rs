@@ -36,6 +36,7 @@ use std::collections::VecDeque;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use crate::run::Transport;
 use anyhow::{Context, anyhow, bail};
 use bridge::envelope;
 use bridge::keys;
@@ -147,12 +148,10 @@ pub(super) fn write_certs(dir: &Path) -> anyhow::Result<()> {
 
 /// A loopback port free right now, for a router to listen on over `transport` (UDP for QUIC).
 pub(super) fn free_port(transport: ZenohTransport) -> anyhow::Result<u16> {
-    let address = ("127.0.0.1", 0);
-    let bound = match transport {
-        ZenohTransport::Quic => std::net::UdpSocket::bind(address).and_then(|s| s.local_addr()),
-        _ => std::net::TcpListener::bind(address).and_then(|l| l.local_addr()),
-    };
-    Ok(bound.context("cannot find a free loopback port")?.port())
+    crate::run::free_loopback_port(match transport {
+        ZenohTransport::Quic => Transport::Udp,
+        ZenohTransport::Tcp | ZenohTransport::Tls => Transport::Tcp,
+    })
 }
 
 /// The two hosts, as `fleet-bridge --member` names them.
