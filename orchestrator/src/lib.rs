@@ -14,6 +14,7 @@
 //! - [`render_cmd`]: `fleet render`, one frame as pictures.
 //! - [`bench`](mod@bench): `fleet bench`, whole-system measurements as [`bench::BenchReport`]s.
 //! - [`pictures`]: plotters drawings with the bundled font.
+//! - [`viewer`]: a run in Foxglove, recorded (`--record`) or live (`--live`).
 //!
 //! The library uses `anyhow` for a command's failures (exit code 1): it is the body of the
 //! `fleet` binary, and [`UsageError`] is the one error a caller must tell apart.
@@ -39,6 +40,7 @@ pub mod run;
 pub mod sweep;
 pub mod usage;
 pub mod variant;
+pub mod viewer;
 
 use cli::{BenchKind, Cli, FleetCommand};
 use usage::UsageError;

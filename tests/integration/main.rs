@@ -14,3 +14,4 @@ mod resources;
 mod run;
 mod scale;
 mod sweep;
+mod viewer;

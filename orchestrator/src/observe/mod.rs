@@ -27,6 +27,12 @@
 //!   targets identified by any agent ([`StepMetrics::identified_any`]), traffic, and the
 //!   fleet's map (every map update merged).
 //!
+//! What is shown: with [`ObserverConfig::view`] on, each measured step goes to the Foxglove
+//! [`Viewer`] (the recording and the live view), with the chosen UAV's camera frames (the
+//! observer subscribes to that UAV's frames, lossy like every frame subscriber) and the
+//! guidance token's plans (decoded then); every run draws `run.gif` ([`Animation`]) from the
+//! same steps. Both only read what was measured: the run is the same with them or without.
+//!
 //! Signals are left to the tokio side ([`SignalHandlingMode::Disabled`]).
 
 pub mod metrics;
@@ -44,6 +50,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
+use protocol::codec;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{
     EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, WireSubscriber, scan_nodes,
@@ -53,8 +60,8 @@ use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::wire::{
-    DropReason, HELLO_STEP, ObserverAck, TargetTruth, TruthState, UavCommand, WireHeader, WireKind,
-    unix_now_ns,
+    DropReason, GuidanceToken, HELLO_STEP, ObserverAck, PlannedView, TargetTruth, TruthState,
+    UavCommand, WireHeader, WireKind, unix_now_ns,
 };
 use tokio::sync::mpsc::UnboundedSender;
 use uav_agent::agent::radio::Radio;
@@ -63,6 +70,8 @@ use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::EstimateInbox;
 use uav_agent::occupancy::OccupancyMap;
 
+use crate::results::maps::{Animation, FRAME_PERIOD_S};
+use crate::viewer::{StepView, ViewConfig, Viewer};
 use metrics::{
     AgentSpread, EstimateObserveError, FusedSets, ObservedEstimate, SetMetrics, identified_ids,
     violations,
@@ -86,6 +95,8 @@ pub struct ObserverConfig {
     /// The next ack announces them to the world as it does restarts, so a lockstep world
     /// that skipped a stopped agent waits for it before its next frame instead of running on.
     pub resumed: Arc<AtomicU32>,
+    /// What the run is shown to (Foxglove).
+    pub view: ViewConfig,
 }
 
 /// The metrics of one step.
@@ -194,6 +205,17 @@ pub struct ObserverReport {
     pub stepping: Option<Duration>,
     /// Where the observer thread's time went ([`phase`]): thread CPU and wall time.
     pub phases: PhaseTimes,
+    /// `run.gif`, when it could be made.
+    pub animation: Option<Vec<u8>>,
+    /// Why the recording or the live view failed, if it did.
+    pub viewer_failure: Option<String>,
+}
+
+/// What the observer says once it has started.
+#[derive(Clone, Debug, Default)]
+pub struct ObserverStarted {
+    /// The live view's address, with `--live`.
+    pub live_url: Option<String>,
 }
 
 /// The phases of the observer thread's time ([`ObserverReport::phases`]).
@@ -204,32 +226,37 @@ pub mod phase {
     pub const WAIT: &str = "observe_wait";
     /// Everything else on the observer thread (acks, node scans, start-up).
     pub const OTHER: &str = "observe_other";
+    /// Showing the run in Foxglove (`--record`, `--live`).
+    pub const VIEW: &str = "observe_view";
+    /// Drawing `run.gif`.
+    pub const ANIMATION: &str = "observe_animation";
 }
 
-/// Starts the observer thread and returns once its iceoryx2 node exists, so the run has a
-/// node listed before any child starts: if the fleet is then killed, the node is listed dead
-/// and the next run cleans the run's files at once (a run with files but no node listed
-/// counts as starting). Events go to `events`; the thread ends at the world's end of run or
-/// once `stop` is raised (checked every few tens of milliseconds).
+/// Starts the observer thread and returns once its iceoryx2 node exists (and the viewer it
+/// was asked for started), so the run has a node listed before any child starts: if the
+/// fleet is then killed, the node is listed dead and the next run cleans the run's files at
+/// once (a run with files but no node listed counts as starting). Events go to `events`; the
+/// thread ends at the world's end of run or once `stop` is raised (checked every few tens of
+/// milliseconds).
 pub fn spawn(
     config: ObserverConfig,
     stop: Arc<AtomicBool>,
     events: UnboundedSender<ObserverEvent>,
-) -> anyhow::Result<JoinHandle<anyhow::Result<ObserverReport>>> {
+) -> anyhow::Result<(JoinHandle<anyhow::Result<ObserverReport>>, ObserverStarted)> {
     let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel(1);
     let thread = std::thread::Builder::new()
         .name("observer".into())
         .spawn(move || observe(&config, &stop, &events, &ready_tx))
         .context("cannot start the observer thread")?;
-    if ready_rx.recv().is_err() {
+    match ready_rx.recv() {
+        Ok(started) => Ok((thread, started)),
         // The thread ended before its node existed: its result says why.
-        return match thread.join() {
+        Err(_) => match thread.join() {
             Ok(Err(e)) => Err(e),
             Ok(Ok(_)) => Err(anyhow::anyhow!("the observer ended before it started")),
             Err(_) => Err(anyhow::anyhow!("the observer thread panicked")),
-        };
+        },
     }
-    Ok(thread)
 }
 
 /// Longest single wait, so the stop flag is noticed promptly.
@@ -245,6 +272,8 @@ struct Ports {
     truth: Subscriber<Ipc, TruthState, ()>,
     estimates: Vec<(u32, WireSubscriber)>,
     tokens: WireSubscriber,
+    /// The shown UAV's camera frames, when a viewer is on.
+    frames: Option<Subscriber<Ipc, CvsFrame, ()>>,
     ack: Publisher<Ipc, ObserverAck, ()>,
     world_wake: Notifier<Ipc>,
     wake: Listener<Ipc>,
@@ -258,10 +287,12 @@ struct Services {
     _guidance: WireService,
     _ack: PubSubService<ObserverAck>,
     _events: Vec<EventService>,
+    _frames: Option<PubSubService<CvsFrame>>,
 }
 
 impl Ports {
-    fn open(node: &RunNode, uavs: u32) -> anyhow::Result<Ports> {
+    /// The observer's ports; with `camera`, also a subscriber to that UAV's frames.
+    fn open(node: &RunNode, uavs: u32, camera: Option<u32>) -> anyhow::Result<Ports> {
         let truth_service = node.open_truth()?;
         let truth = truth_service.subscriber_builder().create()?;
         let mut estimate_services = Vec::new();
@@ -279,10 +310,16 @@ impl Ports {
         let world_wake = world.notifier_builder().create()?;
         let own = node.open_observer_wake()?;
         let wake = own.listener_builder().create()?;
+        let frame_service = camera.map(|uav| node.open_cvs(uav)).transpose()?;
+        let frames = frame_service
+            .as_ref()
+            .map(|s| s.subscriber_builder().create())
+            .transpose()?;
         Ok(Ports {
             truth,
             estimates,
             tokens,
+            frames,
             ack,
             world_wake,
             wake,
@@ -292,6 +329,7 @@ impl Ports {
                 _guidance: guidance,
                 _ack: ack_service,
                 _events: vec![world, own],
+                _frames: frame_service,
             },
         })
     }
@@ -301,15 +339,29 @@ fn observe(
     config: &ObserverConfig,
     stop: &AtomicBool,
     events: &UnboundedSender<ObserverEvent>,
-    ready: &std::sync::mpsc::SyncSender<()>,
+    ready: &std::sync::mpsc::SyncSender<ObserverStarted>,
 ) -> anyhow::Result<ObserverReport> {
     let clock = PhaseClock::new(CpuClock::Thread, phase::OTHER);
     let uavs = config.scenario.uavs.count;
     let node = RunNode::new(&config.run, RunNode::OBSERVER, SignalHandlingMode::Disabled)
         .context("cannot create the observer's iceoryx2 node")?;
+    let viewer = Viewer::start(&config.view, &config.scenario)?;
+    let animation = match world_server::World::new(&config.scenario) {
+        Ok(world) => Animation::new(&config.scenario, &world.scene().buildings)
+            .map_err(|e| tracing::warn!(error = %e, "no run.gif"))
+            .ok(),
+        Err(e) => {
+            tracing::warn!(error = %e, "no run.gif: cannot rebuild the city");
+            None
+        }
+    };
+    let started = ObserverStarted {
+        live_url: viewer.as_ref().and_then(Viewer::live_url),
+    };
     // The spawner waits for this; it is gone only if the spawner is.
-    let _ = ready.send(());
-    let ports = Ports::open(&node, uavs).context("cannot open the observer's ports")?;
+    let _ = ready.send(started);
+    let camera = viewer.as_ref().map(Viewer::camera_uav);
+    let ports = Ports::open(&node, uavs, camera).context("cannot open the observer's ports")?;
     let waitset = node.waitset()?;
     let _guard = waitset
         .attach_notification(&ports.wake)
@@ -336,6 +388,8 @@ fn observe(
             tracks: vec![Vec::new(); uavs as usize],
             stepping: None,
             phases: PhaseTimes::new(),
+            animation: None,
+            viewer_failure: None,
         },
         estimator,
         truths: VecDeque::new(),
@@ -345,8 +399,16 @@ fn observe(
         end_of_run: false,
         first_truth: None,
         clock,
+        viewer,
+        animation,
+        frame_every: (FRAME_PERIOD_S / config.scenario.timing.cvs_period_s)
+            .round()
+            .max(1.0) as u64,
+        plans: (0, BTreeMap::new()),
     };
-    observer.main_loop()?;
+    let ended = observer.main_loop();
+    observer.finish_showing();
+    ended?;
     observer.report.phases = observer.clock.times();
     Ok(observer.report)
 }
@@ -374,6 +436,12 @@ struct Observer<'a> {
     end_of_run: bool,
     first_truth: Option<Instant>,
     clock: PhaseClock,
+    viewer: Option<Viewer>,
+    animation: Option<Animation>,
+    /// Steps between two frames of the animation.
+    frame_every: u64,
+    /// The newest guidance round seen and its plans, by UAV (the first plan seen of each).
+    plans: (u64, BTreeMap<u32, PlannedView>),
 }
 
 impl Observer<'_> {
@@ -478,6 +546,31 @@ impl Observer<'_> {
             self.drain_estimates(idx);
         }
         self.drain_tokens();
+        self.drain_frames();
+    }
+
+    /// Hands the shown UAV's frames of this run to the viewer.
+    fn drain_frames(&mut self) {
+        let (Some(frames), Some(viewer)) = (&self.ports.frames, &mut self.viewer) else {
+            return;
+        };
+        loop {
+            match frames.receive() {
+                Ok(Some(sample)) => {
+                    let frame = sample.payload();
+                    if frame.header.run_tag == self.run_tag && frame.is_well_formed() {
+                        let before = self.clock.enter(phase::VIEW);
+                        viewer.frame(frame);
+                        self.clock.enter(before);
+                    }
+                }
+                Ok(None) => return,
+                Err(e) => {
+                    tracing::warn!(error = ?e, "cannot receive the shown UAV's frames");
+                    return;
+                }
+            }
+        }
     }
 
     /// Counts a dropped message as `{what}:{reason}` (e.g. `estimate:other-run`).
@@ -557,18 +650,85 @@ impl Observer<'_> {
             };
             let header = *sample.user_header();
             let len = sample.payload().len();
-            drop(sample);
             // Any agent may send the token: the sender is not checked.
             if let Err(reason) = header.check(len, WireKind::Token, self.run_tag, None) {
+                drop(sample);
                 self.drop_message("token", reason);
                 continue;
             }
+            if self.viewer.is_some() {
+                match codec::decode::<GuidanceToken>(sample.payload()) {
+                    Ok(token) => self.note_plans(token),
+                    Err(e) => {
+                        tracing::warn!(error = %e, "unreadable token");
+                        self.drop_message("token", DropReason::Malformed);
+                    }
+                }
+            }
+            drop(sample);
             self.report.comms.count_timed(
                 ServiceKind::Tokens,
                 (len + std::mem::size_of::<WireHeader>()) as u64,
                 header.sent_unix_ns,
                 unix_now_ns(),
             );
+        }
+    }
+
+    /// Keeps the plans of the newest round: a newer round replaces them, and within a round
+    /// the first plan seen of each UAV is kept (as the agents merge tokens).
+    fn note_plans(&mut self, token: GuidanceToken) {
+        let (round, plans) = &mut self.plans;
+        if token.round < *round {
+            return;
+        }
+        if token.round > *round {
+            *round = token.round;
+            plans.clear();
+        }
+        for plan in token.plans {
+            plans.entry(plan.uav).or_insert(plan);
+        }
+    }
+
+    /// Completes the recording, stops the live view and ends the animation.
+    fn finish_showing(&mut self) {
+        if let Some(viewer) = self.viewer.take()
+            && let Err(e) = viewer.finish()
+        {
+            tracing::error!(error = %e, "the viewer failed");
+            self.report.viewer_failure = Some(e.to_string());
+        }
+        if let Some(animation) = self.animation.take() {
+            match animation.finish() {
+                Ok(bytes) => self.report.animation = Some(bytes),
+                Err(e) => tracing::warn!(error = %e, "no run.gif"),
+            }
+        }
+    }
+
+    /// Shows a measured step: to the viewer, and as a frame of the animation when one is due.
+    fn show(&mut self, truth: &TruthState, sets: Option<(u32, &FusedSets)>, step: &StepMetrics) {
+        if let Some(viewer) = &mut self.viewer {
+            let before = self.clock.enter(phase::VIEW);
+            viewer.step(&StepView {
+                truth,
+                sets,
+                oem: &self.report.oem,
+                plans: &self.plans.1,
+                metrics: step,
+            });
+            self.clock.enter(before);
+        }
+        if let Some(animation) = &mut self.animation
+            && truth.step % self.frame_every == 0
+        {
+            let before = self.clock.enter(phase::ANIMATION);
+            if let Err(e) = animation.add(truth, sets) {
+                tracing::warn!(error = %e, "run.gif abandoned");
+                self.animation = None;
+            }
+            self.clock.enter(before);
         }
     }
 
@@ -659,25 +819,33 @@ impl Observer<'_> {
                 .map_or(&[], Vec::as_slice)
         };
         let all_fused = FusedSets::of_agents(&estimates, sent, &self.estimator, &self.radio);
-        for (own, fused) in estimates.iter().zip(all_fused) {
+        let all_fused: Vec<(u32, FusedSets)> = estimates
+            .iter()
+            .map(ObservedEstimate::uav)
+            .zip(all_fused)
+            .collect();
+        for (uav, fused) in &all_fused {
             self.report
                 .final_undetected
-                .insert(own.uav(), (k, fused.undetected.clone()));
-            agents.insert(
-                own.uav(),
-                SetMetrics::measure(&fused, truth.targets(), &grid),
-            );
-            // The lowest id comes first: its sets are the ones drawn.
-            if agents.len() == 1 {
-                self.report.final_state = Some(FinalState {
-                    step: k,
-                    time_s: truth.time_s,
-                    uav: own.uav(),
-                    sets: fused,
-                    targets: truth.targets().to_vec(),
-                });
-            }
+                .insert(*uav, (k, fused.undetected.clone()));
+            agents.insert(*uav, SetMetrics::measure(fused, truth.targets(), &grid));
         }
+        // The lowest id comes first: its sets are the ones drawn; the shown UAV's are shown
+        // (the lowest id's when its estimate did not arrive).
+        if let Some((uav, fused)) = all_fused.first() {
+            self.report.final_state = Some(FinalState {
+                step: k,
+                time_s: truth.time_s,
+                uav: *uav,
+                sets: fused.clone(),
+                targets: truth.targets().to_vec(),
+            });
+        }
+        let shown = all_fused
+            .iter()
+            .find(|(uav, _)| *uav == self.config.view.uav)
+            .or(all_fused.first())
+            .map(|(uav, fused)| (*uav, fused));
         let spread = AgentSpread::over(agents.values());
         let estimate_count = estimates.len() as u32;
         let identified_any = identified_ids(&estimates).len() as u32;
@@ -701,7 +869,7 @@ impl Observer<'_> {
             u64::from(live_agents),
             u64::from(live_agents) * std::mem::size_of::<UavCommand>() as u64,
         );
-        StepMetrics {
+        let step = StepMetrics {
             step: k,
             time_s: truth.time_s,
             live_agents,
@@ -711,7 +879,9 @@ impl Observer<'_> {
             worst: spread.map(|s| s.worst),
             agents,
             violations: violation_count,
-        }
+        };
+        self.show(truth, shown, &step);
+        step
     }
 
     /// Lets the orchestrator apply the faults due by this step's time before the step is

@@ -14,6 +14,7 @@ use super::chaos;
 use super::hosts::{HostLayout, RemoteHost};
 use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
+use crate::viewer::{LiveAddress, ViewConfig};
 
 /// The flags that make a run's scenario, shared by `fleet run` and `fleet host` so that the
 /// same flags give every host the same scenario.
@@ -115,6 +116,18 @@ pub struct RunArgs {
     /// with `--remote` hosts needs one: `fleet host` joins the run by it.
     #[arg(long)]
     pub run_id: Option<RunId>,
+    /// Records the run for Foxglove into this MCAP file (the city, the UAVs, the sets, the
+    /// map, the plans, the metrics, the true cars and the shown UAV's camera).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
+    /// Serves the run live to Foxglove over WebSocket, on 127.0.0.1:8765 unless given
+    /// (`0`: any free port; the address is printed); connect Foxglove to `ws://HOST:PORT`.
+    #[arg(long, value_name = "[HOST:]PORT", num_args = 0..=1, default_missing_value = "8765")]
+    pub live: Option<LiveAddress>,
+    /// The UAV whose sets and camera `--record` and `--live` show (the lowest one measured
+    /// stands in at a step without its estimate).
+    #[arg(long, value_name = "UAV", default_value_t = 0)]
+    pub show_uav: u32,
 }
 
 /// `--mode`.
@@ -268,6 +281,8 @@ pub struct RunConfig {
     pub tls: Option<PathBuf>,
     /// Plain TCP between simulated hosts (tests).
     pub insecure_links: bool,
+    /// What the run is shown to (Foxglove).
+    pub view: ViewConfig,
 }
 
 impl RunArgs {
@@ -317,6 +332,21 @@ impl RunArgs {
             HostLayout::with_remotes(scenario.uavs.count, &self.remote)
         }
         .map_err(UsageError)?;
+        if self.show_uav >= scenario.uavs.count {
+            return Err(UsageError(format!(
+                "--show-uav {}: UAV outside the fleet (UAVs 0..={})",
+                self.show_uav,
+                scenario.uavs.count.saturating_sub(1)
+            )));
+        }
+        if let Some(record) = &self.record
+            && record.is_dir()
+        {
+            return Err(UsageError(format!(
+                "--record {}: a directory; give the recording's file name",
+                record.display()
+            )));
+        }
         if let Some(f) = faults.iter().find(|f| !layout.is_here(f.uav)) {
             return Err(UsageError(format!(
                 "--fault {f}: UAV {} runs on another machine; faults apply to this machine's \
@@ -338,6 +368,11 @@ impl RunArgs {
             listen: self.listen.clone(),
             tls: self.tls.clone(),
             insecure_links: self.insecure_links,
+            view: ViewConfig {
+                record: self.record.clone(),
+                live: self.live.clone(),
+                uav: self.show_uav,
+            },
         })
     }
 }

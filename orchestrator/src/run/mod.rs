@@ -19,13 +19,16 @@
 //! [`RunRecord`] holds what was measured, with each restarted or resumed agent's resync and
 //! where every process's time went ([`resources`]).
 //! [`run`] is the command: it executes, then writes `summary.json`, `timeseries.csv` and the
-//! pictures, and prints the summary table.
+//! pictures (with `run.gif`), and prints the summary table. While the run goes on, its
+//! directory holds the run's iceoryx2 configuration for iceoryx2's own tools ([`iox2`]);
+//! with `--record` or `--live` the observer shows the run in Foxglove ([`crate::viewer`]).
 
 pub mod chaos;
 pub mod children;
 pub mod config;
 pub mod faults;
 pub mod hosts;
+pub mod iox2;
 pub mod progress;
 pub mod resources;
 pub mod stale;
@@ -134,8 +137,8 @@ pub fn outcome(record: &RunRecord) -> Outcome {
     Outcome::Success
 }
 
-/// Writes `summary.json`, `timeseries.csv`, `metrics.png`, `map.png` and `sets.png` into the
-/// run's output directory; returns the summary.
+/// Writes `summary.json`, `timeseries.csv`, `metrics.png`, `map.png`, `sets.png` and
+/// `run.gif` into the run's output directory; returns the summary.
 pub fn write_results(record: &RunRecord) -> anyhow::Result<Summary> {
     let out = &record.config.out;
     let scenario = &record.config.scenario;
@@ -151,6 +154,11 @@ pub fn write_results(record: &RunRecord) -> anyhow::Result<Summary> {
         maps::draw_map(&observer.oem, scenario, &out.join("map.png"))?;
         if let Some(state) = &observer.final_state {
             maps::draw_sets(state, &observer.tracks, scenario, &out.join("sets.png"))?;
+        }
+        if let Some(gif) = &observer.animation {
+            let path = out.join("run.gif");
+            std::fs::write(&path, gif)
+                .with_context(|| format!("cannot write {}", path.display()))?;
         }
     }
     Ok(summary)
@@ -177,6 +185,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     let scenario_file = out.join("scenario.toml");
     std::fs::write(&scenario_file, config.scenario.to_toml_string())
         .with_context(|| format!("cannot write {}", scenario_file.display()))?;
+    iox2::write_configs(out, &config.layout, run)?;
     let (stale_runs, stale_files) = stale::remove_stale_runs(run);
     if stale_runs > 0 {
         tracing::info!(
@@ -194,7 +203,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     let resumed = Arc::new(AtomicU32::new(0));
     let stop = Arc::new(AtomicBool::new(false));
     let (events_tx, mut events) = mpsc::unbounded_channel();
-    let observer = observe::spawn(
+    let (observer, observer_started) = observe::spawn(
         ObserverConfig {
             run: run.clone(),
             scenario: config.scenario.clone(),
@@ -203,6 +212,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
             fault_times: plan.times(),
             fault_wait: FAULT_WAIT,
             resumed: resumed.clone(),
+            view: config.view.clone(),
         },
         stop.clone(),
         events_tx,
@@ -244,6 +254,14 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     }
     let total = (config.scenario.duration_s / config.scenario.timing.cvs_period_s).round() as u64;
     let mut progress = Progress::new(total, config.progress_bar, label);
+    if let Some(url) = &observer_started.live_url {
+        progress.note(&format!(
+            "live view on {url}: in Foxglove, open a connection to this address"
+        ));
+    }
+    if let Some(file) = &config.view.record {
+        progress.note(&format!("recording into {}", file.display()));
+    }
     let mut series = Vec::with_capacity(total as usize + 1);
     let mut world_exit: Option<(ExitStatus, Instant)> = None;
     let mut tick = tokio::time::interval(TICK);
@@ -335,7 +353,12 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     stop.store(true, Ordering::Relaxed);
     let observer = join_observer(observer).await;
     let observer = match observer {
-        Ok(report) => Some(report),
+        Ok(report) => {
+            if let Some(why) = &report.viewer_failure {
+                failure.get_or_insert_with(|| why.clone());
+            }
+            Some(report)
+        }
         Err(e) => {
             failure.get_or_insert_with(|| {
                 format!(

@@ -221,6 +221,7 @@ impl SweepArgs {
                     listen: None,
                     tls: None,
                     insecure_links: false,
+                    view: crate::viewer::ViewConfig::default(),
                 },
             });
         }

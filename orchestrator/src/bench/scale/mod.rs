@@ -182,6 +182,7 @@ impl BenchScaleArgs {
                     listen: None,
                     tls: None,
                     insecure_links: false,
+                    view: crate::viewer::ViewConfig::default(),
                     layout: HostLayout::single(uavs),
                 },
             });

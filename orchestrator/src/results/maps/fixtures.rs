@@ -4,12 +4,19 @@
 use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use protocol::math::Point2;
+use protocol::raster::{CellSet, Coverage};
 use protocol::scenario::Scenario;
 use protocol::wire::TargetTruth;
 use world_server::World;
 
 use super::chart::{Area, SIZE};
 use super::raster::PlotRaster;
+use crate::observe::FinalState;
+use crate::observe::metrics::FusedSets;
 
 /// Where a test writes its pictures: `$SETFLEET_KEEP_MAPS` (kept) or a fresh temp dir
 /// (removed when the guard drops).
@@ -123,4 +130,56 @@ pub(super) fn truth_of(world: &World) -> Vec<TargetTruth> {
             speed: car.speed_mps,
         })
         .collect()
+}
+
+/// A final state over `world`'s city with every kind of set: `S^o` around the buildings,
+/// explored ground, `X̄` elsewhere, a patch of `H̄` and two target sets.
+pub(super) fn synthetic_state(scenario: &Scenario, world: &World) -> FinalState {
+    let grid = scenario.grid();
+    let targets = truth_of(world);
+    let mut obstacle_free = CellSet::empty(&grid);
+    for b in &world.scene().buildings {
+        let r = scenario.targets.safety_distance_m;
+        for iy in 0..grid.ny {
+            for ix in 0..grid.nx {
+                let c = grid.cell_centre((ix, iy));
+                if c.x > b.min.x - r && c.x < b.max.x + r && c.y > b.min.y - r && c.y < b.max.y + r
+                {
+                    obstacle_free.set((ix, iy), true);
+                }
+            }
+        }
+    }
+    let mut explored = CellSet::empty(&grid);
+    explored.fill_disc(&grid, Point2::new(-15.0, -15.0), 18.0, Coverage::Inner);
+    explored.and_not_assign(&obstacle_free);
+    let mut undetected = CellSet::full(&grid);
+    undetected.and_not_assign(&explored);
+    undetected.and_not_assign(&obstacle_free);
+    let mut unseen = CellSet::empty(&grid);
+    unseen.fill_disc(&grid, Point2::new(20.0, 20.0), 10.0, Coverage::Outer);
+    let mut sets = BTreeMap::new();
+    for t in targets.iter().take(2) {
+        let mut s = CellSet::empty(&grid);
+        s.fill_disc(
+            &grid,
+            Point2::new(t.ground[0], t.ground[1]),
+            4.0,
+            Coverage::Outer,
+        );
+        sets.insert(t.id, Arc::new(s));
+    }
+    FinalState {
+        step: 40,
+        time_s: 20.0,
+        uav: 0,
+        sets: FusedSets {
+            undetected: Arc::new(undetected),
+            targets: sets,
+            obstacle_free: Arc::new(obstacle_free),
+            explored: Arc::new(explored),
+            unseen,
+        },
+        targets,
+    }
 }

@@ -14,6 +14,7 @@
 //! pixel touches belongs to it, so sets smaller than a pixel still show; the coarse map is
 //! sampled at pixel centres.
 
+mod animation;
 mod chart;
 #[cfg(test)]
 mod fixtures;
@@ -22,5 +23,6 @@ mod map;
 mod raster;
 mod sets;
 
+pub use animation::{Animation, AnimationError, FRAME_PERIOD_S};
 pub use map::draw_map;
 pub use sets::draw_sets;

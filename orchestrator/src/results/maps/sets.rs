@@ -24,13 +24,13 @@ use crate::pictures::topview::building_shade;
 use crate::pictures::{FONT, palette};
 
 /// Explored ground: colour and opacity.
-const EXPLORED: (RGBColor, f64) = (RGBColor(150, 205, 150), 0.3);
+pub(super) const EXPLORED: (RGBColor, f64) = (RGBColor(150, 205, 150), 0.3);
 /// `S^o`: colour and opacity.
-const OBSTACLE_NEIGHBOURHOOD: (RGBColor, f64) = (RGBColor(55, 65, 120), 0.4);
+pub(super) const OBSTACLE_NEIGHBOURHOOD: (RGBColor, f64) = (RGBColor(55, 65, 120), 0.4);
 /// `X̄`: colour and opacity.
-const UNDETECTED: (RGBColor, f64) = (RGBColor(255, 185, 0), 0.45);
+pub(super) const UNDETECTED: (RGBColor, f64) = (RGBColor(255, 185, 0), 0.45);
 /// Opacity of a target set `X_j` (its colour is the target's palette colour).
-const TARGET_ALPHA: f64 = 0.45;
+pub(super) const TARGET_ALPHA: f64 = 0.45;
 /// Hatch lines of `H̄`.
 const UNSEEN_HATCH: Hatch = Hatch {
     ink: RGBColor(40, 40, 40),
@@ -288,7 +288,7 @@ fn check_grid(state: &FinalState, scenario: &Scenario) -> anyhow::Result<()> {
 }
 
 /// The colour of target `id` (its set and its marker).
-fn target_colour(id: u32) -> RGBColor {
+pub(super) fn target_colour(id: u32) -> RGBColor {
     palette(id as usize)
 }
 
@@ -303,65 +303,13 @@ mod tests {
     use world_server::World;
 
     use super::super::fixtures::{
-        OutDir, assert_png, colour_at, flown, paint_in_memory, small_scenario, truth_of,
+        OutDir, assert_png, colour_at, flown, paint_in_memory, small_scenario, synthetic_state,
+        truth_of,
     };
     use super::super::map::draw_map;
     use super::*;
     use crate::observe::metrics::FusedSets;
     use crate::pictures::register_fonts;
-
-    fn synthetic_state(scenario: &Scenario, world: &World) -> FinalState {
-        let grid = scenario.grid();
-        let targets = truth_of(world);
-        let mut obstacle_free = CellSet::empty(&grid);
-        for b in &world.scene().buildings {
-            let r = scenario.targets.safety_distance_m;
-            for iy in 0..grid.ny {
-                for ix in 0..grid.nx {
-                    let c = grid.cell_centre((ix, iy));
-                    if c.x > b.min.x - r
-                        && c.x < b.max.x + r
-                        && c.y > b.min.y - r
-                        && c.y < b.max.y + r
-                    {
-                        obstacle_free.set((ix, iy), true);
-                    }
-                }
-            }
-        }
-        let mut explored = CellSet::empty(&grid);
-        explored.fill_disc(&grid, Point2::new(-15.0, -15.0), 18.0, Coverage::Inner);
-        explored.and_not_assign(&obstacle_free);
-        let mut undetected = CellSet::full(&grid);
-        undetected.and_not_assign(&explored);
-        undetected.and_not_assign(&obstacle_free);
-        let mut unseen = CellSet::empty(&grid);
-        unseen.fill_disc(&grid, Point2::new(20.0, 20.0), 10.0, Coverage::Outer);
-        let mut sets = BTreeMap::new();
-        for t in targets.iter().take(2) {
-            let mut s = CellSet::empty(&grid);
-            s.fill_disc(
-                &grid,
-                Point2::new(t.ground[0], t.ground[1]),
-                4.0,
-                Coverage::Outer,
-            );
-            sets.insert(t.id, Arc::new(s));
-        }
-        FinalState {
-            step: 40,
-            time_s: 20.0,
-            uav: 0,
-            sets: FusedSets {
-                undetected: Arc::new(undetected),
-                targets: sets,
-                obstacle_free: Arc::new(obstacle_free),
-                explored: Arc::new(explored),
-                unseen,
-            },
-            targets,
-        }
-    }
 
     #[test]
     fn the_sets_show_every_layer_over_the_city() {
