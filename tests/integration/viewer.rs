@@ -23,14 +23,14 @@ const TOPICS: [(&str, &str); 14] = [
     ("/truth/cars", "foxglove.SceneUpdate"),
     ("/guidance/plans", "foxglove.SceneUpdate"),
     ("/sets/undetected", "foxglove.Grid"),
-    ("/sets/obstacle_free", "foxglove.Grid"),
+    ("/sets/obstacle_neighbourhood", "foxglove.Grid"),
     ("/sets/unseen", "foxglove.Grid"),
     ("/sets/explored", "foxglove.Grid"),
     ("/map/oem", "foxglove.Grid"),
     ("/camera/labels", "foxglove.CompressedImage"),
     ("/camera/depth", "foxglove.CompressedImage"),
     ("/camera/boxes", "foxglove.ImageAnnotations"),
-    ("/metrics", "FleetMetrics"),
+    ("/metrics", "fleetmetrics.FleetMetrics"),
 ];
 /// Topics written once per step.
 const PER_STEP: [&str; 9] = [
@@ -39,7 +39,7 @@ const PER_STEP: [&str; 9] = [
     "/truth/cars",
     "/guidance/plans",
     "/sets/undetected",
-    "/sets/obstacle_free",
+    "/sets/obstacle_neighbourhood",
     "/sets/unseen",
     "/sets/explored",
     "/metrics",

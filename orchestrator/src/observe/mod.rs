@@ -721,7 +721,7 @@ impl Observer<'_> {
             self.clock.enter(before);
         }
         if let Some(animation) = &mut self.animation
-            && truth.step % self.frame_every == 0
+            && truth.step.is_multiple_of(self.frame_every)
         {
             let before = self.clock.enter(phase::ANIMATION);
             if let Err(e) = animation.add(truth, sets) {

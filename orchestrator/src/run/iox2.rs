@@ -51,7 +51,7 @@ pub fn write_configs(out: &Path, layout: &HostLayout, run: &RunId) -> anyhow::Re
 #[cfg(test)]
 mod tests {
     use iceoryx2::config::Config;
-    use iceoryx2::prelude::FilePath;
+    use iceoryx2::prelude::*;
 
     use super::*;
 

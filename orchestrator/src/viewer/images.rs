@@ -171,7 +171,7 @@ mod tests {
     fn decode(image: &CompressedImage) -> (png::OutputInfo, Vec<u8>) {
         let decoder = png::Decoder::new(std::io::Cursor::new(image.data.to_vec()));
         let mut reader = decoder.read_info().expect("a PNG");
-        let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+        let mut buf = vec![0; reader.output_buffer_size()];
         let info = reader.next_frame(&mut buf).expect("a frame");
         buf.truncate(info.buffer_size());
         (info, buf)

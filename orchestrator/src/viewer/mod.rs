@@ -14,7 +14,7 @@
 //! | `/uavs` | `foxglove.SceneUpdate` | the UAVs and their camera footprints |
 //! | `/truth/cars` | `foxglove.SceneUpdate` | the true cars |
 //! | `/guidance/plans` | `foxglove.SceneUpdate` | the plans in the token |
-//! | `/sets/undetected`, `/sets/obstacle_free`, `/sets/unseen`, `/sets/explored` | `foxglove.Grid` | `X̄`, `S^o`, `H̄`, explored ground |
+//! | `/sets/undetected`, `/sets/obstacle_neighbourhood`, `/sets/unseen`, `/sets/explored` | `foxglove.Grid` | `X̄`, `S^o`, `H̄`, explored ground |
 //! | `/sets/targets/{j}` | `foxglove.Grid` | `X_j` |
 //! | `/map/oem` | `foxglove.Grid` | the occupancy elevation map |
 //! | `/camera/labels`, `/camera/depth` | `foxglove.CompressedImage` | the chosen UAV's frames |
@@ -51,7 +51,7 @@ use protocol::wire::{PlannedView, TruthState};
 use uav_agent::occupancy::OccupancyMap;
 
 use crate::observe::StepMetrics;
-use crate::observe::metrics::FusedSets;
+use crate::observe::metrics::{FusedSets, SetMetrics};
 use topics::{Channels, FleetMetrics, IMAGE_PERIOD_S, SLOW_PERIOD_S};
 
 /// The port `--live` listens on when none is given (Foxglove's default).
@@ -299,7 +299,7 @@ impl Viewer {
         let c = &mut self.channels;
         for (channel, set) in [
             (&c.undetected, &*sets.undetected),
-            (&c.obstacle_free, &*sets.obstacle_free),
+            (&c.obstacle_neighbourhood, &*sets.obstacle_free),
             (&c.unseen, &sets.unseen),
             (&c.explored, &*sets.explored),
         ] {
@@ -376,27 +376,18 @@ fn sim_time(time_s: f64) -> (Timestamp, u64) {
 }
 
 fn metrics(m: &StepMetrics) -> FleetMetrics {
-    let mean = m.mean.clone().unwrap_or_default();
-    let none = |v: Option<f64>| v.unwrap_or(f64::NAN);
+    let mean = |f: fn(&SetMetrics) -> Option<f64>| m.mean.as_ref().and_then(f).unwrap_or(f64::NAN);
     FleetMetrics {
         step: m.step,
         time_s: m.time_s,
         live_agents: m.live_agents,
         estimates: m.estimates,
-        explored: if m.mean.is_some() {
-            mean.explored
-        } else {
-            f64::NAN
-        },
-        ua: if m.mean.is_some() { mean.ua } else { f64::NAN },
-        oa: if m.mean.is_some() { mean.oa } else { f64::NAN },
-        target_set_area_m2: none(mean.target_set_area),
-        loc_error_m: none(mean.loc_error_m),
-        identified: if m.mean.is_some() {
-            mean.identified
-        } else {
-            f64::NAN
-        },
+        explored: mean(|s| Some(s.explored)),
+        ua: mean(|s| Some(s.ua)),
+        oa: mean(|s| Some(s.oa)),
+        target_set_area_m2: mean(|s| s.target_set_area),
+        loc_error_m: mean(|s| s.loc_error_m),
+        identified: mean(|s| Some(s.identified)),
         identified_any: m.identified_any,
         violations: m.violations,
     }

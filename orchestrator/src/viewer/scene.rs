@@ -246,7 +246,7 @@ pub fn transforms(uavs: &[UavTruth], model: &CameraModel, stamp: Timestamp) -> F
                 parent_frame_id: uav_frame(u.id),
                 child_frame_id: camera_frame(u.id),
                 translation: Some(vector([0.0; 3])),
-                rotation: Some(mount.clone()),
+                rotation: Some(mount),
             };
             [body, camera]
         })

@@ -41,8 +41,9 @@ pub const TRUTH: &str = "/truth/cars";
 pub const PLANS: &str = "/guidance/plans";
 /// `foxglove.Grid`: `X̄`, the ground where a target not yet identified may be, per step.
 pub const UNDETECTED: &str = "/sets/undetected";
-/// `foxglove.Grid`: `S^o`, the obstacle-free ground, per step.
-pub const OBSTACLE_FREE: &str = "/sets/obstacle_free";
+/// `foxglove.Grid`: `S^o`, the ground within the safety distance of an obstacle, where no car
+/// can be, per step.
+pub const OBSTACLE_NEIGHBOURHOOD: &str = "/sets/obstacle_neighbourhood";
 /// `foxglove.Grid`: `H̄`, the ground never seen, per step.
 pub const UNSEEN: &str = "/sets/unseen";
 /// `foxglove.Grid`: the explored ground, per step.
@@ -75,7 +76,7 @@ pub const FIXED: [&str; 14] = [
     TRUTH,
     PLANS,
     UNDETECTED,
-    OBSTACLE_FREE,
+    OBSTACLE_NEIGHBOURHOOD,
     UNSEEN,
     EXPLORED,
     OEM,
@@ -134,7 +135,7 @@ pub(super) struct Channels {
     pub(super) truth: Channel<SceneUpdate>,
     pub(super) plans: Channel<SceneUpdate>,
     pub(super) undetected: Channel<Grid>,
-    pub(super) obstacle_free: Channel<Grid>,
+    pub(super) obstacle_neighbourhood: Channel<Grid>,
     pub(super) unseen: Channel<Grid>,
     pub(super) explored: Channel<Grid>,
     targets: BTreeMap<u32, Channel<Grid>>,
@@ -155,7 +156,7 @@ impl Channels {
             truth: ctx.channel_builder(TRUTH).build(),
             plans: ctx.channel_builder(PLANS).build(),
             undetected: ctx.channel_builder(UNDETECTED).build(),
-            obstacle_free: ctx.channel_builder(OBSTACLE_FREE).build(),
+            obstacle_neighbourhood: ctx.channel_builder(OBSTACLE_NEIGHBOURHOOD).build(),
             unseen: ctx.channel_builder(UNSEEN).build(),
             explored: ctx.channel_builder(EXPLORED).build(),
             targets: BTreeMap::new(),

@@ -397,7 +397,7 @@ fn paint_text(header: &mut [u8], text: &str) -> Result<(), AnimationError> {
     let mut rgb = vec![255u8; header.len() * 3];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (SIDE, HEADER)).into_drawing_area();
-        let style = (FONT, 13)
+        let style = (FONT, 14)
             .into_font()
             .color(&BLACK)
             .pos(Pos::new(HPos::Left, VPos::Center));

@@ -294,10 +294,6 @@ pub(super) fn target_colour(id: u32) -> RGBColor {
 
 #[cfg(test)]
 mod tests {
-    use std::collections::BTreeMap;
-    use std::sync::Arc;
-
-    use protocol::raster::Coverage;
     use uav_agent::agent::radio::Radio;
     use uav_agent::occupancy::OccupancyMap;
     use world_server::World;
