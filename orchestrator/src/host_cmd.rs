@@ -119,6 +119,7 @@ async fn serve(config: &HostConfig) -> anyhow::Result<Outcome> {
     let scenario_file = config.out.join("scenario.toml");
     std::fs::write(&scenario_file, config.scenario.to_toml_string())
         .with_context(|| format!("cannot write {}", scenario_file.display()))?;
+    crate::run::iox2::write_configs(&config.out, &config.layout, &config.run)?;
     let checkpoints = config.out.join("checkpoints");
     std::fs::create_dir_all(&checkpoints)
         .with_context(|| format!("cannot create {}", checkpoints.display()))?;

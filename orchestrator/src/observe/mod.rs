@@ -405,6 +405,7 @@ fn observe(
             .round()
             .max(1.0) as u64,
         plans: (0, BTreeMap::new()),
+        oem_changed: false,
     };
     let ended = observer.main_loop();
     observer.finish_showing();
@@ -442,6 +443,8 @@ struct Observer<'a> {
     frame_every: u64,
     /// The newest guidance round seen and its plans, by UAV (the first plan seen of each).
     plans: (u64, BTreeMap<u32, PlannedView>),
+    /// Whether the fleet's map changed since the last step shown.
+    oem_changed: bool,
 }
 
 impl Observer<'_> {
@@ -617,7 +620,7 @@ impl Observer<'_> {
                     );
                 }
                 Ok((e, map)) => {
-                    self.report.oem.merge(&map);
+                    self.oem_changed |= self.report.oem.merge(&map);
                     self.report.agents.entry(sender).or_default().observe(&e);
                     let steps = self.store.entry(sender).or_default();
                     steps.insert(e.step(), e);
@@ -715,6 +718,7 @@ impl Observer<'_> {
                 truth,
                 sets,
                 oem: &self.report.oem,
+                oem_changed: std::mem::take(&mut self.oem_changed),
                 plans: &self.plans.1,
                 metrics: step,
             });

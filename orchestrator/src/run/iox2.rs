@@ -5,10 +5,11 @@
 //! carries that prefix. `iox2` reads `config/iceoryx2.toml` under the directory it is started
 //! in before any user or system configuration, so the run writes one there:
 //!
-//! - `OUT/config/iceoryx2.toml`: the world's host, where the world-server, the observer and
-//!   its agents are (`cd OUT && iox2 service list`);
+//! - `OUT/config/iceoryx2.toml`: the first host started here: with `fleet run` the world's
+//!   host, where the world-server, the observer and its agents are (`cd OUT && iox2 service
+//!   list`), with `fleet host` that host;
 //! - `OUT/hosts/NAME/config/iceoryx2.toml`: each other simulated host started here, in its
-//!   own domain (`--hosts N`).
+//!   own domain (`fleet run --hosts N`).
 
 use std::path::{Path, PathBuf};
 
@@ -18,27 +19,18 @@ use protocol::service::RunId;
 
 use super::hosts::HostLayout;
 
-/// The directory under `out` whose `config/iceoryx2.toml` is host `host`'s.
-pub fn config_home(out: &Path, layout: &HostLayout, host: u16) -> PathBuf {
-    if host == 0 {
-        out.to_path_buf()
-    } else {
-        out.join("hosts")
-            .join(layout.hosts()[usize::from(host)].name.as_str())
-    }
-}
-
 /// Writes the configuration of every host of `layout` started here; returns the files.
 pub fn write_configs(out: &Path, layout: &HostLayout, run: &RunId) -> anyhow::Result<Vec<PathBuf>> {
     let mut written = Vec::new();
-    for (h, host) in layout.hosts().iter().enumerate() {
-        let h = h as u16;
-        if !host.here {
-            continue;
-        }
-        let config = run_config(&layout.run_on(run, h))?;
+    let here = layout.hosts().iter().enumerate().filter(|(_, h)| h.here);
+    for (n, (h, host)) in here.enumerate() {
+        let config = run_config(&layout.run_on(run, h as u16))?;
         let text = toml::to_string(&config).context("cannot write the iceoryx2 configuration")?;
-        let dir = config_home(out, layout, h).join("config");
+        let home = match n {
+            0 => out.to_path_buf(),
+            _ => out.join("hosts").join(host.name.as_str()),
+        };
+        let dir = home.join("config");
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("cannot create {}", dir.display()))?;
         let file = dir.join("iceoryx2.toml");
@@ -71,6 +63,23 @@ mod tests {
             // Everything else is iceoryx2's default, as every process of the run uses it.
             assert_eq!(read, run_config(&layout.run_on(&run, h as u16)).unwrap());
         }
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    #[test]
+    fn a_joining_host_writes_its_own_config_at_the_top() {
+        let out = std::env::temp_dir().join(format!("setfleet-iox2-host-{}", std::process::id()));
+        let name = bridge::security::HostName::new("h1").unwrap();
+        let agents = [2, 3].into_iter().collect();
+        let layout = HostLayout::joining(4, name, &agents, Some(5)).unwrap();
+        let run: RunId = "iox2-host".parse().unwrap();
+        let files = write_configs(&out, &layout, &run).unwrap();
+        assert_eq!(files, [out.join("config/iceoryx2.toml")]);
+        let text = std::fs::read_to_string(&files[0]).unwrap();
+        assert!(
+            text.contains(&layout.run_on(&run, 1).file_prefix()),
+            "{text}"
+        );
         std::fs::remove_dir_all(&out).unwrap();
     }
 }

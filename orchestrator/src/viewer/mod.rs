@@ -152,6 +152,8 @@ pub struct StepView<'a> {
     pub sets: Option<(u32, &'a FusedSets)>,
     /// The fleet's map.
     pub oem: &'a OccupancyMap,
+    /// Whether the map changed since the previous step.
+    pub oem_changed: bool,
     /// The plans of the newest guidance round, by UAV.
     pub plans: &'a BTreeMap<u32, PlannedView>,
     /// The step's metrics.
@@ -173,8 +175,8 @@ pub struct Viewer {
     last_city_s: Option<f64>,
     last_oem_s: Option<f64>,
     last_image_s: Option<f64>,
-    /// The map's known cells when it was last logged.
-    oem_known: usize,
+    /// Whether the map changed since it was last logged.
+    oem_changed: bool,
 }
 
 impl Viewer {
@@ -231,7 +233,7 @@ impl Viewer {
             last_city_s: None,
             last_oem_s: None,
             last_image_s: None,
-            oem_known: 0,
+            oem_changed: true,
         }))
     }
 
@@ -282,9 +284,9 @@ impl Viewer {
         if let Some((_, sets)) = view.sets {
             self.log_sets(sets, stamp, nanos);
         }
-        let known = view.oem.known_cells().count();
-        if known != self.oem_known && due(&mut self.last_oem_s, time_s, SLOW_PERIOD_S) {
-            self.oem_known = known;
+        self.oem_changed |= view.oem_changed;
+        if self.oem_changed && due(&mut self.last_oem_s, time_s, SLOW_PERIOD_S) {
+            self.oem_changed = false;
             self.channels
                 .oem
                 .log_with_time(&grids::oem(view.oem, stamp), nanos);
