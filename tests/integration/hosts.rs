@@ -6,7 +6,7 @@ use std::process::{Command, Output};
 use std::time::Duration;
 
 use serde_json::Value;
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, processes_mentioning, wait_until};
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, processes_mentioning, wait_until};
 
 /// A small 4-UAV scenario (every host gets an agent with up to 4 hosts).
 fn scenario(duration_s: f64) -> String {
@@ -16,13 +16,10 @@ fn scenario(duration_s: f64) -> String {
     )
 }
 
+/// `fleet run --strict` of the test's scenario.
 fn fleet_run(t: &TestRun, scenario: &Path, out: &Path, extra: &[&str]) -> Command {
-    let mut cmd = Command::new(binary("fleet"));
-    cmd.args(["run", "--strict", "--run-id", t.run.as_str(), "--scenario"])
-        .arg(scenario)
-        .arg("--out")
-        .arg(out)
-        .args(extra);
+    let mut cmd = tests::fleet_run(t, scenario, out, &["--strict"]);
+    cmd.args(extra);
     cmd
 }
 

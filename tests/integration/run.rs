@@ -6,7 +6,9 @@ use std::process::{Command, Output};
 use std::time::Duration;
 
 use serde_json::Value;
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, processes_mentioning, wait_until};
+use tests::{
+    ChildGuard, EXIT_TIMEOUT, TestRun, binary, fleet_run, processes_mentioning, wait_until,
+};
 
 /// The 2-UAV small-region scenario of the tests, with a camera large enough to identify cars.
 fn scenario(duration_s: f64, uavs: u32) -> String {
@@ -14,17 +16,6 @@ fn scenario(duration_s: f64, uavs: u32) -> String {
         "seed = 3\nduration_s = {duration_s}\n\n[region]\nhalf_extent_m = 100.0\n\n\
          [targets]\ncount = 4\n\n[uavs]\ncount = {uavs}\n\n[camera]\nrows = 120\ncols = 160\n"
     )
-}
-
-/// `fleet run` of the test's scenario into `out`, with the test's run id.
-fn fleet_run(t: &TestRun, scenario: &Path, out: &Path, extra: &[&str]) -> Command {
-    let mut cmd = Command::new(binary("fleet"));
-    cmd.args(["run", "--run-id", t.run.as_str(), "--scenario"])
-        .arg(scenario)
-        .arg("--out")
-        .arg(out)
-        .args(extra);
-    cmd
 }
 
 /// Runs to the end (bounded) and checks that nothing of the run is left.

@@ -4,14 +4,13 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use foxglove::Decode;
 use foxglove::messages::{Grid, SceneUpdate};
 use futures_util::{SinkExt, StreamExt};
 use serde_json::{Value, json};
-use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary};
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, fleet_run};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
@@ -51,16 +50,6 @@ fn scenario(duration_s: f64) -> String {
         "seed = 3\nduration_s = {duration_s}\n\n[region]\nhalf_extent_m = 100.0\n\n\
          [targets]\ncount = 4\n\n[uavs]\ncount = 2\n\n[camera]\nrows = 120\ncols = 160\n"
     )
-}
-
-fn fleet_run(t: &TestRun, scenario: &Path, out: &Path, extra: &[&str]) -> Command {
-    let mut cmd = Command::new(binary("fleet"));
-    cmd.args(["run", "--strict", "--run-id", t.run.as_str(), "--scenario"])
-        .arg(scenario)
-        .arg("--out")
-        .arg(out)
-        .args(extra);
-    cmd
 }
 
 /// One message of a recording.
@@ -121,6 +110,7 @@ fn a_recording_holds_every_topic_at_every_step_and_shows_the_guarantee() {
         &file,
         &out_dir,
         &[
+            "--strict",
             "--record",
             recording.to_str().expect("utf-8"),
             "--show-uav",
@@ -238,7 +228,15 @@ fn a_live_view_advertises_the_topics_and_streams_the_steps() {
         &t,
         &file,
         &t.dir.join("out"),
-        &["--live", &address, "--mode", "realtime", "--speedup", "2"],
+        &[
+            "--strict",
+            "--live",
+            &address,
+            "--mode",
+            "realtime",
+            "--speedup",
+            "2",
+        ],
     ));
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()

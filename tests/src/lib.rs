@@ -302,6 +302,17 @@ pub fn wait_until(what: &str, timeout: Duration, mut done: impl FnMut() -> bool)
     }
 }
 
+/// `fleet run` of `scenario` into `out` with `t`'s run id, and `extra` arguments.
+pub fn fleet_run(t: &TestRun, scenario: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut cmd = Command::new(binary("fleet"));
+    cmd.args(["run", "--run-id", t.run.as_str(), "--scenario"])
+        .arg(scenario)
+        .arg("--out")
+        .arg(out)
+        .args(extra);
+    cmd
+}
+
 /// The command of one of `t`'s run's processes (`world-server`, `uav-agent`): the binary
 /// `name` with the run's id and `scenario`; the caller adds the rest.
 pub fn run_process(name: &str, t: &TestRun, scenario: &Path) -> Command {
