@@ -124,19 +124,21 @@ impl fmt::Display for LiveAddress {
 #[derive(Debug, thiserror::Error)]
 pub enum ViewerError {
     /// The recording could not be created or completed.
-    #[error("cannot write the recording {path}: {source}")]
+    #[error("cannot write the recording {path}")]
     Record {
         /// The file.
         path: PathBuf,
         /// Why.
+        #[source]
         source: foxglove::FoxgloveError,
     },
     /// The live server could not start.
-    #[error("cannot serve the live view on {address}: {source}")]
+    #[error("cannot serve the live view on {address}")]
     Live {
         /// Where it was to listen.
         address: LiveAddress,
         /// Why.
+        #[source]
         source: foxglove::FoxgloveError,
     },
     /// The city could not be rebuilt from the scenario.
