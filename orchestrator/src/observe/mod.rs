@@ -345,22 +345,21 @@ fn observe(
     let uavs = config.scenario.uavs.count;
     let node = RunNode::new(&config.run, RunNode::OBSERVER, SignalHandlingMode::Disabled)
         .context("cannot create the observer's iceoryx2 node")?;
-    let viewer = Viewer::start(&config.view, &config.scenario)?;
-    let animation = match world_server::World::new(&config.scenario) {
-        Ok(world) => Animation::new(&config.scenario, &world.scene().buildings)
-            .map_err(|e| tracing::warn!(error = %e, "no run.gif"))
-            .ok(),
-        Err(e) => {
-            tracing::warn!(error = %e, "no run.gif: cannot rebuild the city");
-            None
-        }
-    };
+    // The city, for the viewer and the animation (the same the world builds).
+    let world = world_server::World::new(&config.scenario)
+        .context("cannot rebuild the city for run.gif and the viewer")?;
+    let buildings = &world.scene().buildings;
+    let viewer = Viewer::start(&config.view, &config.scenario, buildings)?;
     let started = ObserverStarted {
         live_url: viewer.as_ref().and_then(Viewer::live_url),
     };
     // The spawner waits for this; it is gone only if the spawner is.
     let _ = ready.send(started);
-    let camera = viewer.as_ref().map(Viewer::camera_uav);
+    let animation = Animation::new(&config.scenario, buildings)
+        .map_err(|e| tracing::warn!(error = %e, "no run.gif"))
+        .ok();
+    drop(world);
+    let camera = config.view.is_on().then_some(config.view.uav);
     let ports = Ports::open(&node, uavs, camera).context("cannot open the observer's ports")?;
     let waitset = node.waitset()?;
     let _guard = waitset
@@ -834,22 +833,7 @@ impl Observer<'_> {
                 .insert(*uav, (k, fused.undetected.clone()));
             agents.insert(*uav, SetMetrics::measure(fused, truth.targets(), &grid));
         }
-        // The lowest id comes first: its sets are the ones drawn; the shown UAV's are shown
-        // (the lowest id's when its estimate did not arrive).
-        if let Some((uav, fused)) = all_fused.first() {
-            self.report.final_state = Some(FinalState {
-                step: k,
-                time_s: truth.time_s,
-                uav: *uav,
-                sets: fused.clone(),
-                targets: truth.targets().to_vec(),
-            });
-        }
-        let shown = all_fused
-            .iter()
-            .find(|(uav, _)| *uav == self.config.view.uav)
-            .or(all_fused.first())
-            .map(|(uav, fused)| (*uav, fused));
+
         let spread = AgentSpread::over(agents.values());
         let estimate_count = estimates.len() as u32;
         let identified_any = identified_ids(&estimates).len() as u32;
@@ -884,7 +868,23 @@ impl Observer<'_> {
             agents,
             violations: violation_count,
         };
+        // The shown UAV's sets are shown (the lowest id's when its estimate did not arrive);
+        // the lowest id comes first, and its sets are the ones drawn in `sets.png`.
+        let shown = all_fused
+            .iter()
+            .find(|(uav, _)| *uav == self.config.view.uav)
+            .or(all_fused.first())
+            .map(|(uav, fused)| (*uav, fused));
         self.show(truth, shown, &step);
+        if let Some((uav, sets)) = all_fused.into_iter().next() {
+            self.report.final_state = Some(FinalState {
+                step: k,
+                time_s: truth.time_s,
+                uav,
+                sets,
+                targets: truth.targets().to_vec(),
+            });
+        }
         step
     }
 

@@ -57,18 +57,9 @@ fn set_grid(
     let columns = (area.x1 - area.x0 + 1).div_ceil(factor);
     let rows = (area.y1 - area.y0 + 1).div_ceil(factor);
     let mut data = vec![0u8; columns as usize * rows as usize];
-    for iy in area.y0..=area.y1 {
-        let out_row = ((iy - area.y0) / factor) as usize * columns as usize;
-        for (w, &word) in set.row(iy).iter().enumerate() {
-            let mut bits = word;
-            while bits != 0 {
-                let ix = w as u32 * 64 + bits.trailing_zeros();
-                bits &= bits - 1;
-                if ix >= area.x0 && ix <= area.x1 {
-                    data[out_row + ((ix - area.x0) / factor) as usize] = 1;
-                }
-            }
-        }
+    for (ix, iy) in set.iter().filter(|&cell| area.contains(cell)) {
+        let (c, r) = ((ix - area.x0) / factor, (iy - area.y0) / factor);
+        data[r as usize * columns as usize + c as usize] = 1;
     }
     let cell = grid.cell_m * f64::from(factor);
     let corner = [

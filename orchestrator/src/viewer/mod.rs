@@ -49,6 +49,7 @@ use protocol::grid::GroundGrid;
 use protocol::scenario::Scenario;
 use protocol::wire::{PlannedView, TruthState};
 use uav_agent::occupancy::OccupancyMap;
+use world_server::scene::Building;
 
 use crate::observe::StepMetrics;
 use crate::observe::metrics::{FusedSets, SetMetrics};
@@ -141,9 +142,6 @@ pub enum ViewerError {
         #[source]
         source: foxglove::FoxgloveError,
     },
-    /// The city could not be rebuilt from the scenario.
-    #[error("cannot rebuild the city for the viewer: {0}")]
-    City(#[from] world_server::WorldBuildError),
 }
 
 /// One measured step, as the observer hands it over.
@@ -172,7 +170,6 @@ pub struct Viewer {
     camera: CameraModel,
     car_size_m: [f64; 3],
     grid: GroundGrid,
-    uav: u32,
     /// When the slow topics and the images were last logged, simulated seconds.
     last_city_s: Option<f64>,
     last_oem_s: Option<f64>,
@@ -182,14 +179,17 @@ pub struct Viewer {
 }
 
 impl Viewer {
-    /// Opens the recording and starts the live server that `config` asks for; `None` when it
-    /// asks for neither. Call it outside any tokio runtime: the live server runs on the
-    /// Foxglove SDK's own.
-    pub fn start(config: &ViewConfig, scenario: &Scenario) -> Result<Option<Viewer>, ViewerError> {
+    /// Opens the recording and starts the live server that `config` asks for, for a run of
+    /// `scenario` in a city of `buildings`; `None` when it asks for neither. Call it outside
+    /// any tokio runtime: the live server runs on the Foxglove SDK's own.
+    pub fn start(
+        config: &ViewConfig,
+        scenario: &Scenario,
+        buildings: &[Building],
+    ) -> Result<Option<Viewer>, ViewerError> {
         if !config.is_on() {
             return Ok(None);
         }
-        let world = world_server::World::new(scenario)?;
         let ctx = Context::new();
         let mcap = match &config.record {
             Some(path) => {
@@ -227,11 +227,10 @@ impl Viewer {
             channels: Channels::new(&ctx),
             mcap,
             server,
-            buildings: scene::city(&world.scene().buildings, Timestamp::new(0, 0)),
+            buildings: scene::city(buildings, Timestamp::new(0, 0)),
             camera: scenario.camera_model(),
             car_size_m: scenario.targets.size_m,
             grid: scenario.grid(),
-            uav: config.uav,
             last_city_s: None,
             last_oem_s: None,
             last_image_s: None,
@@ -243,11 +242,6 @@ impl Viewer {
     pub fn live_url(&self) -> Option<String> {
         let (server, host) = self.server.as_ref()?;
         Some(format!("ws://{host}:{}", server.port()))
-    }
-
-    /// The UAV whose camera is shown.
-    pub fn camera_uav(&self) -> u32 {
-        self.uav
     }
 
     /// Logs one measured step.

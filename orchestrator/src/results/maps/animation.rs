@@ -175,36 +175,30 @@ impl Animation {
     }
 
     fn paint_ground(&self, map: &mut [u8], sets: Option<&FusedSets>) {
-        let mut bits: Vec<u8> = self
-            .buildings
-            .iter()
-            .map(|&b| if b { BUILDING_BIT } else { 0 })
-            .collect();
+        for (pixel, &building) in map.iter_mut().zip(&self.buildings) {
+            *pixel = if building { BUILDING_BIT } else { 0 };
+        }
         let Some(sets) = sets else {
-            map.copy_from_slice(&bits);
             return;
         };
-        self.mark(&mut bits, &sets.explored, EXPLORED_BIT);
-        self.mark(&mut bits, &sets.obstacle_free, FREE_BIT);
-        self.mark(&mut bits, &sets.undetected, UNDETECTED_BIT);
-        self.mark(&mut bits, &sets.unseen, UNSEEN_BIT);
-        map.copy_from_slice(&bits);
+        for (set, bit) in [
+            (&*sets.explored, EXPLORED_BIT),
+            (&*sets.obstacle_free, FREE_BIT),
+            (&*sets.undetected, UNDETECTED_BIT),
+            (&sets.unseen, UNSEEN_BIT),
+        ] {
+            self.mark(map, set, |pixel| *pixel |= bit);
+        }
         for (&id, set) in &sets.targets {
-            let mut own = vec![0u8; map.len()];
-            self.mark(&mut own, set, 1);
             let ink = TARGETS + (id % 8) as u8;
-            for (m, o) in map.iter_mut().zip(&own) {
-                if *o != 0 {
-                    *m = ink;
-                }
-            }
+            self.mark(map, set, |pixel| *pixel = ink);
         }
     }
 
-    /// ORs `bit` into every pixel that touches a cell of `set`: per pixel row, the grid
+    /// Paints every pixel that touches a cell of `set` with `paint`: per pixel row, the grid
     /// rows it touches are ORed into one row, and each pixel column looks for a set bit among
     /// the grid columns it touches.
-    fn mark(&self, pixels: &mut [u8], set: &CellSet, bit: u8) {
+    fn mark(&self, pixels: &mut [u8], set: &CellSet, paint: impl Fn(&mut u8)) {
         let Some((y0, y1)) = set.row_range() else {
             return;
         };
@@ -228,7 +222,7 @@ impl Animation {
                 if let Some((c0, c1)) = *columns
                     && any_bit(&merged, c0, c1)
                 {
-                    *pixel |= bit;
+                    paint(pixel);
                 }
             }
         }
