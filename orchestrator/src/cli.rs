@@ -24,7 +24,8 @@ pub enum FleetCommand {
     Host(crate::host_cmd::HostArgs),
     /// Make a fleet authority and a TLS certificate for each host.
     Certs(crate::host_cmd::CertsArgs),
-    /// Run every variant on seeds 1..=N and write the paper's Table I layout.
+    /// Run every variant on the seeds given and write the paper's Table I layout, with the
+    /// variants' paired differences.
     Sweep(crate::sweep::SweepArgs),
     /// Render one UAV's camera frame at a given time as pictures.
     Render(crate::render_cmd::RenderArgs),

@@ -8,10 +8,10 @@
 //!
 //! | variant | what it is |
 //! |---|---|
-//! | `paper` | the paper's MPC as written: the map and previously occluded ground (`kappa = 1`); the built-in defaults, so `fleet run` with no variant is the paper's scenario |
+//! | `paper` | the paper's MPC as written: the map and previously occluded ground (`kappa = 1`); the built-in defaults, so `fleet run` with no variant is the paper's scenario. Where the paper's text can be read two ways, the literal reading: `Φ_h` measured at the estimator's resolution, the window of eq. (28) in frames, the predicted views at the end of each period (eqs. 29-30), plans kept inside the world's geofence |
 //! | `kappa0` | the paper's MPC, previously occluded ground not rewarded (`kappa = 0`) |
 //! | `nomap` | the paper's MPC without the map (the paper's reference \[3\], `kappa = 0`) |
-//! | `setfleet` | the project's planner (`guidance.planner = "setfleet"`, `uav_agent::guidance::setfleet`): a decision every 1 s, a beam search 6 s ahead, sets valued with their future growth, targets weighted, UAVs spread |
+//! | `setfleet` | the project's planner (`guidance.planner = "setfleet"`, `uav_agent::guidance::setfleet`): a decision every 1 s, a beam search 6 s ahead, sets valued with their future growth, targets weighted, UAVs spread; it keeps the readings it was tuned with (recently hidden ground over whole guidance periods, plans inside the RoI; `predicted_views` and `hidden_resolution` are the paper's MPC's only) |
 
 use clap::ValueEnum;
 use serde::Serialize;
@@ -60,16 +60,28 @@ impl Variant {
                 "guidance.planner=paper",
                 "guidance.kappa=1",
                 "guidance.use_map=true",
+                "guidance.hidden_resolution=estimator",
+                "guidance.hidden_window=frames",
+                "guidance.predicted_views=period_end",
+                "guidance.border=geofence",
             ],
             Variant::Kappa0 => &[
                 "guidance.planner=paper",
                 "guidance.kappa=0",
                 "guidance.use_map=true",
+                "guidance.hidden_resolution=estimator",
+                "guidance.hidden_window=frames",
+                "guidance.predicted_views=period_end",
+                "guidance.border=geofence",
             ],
             Variant::Nomap => &[
                 "guidance.planner=paper",
                 "guidance.kappa=0",
                 "guidance.use_map=false",
+                "guidance.hidden_resolution=estimator",
+                "guidance.hidden_window=frames",
+                "guidance.predicted_views=period_end",
+                "guidance.border=geofence",
             ],
             Variant::Setfleet => &[
                 "guidance.planner=setfleet",
@@ -82,6 +94,8 @@ impl Variant {
                 "guidance.target_weight=1",
                 "guidance.growth_horizon_s=10",
                 "guidance.spread_m=60",
+                "guidance.hidden_window=periods",
+                "guidance.border=region",
             ],
         }
     }

@@ -171,6 +171,10 @@ pub struct RegionConfig {
     pub building_fraction: f64,
     /// Range of building heights `[lo, hi]`.
     pub building_height_m: [f64; 2],
+    /// Side the city's building lots aim for, metres (`4 <= value <= 200`): each block of
+    /// the road grid is cut into lots of about this side, at most one building per lot, each
+    /// building 45 % to 100 % of its lot's sides. The paper shows its city, not its lots.
+    pub lot_size_m: f64,
 }
 
 /// `[targets]`.
@@ -303,6 +307,94 @@ pub struct GuidanceConfig {
     /// `setfleet`: distance between view centres below which this UAV's plan is charged for
     /// overlapping the plans already in the token, metres (0: no charge).
     pub spread_m: f64,
+    /// The paper's MPC: how `Φ_h` measures the predicted sets inside recently hidden ground:
+    /// `"estimator"` (the default) or `"planning"` ([`HiddenResolution`]).
+    pub hidden_resolution: HiddenResolution,
+    /// What "the last `h` time steps" of the paper's eq. (28) counts, for every planner's
+    /// recently hidden ground: `"frames"` (the default) or `"periods"` ([`HiddenWindow`]).
+    pub hidden_window: HiddenWindow,
+    /// The paper's MPC: which predicted poses' fields of view it removes from the predicted
+    /// sets: `"period_end"` (the default) or `"every_frame"` ([`PredictedViews`]).
+    pub predicted_views: PredictedViews,
+    /// The square every planner keeps its plans in: `"geofence"` (the default) or
+    /// `"region"` ([`PlanBorder`]).
+    pub border: PlanBorder,
+}
+
+/// How the MPC's `Φ_h` measures the predicted sets inside recently hidden ground
+/// (`guidance.hidden_resolution`). The MPC predicts its sets on a coarse planning grid
+/// (`uav_agent::guidance::coarse`); the choices differ in what a coarse cell counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HiddenResolution {
+    /// A predicted coarse cell counts the area of its estimator cells that lie both in the
+    /// sets and in the hidden ground now: the overlap is measured at the estimator's
+    /// resolution, and a coarse cell can never count an overlap its fine cells do not have.
+    #[default]
+    Estimator,
+    /// A predicted coarse cell counts whole when any of its estimator cells is hidden (the
+    /// any-cell coarsening of both sets, which can count a set cell and a hidden cell that
+    /// only share a coarse cell).
+    Planning,
+}
+
+impl HiddenResolution {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["estimator", "planning"];
+}
+
+/// What "the `H^CVS` obtained during the last `h` time steps" (the paper's eq. 28) counts
+/// (`guidance.hidden_window`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HiddenWindow {
+    /// The last `h` CVS frames (the paper's time index `k` is the CVS step).
+    #[default]
+    Frames,
+    /// Every frame of the last `h` guidance periods, the current one included.
+    Periods,
+}
+
+impl HiddenWindow {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["frames", "periods"];
+}
+
+/// Which predicted fields of view the MPC removes from its predicted sets
+/// (`guidance.predicted_views`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PredictedViews {
+    /// `F^P_{k+τ}` only, the pose at the end of each of the `h` guidance periods (the
+    /// paper's eqs. 29-30).
+    #[default]
+    PeriodEnd,
+    /// The pose of every CVS frame of each period (the camera sees at every frame).
+    EveryFrame,
+}
+
+impl PredictedViews {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["period_end", "every_frame"];
+}
+
+/// The square the MPC keeps its plans in (`guidance.border`): sequences whose predicted
+/// positions leave it are excluded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlanBorder {
+    /// The world's geofence ([`Scenario::geofence_half_extent`]), inside which the world
+    /// never overrides a command: a plan the MPC keeps is a plan the UAV flies.
+    #[default]
+    Geofence,
+    /// The RoI: plans between the geofence and the RoI's edge are overridden by the world's
+    /// turn back to the centre.
+    Region,
+}
+
+impl PlanBorder {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["geofence", "region"];
 }
 
 /// The guidance planner (`guidance.planner`).
@@ -368,6 +460,7 @@ impl Default for RegionConfig {
             half_extent_m: 250.0,
             building_fraction: 0.05,
             building_height_m: [10.0, 60.0],
+            lot_size_m: 21.0,
         }
     }
 }
@@ -447,6 +540,10 @@ impl Default for GuidanceConfig {
             target_weight: 4.0,
             growth_horizon_s: 10.0,
             spread_m: 60.0,
+            hidden_resolution: HiddenResolution::Estimator,
+            hidden_window: HiddenWindow::Frames,
+            predicted_views: PredictedViews::PeriodEnd,
+            border: PlanBorder::Geofence,
         }
     }
 }
@@ -485,6 +582,23 @@ impl Scenario {
     /// Number of steps of the run: `duration_s / cvs_period_s`, rounded.
     pub fn steps(&self) -> u64 {
         (self.duration_s / self.timing.cvs_period_s).round() as u64
+    }
+
+    /// Half side of the world's geofence square `[-f, f]^2`: the RoI shrunk by two turn
+    /// radii, a step's travel and a metre, but never below half the RoI. The world turns a UAV
+    /// back toward the centre when its command would take it out of the fence within a step,
+    /// and a UAV turning back at its largest rate from the fence never leaves the RoI; the
+    /// MPC keeps its plans inside the same square (`guidance.border = "geofence"`).
+    pub fn geofence_half_extent(&self) -> f64 {
+        let h = self.region.half_extent_m;
+        let v = self.uavs.speed_mps;
+        let w = self.uavs.max_yaw_rate_rps;
+        let buffer = if w > 0.0 {
+            2.0 * v / w + v * self.timing.cvs_period_s + 1.0
+        } else {
+            f64::INFINITY
+        };
+        (h - buffer).max(0.5 * h)
     }
 
     /// CVS periods per guidance period.

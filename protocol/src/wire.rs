@@ -11,8 +11,9 @@ use serde::{Deserialize, Serialize};
 use crate::camera::CameraPose;
 use crate::raster::delta::SetCode;
 
-/// Version of every message layout in this module and in [`crate::frame`].
-pub const PROTOCOL_VERSION: u32 = 5;
+/// Version of every message layout in this module and in [`crate::frame`]. 6: estimates carry
+/// the sender's `P^g` ([`EstimateMsg::free_ground`]).
+pub const PROTOCOL_VERSION: u32 = 6;
 /// Targets a truth message can hold.
 pub const TRUTH_MAX_TARGETS: usize = 64;
 /// UAVs a truth message can hold, and the largest fleet.
@@ -94,7 +95,7 @@ pub struct TargetTruth {
 /// Ground truth of one UAV.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("setfleet.UavTruth.v1")]
+#[type_name("setfleet.UavTruth.v2")]
 pub struct UavTruth {
     /// UAV index.
     pub id: u32,
@@ -104,14 +105,24 @@ pub struct UavTruth {
     pub position: [f64; 3],
     /// Yaw, radians.
     pub yaw: f64,
-    /// Current yaw reference, radians.
+    /// The yaw reference followed in the step that led here, radians: the commanded one, or
+    /// the world's turn back to the centre when its geofence overrode the command.
     pub yaw_ref: f64,
+    /// The yaw reference last commanded by the agent, radians (wrapped into `(-pi, pi]`).
+    pub commanded_yaw_ref: f64,
+}
+
+impl UavTruth {
+    /// Whether the world's geofence overrode the agent's command in the step that led here.
+    pub fn geofence_override(&self) -> bool {
+        self.yaw_ref != self.commanded_yaw_ref
+    }
 }
 
 /// World -> observers: the true state at a step (agents never subscribe).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
-#[type_name("setfleet.TruthState.v1")]
+#[type_name("setfleet.TruthState.v2")]
 pub struct TruthState {
     /// [`crate::service::RunId::tag`] of the run.
     pub run_tag: u64,
@@ -372,7 +383,11 @@ pub struct EstimateMsg {
     pub explored: SetCode,
     /// Ground hidden in this frame, `H^CVS`.
     pub hidden: SetCode,
-    /// `H̄`: ground hidden at some earlier frame and not proven free since (for the OA metric).
+    /// Ground this frame proved free, `P^g`: receivers remove it from their `H̄`, which is the
+    /// fleet's (ground hidden from any UAV and seen by none since).
+    pub free_ground: SetCode,
+    /// `H̄`: ground hidden at some earlier frame and not proven free since, as the sender held
+    /// it before fusing the step's estimates (for the OA metric).
     pub unseen: SetCode,
     /// The sender's counters, so observers see them even if the agent is killed.
     pub stats: AgentStats,

@@ -182,7 +182,7 @@ fn a_corrupt_or_foreign_checkpoint_is_refused_and_the_agent_starts_fresh() {
     let file = t.write("scenario.toml", &scenario(2.0, 1));
     let dir = t.dir.join("checkpoints");
     std::fs::create_dir_all(&dir).expect("checkpoint dir");
-    std::fs::write(dir.join("agent-0.ckpt"), b"SFCKPT01 and then garbage").expect("write");
+    std::fs::write(dir.join("agent-0.ckpt"), b"SFCKPT02 and then garbage").expect("write");
     let dir_arg = dir.to_str().expect("utf-8 path");
     let world = process("world-server", &t, &file, &["--agents", "0"]);
     let agent = process(

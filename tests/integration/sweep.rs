@@ -14,10 +14,11 @@ const SCENARIO: &str = "seed = 3\nduration_s = 10.0\n\n[region]\nhalf_extent_m =
                         [targets]\ncount = 4\n\n[uavs]\ncount = 2\n\n[camera]\nrows = 120\n\
                         cols = 160\n";
 
-/// Two variants (their planners differ) on two seeds, 4 s each.
+/// Two variants (their planners differ) on seeds 1 and 2 (as a range, which `--seeds 2`
+/// means too), 4 s each.
 const SWEEP: [&str; 6] = [
     "--seeds",
-    "2",
+    "1..=2",
     "--variants",
     "paper,setfleet",
     "--duration",
@@ -127,6 +128,7 @@ fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
         serde_json::json!(["paper", "setfleet"])
     );
     assert_eq!(whole.0["failed_runs"], serde_json::json!([]));
+    assert_paired(&whole.0, &single);
 
     // Five shards of four runs: run i in shard i mod 5, so shard 4 has none.
     let shards: Vec<PathBuf> = (0..5).map(|k| t.dir.join(format!("shard-{k}"))).collect();
@@ -170,6 +172,37 @@ fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
         parallel.0, whole.0,
         "the --jobs 2 table differs from the sweep's"
     );
+}
+
+/// The sweep's two variants compared seed by seed: on both seeds for the summary's values,
+/// on none over the steady window (100-300 s), which 4 s runs do not reach.
+fn assert_paired(table: &Value, dir: &Path) {
+    let paired = table["paired"].as_array().expect("paired");
+    assert_eq!(paired.len(), 4 * 2, "{table}");
+    let metrics: Vec<&str> = paired.iter().filter_map(|p| p["metric"].as_str()).collect();
+    let each = ["ua", "oa", "target_set_area", "loc_error_m"];
+    assert_eq!(metrics, each.map(|m| [m, m]).concat(), "{table}");
+    for (i, p) in paired.iter().enumerate() {
+        assert_eq!([&p["a"], &p["b"]], ["paper", "setfleet"], "{p}");
+        let window = if i % 2 == 0 { "final" } else { "100-300 s" };
+        assert_eq!(p["window"], window, "{p}");
+        if window == "100-300 s" {
+            assert_eq!(p["n"], 0, "{p}");
+            assert_eq!(p["mean"], Value::Null, "{p}");
+        }
+    }
+    let ua = &paired[0];
+    assert_eq!(ua["n"], 2, "{ua}");
+    let counts = ["a_better", "b_better", "ties"].map(|k| ua[k].as_u64().expect(k));
+    assert_eq!(counts.iter().sum::<u64>(), 2, "{ua}");
+    let ci = ua["ci95"].as_array().expect("ci95");
+    let (lo, mean, hi) = (ci[0].as_f64(), ua["mean"].as_f64(), ci[1].as_f64());
+    assert!(lo <= mean && mean <= hi, "{ua}");
+    assert_eq!(table["steady_window_s"], serde_json::json!([100.0, 300.0]));
+    let md = std::fs::read_to_string(dir.join("table.md")).expect("table.md");
+    assert!(md.contains("Paired differences a − b"), "{md}");
+    assert!(md.contains("| paper − setfleet | UA (pp) |"), "{md}");
+    assert!(md.contains("(seeds 1..=2)"), "{md}");
 }
 
 #[test]
@@ -262,6 +295,7 @@ fn an_axis_sweep_compares_the_values_of_a_key() {
         md.contains("| metric | comms.loss = 0 | comms.loss = 0.5 |"),
         "{md}"
     );
+    assert_axis_paired(&axis, &md);
     for picture in ["axis.png", "metrics.png"] {
         let bytes = std::fs::read(out_dir.join(picture)).expect(picture);
         assert!(bytes.starts_with(b"\x89PNG"), "{picture}");
@@ -280,4 +314,41 @@ fn an_axis_sweep_compares_the_values_of_a_key() {
         without_wall_clock(axis)
     );
     assert!(merged.join("comms.loss=0.5/table.md").is_file());
+    // The comparison of the values has nothing of the wall clock: the merge writes it alike.
+    let merged_md = std::fs::read_to_string(merged.join("axis.md")).expect("axis.md");
+    let paired = |md: &str| md.find("\nPaired differences").map(|i| md[i..].to_owned());
+    assert!(paired(&md).is_some(), "{md}");
+    assert_eq!(paired(&merged_md), paired(&md));
+}
+
+/// The axis's second value compared with its first seed by seed, for the one variant: on both
+/// seeds for the summary's values, on none over the steady window (100-300 s), which 4 s runs
+/// do not reach.
+fn assert_axis_paired(axis: &Value, md: &str) {
+    let paired = axis["paired"].as_array().expect("paired");
+    assert_eq!(paired.len(), 4 * 2, "{axis}");
+    let metrics: Vec<&str> = paired.iter().filter_map(|p| p["metric"].as_str()).collect();
+    let each = ["ua", "oa", "target_set_area", "loc_error_m"];
+    assert_eq!(metrics, each.map(|m| [m, m]).concat(), "{axis}");
+    for (i, p) in paired.iter().enumerate() {
+        assert_eq!(
+            [&p["variant"], &p["value"], &p["reference"]],
+            ["paper", "0.5", "0"],
+            "{p}"
+        );
+        let window = if i % 2 == 0 { "final" } else { "100-300 s" };
+        assert_eq!(p["window"], window, "{p}");
+        if window == "100-300 s" {
+            assert_eq!(p["n"], 0, "{p}");
+        }
+    }
+    let ua = &paired[0];
+    assert_eq!(ua["n"], 2, "{ua}");
+    let counts = ["a_better", "b_better", "ties"].map(|k| ua[k].as_u64().expect(k));
+    assert_eq!(counts.iter().sum::<u64>(), 2, "{ua}");
+    let ci = ua["ci95"].as_array().expect("ci95");
+    let (lo, mean, hi) = (ci[0].as_f64(), ua["mean"].as_f64(), ci[1].as_f64());
+    assert!(lo <= mean && mean <= hi, "{ua}");
+    assert!(md.contains("Paired differences V − V₁"), "{md}");
+    assert!(md.contains("| paper | 0.5 − 0 | UA (pp) |"), "{md}");
 }

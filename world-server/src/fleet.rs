@@ -47,7 +47,7 @@ impl Fleet {
                 u.altitudes_m.len()
             )));
         }
-        let fence = geofence_half_extent(scenario);
+        let fence = scenario.geofence_half_extent();
         let radius = 0.9 * fence;
         let uavs = (0..n)
             .map(|i| {
@@ -131,20 +131,6 @@ impl Fleet {
     }
 }
 
-/// Half side of the geofence square: the RoI shrunk by two turn radii, a step's travel and a
-/// metre, but never below half the RoI.
-pub fn geofence_half_extent(scenario: &Scenario) -> Real {
-    let h = scenario.region.half_extent_m;
-    let v = scenario.uavs.speed_mps;
-    let w = scenario.uavs.max_yaw_rate_rps;
-    let buffer = if w > 0.0 {
-        2.0 * v / w + v * scenario.timing.cvs_period_s + 1.0
-    } else {
-        Real::INFINITY
-    };
-    (h - buffer).max(0.5 * h)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -165,6 +151,33 @@ mod tests {
                 assert!(p.x.abs() < 250.0 && p.y.abs() < 250.0, "{p:?}");
             }
         }
+    }
+
+    /// A command that keeps a UAV inside the geofence (the square the MPC plans in by
+    /// default) is flown as given; one that would cross it is overridden, and the override is
+    /// what the truth reports ([`protocol::wire::UavTruth::geofence_override`]).
+    #[test]
+    fn only_commands_crossing_the_geofence_are_overridden() {
+        let s = Scenario::default();
+        let fence = s.geofence_half_extent();
+        let mut f = Fleet::launch(&s, 60.0).unwrap();
+        let at = |x: Real| UavState {
+            position: Point3::new(x, 0.0, 80.0),
+            yaw: 0.0,
+        };
+        // Heading east, 10 m inside the fence: a 5 m step stays inside.
+        f.teleport(0, at(fence - 10.0));
+        f.command(0, 0.0);
+        f.step(0.5);
+        let u = f.uavs()[0];
+        assert_eq!(u.yaw_ref, u.commanded_yaw_ref);
+        assert!(u.state.position.x <= fence);
+        // 2 m inside: the step would cross the fence, and the world turns it back instead.
+        f.teleport(0, at(fence - 2.0));
+        f.command(0, 0.0);
+        f.step(0.5);
+        let u = f.uavs()[0];
+        assert_ne!(u.yaw_ref, u.commanded_yaw_ref);
     }
 
     #[test]

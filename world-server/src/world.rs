@@ -151,6 +151,7 @@ impl World {
                 position: [p.x, p.y, p.z],
                 yaw: u.state.yaw,
                 yaw_ref: u.yaw_ref,
+                commanded_yaw_ref: u.commanded_yaw_ref,
             };
         }
     }

@@ -14,11 +14,16 @@
 //! target-set area, localisation error and identified count of those sets, and
 //! [`AgentSpread::over`] their mean over agents and their worst agent.
 //!
-//! `H̄` is not part of a [`PeerEstimate`]: an agent publishes its own `H̄` (`msg.unseen`, as it
-//! stood before the step's fusion), and fusing a peer adds that peer's `H^CVS` of the step to
-//! it (`EstimatorState::fuse` calls `HiddenHistory::add_hidden`, a union; nothing is removed
-//! until the agent's own next frame proves ground free). So agent `i`'s fused `H̄` is its
-//! published `H̄` joined with the `H^CVS` of every peer it fused, which is what is computed.
+//! `H̄` is the fleet's, as in the paper: ground hidden from any UAV and proven free by none
+//! since. At its step `k` agent `i` joins the step's hidden ground (`H^CVS`) of its frame and of
+//! every estimate it fuses, then removes the ground any of them proved free (`P^g`), so a cell
+//! one UAV saw hidden and another saw free at the step is not in it, whatever the order; late
+//! estimates are older news than its own frame ([`Unseen`] states the rule and why). `H̄` is
+//! not part of a [`PeerEstimate`]'s fusion law: an agent publishes its `H̄` as it stood after
+//! its frame and before the step's fusion (`msg.unseen`), with its frame's `H^CVS` and `P^g`,
+//! and [`FusedSets`] rebuilds its fused `H̄` from them and the fused peers' `H^CVS` and `P^g`
+//! with the agent's own code ([`Unseen::after_frame`], then [`Unseen::fuse`] per peer), so the
+//! two agree bit for bit.
 //!
 //! What is not reproduced: a peer estimate that reached the agent after its bounded wait is
 //! fused by the agent later, dilated; here only the estimates of the same step are fused (in
@@ -37,7 +42,7 @@ use protocol::wire::{AgentStats, TargetTruth};
 use uav_agent::agent::radio::{LinkKind, Radio};
 use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::{self, EstimateInbox};
-use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate};
+use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate, Unseen};
 use uav_agent::occupancy::OccupancyMap;
 
 /// What the observer keeps of one agent's estimate of one step.
@@ -139,23 +144,26 @@ impl FusedSets {
         FusedSets::with_unseen(fused, own, &fused_with)
     }
 
-    /// The sets of `fused`, with `H̄` of agent `own` once it fused `peers`: its own joined
-    /// with the peers' `H^CVS`.
+    /// The sets of `fused`, with `H̄` of agent `own` once it fused `peers`: the `H̄` it
+    /// published after its frame, with its frame's and the peers' hidden and proven-free
+    /// ground folded in by the agents' rule (module docs).
     fn with_unseen(
         fused: PeerEstimate,
         own: &ObservedEstimate,
         peers: &[&ObservedEstimate],
     ) -> FusedSets {
-        let mut unseen = own.unseen.clone();
+        let e = &own.estimate;
+        let mut unseen = Unseen::after_frame(e.step, own.unseen.clone(), &e.hidden, &e.free_ground);
         for peer in peers {
-            unseen.or_assign(&peer.estimate.hidden);
+            let p = &peer.estimate;
+            unseen.fuse(p.step, &p.hidden, &p.free_ground);
         }
         FusedSets {
             undetected: fused.undetected,
             targets: fused.targets,
             obstacle_free: fused.obstacle_free,
             explored: fused.explored,
-            unseen,
+            unseen: unseen.into_cells(),
         }
     }
 
@@ -501,6 +509,7 @@ pub(crate) mod tests {
                 obstacle_free: CellSet::empty(grid).into(),
                 explored: CellSet::empty(grid).into(),
                 hidden: CellSet::empty(grid).into(),
+                free_ground: CellSet::empty(grid).into(),
                 oem: OccupancyMap::new(*grid),
                 oem_full: false,
             },
@@ -578,8 +587,9 @@ pub(crate) mod tests {
                 e.estimate.obstacle_free = scattered(seed + 5, 0.1).into();
                 e.estimate.explored = scattered(seed + 6, 0.3).into();
                 e.estimate.hidden = scattered(seed + 7, 0.2).into();
+                e.estimate.free_ground = scattered(seed + 9, 0.2).into();
                 e.unseen = scattered(seed + 8, 0.3);
-                e.unseen.or_assign(&e.estimate.hidden);
+                as_published(&mut e);
                 e
             })
             .collect();
@@ -635,7 +645,9 @@ pub(crate) mod tests {
                 e.estimate.undetected = scattered(seed + 1, 0.8).into();
                 e.estimate.explored = scattered(seed + 2, 0.3).into();
                 e.estimate.hidden = scattered(seed + 3, 0.1).into();
+                e.estimate.free_ground = scattered(seed + 7, 0.2).into();
                 e.unseen = scattered(seed + 4, 0.2);
+                as_published(&mut e);
                 let mut targets = vec![(1, scattered(seed + 5, 0.9))];
                 if uav % 2 == 0 {
                     targets.push((2, scattered(seed + 6, 0.9)));
@@ -756,7 +768,9 @@ pub(crate) mod tests {
                 e.estimate.undetected = scattered(seed + 1, 0.8).into();
                 e.estimate.explored = scattered(seed + 2, 0.3).into();
                 e.estimate.hidden = scattered(seed + 3, 0.1).into();
+                e.estimate.free_ground = scattered(seed + 6, 0.2).into();
                 e.unseen = scattered(seed + 4, 0.2);
+                as_published(&mut e);
                 e.estimate.targets = [(1, scattered(seed + 5, 0.9).into())].into();
                 e
             })
@@ -777,10 +791,25 @@ pub(crate) mod tests {
         state.obstacle_free = (*e.obstacle_free).clone();
         state.explored = (*e.explored).clone();
         state.hidden = (*e.hidden).clone();
+        state.free_ground = (*e.free_ground).clone();
+        // The H̄ it held before its frame of the step (what it published, less the frame's
+        // hidden ground, would do as well), then the frame.
+        let none = CellSet::empty(&cfg.grid);
+        let history = &mut state.hidden_history;
+        history.record(e.step.saturating_sub(1), &own.unseen, &none);
+        history.record(e.step, &e.hidden, &e.free_ground);
+        assert_eq!(history.unseen(), &own.unseen, "a consistent fixture");
         state
-            .hidden_history
-            .record(e.step, &own.unseen, &CellSet::empty(&cfg.grid));
-        state
+    }
+
+    /// Makes `e`'s published `H̄` what an agent publishes after its frame: holding the frame's
+    /// hidden ground and none of the ground it proved free (which it did not see hidden).
+    fn as_published(e: &mut ObservedEstimate) {
+        let mut hidden = (*e.estimate.hidden).clone();
+        hidden.and_not_assign(&e.estimate.free_ground);
+        e.unseen.or_assign(&hidden);
+        e.unseen.and_not_assign(&e.estimate.free_ground);
+        e.estimate.hidden = hidden.into();
     }
 
     #[test]
@@ -861,6 +890,98 @@ pub(crate) mod tests {
                 .iter()
                 .all(|own| fused_peers(own, &early, &radio).count() == 0)
         );
+    }
+
+    #[test]
+    fn unseen_is_ground_hidden_from_the_fleet_and_seen_by_no_fused_uav_since() {
+        let cfg = config();
+        let g = grid();
+        // Step 3: A's frame hid c, B's proved c and d free, C's held d in its H̄ and saw
+        // neither. A and C are 10 m apart, B 200 m away from both.
+        let (c, d) = ((2, 2), (7, 7));
+        let uav = |id: u32, x: f64, hidden: &[CellIndex], free: &[CellIndex], unseen| {
+            let mut e = blank(&g, id, 3);
+            e.estimate.pose = at(x);
+            e.estimate.hidden = set(hidden).into();
+            e.estimate.free_ground = set(free).into();
+            e.unseen = unseen;
+            as_published(&mut e);
+            e
+        };
+        let a = uav(0, 0.0, &[c], &[], CellSet::empty(&g));
+        let b = uav(1, 200.0, &[], &[c, d], CellSet::empty(&g));
+        let own = uav(2, 10.0, &[], &[], set(&[d]));
+        let all = [a.clone(), b.clone(), own.clone()];
+        // C fuses A's and B's estimates of the step, in either order: c and d were seen.
+        for order in [[&a, &b], [&b, &a]] {
+            let fused = FusedSets::fuse(&own, order, &cfg);
+            assert!(fused.unseen.is_empty(), "{:?}", fused.unseen);
+        }
+        // Which is what every agent holds, with every link up, and what its estimator holds.
+        let radio = Radio::perfect();
+        let shared = FusedSets::of_agents(&all, &all, &cfg, &radio);
+        for (e, fused) in all.iter().zip(&shared) {
+            assert!(fused.unseen.is_empty(), "agent {}", e.uav());
+        }
+        // With links of 100 m, C hears A only: c is unseen, and d is still.
+        let near = Radio::perfect().with_range(100.0);
+        let shared = FusedSets::of_agents(&all, &all, &cfg, &near);
+        assert_eq!(shared[0].unseen, set(&[c]), "A hears C, which saw no c");
+        assert_eq!(shared[1].unseen, CellSet::empty(&g), "B hears nobody");
+        assert_eq!(shared[2].unseen, set(&[c, d]));
+        for (e, fused) in all.iter().zip(&shared) {
+            let mut state = state_of(e, &cfg);
+            for peer in fused_peers(e, &all, &near) {
+                state.fuse(&peer.estimate, &cfg);
+            }
+            assert_eq!(&fused.unseen, state.hidden_history.unseen(), "{}", e.uav());
+        }
+    }
+
+    /// The agents' own code over rendered frames (the in-process fleet of `fleet bench`): at
+    /// every step, what the observer rebuilds from the estimates each agent published is what
+    /// its estimator holds once it fused its peers' (every one, as with perfect links).
+    #[test]
+    fn the_observer_rebuilds_each_estimators_fused_sets_over_a_rendered_run() {
+        use crate::bench::estimator::FleetSim;
+
+        let scenario = Scenario::load(
+            None,
+            &[
+                "region.half_extent_m=60".into(),
+                "targets.count=3".into(),
+                "uavs.count=3".into(),
+            ],
+        )
+        .expect("scenario");
+        let cfg = EstimatorConfig::from_scenario(&scenario);
+        let mut sim = FleetSim::new(&scenario).expect("fleet");
+        // Cells that a peer's frame of the step proved free, which the old rule (the agent's
+        // published H̄ joined with its peers' hidden ground) kept.
+        let mut cleared_by_peers = 0;
+        for _ in 0..16 {
+            sim.step().expect("step");
+            let observed: Vec<ObservedEstimate> = sim
+                .last_messages()
+                .iter()
+                .map(|bytes| ObservedEstimate::decode(bytes, &cfg).expect("decode").0)
+                .collect();
+            let fused = FusedSets::of_agents(&observed, &observed, &cfg, &Radio::perfect());
+            for ((own, sets), estimator) in observed.iter().zip(&fused).zip(sim.estimators()) {
+                let state = estimator.state();
+                let at = (own.uav(), own.step());
+                assert_eq!(&sets.unseen, state.hidden_history.unseen(), "H̄ of {at:?}");
+                assert_eq!(&*sets.undetected, state.undetected.cells(), "X̄ of {at:?}");
+                assert_eq!(*sets.explored, state.explored, "explored of {at:?}");
+                let mut old_rule = own.unseen.clone();
+                for peer in observed.iter().filter(|p| p.uav() != own.uav()) {
+                    old_rule.or_assign(&peer.estimate.hidden);
+                }
+                assert!(sets.unseen.is_subset_of(&old_rule));
+                cleared_by_peers += old_rule.difference_count(&sets.unseen);
+            }
+        }
+        assert!(cleared_by_peers > 0, "the run exercises the fleet's rule");
     }
 
     #[test]

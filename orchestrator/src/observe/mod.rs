@@ -201,6 +201,9 @@ pub struct ObserverReport {
     pub oem: OccupancyMap,
     /// Each UAV's ground track (x, y) per step.
     pub tracks: Vec<Vec<[f64; 2]>>,
+    /// Per UAV, the steps at which the world's geofence overrode its agent's command
+    /// ([`protocol::wire::UavTruth::geofence_override`]).
+    pub geofence_overrides: Vec<u64>,
     /// Wall time from the first truth to the last step's ack.
     pub stepping: Option<Duration>,
     /// Where the observer thread's time went ([`phase`]): thread CPU and wall time.
@@ -385,6 +388,7 @@ fn observe(
             final_undetected: BTreeMap::new(),
             oem: OccupancyMap::new(estimator.oem_grid),
             tracks: vec![Vec::new(); uavs as usize],
+            geofence_overrides: vec![0; uavs as usize],
             stepping: None,
             phases: PhaseTimes::new(),
             animation: None,
@@ -845,6 +849,9 @@ impl Observer<'_> {
         for u in truth.uavs() {
             if let Some(track) = self.report.tracks.get_mut(u.id as usize) {
                 track.push([u.position[0], u.position[1]]);
+            }
+            if let Some(count) = self.report.geofence_overrides.get_mut(u.id as usize) {
+                *count += u64::from(u.geofence_override());
             }
         }
         self.report.comms.count(

@@ -109,6 +109,10 @@ pub struct Summary {
     pub resync_steps_max: Option<u64>,
     /// The mean resync over the restarts and pauses that have one, steps.
     pub resync_steps_mean: Option<f64>,
+    /// UAV-steps at which the world's geofence overrode an agent's command, summed over the
+    /// UAVs (each agent's count is in `agents`): how often the planner's plans were not the
+    /// ones flown near the border (`guidance.border`).
+    pub geofence_overrides: u64,
     /// Per agent.
     pub agents: Vec<AgentSummary>,
     /// Traffic per service kind.
@@ -154,6 +158,9 @@ pub struct AgentSummary {
     pub final_measured_step: Option<u64>,
     /// Restarts injected.
     pub restarts: u64,
+    /// Steps at which the world's geofence overrode the agent's command (its turn back to
+    /// the centre flown instead of the agent's yaw reference).
+    pub geofence_overrides: u64,
     /// The set metrics of this agent's own fused sets.
     pub metrics: MetricFinals,
 }
@@ -310,7 +317,7 @@ impl Summary {
         let steps = series.len() as u64;
         let sim_s = steps as f64 * scenario.timing.cvs_period_s;
         let observer = record.observer.as_ref();
-        let agents = (0..scenario.uavs.count)
+        let agents: Vec<AgentSummary> = (0..scenario.uavs.count)
             .map(|uav| {
                 let t = observer.and_then(|o| o.agents.get(&uav));
                 let last = observer.and_then(|o| o.final_undetected.get(&uav));
@@ -328,6 +335,10 @@ impl Summary {
                     final_undetected_digest: last.map(|(_, set)| set.digest()),
                     final_measured_step: last.map(|(step, _)| *step),
                     restarts: record.faults.restarts(uav),
+                    geofence_overrides: observer
+                        .and_then(|o| o.geofence_overrides.get(uav as usize))
+                        .copied()
+                        .unwrap_or(0),
                     metrics: per_agent.get(&uav).cloned().unwrap_or_default(),
                 }
             })
@@ -397,6 +408,7 @@ impl Summary {
             hosts: record.config.layout.hosts().len() as u16,
             resync_steps_max,
             resync_steps_mean,
+            geofence_overrides: agents.iter().map(|a| a.geofence_overrides).sum(),
             agents,
             comms,
             observer: ObserverSummary {

@@ -6,13 +6,27 @@
 //! a sweep directory of its own, with its `table.json`, `table.md` and `metrics.png` (and
 //! `fleet sweep --merge` reads it like any sweep). Beside them the sweep writes:
 //!
-//! - `axis.json` and `axis.md`: per variant, one row per final metric of the sweep's table
-//!   ([`super::table`]) plus the radio's rows (the share of peer estimates and
-//!   of tokens the radio lost, measured, and the estimates' traffic), one column per value,
-//!   mean ± sample standard deviation over the seeds;
+//! - `axis.json` and `axis.md`: per variant, one row per metric of the sweep's table
+//!   ([`super::table`], its final values and its means over the steady window) plus the
+//!   radio's rows (the share of peer estimates and of tokens the radio lost, measured, and
+//!   the estimates' traffic), one column per value, mean ± sample standard deviation over the
+//!   seeds; then, per variant, every value compared with the first seed by seed (`paired` in
+//!   `axis.json`, the last table of `axis.md`; below);
 //! - `axis.png`: UA, localisation error, target-set area and the measured loss against the
 //!   value (mean with ±1 sd bars, a line per variant);
 //! - `metrics.png`: UA and OA over time per value (and variant), mean and ±1 sd over seeds.
+//!
+//! **The values compared seed by seed.** The first value listed, `V₁`, is the reference: per
+//! variant, every later value `V` is compared with it as [`super::paired`] compares two
+//! variants, on the seeds both ran, with `V` as `a` and `V₁` as `b`: the mean of `V − V₁`, its
+//! 95 % confidence interval (Student's t), the t statistic, and on how many seeds `V` was
+//! lower (`a_better`), `V₁` was (`b_better`) or they tied, on UA, OA, target-set area and
+//! localisation error, each final and over the steady window. Unless the key changes them, a
+//! seed puts the same cars on the same routes at every value, so the pairs take out that part
+//! of the spread over seeds. Each object of `paired` names its `variant`, `value` (`V` as
+//! `--axis` writes it), `reference` (`V₁`), `metric` and `window`; the objects come by
+//! variant (in column order), then value, metric, and final before window. `axis.md` has a
+//! row per variant, value and metric, formatted as `table.md`'s comparisons.
 //!
 //! A value is applied as the override `KEY=V` after the variant's and the user's `--set`
 //! overrides (so it wins over a `--set` of the same key), and checked like any override: a
@@ -30,6 +44,7 @@ use serde::Serialize;
 
 use super::Shard;
 use super::collect::{FoundRuns, assemble, write_table};
+use super::paired::{self, Comparison, Differences, Sides, Window, compare_metrics};
 use super::table::{Cell, ROWS, format_cell, seed_range};
 use crate::observe::StepMetrics;
 use crate::pictures::{FONT, palette, short_number};
@@ -187,6 +202,10 @@ pub struct AxisTable {
     pub variants: Vec<Variant>,
     /// `metrics[variant][i][row]`: the cells of value `i`.
     pub metrics: BTreeMap<&'static str, Vec<BTreeMap<&'static str, Cell>>>,
+    /// Per variant (in column order), every value after the first compared with the first
+    /// seed by seed, on UA, OA, target-set area and localisation error, each by its final
+    /// value and by its window mean.
+    pub paired: Vec<AxisPaired>,
     /// Runs that failed or were interrupted, as `KEY=V/variant/seed-n`.
     pub failed_runs: Vec<String>,
 }
@@ -227,14 +246,44 @@ impl AxisTable {
                 (variant.name(), columns)
             })
             .collect();
-        AxisTable {
+        let mut table = AxisTable {
             key: axis.key.clone(),
             values: axis.values.clone(),
             seeds,
             variants: variants.to_vec(),
             metrics,
+            paired: Vec::new(),
             failed_runs,
+        };
+        table.paired = table.compare_values();
+        table
+    }
+
+    /// Per variant, every value after the first compared with the first on the seeds both
+    /// ran: the cells of a row hold every value's runs in the same seed order.
+    fn compare_values(&self) -> Vec<AxisPaired> {
+        let Some(reference) = self.values.first() else {
+            return Vec::new();
+        };
+        let mut paired = Vec::new();
+        for &variant in &self.variants {
+            let column =
+                |i: usize, key: &str| Some(self.cell(variant.name(), i, key)?.values.clone());
+            for (i, value) in self.values.iter().enumerate().skip(1) {
+                let metrics = compare_metrics(|key| column(i, key), |key| column(0, key));
+                paired.extend(metrics.into_iter().map(|(metric, window, differences)| {
+                    AxisPaired {
+                        variant,
+                        value: value.clone(),
+                        reference: reference.clone(),
+                        metric,
+                        window,
+                        differences,
+                    }
+                }));
+            }
         }
+        paired
     }
 
     /// Per variant, the metrics as rows and the values as columns, in Markdown.
@@ -242,17 +291,19 @@ impl AxisTable {
         let mut md = String::new();
         let _ = writeln!(
             md,
-            "Final metrics against `{}`, mean ± standard deviation over {} seeds ({}); the set \
-             metrics are each agent's own, averaged over agents unless marked worst agent.",
+            "Final metrics and means over {} of simulated time against `{}`, mean ± standard \
+             deviation over {} seeds ({}); the set metrics are each agent's own, averaged over \
+             agents unless marked worst agent.",
+            super::table::window_text(),
             self.key,
             self.seeds.len(),
             seed_range(&self.seeds)
         );
         let rows = ROWS
             .iter()
-            .map(|r| (r.key, r.label, r.scale))
-            .chain(RADIO_ROWS.iter().map(|r| (r.key, r.label, r.scale)));
-        let rows: Vec<(&str, &str, f64)> = rows.collect();
+            .map(|r| (r.key, r.label(), r.scale))
+            .chain(RADIO_ROWS.iter().map(|r| (r.key, r.label.into(), r.scale)));
+        let rows: Vec<(&str, std::borrow::Cow<'_, str>, f64)> = rows.collect();
         for variant in &self.variants {
             let name = variant.name();
             let _ = writeln!(md, "\n### {name}\n");
@@ -263,15 +314,29 @@ impl AxisTable {
                 .collect();
             let _ = writeln!(md, "| metric | {} |", heads.join(" | "));
             let _ = writeln!(md, "|---|{}", "---:|".repeat(heads.len()));
-            for &(key, label, scale) in &rows {
+            for (key, label, scale) in &rows {
                 let cells: Vec<String> = (0..self.values.len())
                     .map(|i| {
                         self.cell(name, i, key)
-                            .map_or_else(|| "-".into(), |c| format_cell(c, scale))
+                            .map_or_else(|| "-".into(), |c| format_cell(c, *scale))
                     })
                     .collect();
                 let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
             }
+        }
+        if let Some(reference) = self.values.first() {
+            let title = format!(
+                "Paired differences V − V₁ between the values of `{}`, per variant: each value V \
+                 against the first, V₁ = {reference}",
+                self.key
+            );
+            let sides = Sides {
+                title: &title,
+                a: "V",
+                b: "V₁",
+                heads: "variant | V − V₁",
+            };
+            paired::write_section(&sides, &self.paired, &mut md);
         }
         if !self.failed_runs.is_empty() {
             let _ = writeln!(
@@ -285,6 +350,50 @@ impl AxisTable {
 
     fn cell(&self, variant: &str, i: usize, key: &str) -> Option<&Cell> {
         self.metrics.get(variant)?.get(i)?.get(key)
+    }
+}
+
+/// A value of the axis compared with the first, for one variant, on one metric: an object of
+/// `paired` in `axis.json`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AxisPaired {
+    /// The variant, run at both values.
+    pub variant: Variant,
+    /// The value compared, as `--axis` writes it (`a` of the differences).
+    pub value: String,
+    /// The axis's first value, the reference (`b`).
+    pub reference: String,
+    /// The metric: `ua`, `oa`, `target_set_area` or `loc_error_m`.
+    pub metric: &'static str,
+    /// Which of its values: `final` (the table's row from `summary.json`) or the steady
+    /// window's mean.
+    pub window: Window,
+    /// The statistics of `value − reference` seed by seed, in the metric's unit; `a_better`
+    /// counts the seeds on which `value` was lower, `b_better` those on which `reference` was.
+    #[serde(flatten)]
+    pub differences: Differences,
+}
+
+impl Comparison for AxisPaired {
+    fn sides(&self) -> String {
+        format!(
+            "{} | {} − {}",
+            self.variant.name(),
+            self.value,
+            self.reference
+        )
+    }
+
+    fn metric(&self) -> &'static str {
+        self.metric
+    }
+
+    fn window(&self) -> Window {
+        self.window
+    }
+
+    fn differences(&self) -> &Differences {
+        &self.differences
     }
 }
 
@@ -524,6 +633,7 @@ fn draw_panel(
 #[cfg(test)]
 mod tests {
     use super::super::collect::FoundRun;
+    use super::super::table::{ROW_COUNT, run_values};
     use super::*;
 
     #[test]
@@ -575,7 +685,7 @@ mod tests {
 
     fn run(s: &serde_json::Value) -> FoundRun {
         FoundRun {
-            values: super::super::table::row_values_json(s),
+            values: run_values(&serde::Deserialize::deserialize(s).unwrap(), &[]),
             radio: radio_values(s),
             series: Vec::new(),
             source: std::path::PathBuf::new(),
@@ -616,6 +726,133 @@ mod tests {
             md.contains("| peer estimates lost by the radio (%) | 0.00 ± 0.00 | 50.00 ± 0.00 |"),
             "{md}"
         );
+    }
+
+    /// A run whose only values are these rows'.
+    fn run_of(rows: &[(&str, f64)]) -> FoundRun {
+        let mut values = vec![None; ROW_COUNT];
+        for &(key, value) in rows {
+            values[ROWS.iter().position(|r| r.key == key).unwrap()] = Some(value);
+        }
+        FoundRun {
+            values,
+            radio: vec![None; RADIO_ROWS.len()],
+            series: Vec::new(),
+            source: std::path::PathBuf::new(),
+        }
+    }
+
+    #[test]
+    fn the_axis_compares_every_value_with_the_first_seed_by_seed() {
+        let axis: Axis = "comms.loss=0,0.5".parse().unwrap();
+        // `paper` on seeds 1..=4: final UA, UA over the window and the localisation error at
+        // each value (seed 3 did not run at 0.5); OA has no value anywhere.
+        let ua = [
+            [Some(0.50), Some(0.40), Some(0.45), Some(0.30)],
+            [Some(0.55), Some(0.50), None, Some(0.30)],
+        ];
+        let ua_window = [
+            [Some(0.6), Some(0.5), Some(0.4), Some(0.3)],
+            [Some(0.6), Some(0.5), None, Some(0.3)],
+        ];
+        let error = [
+            [Some(10.0), Some(7.0), Some(12.0), Some(5.0)],
+            [Some(8.0), Some(7.0), None, Some(9.0)],
+        ];
+        let levels: Vec<FoundRuns> = (0..2)
+            .map(|level| {
+                let mut runs = FoundRuns::new();
+                for (i, seed) in (1..=4).enumerate() {
+                    let (Some(ua), Some(window), Some(error)) =
+                        (ua[level][i], ua_window[level][i], error[level][i])
+                    else {
+                        continue;
+                    };
+                    let rows = [
+                        ("ua_final", ua),
+                        ("ua_window", window),
+                        ("loc_error_mean_m", error),
+                    ];
+                    runs.insert((Variant::Paper, seed), run_of(&rows));
+                }
+                runs
+            })
+            .collect();
+        let table = AxisTable::build(&axis, &[Variant::Paper], &levels, vec![]);
+        assert_eq!(table.seeds, vec![1, 2, 3, 4]);
+        // One variant, one value after the first, four metrics, two windows each.
+        assert_eq!(table.paired.len(), 4 * 2);
+        let find = |metric: &str, window: Window| {
+            let p = table
+                .paired
+                .iter()
+                .find(|p| (p.metric, p.window) == (metric, window));
+            p.unwrap()
+        };
+        for (metric, window, columns) in [
+            ("ua", Window::Final, &ua),
+            ("ua", Window::Steady, &ua_window),
+            ("loc_error_m", Window::Final, &error),
+            ("oa", Window::Final, &[[None; 4]; 2]),
+        ] {
+            let p = find(metric, window);
+            assert_eq!((p.variant, p.value.as_str()), (Variant::Paper, "0.5"));
+            assert_eq!(p.reference, "0");
+            let expected = Differences::of(&columns[1], &columns[0]);
+            assert_eq!(p.differences, expected, "{metric} {window:?}");
+        }
+        // 0.5 − 0 on seeds 1, 2 and 4: UA 0.05, 0.1, 0 (0.5 lower on none, 0 on two, a tie).
+        let d = &find("ua", Window::Final).differences;
+        assert_eq!((d.n, d.a_better, d.b_better, d.ties), (3, 0, 2, 1));
+        assert!((d.mean.unwrap() - 0.05).abs() < 1e-12 && (d.sd.unwrap() - 0.05).abs() < 1e-12);
+        assert_eq!(find("oa", Window::Steady).differences.n, 0);
+
+        let json = serde_json::to_value(&table).unwrap();
+        let first = &json["paired"][0];
+        for (key, value) in [
+            ("variant", "paper"),
+            ("value", "0.5"),
+            ("reference", "0"),
+            ("metric", "ua"),
+            ("window", "final"),
+        ] {
+            assert_eq!(first[key], value, "{first}");
+        }
+        assert_eq!(first["n"], 3, "{first}");
+        assert_eq!(json["paired"][1]["window"], "100-300 s");
+
+        let md = table.to_markdown();
+        let section = md.find("Paired differences V − V₁").expect(&md);
+        assert!(
+            section > md.find("| metric | comms.loss = 0 |").unwrap(),
+            "{md}"
+        );
+        assert!(md.contains("V₁ = 0"), "{md}");
+        assert!(
+            md.contains(
+                "| variant | V − V₁ | metric | Δ final [95 % CI] | V / V₁ lower, ties | \
+                 Δ 100-300 s [95 % CI] | V / V₁ lower, ties |\n|---|---|---|---:|---:|---:|---:|"
+            ),
+            "{md}"
+        );
+        // t(0.975, 2) = 4.302653: 5 ± 4.302653 · 5 / √3 = 5 ± 12.42 pp.
+        assert!(
+            md.contains(
+                "| paper | 0.5 − 0 | UA (pp) | 5.00 [-7.42, 17.42] | 0 / 2, 1 | \
+                 0.00 [0.00, 0.00] | 0 / 0, 3 |"
+            ),
+            "{md}"
+        );
+        assert!(
+            md.contains("| paper | 0.5 − 0 | OA (pp) | - | - | - | - |"),
+            "{md}"
+        );
+
+        // A single value has nothing to compare with.
+        let one: Axis = "comms.loss=0".parse().unwrap();
+        let alone = AxisTable::build(&one, &[Variant::Paper], &levels[..1], vec![]);
+        assert!(alone.paired.is_empty());
+        assert!(!alone.to_markdown().contains("Paired differences"));
     }
 
     #[test]

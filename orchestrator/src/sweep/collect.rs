@@ -9,8 +9,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
+use serde::Deserialize as _;
 
-use super::table::{ROW_COUNT, Table, row_values_json};
+use super::table::{ROW_COUNT, SummaryValues, Table, run_values};
 use crate::Outcome;
 use crate::observe::StepMetrics;
 use crate::results::curves::draw_sweep;
@@ -31,7 +32,7 @@ pub struct MergeConfig {
 
 /// One run read back from a sweep directory.
 pub(super) struct FoundRun {
-    /// Its value of every row of the table.
+    /// Its value of every row of the table ([`run_values`]).
     pub values: Vec<Option<f64>>,
     /// Its value of every radio row of an axis table ([`super::axis`]).
     pub radio: Vec<Option<f64>>,
@@ -244,6 +245,13 @@ fn seed_dirs(dir: &Path) -> anyhow::Result<Vec<(u64, PathBuf)>> {
     Ok(found)
 }
 
+/// Which run a `summary.json` is of.
+#[derive(serde::Deserialize)]
+struct RunIdentity {
+    variant: String,
+    seed: u64,
+}
+
 /// A run's table values and series, checking that its summary is the variant's and seed's.
 pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Result<FoundRun> {
     let read = |name: &str| {
@@ -252,18 +260,21 @@ pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Resul
     };
     let summary: serde_json::Value = serde_json::from_str(&read("summary.json")?)
         .with_context(|| format!("{}: summary.json is not JSON", dir.display()))?;
+    let not_a_summary = || format!("{}: summary.json is not a run's summary", dir.display());
+    let identity = RunIdentity::deserialize(&summary).with_context(not_a_summary)?;
     anyhow::ensure!(
-        summary["variant"] == variant.name() && summary["seed"] == seed,
+        identity.variant == variant.name() && identity.seed == seed,
         "{}: summary.json is of variant {} seed {}, not {} seed {seed}",
         dir.display(),
-        summary["variant"],
-        summary["seed"],
+        identity.variant,
+        identity.seed,
         variant.name()
     );
+    let finals = SummaryValues::deserialize(&summary).with_context(not_a_summary)?;
     let series = timeseries::from_csv(&read("timeseries.csv")?)
         .with_context(|| format!("{}: timeseries.csv", dir.display()))?;
     Ok(FoundRun {
-        values: row_values_json(&summary),
+        values: run_values(&finals, &series),
         radio: super::axis::radio_values(&summary),
         series,
         source: dir.to_owned(),

@@ -1,9 +1,21 @@
-//! `fleet sweep`: every variant on seeds 1..=N, one full run each (as separate processes,
-//! like `fleet run`), then the paper's Table I layout: one row per final metric, one column
-//! per variant, mean ± sample standard deviation over the seeds ([`table`]).
+//! `fleet sweep`: every variant on the same seeds (`--seeds N`: 1..=N; `--seeds A..B`: A to
+//! B, both included; [`SeedSet`]), one full run each (as separate processes, like
+//! `fleet run`), then the paper's Table I layout: one row per metric, one column per variant,
+//! mean ± sample standard deviation over the seeds ([`table`]), and every two variants
+//! compared seed by seed ([`paired`]).
 //!
 //! Writes into `--out`: each run's results under `<variant>/seed-<n>/`, `table.json`,
 //! `table.md` and `metrics.png` (UA and OA over time per variant, mean ± 1 sd).
+//!
+//! **Statistics that can tell.** The table's rows are the final metrics of `summary.json` and
+//! four steadier ones, the mean of UA, OA, target-set area and localisation error over
+//! simulated time 100 s to 300 s ([`STEADY_WINDOW_S`], from each run's `timeseries.csv`).
+//! Since a seed fixes the world, the variants are then compared seed by seed on those four
+//! metrics, final and over the window: for each two variants `a` and `b`, the mean of
+//! `a − b` over the seeds both ran, its 95 % confidence interval (Student's t), the t
+//! statistic, and on how many seeds each was lower (lower is better for all four). A CI that
+//! excludes 0 means the difference is measurable on those seeds (`paired` in `table.json`,
+//! the second table of `table.md`).
 //!
 //! A sweep spreads over cores and machines three ways, all giving the same table:
 //!
@@ -29,6 +41,8 @@
 pub mod axis;
 pub mod collect;
 pub mod jobs;
+pub mod paired;
+pub mod seeds;
 pub mod shard;
 pub mod table;
 
@@ -47,8 +61,10 @@ pub use axis::Axis;
 use collect::{FoundRuns, assemble, read_run, write_table};
 pub use collect::{MergeConfig, merge};
 use jobs::RunEnd;
+pub use paired::{Differences, Paired, t_quantile};
+pub use seeds::{MAX_SEEDS, SeedSet};
 pub use shard::Shard;
-pub use table::{Cell, Table, row_values};
+pub use table::{Cell, STEADY_WINDOW_S, SummaryValues, Table};
 use world_server::server::StepMode;
 
 /// Most runs `--jobs` runs at once.
@@ -57,12 +73,13 @@ pub const MAX_JOBS: u32 = 256;
 /// `fleet sweep`.
 #[derive(Debug, Clone, Args)]
 pub struct SweepArgs {
-    /// The scenario (its seed is replaced by 1..=N).
+    /// The scenario (its seed is replaced by each of --seeds).
     #[command(flatten)]
     pub scenario: ScenarioArgs,
-    /// Number of seeds: runs use seeds 1..=N.
-    #[arg(long, required_unless_present = "merge")]
-    pub seeds: Option<u32>,
+    /// The seeds: a number N (seeds 1..=N) or a range A..B of seeds, both included (also
+    /// written A..=B), e.g. 30 or 101..130; at most 1000 seeds.
+    #[arg(long, required_unless_present = "merge", value_name = "N|A..B")]
+    pub seeds: Option<SeedSet>,
     /// Variants to run, comma-separated, in the table's column order (each is a named set of
     /// scenario settings; `--set` overrides apply after them).
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = Variant::ALL.to_vec())]
@@ -74,7 +91,7 @@ pub struct SweepArgs {
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub jobs: u32,
     /// Runs only shard K of N (K counted from 0): run i of the sweep's list (variant-major,
-    /// seeds in order) belongs to shard i mod N. Give every shard the same --seeds,
+    /// the seeds of --seeds in order) belongs to shard i mod N. Give every shard the same --seeds,
     /// --variants and scenario, then `--merge` their output directories.
     #[arg(long, value_name = "K/N")]
     pub shard: Option<Shard>,
@@ -132,12 +149,9 @@ pub struct SweepConfig {
 impl SweepArgs {
     /// Checks the counts, the shard and every variant's scenario.
     pub fn validate(&self) -> Result<SweepConfig, UsageError> {
-        let seeds = self
-            .seeds
-            .ok_or_else(|| UsageError("--seeds: give the number of seeds".into()))?;
-        if seeds == 0 || seeds > 1000 {
-            return Err(UsageError(format!("--seeds {seeds}: must be 1 to 1000")));
-        }
+        let seeds = self.seeds.ok_or_else(|| {
+            UsageError("--seeds: give the number of seeds N or a range of seeds A..B".into())
+        })?;
         if self.jobs == 0 || self.jobs > MAX_JOBS {
             return Err(UsageError(format!(
                 "--jobs {}: must be 1 to {MAX_JOBS}",
@@ -164,7 +178,7 @@ impl SweepArgs {
         let mut all = Vec::new();
         for level in 0..levels {
             for &variant in &variants {
-                for seed in 1..=u64::from(seeds) {
+                for seed in seeds.iter() {
                     all.push((level, variant, seed));
                 }
             }
@@ -387,8 +401,10 @@ mod tests {
         }
         let w = Wrap::try_parse_from(["x", "--merge", "a", "b"]).unwrap();
         assert_eq!(w.sweep.merge_config().unwrap().sources.len(), 2);
-        let w = Wrap::try_parse_from(["x", "--seeds", "0"]).unwrap();
-        assert!(w.sweep.validate().unwrap_err().0.contains("--seeds"));
+        for bad in ["0", "5..2", "a..b", "1001"] {
+            let e = Wrap::try_parse_from(["x", "--seeds", bad]).err().unwrap();
+            assert!(e.to_string().contains("--seeds"), "{bad}: {e}");
+        }
         assert!(Wrap::try_parse_from(["x", "--seeds", "1", "--variants", "best"]).is_err());
     }
 
@@ -435,6 +451,39 @@ mod tests {
         assert_eq!(c.runs.len(), 3);
         assert!(c.runs[2].config.run_id.as_str().ends_with("-11"));
         assert!(c.runs[1].label.starts_with("2/3 "), "{}", c.runs[1].label);
+    }
+
+    #[test]
+    fn a_range_of_seeds_runs_those_seeds_and_shards_them_alike() {
+        let whole = planned(&["--seeds", "101..103", "--variants", "paper,nomap"]);
+        let seeds: Vec<u64> = whole.iter().map(|r| r.1).collect();
+        assert_eq!(seeds, [101, 102, 103, 101, 102, 103]);
+        assert_eq!(
+            whole,
+            planned(&["--seeds", "101..=103", "--variants", "paper,nomap"])
+        );
+        assert_eq!(whole[3], (Variant::Nomap, 101, 3));
+        let one = planned(&[
+            "--seeds",
+            "101..103",
+            "--variants",
+            "paper,nomap",
+            "--shard",
+            "1/4",
+        ]);
+        assert_eq!(
+            one,
+            vec![(Variant::Paper, 102, 1), (Variant::Nomap, 103, 5)]
+        );
+        let w = Wrap::try_parse_from(["x", "--seeds", "7..8", "--out", "o"]).unwrap();
+        let c = w.sweep.validate().unwrap();
+        assert_eq!(c.runs[1].config.scenario.seed, 8);
+        assert_eq!(c.runs[1].config.out, PathBuf::from("o/nomap/seed-8"));
+        assert!(
+            c.runs[1].label.ends_with("nomap seed 8"),
+            "{}",
+            c.runs[1].label
+        );
     }
 
     #[test]

@@ -1,9 +1,9 @@
 //! `--shard K/N`: which share of a sweep's runs one machine runs.
 //!
 //! A sweep's runs are listed in a fixed order: variant-major, in the order of `--variants`,
-//! seeds 1..=N within each variant. Run `i` of that list (counting from 0) belongs to shard
-//! `i mod N`, and `K` counts from 0 too, so the indices a batch system hands out
-//! (`$SLURM_ARRAY_TASK_ID` of `--array=0-15`, a Kubernetes indexed Job's
+//! the seeds of `--seeds` in order within each variant. Run `i` of that list (counting from
+//! 0) belongs to shard `i mod N`, and `K` counts from 0 too, so the indices a batch system
+//! hands out (`$SLURM_ARRAY_TASK_ID` of `--array=0-15`, a Kubernetes indexed Job's
 //! `$JOB_COMPLETION_INDEX`) are the shard numbers as they are. Every shard must be given the
 //! same `--seeds`, `--variants` and scenario: the split is a function of the list alone, so
 //! the shards are disjoint, together hold every run, and a run's shard never depends on the

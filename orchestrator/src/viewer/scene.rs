@@ -369,6 +369,7 @@ mod tests {
             position: [10.0, 20.0, 40.0],
             yaw: 0.3,
             yaw_ref: 0.3,
+            commanded_yaw_ref: 0.3,
         };
         let dead = UavTruth {
             id: 2,

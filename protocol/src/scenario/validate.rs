@@ -57,6 +57,10 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
     match key {
         "guidance.planner" => Some(&super::Planner::NAMES),
         "estimator.sets" => Some(&super::SetGrowth::NAMES),
+        "guidance.hidden_resolution" => Some(&super::HiddenResolution::NAMES),
+        "guidance.hidden_window" => Some(&super::HiddenWindow::NAMES),
+        "guidance.predicted_views" => Some(&super::PredictedViews::NAMES),
+        "guidance.border" => Some(&super::PlanBorder::NAMES),
         _ => None,
     }
 }
@@ -383,6 +387,7 @@ impl Scenario {
         let region = &self.region;
         Interval::closed(20.0, 5000.0).check("region.half_extent_m", region.half_extent_m)?;
         Interval::closed(0.0, 0.3).check("region.building_fraction", region.building_fraction)?;
+        Interval::closed(4.0, 200.0).check("region.lot_size_m", region.lot_size_m)?;
         let [lo, hi] = region.building_height_m;
         require(
             lo > 0.0 && lo <= hi && hi <= 500.0,
@@ -811,6 +816,48 @@ mod tests {
                 .to_toml_string()
                 .contains("planner = \"paper\"")
         );
+    }
+
+    /// The keys choosing between readings of the paper take their names, default to the
+    /// literal reading, write back as names, and refuse anything else naming the choices.
+    #[test]
+    fn the_readings_of_the_paper_are_one_of_their_names() {
+        use super::super::{HiddenResolution, HiddenWindow, PlanBorder, PredictedViews};
+        let g = Scenario::default().guidance;
+        assert_eq!(g.hidden_resolution, HiddenResolution::Estimator);
+        assert_eq!(g.hidden_window, HiddenWindow::Frames);
+        assert_eq!(g.predicted_views, PredictedViews::PeriodEnd);
+        assert_eq!(g.border, PlanBorder::Geofence);
+        let other = [
+            "guidance.hidden_resolution=planning",
+            "guidance.hidden_window=periods",
+            "guidance.predicted_views=every_frame",
+            "guidance.border=region",
+        ]
+        .map(str::to_owned);
+        let s = Scenario::load(None, &other).unwrap();
+        assert_eq!(s.guidance.hidden_resolution, HiddenResolution::Planning);
+        assert_eq!(s.guidance.hidden_window, HiddenWindow::Periods);
+        assert_eq!(s.guidance.predicted_views, PredictedViews::EveryFrame);
+        assert_eq!(s.guidance.border, PlanBorder::Region);
+        let text = s.to_toml_string();
+        assert!(text.contains("predicted_views = \"every_frame\""), "{text}");
+        assert_eq!(Scenario::from_toml_str(&text).unwrap(), s);
+        for (bad, names) in [
+            ("guidance.hidden_resolution=fine", "estimator, planning"),
+            ("guidance.hidden_window=steps", "frames, periods"),
+            ("guidance.predicted_views=all", "period_end, every_frame"),
+            ("guidance.border=1", "geofence, region"),
+        ] {
+            let e = Scenario::load(None, &[bad.to_owned()])
+                .unwrap_err()
+                .to_string();
+            let key = bad.split('=').next().unwrap();
+            assert!(e.contains(key) && e.contains(names), "{bad}: {e}");
+        }
+        let s = Scenario::load(None, &["region.lot_size_m=40".to_owned()]).unwrap();
+        assert_eq!(s.region.lot_size_m, 40.0);
+        assert!(Scenario::load(None, &["region.lot_size_m=2".to_owned()]).is_err());
     }
 
     #[test]

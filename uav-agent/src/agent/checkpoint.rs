@@ -37,8 +37,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::estimator::{Estimator, EstimatorConfig, EstimatorState};
 
-/// First bytes of every checkpoint file (format version included).
-const MAGIC: &[u8; 8] = b"SFCKPT01";
+/// First bytes of every checkpoint file (format version included: 02 since the state keeps
+/// its frame's `P^g` and the step's news of the fleet's `H̄`), so a checkpoint of an older
+/// layout is refused, not misread.
+const MAGIC: &[u8; 8] = b"SFCKPT02";
 /// Magic, body length (u64 LE), body CRC-32 (u32 LE).
 const HEADER_BYTES: usize = 8 + 8 + 4;
 

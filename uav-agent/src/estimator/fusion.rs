@@ -2,10 +2,17 @@
 //!
 //! Two estimates of the same fleet are combined as a meet of outer sets and a join of proven
 //! facts: `X̄` and every `X_j` are intersected (a target one side has not identified uses that
-//! side's `X̄` in its place, which also holds it), `S^o`, the explored ground, `H^CVS` and the
-//! identified ids are unioned, the maps merged (ground wins, else the taller obstacle).
+//! side's `X̄` in its place, which also holds it), `S^o`, the explored ground, `H^CVS`, `P^g`
+//! and the identified ids are unioned, the maps merged (ground wins, else the taller obstacle).
 //! On estimates of the same step this is idempotent, commutative and associative, so the order
 //! and repetition of messages do not matter.
+//!
+//! A state that fuses a peer's estimate also folds the peer's `H^CVS` and `P^g` into its `H̄`
+//! ([`super::HiddenHistory::fuse`]): `H̄` is the fleet's, so ground any fused UAV saw hidden at
+//! the step joins it and ground any fused UAV proved free at the step leaves it, the step's
+//! hidden ground joined first and its free ground removed last, whatever the order the
+//! estimates are fused in. An estimate of an earlier step (late) is applied before the state's
+//! own frame of its step ([`super::Unseen`] states the rule and why).
 //!
 //! An estimate of another step `k'` is first dilated by `v_max |k - k'| T`: a target is within
 //! that distance of where it was (or will be), so the dilated set still holds it at step `k`.
@@ -55,6 +62,8 @@ pub struct PeerEstimate {
     pub explored: SharedSet,
     /// `H^CVS`.
     pub hidden: SharedSet,
+    /// `P^g`: ground the sender's frame of `step` proved free (it clears `H̄`).
+    pub free_ground: SharedSet,
     /// The sender's map cells carried by the message (all others unknown).
     pub oem: OccupancyMap,
     /// Whether `oem` is the sender's whole known map rather than a delta.
@@ -133,6 +142,7 @@ struct Lattice<'a, S: FusedSet> {
     obstacle_free: &'a mut CellSet,
     explored: &'a mut CellSet,
     hidden: &'a mut CellSet,
+    free_ground: &'a mut CellSet,
     oem: &'a mut OccupancyMap,
 }
 
@@ -156,6 +166,7 @@ fn fuse_into<S: FusedSet>(
         &src.obstacle_free,
         &src.explored,
         &src.hidden,
+        &src.free_ground,
     ]
     .into_iter()
     .chain(src.targets.values())
@@ -200,6 +211,7 @@ fn fuse_into<S: FusedSet>(
     dst.obstacle_free.or_assign(&src.obstacle_free);
     dst.explored.or_assign(&src.explored);
     dst.hidden.or_assign(&src.hidden);
+    dst.free_ground.or_assign(&src.free_ground);
     dst.oem.merge(&src.oem);
     report
 }
@@ -216,6 +228,7 @@ impl EstimatorState {
                 obstacle_free: &mut self.obstacle_free,
                 explored: &mut self.explored,
                 hidden: &mut self.hidden,
+                free_ground: &mut self.free_ground,
                 oem: &mut self.oem,
             },
             peer,
@@ -224,7 +237,8 @@ impl EstimatorState {
             |undetected: &ReachSet, theirs: &CellSet| learned_set(undetected, theirs, config),
         );
         if !report.grid_mismatch {
-            self.hidden_history.add_hidden(step, &peer.hidden);
+            self.hidden_history
+                .fuse(step, peer.step, &peer.hidden, &peer.free_ground);
         }
         // A target learned from a peer starts from this side's X̄, whose reach knows nothing
         // near the target: its set must be bounded by its box (whole-cell growth keeps none).
@@ -263,6 +277,7 @@ impl EstimatorState {
             obstacle_free: Arc::new(self.obstacle_free.clone()),
             explored: Arc::new(self.explored.clone()),
             hidden: Arc::new(self.hidden.clone()),
+            free_ground: Arc::new(self.free_ground.clone()),
             oem: self.oem.clone(),
             oem_full: true,
         }
@@ -281,6 +296,7 @@ impl PeerEstimate {
                 obstacle_free: Arc::make_mut(&mut self.obstacle_free),
                 explored: Arc::make_mut(&mut self.explored),
                 hidden: Arc::make_mut(&mut self.hidden),
+                free_ground: Arc::make_mut(&mut self.free_ground),
                 oem: &mut self.oem,
             },
             other,
@@ -310,6 +326,7 @@ fn learned_set(undetected: &ReachSet, theirs: &CellSet, config: &EstimatorConfig
 pub(crate) mod tests {
     use proptest::prelude::*;
     use proptest::strategy::ValueTree;
+    use protocol::grid::CellIndex;
     use protocol::math::Point2;
 
     use super::*;
@@ -345,11 +362,12 @@ pub(crate) mod tests {
             set_strategy(g, 0.2),
             set_strategy(g, 0.3),
             set_strategy(g, 0.3),
+            set_strategy(g, 0.3),
             proptest::collection::vec((0u32..og.nx, 0u32..og.ny, 0u8..3, 0.0f32..60.0), 0..10),
             any::<u32>(),
         )
             .prop_map(
-                move |(undetected, targets, so, explored, hidden, cells, uav)| {
+                move |(undetected, targets, so, explored, hidden, free_ground, cells, uav)| {
                     let mut oem = OccupancyMap::new(og);
                     for (ix, iy, s, h) in cells {
                         let status = crate::occupancy::OemStatus::from_code(s).unwrap_or_default();
@@ -368,6 +386,7 @@ pub(crate) mod tests {
                         obstacle_free: so.into(),
                         explored: explored.into(),
                         hidden: hidden.into(),
+                        free_ground: free_ground.into(),
                         oem,
                         oem_full: false,
                     }
@@ -382,6 +401,7 @@ pub(crate) mod tests {
         SharedSet,
         SharedSet,
         SharedSet,
+        SharedSet,
         Vec<((u32, u32), OemCell)>,
     );
 
@@ -392,6 +412,7 @@ pub(crate) mod tests {
             p.obstacle_free.clone(),
             p.explored.clone(),
             p.hidden.clone(),
+            p.free_ground.clone(),
             p.oem.known_cells().collect::<Vec<_>>(),
         )
     }
@@ -488,6 +509,7 @@ pub(crate) mod tests {
         state.obstacle_free = (*a.obstacle_free).clone();
         state.explored = (*a.explored).clone();
         state.hidden = (*a.hidden).clone();
+        state.free_ground = (*a.free_ground).clone();
         state.oem = a.oem.clone();
         state.fuse(&b, &cfg);
         assert_eq!(content(&state.to_peer(0)), content(&fused(&a, &b)));
@@ -503,5 +525,92 @@ pub(crate) mod tests {
         let r = state.fuse(&other, &cfg);
         assert!(r.grid_mismatch);
         assert_eq!(state.undetected.cells(), &CellSet::full(&cfg.grid));
+    }
+
+    fn cells(cells: &[CellIndex]) -> CellSet {
+        CellSet::from_cells(&config().grid, cells.iter().copied())
+    }
+
+    /// A fresh state whose own frames hid and proved free these cells, a frame a step: the last
+    /// one of step `frames.last().0`.
+    fn state_after(frames: &[(u64, &[CellIndex], &[CellIndex])]) -> EstimatorState {
+        let mut state = EstimatorState::new(&config());
+        for &(step, hidden, free) in frames {
+            state.step = step;
+            state
+                .hidden_history
+                .record(step, &cells(hidden), &cells(free));
+        }
+        state
+    }
+
+    /// UAV `uav`'s estimate of `step`, knowing nothing but that its frame hid `hidden` and
+    /// proved `free` free.
+    fn news(uav: u32, step: u64, hidden: &[CellIndex], free: &[CellIndex]) -> PeerEstimate {
+        let mut p = EstimatorState::new(&config()).to_peer(uav);
+        p.step = step;
+        p.hidden = cells(hidden).into();
+        p.free_ground = cells(free).into();
+        p
+    }
+
+    #[test]
+    fn ground_hidden_from_one_uav_and_proven_free_by_another_in_the_step_is_not_unseen() {
+        let cfg = config();
+        let (k, c) = (4, (3, 3));
+        // C fuses A's and B's step-k estimates: A's frame hid c, B's proved it free.
+        let a = news(0, k, &[c], &[]);
+        let b = news(1, k, &[], &[c]);
+        for order in [[&a, &b], [&b, &a]] {
+            let mut state = state_after(&[(k, &[], &[])]);
+            for p in order {
+                state.fuse(p, &cfg);
+            }
+            assert!(
+                !state.hidden_history.unseen().contains(c),
+                "order {order:?}"
+            );
+        }
+        // Without B's estimate c is unseen, and stays so while no fused frame proves it free.
+        let mut state = state_after(&[(k, &[], &[])]);
+        state.fuse(&a, &cfg);
+        assert!(state.hidden_history.unseen().contains(c));
+        state.step = k + 1;
+        state.hidden_history.record(k + 1, &cells(&[]), &cells(&[]));
+        assert!(state.hidden_history.unseen().contains(c));
+        state.fuse(&news(1, k + 1, &[], &[c]), &cfg);
+        assert!(!state.hidden_history.unseen().contains(c));
+        // C's own frame plays either part the same way.
+        let mut saw_free = state_after(&[(k, &[], &[c])]);
+        saw_free.fuse(&a, &cfg);
+        assert!(!saw_free.hidden_history.unseen().contains(c));
+        let mut saw_hidden = state_after(&[(k, &[c], &[])]);
+        assert!(saw_hidden.hidden_history.unseen().contains(c));
+        saw_hidden.fuse(&b, &cfg);
+        assert!(!saw_hidden.hidden_history.unseen().contains(c));
+    }
+
+    #[test]
+    fn a_late_estimate_is_older_news_than_the_agents_own_frame() {
+        let cfg = config();
+        let k = 6;
+        // Before step k, C's H̄ holds e. At step k its frame hid c and proved d free.
+        let (c, d, e, f) = ((1, 1), (2, 2), (3, 3), (4, 4));
+        let frames: &[(u64, &[CellIndex], &[CellIndex])] = &[(k - 1, &[e], &[]), (k, &[c], &[d])];
+        // A late estimate of step k - 2 proved c and e free and hid d and f; a step-k one
+        // proved f free.
+        let late = news(0, k - 2, &[d, f], &[c, e]);
+        let now = news(1, k, &[], &[f]);
+        let mut alone = state_after(frames);
+        alone.fuse(&late, &cfg);
+        // What C's frame of step k saw stands; the older H̄ is updated by the late news.
+        assert_eq!(alone.hidden_history.unseen(), &cells(&[c, f]));
+        for order in [[&late, &now], [&now, &late]] {
+            let mut state = state_after(frames);
+            for p in order {
+                state.fuse(p, &cfg);
+            }
+            assert_eq!(state.hidden_history.unseen(), &cells(&[c]), "{order:?}");
+        }
     }
 }

@@ -27,8 +27,17 @@
 //! the next whole map (every `oem_full_every` messages) or the cell's next change; it never makes
 //! a receiver's map wrong, and the map feeds the guidance only, never the guaranteed sets.
 //!
-//! Whatever a peer sends is validated: a set on another grid, a malformed set or delta, a map
-//! cell out of range, a duplicated target are typed errors, never a panic.
+//! Besides its guaranteed sets, an estimate carries the sender's `H^CVS` and `P^g` of its step
+//! (the ground its frame saw hidden and the ground it proved free) and its `H̄` as it stood
+//! before the step's fusion: a receiver folds the first two into its own `H̄`, which is the
+//! fleet's ([`super::Unseen`]), and the observer rebuilds every agent's `H̄` from the three.
+//! `P^g` is one camera footprint: a few runs per row of its box, and as a delta the cells the
+//! footprint gained and lost since the previous frame.
+//!
+//! Whatever a peer sends is validated: a set on another grid (any of them, `P^g` included), a
+//! malformed set or delta, a map cell out of range, a duplicated target are typed errors, never
+//! a panic. The layout is the protocol's ([`protocol::wire::PROTOCOL_VERSION`]): a peer of
+//! another version is refused by its header before its payload is read.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -59,6 +68,8 @@ pub struct EstimateSets {
     pub explored: SharedSet,
     /// `H^CVS`.
     pub hidden: SharedSet,
+    /// `P^g`.
+    pub free_ground: SharedSet,
     /// `H̄`.
     pub unseen: SharedSet,
 }
@@ -77,6 +88,7 @@ impl EstimateSets {
             obstacle_free: share(&state.obstacle_free),
             explored: share(&state.explored),
             hidden: share(&state.hidden),
+            free_ground: share(&state.free_ground),
             unseen: share(state.hidden_history.unseen()),
         }
     }
@@ -154,11 +166,19 @@ impl EstimateOutbox {
         let obstacle_free = code(&sets.obstacle_free, base.map(|b| &b.obstacle_free));
         let explored = code(&sets.explored, base.map(|b| &b.explored));
         let hidden = code(&sets.hidden, base.map(|b| &b.hidden));
+        let free_ground = code(&sets.free_ground, base.map(|b| &b.free_ground));
         let unseen = code(&sets.unseen, base.map(|b| &b.unseen));
-        let any_delta = [&undetected, &obstacle_free, &explored, &hidden, &unseen]
-            .into_iter()
-            .chain(targets.iter().map(|t| &t.set))
-            .any(SetCode::is_delta);
+        let any_delta = [
+            &undetected,
+            &obstacle_free,
+            &explored,
+            &hidden,
+            &free_ground,
+            &unseen,
+        ]
+        .into_iter()
+        .chain(targets.iter().map(|t| &t.set))
+        .any(SetCode::is_delta);
         let msg = EstimateMsg {
             uav: self.uav,
             step: state.step,
@@ -177,6 +197,7 @@ impl EstimateOutbox {
             obstacle_free,
             explored,
             hidden,
+            free_ground,
             unseen,
             stats: protocol::wire::AgentStats::default(),
             oem,
@@ -203,6 +224,8 @@ pub enum SetRole {
     Explored,
     /// `H^CVS`.
     Hidden,
+    /// `P^g`.
+    FreeGround,
     /// `H̄`.
     Unseen,
 }
@@ -324,6 +347,12 @@ fn rebuild(
             base.map(|b| &b.explored),
         )?,
         hidden: decode_set(grid, SetRole::Hidden, &msg.hidden, base.map(|b| &b.hidden))?,
+        free_ground: decode_set(
+            grid,
+            SetRole::FreeGround,
+            &msg.free_ground,
+            base.map(|b| &b.free_ground),
+        )?,
         unseen: decode_set(grid, SetRole::Unseen, &msg.unseen, base.map(|b| &b.unseen))?,
     };
     let pose_ok = msg.pose.position.iter().all(|v| v.is_finite()) && msg.pose.yaw.is_finite();
@@ -339,6 +368,7 @@ fn rebuild(
         obstacle_free: sets.obstacle_free.clone(),
         explored: sets.explored.clone(),
         hidden: sets.hidden.clone(),
+        free_ground: sets.free_ground.clone(),
         oem: OccupancyMap::from_updates(config.oem_grid, &msg.oem)?,
         oem_full: msg.oem_full,
     };
@@ -466,6 +496,7 @@ mod tests {
         s.obstacle_free = (*p.obstacle_free).clone();
         s.explored = (*p.explored).clone();
         s.hidden = (*p.hidden).clone();
+        s.free_ground = (*p.free_ground).clone();
         s.oem = p.oem.clone();
         s
     }
@@ -500,6 +531,7 @@ mod tests {
             prop_assert_eq!(&back.obstacle_free, &p.obstacle_free);
             prop_assert_eq!(&back.explored, &p.explored);
             prop_assert_eq!(&back.hidden, &p.hidden);
+            prop_assert_eq!(&back.free_ground, &p.free_ground);
             prop_assert_eq!(
                 back.oem.known_cells().collect::<Vec<_>>(),
                 p.oem.known_cells().collect::<Vec<_>>()
@@ -524,6 +556,7 @@ mod tests {
                 prop_assert_eq!(&back.obstacle_free, &p.obstacle_free);
                 prop_assert_eq!(&back.explored, &p.explored);
                 prop_assert_eq!(&back.hidden, &p.hidden);
+                prop_assert_eq!(&back.free_ground, &p.free_ground);
                 prop_assert_eq!(inbox.unseen(2), Some(s.hidden_history.unseen()));
                 prop_assert_eq!(inbox.wanted(), 0);
             }
@@ -697,6 +730,48 @@ mod tests {
             Err(EstimateReadError::Set {
                 role: SetRole::Undetected,
                 ..
+            })
+        ));
+
+        // P^g, which clears the receivers' H̄: on another grid, as a delta without a base, with
+        // runs that overflow its box.
+        let mut m = good.clone();
+        let SetCode::Whole(e) = &good.free_ground else {
+            panic!("a first message is whole")
+        };
+        m.free_ground = SetCode::Whole(EncodedSet { ny: 3, ..e.clone() });
+        let refused = PeerEstimate::from_msg(&m, &cfg);
+        assert!(
+            matches!(
+                refused,
+                Err(EstimateReadError::Set {
+                    role: SetRole::FreeGround,
+                    ..
+                })
+            ),
+            "{refused:?}"
+        );
+        m.free_ground = SetCode::Delta(protocol::raster::delta::SetDelta {
+            flips: e.clone(),
+            digest: 1,
+        });
+        let refused = PeerEstimate::from_msg(&m, &cfg);
+        assert!(matches!(
+            refused,
+            Err(EstimateReadError::Set {
+                role: SetRole::FreeGround,
+                source: DeltaError::NoBase,
+            })
+        ));
+        assert_eq!(refused.unwrap_err().drop_reason(), DropReason::NoBase);
+        let mut runs = e.clone();
+        runs.runs = vec![u32::MAX, 5];
+        m.free_ground = SetCode::Whole(runs);
+        assert!(matches!(
+            PeerEstimate::from_msg(&m, &cfg),
+            Err(EstimateReadError::Set {
+                role: SetRole::FreeGround,
+                source: DeltaError::Decode(_),
             })
         ));
 

@@ -35,11 +35,11 @@ use protocol::frame::CvsFrame;
 use protocol::grid::GroundGrid;
 use protocol::math::Real;
 use protocol::raster::{CellBox, CellSet, ReachSet};
-use protocol::scenario::{Scenario, SetGrowth};
+use protocol::scenario::{HiddenWindow, Scenario, SetGrowth};
 use serde::{Deserialize, Serialize};
 
 pub use fusion::{FuseReport, PeerEstimate};
-pub use hidden::HiddenHistory;
+pub use hidden::{HiddenHistory, Unseen};
 pub use message::{EstimateOutbox, EstimateReadError};
 
 use crate::occupancy::OccupancyMap;
@@ -74,10 +74,12 @@ pub struct EstimatorConfig {
     pub period_s: Real,
     /// Depth noise bounds `[w_lo, w_hi]`; each frame's own bounds are added to them.
     pub depth_noise: [Real; 2],
-    /// Frames per guidance period (for the hidden-ground history).
-    pub guidance_period_steps: u64,
-    /// Guidance periods of hidden ground remembered (the MPC horizon `h`).
-    pub hidden_periods: u32,
+    /// Frames per slot of the hidden-ground history: 1 when the window of eq. (28) counts
+    /// frames, the frames of a guidance period when it counts periods
+    /// (`guidance.hidden_window`).
+    pub hidden_slot_steps: u64,
+    /// Slots of hidden ground remembered: the MPC horizon `h`.
+    pub hidden_slots: u32,
     /// Obstacle pixels drawn into `S^o` on a lattice of this pitch (plus region borders).
     pub obstacle_pixel_stride: u32,
     /// A message carries the whole OEM every this many messages.
@@ -97,8 +99,11 @@ impl EstimatorConfig {
             safety_distance_m: scenario.targets.safety_distance_m,
             period_s: scenario.timing.cvs_period_s,
             depth_noise: scenario.camera.depth_noise,
-            guidance_period_steps: scenario.steps_per_guidance(),
-            hidden_periods: scenario.guidance.horizon.max(1),
+            hidden_slot_steps: match scenario.guidance.hidden_window {
+                HiddenWindow::Frames => 1,
+                HiddenWindow::Periods => scenario.steps_per_guidance(),
+            },
+            hidden_slots: scenario.guidance.horizon.max(1),
             obstacle_pixel_stride: 3,
             oem_full_every: 20,
             sets: scenario.estimator.sets,
@@ -132,6 +137,10 @@ pub struct EstimatorState {
     /// `H^CVS` of the last frame (and of peers' fused since).
     #[serde(with = "cell_set")]
     pub hidden: CellSet,
+    /// `P^g` of the last frame (and of peers' fused since): the ground its camera proved free,
+    /// which clears the fleet's `H̄` ([`HiddenHistory`]).
+    #[serde(with = "cell_set")]
+    pub free_ground: CellSet,
     /// Hidden ground of the last guidance periods and hidden ground not seen since.
     pub hidden_history: HiddenHistory,
     /// The occupancy elevation map.
@@ -152,11 +161,8 @@ impl EstimatorState {
             obstacle_free: CellSet::empty(g),
             explored: CellSet::empty(g),
             hidden: CellSet::empty(g),
-            hidden_history: HiddenHistory::new(
-                g,
-                config.guidance_period_steps,
-                config.hidden_periods,
-            ),
+            free_ground: CellSet::empty(g),
+            hidden_history: HiddenHistory::new(g, config.hidden_slot_steps, config.hidden_slots),
             oem: OccupancyMap::new(config.oem_grid),
         }
     }
@@ -179,11 +185,12 @@ impl EstimatorState {
             &self.obstacle_free,
             &self.explored,
             &self.hidden,
+            &self.free_ground,
         ]
         .into_iter()
         .chain(self.targets.values().map(ReachSet::cells))
         .all(|s| s.same_shape(&probe))
-            && self.hidden_history.unseen().same_shape(&probe)
+            && self.hidden_history.fits(&probe)
             && *self.oem.grid() == config.oem_grid
     }
 }
@@ -468,6 +475,7 @@ impl Estimator {
             .map(|(id, s)| (*id, s.area(grid)))
             .collect();
         report.free_ground_area_m2 = free_ground.area(grid);
+        st.free_ground = free_ground;
         report.obstacle_free_area_m2 = st.obstacle_free.area(grid);
         report.explored_area_m2 = st.explored.area(grid);
         report.hidden_area_m2 = st.hidden.area(grid);
@@ -757,6 +765,8 @@ mod tests {
         let restored = Estimator::with_state(cfg.clone(), back.clone()).expect("restore");
         assert_eq!(cells(restored.state()), cells(e.state()));
         assert_eq!(restored.state().explored, e.state().explored);
+        assert_eq!(restored.state().free_ground, e.state().free_ground);
+        assert_eq!(restored.state().hidden_history, e.state().hidden_history);
         assert_eq!(restored.state().oem, e.state().oem);
         let other = EstimatorConfig {
             grid: GroundGrid::new(10.0, 0.5),

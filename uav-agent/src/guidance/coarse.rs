@@ -1,6 +1,10 @@
 //! The coarse planning grid: the MPC weighs hundreds of predicted sets per decision, so it
 //! plans on cells a whole number of times larger than the estimator's. A coarse cell belongs
 //! to a set when any of its fine cells does (the planning sets stay outer).
+//!
+//! Where an area must not be invented by the coarsening, a fine set is also counted per coarse
+//! cell ([`CoarseGrid::weights`]): [`CellWeights`] holds how many fine cells of each coarse cell
+//! a set has, so the area of that set inside any coarse set is measured at the fine resolution.
 
 use protocol::grid::GroundGrid;
 use protocol::raster::CellSet;
@@ -71,6 +75,77 @@ impl CoarseGrid {
         }
         out
     }
+
+    /// How many cells of `fine_set` each coarse cell holds, as [`CellWeights`].
+    pub fn weights(&self, fine_set: &CellSet) -> CellWeights {
+        let f = self.factor as usize;
+        let nx = self.coarse.nx as usize;
+        let mut counts = vec![0u32; nx * self.coarse.ny as usize];
+        for fy in 0..self.fine.ny {
+            let row = &mut counts[(fy / self.factor) as usize * nx..][..nx];
+            for (w, &word) in fine_set.row(fy).iter().enumerate() {
+                let mut bits = word;
+                while bits != 0 {
+                    let b = bits.trailing_zeros() as usize;
+                    if let Some(count) = row.get_mut((w * 64 + b) / f) {
+                        *count += 1;
+                    }
+                    bits &= bits - 1;
+                }
+            }
+        }
+        let most = counts.iter().copied().max().unwrap_or(0);
+        let planes = (0..u32::BITS - most.leading_zeros())
+            .map(|bit| {
+                let mut plane = CellSet::empty(&self.coarse);
+                for (i, _) in counts
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, c)| *c >> bit & 1 == 1)
+                {
+                    plane.set(((i % nx) as u32, (i / nx) as u32), true);
+                }
+                plane
+            })
+            .collect();
+        CellWeights {
+            planes,
+            unit_m2: self.fine.cell_area(),
+        }
+    }
+}
+
+/// A whole number of fine cells per coarse cell, stored as bit planes (plane `b` holds the
+/// coarse cells whose count has bit `b` set), so that the fine area inside a coarse set costs
+/// one intersection count per plane.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CellWeights {
+    planes: Vec<CellSet>,
+    /// Area of one counted cell, m².
+    unit_m2: f64,
+}
+
+impl CellWeights {
+    /// Every cell of `coarse_set` counted once, as a cell of its own grid: the area of a coarse
+    /// set inside `coarse_set` at the coarse resolution.
+    pub fn whole(coarse_set: CellSet, cell_area_m2: f64) -> Self {
+        Self {
+            planes: vec![coarse_set],
+            unit_m2: cell_area_m2,
+        }
+    }
+
+    /// The counted area inside `coarse_set`: the sum of the counts of its cells times the
+    /// area of one counted cell, m².
+    pub fn area_in(&self, coarse_set: &CellSet) -> f64 {
+        let cells: u64 = self
+            .planes
+            .iter()
+            .enumerate()
+            .map(|(bit, plane)| coarse_set.intersection_count(plane) << bit)
+            .sum();
+        cells as f64 * self.unit_m2
+    }
 }
 
 #[cfg(test)]
@@ -110,6 +185,40 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The weighted area of a fine set inside a coarse set is the area of the fine cells of
+    /// the set that lie in the coarse set's cells, exactly.
+    #[test]
+    fn weights_count_the_fine_cells_of_each_coarse_cell() {
+        let fine = GroundGrid::new(25.0, 0.5);
+        let cg = CoarseGrid::new(fine);
+        let mut s = CellSet::empty(&fine);
+        // 25 cells in coarse cell (0, 0), 1 in (1, 0), 3 in (19, 19).
+        for x in 0..5 {
+            for y in 0..5 {
+                s.set((x, y), true);
+            }
+        }
+        for &c in &[(5, 0), (99, 99), (95, 95), (97, 96)] {
+            s.set(c, true);
+        }
+        let w = cg.weights(&s);
+        let mut coarse = CellSet::empty(&cg.coarse);
+        assert_eq!(w.area_in(&coarse), 0.0);
+        coarse.set((0, 0), true);
+        assert_eq!(w.area_in(&coarse), 25.0 * 0.25);
+        coarse.set((1, 0), true);
+        coarse.set((19, 19), true);
+        coarse.set((7, 7), true);
+        assert_eq!(w.area_in(&coarse), 29.0 * 0.25);
+        assert_eq!(
+            w.area_in(&CellSet::full(&cg.coarse)),
+            s.count() as f64 * 0.25
+        );
+        // Counted whole, a coarse set is its cells' area.
+        let whole = CellWeights::whole(cg.downsample(&s), cg.coarse.cell_area());
+        assert_eq!(whole.area_in(&coarse), 3.0 * 6.25);
     }
 
     #[test]

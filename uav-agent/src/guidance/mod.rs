@@ -11,26 +11,37 @@
 //! world's dynamics ([`protocol::flight::advance`]) at every CVS step of the horizon; the
 //! predicted sets (the union of `X̄` and every `X_j`, on the coarse planning grid of
 //! [`coarse`]) are dilated by the targets' motion once per guidance period and lose the ground
-//! the UAV will see in that period (its fields of view less the shadows of known buildings,
-//! [`view`]) and the ground seen by the UAVs that already decided this round (the token). The
-//! sequence minimising `J = Φ_X + λ Φ_d + κ Φ_h` wins:
+//! the UAV will see in that period (its predicted field of view less the shadows of known
+//! buildings, [`view`]) and the ground seen by the UAVs that already decided this round (the
+//! token). The sequence minimising `J = Φ_X + λ Φ_d + κ Φ_h` wins:
 //! - `Φ_X`: area of the predicted sets at the end of the horizon, m²;
 //! - `Φ_d`: distance from the predicted view centre to the nearest predicted set cell that
 //!   known buildings do not hide from the final pose, m;
-//! - `Φ_h`: area of the predicted sets inside ground occluded in the last periods, m².
+//! - `Φ_h`: area of the predicted sets inside ground hidden in the last `h` time steps
+//!   (eq. 28), m².
 //!
-//! Sequences whose predicted positions leave the RoI are excluded; if every sequence leaves
-//! it, the one that strays least is taken. Ties keep the first sequence in lexicographic
+//! Sequences whose predicted positions leave the border square are excluded; if every sequence
+//! leaves it, the one that strays least is taken. Ties keep the first sequence in lexicographic
 //! order of the increments, so decisions are deterministic.
 //!
 //! The search is a branch and bound (`search`) that decides exactly as the plain enumeration:
 //! sequences are costed in order of a lower bound (their sets predicted without shadows) and
 //! the visit stops when no bound can beat the best cost.
 //!
-//! Choices where docs/design.md and the paper are silent: fields of view are swept at every CVS
-//! step of a period (not only at its end), since the camera sees at every step; `Φ_d` is
-//! measured from the point the optical axis meets the ground, which is what the camera looks
-//! at with a tilted gimbal.
+//! Where the paper can be read two ways, a scenario key chooses, and the defaults (the `paper`
+//! variant) take the literal reading:
+//!
+//! | key | default: the paper as written | other reading |
+//! |---|---|---|
+//! | `guidance.predicted_views` | `period_end`: the view `F^P_{k+τ}` at the pose ending each period removes ground (eqs. 29-30) | `every_frame`: the views of every CVS frame of the period, since the camera sees at every frame |
+//! | `guidance.hidden_resolution` | `estimator`: `Φ_h` counts, in each predicted coarse cell, the area of its 0.5 m cells that are in the sets *and* hidden now ([`CellWeights`]), so the coarsening cannot invent an overlap | `planning`: a predicted coarse cell counts whole when any of its fine cells is hidden, even if none of them is in the sets |
+//! | `guidance.hidden_window` | `frames`: eq. (28)'s "last `h` time steps" are CVS frames (the estimator's history, `estimator::HiddenHistory`) | `periods`: every frame of the last `h` guidance periods |
+//! | `guidance.border` | `geofence`: plans stay inside the world's geofence ([`Scenario::geofence_half_extent`]), where the world never overrides a command | `region`: plans stay inside the RoI, and the world turns back those that cross its geofence |
+//!
+//! `Φ_h` at the estimator's resolution counts the sets' hidden ground where the sets are now;
+//! ground the sets grow into over the horizon is counted by `Φ_X` only (on the planning grid
+//! the two cannot be told apart from an invented overlap). `Φ_d` is measured from the point the
+//! optical axis meets the ground, which is what the camera looks at with a tilted gimbal.
 
 pub mod coarse;
 pub mod ring;
@@ -43,10 +54,10 @@ use protocol::flight::{self, UavState};
 use protocol::grid::{GroundGrid, Rect};
 use protocol::math::{Point2, Point3};
 use protocol::raster::CellSet;
-use protocol::scenario::{Planner, Scenario};
+use protocol::scenario::{HiddenResolution, PlanBorder, Planner, PredictedViews, Scenario};
 use protocol::wire::PlannedView;
 
-pub use coarse::CoarseGrid;
+pub use coarse::{CellWeights, CoarseGrid};
 pub use ring::{TokenRing, Turn};
 pub use setfleet::SetfleetParams;
 pub use view::{GroundPredictor, ObstacleCell};
@@ -58,7 +69,7 @@ pub struct GuidanceParams {
     pub grids: CoarseGrid,
     /// The camera.
     pub camera: CameraModel,
-    /// The region the UAVs must stay in.
+    /// The square plans must stay in (`guidance.border`): the world's geofence or the RoI.
     pub region: Rect,
     /// Horizon `h`, guidance periods.
     pub horizon: u32,
@@ -70,6 +81,10 @@ pub struct GuidanceParams {
     pub kappa: f64,
     /// Whether the occupancy map's buildings hide ground in predictions.
     pub use_map: bool,
+    /// How `Φ_h` measures the sets inside hidden ground (`guidance.hidden_resolution`).
+    pub hidden_resolution: HiddenResolution,
+    /// Which predicted poses' views clear the predicted sets (`guidance.predicted_views`).
+    pub predicted_views: PredictedViews,
     /// CVS steps per guidance period.
     pub steps_per_period: u32,
     /// CVS period, seconds.
@@ -94,7 +109,10 @@ pub struct GuidanceParams {
 impl GuidanceParams {
     /// The MPC of a scenario.
     pub fn from_scenario(s: &Scenario) -> Self {
-        let h = s.region.half_extent_m;
+        let h = match s.guidance.border {
+            PlanBorder::Geofence => s.geofence_half_extent(),
+            PlanBorder::Region => s.region.half_extent_m,
+        };
         Self {
             grids: CoarseGrid::new(s.grid()),
             camera: s.camera_model(),
@@ -107,6 +125,8 @@ impl GuidanceParams {
             lambda: s.guidance.lambda,
             kappa: s.guidance.kappa,
             use_map: s.guidance.use_map,
+            hidden_resolution: s.guidance.hidden_resolution,
+            predicted_views: s.guidance.predicted_views,
             steps_per_period: s.steps_per_guidance() as u32,
             dt: s.timing.cvs_period_s,
             speed: s.uavs.speed_mps,
@@ -126,6 +146,36 @@ impl GuidanceParams {
 
     fn planning_grid(&self) -> &GroundGrid {
         &self.grids.coarse
+    }
+
+    /// The poses of one period (or its first `n` frames) whose views clear the predicted
+    /// sets: every one, or the last one only (`F^P_{k+τ}` of the paper's eqs. 29-30).
+    fn viewed<'p>(&self, poses: &'p [CameraPose]) -> &'p [CameraPose] {
+        match self.predicted_views {
+            PredictedViews::EveryFrame => poses,
+            PredictedViews::PeriodEnd => poses.last().map_or(&[], std::slice::from_ref),
+        }
+    }
+
+    /// The recently hidden ground as `Φ_h` counts it on the planning grid
+    /// (`guidance.hidden_resolution`): per coarse cell, the area of its fine cells in both
+    /// `sets` and `hidden` (`Estimator`), or the whole cell when any fine cell is hidden
+    /// (`Planning`).
+    fn hidden_weights(&self, sets: &[&CellSet], hidden: &CellSet) -> CellWeights {
+        match self.hidden_resolution {
+            HiddenResolution::Planning => CellWeights::whole(
+                self.grids.downsample(hidden),
+                self.planning_grid().cell_area(),
+            ),
+            HiddenResolution::Estimator => {
+                let mut overlap = CellSet::empty(&self.grids.fine);
+                for set in sets {
+                    overlap.or_assign(set);
+                }
+                overlap.and_assign(hidden);
+                self.grids.weights(&overlap)
+            }
+        }
     }
 }
 
@@ -254,7 +304,7 @@ fn seen_by_others(
     let per = params.steps_per_period as usize;
     let range = period as usize * per..(period as usize + 1) * per;
     for view in others {
-        for pose in view.poses.get(range.clone()).unwrap_or(&[]) {
+        for pose in params.viewed(view.poses.get(range.clone()).unwrap_or(&[])) {
             if pose.position.iter().all(|v| v.is_finite()) && pose.yaw.is_finite() {
                 predictor.add_visible_ground_within(
                     &mut seen,
@@ -511,6 +561,7 @@ mod tests {
     fn never_plans_out_of_the_region_when_it_can_stay() {
         let mut s = scenario();
         s.region.half_extent_m = 150.0;
+        s.guidance.border = PlanBorder::Region;
         let params = GuidanceParams::from_scenario(&s);
         // Near the east border heading east: most sequences leave; the chosen one must not.
         let hidden = CellSet::empty(&params.grids.fine);
@@ -538,6 +589,133 @@ mod tests {
         );
     }
 
+    /// The default border is the world's geofence: heading at it, the chosen plan turns
+    /// before the fence, so the world never has to override it.
+    #[test]
+    fn plans_stay_inside_the_world_geofence() {
+        let s = scenario();
+        let fence = s.geofence_half_extent();
+        assert!(fence < s.region.half_extent_m);
+        let params = GuidanceParams::from_scenario(&s);
+        assert_eq!(params.region.max.x, fence);
+        assert_eq!(params.region.min.y, -fence);
+        let hidden = CellSet::empty(&params.grids.fine);
+        let everything = CellSet::full(&params.grids.fine);
+        let d = plan(
+            &params,
+            &PlanningInput {
+                uav: 0,
+                state: UavState {
+                    position: Point3::new(fence - 30.0, 0.0, 60.0),
+                    yaw: 0.0,
+                },
+                sets: &[&everything],
+                recently_hidden: &hidden,
+                obstacles: &[],
+                others: &[],
+            },
+        );
+        assert!(d.excluded > 0, "{d:?}");
+        assert!(
+            d.view
+                .poses
+                .iter()
+                .all(|p| p.position.x.abs() <= fence && p.position.y.abs() <= fence),
+            "{d:?}"
+        );
+    }
+
+    /// One straight sequence of one period (`U = {0}`, `h = 1`) past a small set that only
+    /// the period's first frames see: with a view at every frame the set is cleared, with
+    /// the view at the period's end only (the paper's `F^P_{k+τ}`) it is not.
+    #[test]
+    fn only_the_period_end_view_clears_the_sets_by_default() {
+        let cost = |views: PredictedViews| {
+            let mut s = scenario();
+            s.guidance.horizon = 1;
+            s.guidance.yaw_increments_rad = vec![0.0];
+            s.guidance.predicted_views = views;
+            let params = GuidanceParams::from_scenario(&s);
+            let set = blob(&params, Point2::new(50.0, 0.0), 2.0);
+            let hidden = CellSet::empty(&params.grids.fine);
+            plan(
+                &params,
+                &PlanningInput {
+                    uav: 0,
+                    state: start(),
+                    sets: &[&set],
+                    recently_hidden: &hidden,
+                    obstacles: &[],
+                    others: &[],
+                },
+            )
+            .cost
+        };
+        let every_frame = cost(PredictedViews::EveryFrame);
+        let period_end = cost(PredictedViews::PeriodEnd);
+        assert_eq!(every_frame.area_m2, 0.0, "{every_frame:?}");
+        // From 60 m up, the first frame's view starts 31.5 m ahead of the UAV, the last
+        // frame's 25 m further on: the disc grown by one period (2 m + 6 m, on 2.5 m cells)
+        // lies between the two near edges.
+        assert!(period_end.area_m2 > 150.0, "{period_end:?}");
+    }
+
+    /// `Φ_h` at the estimator's resolution is the fine area of the sets' hidden ground (far
+    /// from every view, so nothing clears it), and hidden ground sharing only coarse cells
+    /// with the sets counts nothing; the any-cell coarsening counts both whole coarse cells.
+    #[test]
+    fn phi_h_counts_the_fine_overlap_of_the_sets_and_the_hidden_ground() {
+        let hidden_m2 = |resolution: HiddenResolution| {
+            let mut s = Scenario::default();
+            s.guidance.hidden_resolution = resolution;
+            s.guidance.kappa = 1.0;
+            let params = GuidanceParams::from_scenario(&s);
+            let fine = params.grids.fine;
+            // The set: fine cells x in [0, 40), y in [0, 3) (a 20 m x 1.5 m strip in the
+            // south-west corner) and the cell (100, 0); hidden: x in [20, 60), y in [0, 2),
+            // and x in [100, 110), y in [3, 5) (coarse cells the set touches, but none of its
+            // fine cells).
+            let mut set = CellSet::empty(&fine);
+            let mut hidden = CellSet::empty(&fine);
+            for y in 0..3 {
+                set.fill_row_span(y, 0, 39);
+            }
+            for y in 0..2 {
+                hidden.fill_row_span(y, 20, 59);
+            }
+            for y in 3..5 {
+                hidden.fill_row_span(y, 100, 109);
+            }
+            set.set((100, 0), true);
+            let overlap = {
+                let mut o = set.clone();
+                o.and_assign(&hidden);
+                o.count() as f64 * fine.cell_area()
+            };
+            let d = plan(
+                &params,
+                &PlanningInput {
+                    uav: 0,
+                    state: UavState {
+                        position: Point3::new(100.0, 100.0, 80.0),
+                        yaw: std::f64::consts::FRAC_PI_4,
+                    },
+                    sets: &[&set],
+                    recently_hidden: &hidden,
+                    obstacles: &[],
+                    others: &[],
+                },
+            );
+            (d.cost.hidden_m2, overlap)
+        };
+        let (fine_m2, overlap) = hidden_m2(HiddenResolution::Estimator);
+        // Rows 0 and 1, x in [20, 40): 40 cells of 0.25 m².
+        assert_eq!(overlap, 40.0 * 0.25);
+        assert_eq!(fine_m2, overlap);
+        let (coarse_m2, _) = hidden_m2(HiddenResolution::Planning);
+        assert!(coarse_m2 > fine_m2, "{coarse_m2} <= {fine_m2}");
+    }
+
     /// A fingerprint of everything a decision holds (FNV-1a over the bits of its numbers).
     fn fingerprint(d: &Decision) -> u64 {
         let c = &d.cost;
@@ -561,8 +739,18 @@ mod tests {
     /// every decision. (A change of what the planners decide updates the fingerprints.)
     #[test]
     fn decisions_are_the_recorded_ones() {
-        let paper = GuidanceParams::from_scenario(&scenario());
-        let mut s = scenario();
+        // The readings these fingerprints were recorded with, before the paper's literal
+        // reading became the default: they pin that the choices are the only change.
+        let earlier = |mut s: Scenario| {
+            s.guidance.hidden_resolution = HiddenResolution::Planning;
+            s.guidance.hidden_window = protocol::scenario::HiddenWindow::Periods;
+            s.guidance.predicted_views = PredictedViews::EveryFrame;
+            s.guidance.border = PlanBorder::Region;
+            s
+        };
+        let paper = GuidanceParams::from_scenario(&earlier(scenario()));
+        let literal = GuidanceParams::from_scenario(&scenario());
+        let mut s = earlier(scenario());
         // The `setfleet` variant's settings.
         s.guidance.planner = Planner::Setfleet;
         s.timing.guidance_period_s = 1.0;
@@ -571,6 +759,7 @@ mod tests {
         let setfleet = GuidanceParams::from_scenario(&s);
         let mut rng = Xorshift(0x9e37_79b9_7f4a_7c15);
         let mut fingerprints = Vec::new();
+        let mut literal_fingerprints = Vec::new();
         for case in 0..6 {
             let fine = &paper.grids.fine;
             let mut undetected = CellSet::empty(fine);
@@ -613,6 +802,7 @@ mod tests {
             };
             fingerprints.push(fingerprint(&plan(&paper, &input)));
             fingerprints.push(fingerprint(&setfleet::plan(&setfleet, &input)));
+            literal_fingerprints.push(fingerprint(&plan(&literal, &input)));
         }
         // Paper, setfleet, for each case.
         let recorded: [u64; 12] = [
@@ -630,6 +820,16 @@ mod tests {
             0x4ee4_5686_6ce9_29ac,
         ];
         assert_eq!(fingerprints, recorded, "{fingerprints:#x?}");
+        // The paper's literal reading (the defaults), for each case.
+        let recorded: [u64; 6] = [
+            0x5f5d_52dd_dcf0_b195,
+            0xf447_e6a4_cf18_dd69,
+            0x9764_f986_a95d_d859,
+            0x663a_7931_13e1_13a3,
+            0x6ac9_81cc_2c01_b72b,
+            0x4056_88f6_40fe_5ea8,
+        ];
+        assert_eq!(literal_fingerprints, recorded, "{literal_fingerprints:#x?}");
     }
 
     /// A random situation owned: the sets, the recently hidden ground, the known buildings,
@@ -700,13 +900,14 @@ mod tests {
             start_sets.or_assign(&params.grids.downsample(s));
         }
         let obstacles: &[ObstacleCell] = if params.use_map { input.obstacles } else { &[] };
-        let hidden = params.grids.downsample(input.recently_hidden);
+        let hidden = params.hidden_weights(input.sets, input.recently_hidden);
         let per = params.steps_per_period as usize;
         let others_seen: Vec<CellSet> = (0..params.horizon as usize)
             .map(|period| {
                 let mut seen = CellSet::empty(&grid);
                 for v in input.others {
-                    for pose in v.poses.get(period * per..(period + 1) * per).unwrap_or(&[]) {
+                    let poses = v.poses.get(period * per..(period + 1) * per).unwrap_or(&[]);
+                    for pose in params.viewed(poses) {
                         view::add_visible_ground(&mut seen, &grid, &params.camera, pose, obstacles);
                     }
                 }
@@ -734,12 +935,15 @@ mod tests {
                 sets.and_not_assign(&others_seen[period]);
                 let yaw_ref = state.yaw + u;
                 let mut seen = CellSet::empty(&grid);
+                let start = poses.len();
                 for _ in 0..per {
                     let pose;
                     (state, pose) = fly_step(params, state, yaw_ref);
                     stray_m = stray_m.max(stray(&params.region, &state.position));
-                    view::add_visible_ground(&mut seen, &grid, &params.camera, &pose, obstacles);
                     poses.push(pose);
+                }
+                for pose in params.viewed(&poses[start..]) {
+                    view::add_visible_ground(&mut seen, &grid, &params.camera, pose, obstacles);
                 }
                 sets.and_not_assign(&seen);
             }
@@ -748,7 +952,7 @@ mod tests {
                 excluded += 1;
             }
             let area_m2 = sets.count() as f64 * grid.cell_area();
-            let hidden_m2 = sets.intersection_count(&hidden) as f64 * grid.cell_area();
+            let hidden_m2 = hidden.area_in(&sets);
             let distance_m = poses.last().map_or(0.0, |pose| {
                 nearest_visible_distance(&grid, &sets, &params.camera, pose, obstacles)
             });
@@ -786,6 +990,12 @@ mod tests {
                 s.guidance.horizon = 3;
                 s.guidance.yaw_increments_rad = vec![-0.6, 0.0, 0.6];
             }
+            // Every reading of the paper's ambiguities, in turn.
+            s.guidance.predicted_views =
+                [PredictedViews::PeriodEnd, PredictedViews::EveryFrame][seed as usize % 2];
+            s.guidance.hidden_resolution =
+                [HiddenResolution::Estimator, HiddenResolution::Planning][seed as usize / 2 % 2];
+            s.guidance.border = [PlanBorder::Geofence, PlanBorder::Region][seed as usize / 4 % 2];
             let params = GuidanceParams::from_scenario(&s);
             let situation = Situation::random(&params, seed);
             let sets: Vec<&CellSet> = situation.sets.iter().collect();

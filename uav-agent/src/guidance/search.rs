@@ -28,8 +28,8 @@ use protocol::raster::CellSet;
 
 use super::view::same_pose;
 use super::{
-    Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
-    fly_step, nearest_visible_distance, seen_by_others, stray, view,
+    CellWeights, Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput,
+    decision, fly_step, nearest_visible_distance, seen_by_others, stray, view,
 };
 
 /// A sequence, simulated, with the lower bound of its cost.
@@ -47,9 +47,9 @@ struct Exact {
     state: UavState,
     sets: CellSet,
     grown: Option<CellSet>,
-    /// The views (on `grown`) of its children's first poses, by pose: the increments the yaw
-    /// rate cannot reach in one CVS step (the large turns to either side) fly the same first
-    /// step, whose view is computed once.
+    /// The views (on `grown`) of its children's first viewed poses, by pose: with a view at
+    /// every frame, the increments the yaw rate cannot reach in one CVS step (the large turns
+    /// to either side) fly the same first step, whose view is computed once.
     first_views: Vec<(CameraPose, CellSet)>,
 }
 
@@ -59,7 +59,8 @@ struct Search<'a> {
     obstacles: &'a [ObstacleCell],
     /// Ground the UAVs ahead in the token will see, per period.
     others_seen: Vec<CellSet>,
-    hidden: CellSet,
+    /// Recently hidden ground as `Φ_h` counts it.
+    hidden: CellWeights,
     predictor: GroundPredictor,
 }
 
@@ -97,7 +98,7 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
         params,
         obstacles,
         others_seen,
-        hidden: params.grids.downsample(input.recently_hidden),
+        hidden: params.hidden_weights(input.sets, input.recently_hidden),
         predictor,
     };
     let bounded = [params.lambda, params.kappa]
@@ -193,10 +194,10 @@ fn growth_m(params: &GuidanceParams) -> f64 {
 }
 
 /// The cost of predicted sets with `Φ_d = distance_m`.
-fn terms(params: &GuidanceParams, sets: &CellSet, hidden: &CellSet, distance_m: f64) -> Cost {
+fn terms(params: &GuidanceParams, sets: &CellSet, hidden: &CellWeights, distance_m: f64) -> Cost {
     let grid = params.planning_grid();
     let area_m2 = sets.count() as f64 * grid.cell_area();
-    let hidden_m2 = sets.intersection_count(hidden) as f64 * grid.cell_area();
+    let hidden_m2 = hidden.area_in(sets);
     Cost {
         area_m2,
         distance_m,
@@ -258,7 +259,7 @@ impl Search<'_> {
             let start = poses.len();
             let (next, stray_next) = self.fly(state, u, stray_m, poses);
             let mut footprints = CellSet::empty(&grid);
-            for pose in &poses[start..] {
+            for pose in params.viewed(&poses[start..]) {
                 self.predictor.add_footprint_within(
                     &mut footprints,
                     &grid,
@@ -302,7 +303,7 @@ impl Search<'_> {
             .get_or_insert_with(|| self.grow(&parent.sets, k));
         let poses = leaf.poses.get(k * params.steps_per_period as usize..)?;
         let mut footprints = CellSet::empty(&grid);
-        for pose in poses {
+        for pose in params.viewed(poses) {
             self.predictor.add_footprint_within(
                 &mut footprints,
                 &grid,
@@ -345,7 +346,7 @@ impl Search<'_> {
             let (state, _) = self.fly(parent.state, u, 0.0, &mut poses);
             let mut seen = CellSet::empty(&grid);
             // Only the ground of the grown sets can change them.
-            for (step, pose) in poses.iter().enumerate() {
+            for (step, pose) in params.viewed(&poses).iter().enumerate() {
                 if step > 0 {
                     self.predictor.add_visible_ground_within(
                         &mut seen,

@@ -8,8 +8,6 @@ use rand_chacha::ChaCha8Rng;
 use super::roads::RoadGrid;
 use crate::error::WorldBuildError;
 
-/// Target size of the lots a block is cut into (one building at most per lot).
-const LOT_SIZE_M: Real = 21.0;
 /// Gap between neighbouring lots of a block.
 const LOT_GAP_M: Real = 3.0;
 /// Smallest side of a lot worth building on.
@@ -74,20 +72,22 @@ impl Lot {
 }
 
 /// Places buildings covering `fraction` of the ground area `ground_area` (to rounding), with
-/// heights uniform in `heights`, every footprint at least the grid's building setback from
-/// every road centreline.
+/// heights uniform in `heights`, one at most per lot of about `lot_size` metres a side
+/// (`region.lot_size_m`), every footprint at least the grid's building setback from every road
+/// centreline.
 pub fn generate(
     grid: &RoadGrid,
     ground_area: Real,
     fraction: Real,
     heights: [Real; 2],
+    lot_size: Real,
     rng: &mut ChaCha8Rng,
 ) -> Result<Vec<Building>, WorldBuildError> {
     let wanted = fraction * ground_area;
     if wanted <= 0.0 {
         return Ok(Vec::new());
     }
-    let mut lots = lots(grid);
+    let mut lots = lots(grid, lot_size);
     let capacity: Real = lots.iter().map(Lot::area).sum();
     if wanted > capacity {
         return Err(WorldBuildError::Placement(format!(
@@ -162,15 +162,15 @@ pub fn generate(
 }
 
 /// Every lot of every block, in a fixed order.
-fn lots(grid: &RoadGrid) -> Vec<Lot> {
+fn lots(grid: &RoadGrid, lot_size: Real) -> Vec<Lot> {
     let setback = grid.profile.building_setback();
     let mut out = Vec::new();
     for wx in grid.xs.windows(2) {
         for wy in grid.ys.windows(2) {
             let (x0, x1) = (wx[0] + setback, wx[1] - setback);
             let (y0, y1) = (wy[0] + setback, wy[1] - setback);
-            for (ax0, ax1) in split(x0, x1) {
-                for (ay0, ay1) in split(y0, y1) {
+            for (ax0, ax1) in split(x0, x1, lot_size) {
+                for (ay0, ay1) in split(y0, y1, lot_size) {
                     out.push(Lot {
                         min: Point2::new(ax0, ay0),
                         max: Point2::new(ax1, ay1),
@@ -182,13 +182,13 @@ fn lots(grid: &RoadGrid) -> Vec<Lot> {
     out
 }
 
-/// Cuts `[a, b]` into lots of about [`LOT_SIZE_M`] separated by [`LOT_GAP_M`].
-fn split(a: Real, b: Real) -> Vec<(Real, Real)> {
+/// Cuts `[a, b]` into lots of about `lot_size` separated by [`LOT_GAP_M`].
+fn split(a: Real, b: Real, lot_size: Real) -> Vec<(Real, Real)> {
     let len = b - a;
     if len < MIN_LOT_SIDE_M {
         return Vec::new();
     }
-    let n = ((len + LOT_GAP_M) / (LOT_SIZE_M + LOT_GAP_M))
+    let n = ((len + LOT_GAP_M) / (lot_size + LOT_GAP_M))
         .round()
         .max(1.0) as usize;
     let side = (len - (n - 1) as Real * LOT_GAP_M) / n as Real;

@@ -42,6 +42,7 @@ impl City {
             ground_area,
             r.building_fraction,
             r.building_height_m,
+            r.lot_size_m,
             rng,
         )?;
         Ok(City {

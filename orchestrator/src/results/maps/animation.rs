@@ -502,6 +502,7 @@ mod tests {
             position: [0.0, 0.0, 20.0],
             yaw: 0.0,
             yaw_ref: 0.0,
+            commanded_yaw_ref: 0.0,
         };
         animation.add(&truth, None).unwrap();
         let frames = frames(&animation.finish().unwrap());
