@@ -177,27 +177,9 @@ fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
 /// The sweep's two variants compared seed by seed: on both seeds for the summary's values,
 /// on none over the steady window (100-300 s), which 4 s runs do not reach.
 fn assert_paired(table: &Value, dir: &Path) {
-    let paired = table["paired"].as_array().expect("paired");
-    assert_eq!(paired.len(), 4 * 2, "{table}");
-    let metrics: Vec<&str> = paired.iter().filter_map(|p| p["metric"].as_str()).collect();
-    let each = ["ua", "oa", "target_set_area", "loc_error_m"];
-    assert_eq!(metrics, each.map(|m| [m, m]).concat(), "{table}");
-    for (i, p) in paired.iter().enumerate() {
+    assert_two_seed_comparisons(table, |p| {
         assert_eq!([&p["a"], &p["b"]], ["paper", "setfleet"], "{p}");
-        let window = if i % 2 == 0 { "final" } else { "100-300 s" };
-        assert_eq!(p["window"], window, "{p}");
-        if window == "100-300 s" {
-            assert_eq!(p["n"], 0, "{p}");
-            assert_eq!(p["mean"], Value::Null, "{p}");
-        }
-    }
-    let ua = &paired[0];
-    assert_eq!(ua["n"], 2, "{ua}");
-    let counts = ["a_better", "b_better", "ties"].map(|k| ua[k].as_u64().expect(k));
-    assert_eq!(counts.iter().sum::<u64>(), 2, "{ua}");
-    let ci = ua["ci95"].as_array().expect("ci95");
-    let (lo, mean, hi) = (ci[0].as_f64(), ua["mean"].as_f64(), ci[1].as_f64());
-    assert!(lo <= mean && mean <= hi, "{ua}");
+    });
     assert_eq!(table["steady_window_s"], serde_json::json!([100.0, 300.0]));
     let md = std::fs::read_to_string(dir.join("table.md")).expect("table.md");
     assert!(md.contains("Paired differences a − b"), "{md}");
@@ -325,21 +307,34 @@ fn an_axis_sweep_compares_the_values_of_a_key() {
 /// seeds for the summary's values, on none over the steady window (100-300 s), which 4 s runs
 /// do not reach.
 fn assert_axis_paired(axis: &Value, md: &str) {
-    let paired = axis["paired"].as_array().expect("paired");
-    assert_eq!(paired.len(), 4 * 2, "{axis}");
-    let metrics: Vec<&str> = paired.iter().filter_map(|p| p["metric"].as_str()).collect();
-    let each = ["ua", "oa", "target_set_area", "loc_error_m"];
-    assert_eq!(metrics, each.map(|m| [m, m]).concat(), "{axis}");
-    for (i, p) in paired.iter().enumerate() {
+    assert_two_seed_comparisons(axis, |p| {
         assert_eq!(
             [&p["variant"], &p["value"], &p["reference"]],
             ["paper", "0.5", "0"],
             "{p}"
         );
+    });
+    assert!(md.contains("Paired differences V − V₁"), "{md}");
+    assert!(md.contains("| paper | 0.5 − 0 | UA (pp) |"), "{md}");
+}
+
+/// The `paired` entries of a sweep's table or axis made of two 4 s runs a side: every metric,
+/// final then over the steady window (no pair there, as 4 s runs do not reach 100 s), each
+/// entry naming its sides as `sides` checks, and UA's final difference over both seeds with
+/// its mean inside its interval.
+fn assert_two_seed_comparisons(json: &Value, sides: impl Fn(&Value)) {
+    let paired = json["paired"].as_array().expect("paired");
+    assert_eq!(paired.len(), 4 * 2, "{json}");
+    let metrics: Vec<&str> = paired.iter().filter_map(|p| p["metric"].as_str()).collect();
+    let each = ["ua", "oa", "target_set_area", "loc_error_m"];
+    assert_eq!(metrics, each.map(|m| [m, m]).concat(), "{json}");
+    for (i, p) in paired.iter().enumerate() {
+        sides(p);
         let window = if i % 2 == 0 { "final" } else { "100-300 s" };
         assert_eq!(p["window"], window, "{p}");
         if window == "100-300 s" {
             assert_eq!(p["n"], 0, "{p}");
+            assert_eq!(p["mean"], Value::Null, "{p}");
         }
     }
     let ua = &paired[0];
@@ -349,6 +344,4 @@ fn assert_axis_paired(axis: &Value, md: &str) {
     let ci = ua["ci95"].as_array().expect("ci95");
     let (lo, mean, hi) = (ci[0].as_f64(), ua["mean"].as_f64(), ci[1].as_f64());
     assert!(lo <= mean && mean <= hi, "{ua}");
-    assert!(md.contains("Paired differences V − V₁"), "{md}");
-    assert!(md.contains("| paper | 0.5 − 0 | UA (pp) |"), "{md}");
 }
