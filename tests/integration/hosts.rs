@@ -42,12 +42,18 @@ fn summary(out: &Path) -> Value {
     serde_json::from_str(&text).expect("summary.json is JSON")
 }
 
-/// The last line of a bridge's log: its report.
+/// A bridge's report: the one JSON line of its log. The bridge prints it on stdout when it
+/// stops, and Zenoh's threads may still log to stderr (the same file) after it, so it is not
+/// always the last line.
 fn bridge_report(out: &Path, host: u16) -> Value {
     let log =
         std::fs::read_to_string(out.join(format!("logs/bridge-h{host}.log"))).expect("bridge log");
-    let last = log.lines().last().expect("a report line");
-    serde_json::from_str(last).unwrap_or_else(|e| panic!("bridge report {last:?}: {e}"))
+    let mut reports = log.lines().filter(|line| line.starts_with('{'));
+    let report = reports
+        .next()
+        .unwrap_or_else(|| panic!("no report in the bridge's log:\n{log}"));
+    assert!(reports.next().is_none(), "two reports in:\n{log}");
+    serde_json::from_str(report).unwrap_or_else(|e| panic!("bridge report {report:?}: {e}"))
 }
 
 fn stderr(out: &Output) -> String {

@@ -44,7 +44,7 @@ use serde::Serialize;
 
 use super::Shard;
 use super::collect::{FoundRuns, assemble, write_table};
-use super::paired::{self, Comparison, Differences, Sides, Window, compare_metrics};
+use super::paired::{self, Comparison, PairedMetric, Sides, compare_metrics};
 use super::table::{Cell, ROWS, format_cell, seed_range};
 use crate::observe::StepMetrics;
 use crate::pictures::{FONT, palette, short_number};
@@ -271,15 +271,11 @@ impl AxisTable {
                 |i: usize, key: &str| Some(self.cell(variant.name(), i, key)?.values.clone());
             for (i, value) in self.values.iter().enumerate().skip(1) {
                 let metrics = compare_metrics(|key| column(i, key), |key| column(0, key));
-                paired.extend(metrics.into_iter().map(|(metric, window, differences)| {
-                    AxisPaired {
-                        variant,
-                        value: value.clone(),
-                        reference: reference.clone(),
-                        metric,
-                        window,
-                        differences,
-                    }
+                paired.extend(metrics.into_iter().map(|compared| AxisPaired {
+                    variant,
+                    value: value.clone(),
+                    reference: reference.clone(),
+                    compared,
                 }));
             }
         }
@@ -363,15 +359,11 @@ pub struct AxisPaired {
     pub value: String,
     /// The axis's first value, the reference (`b`).
     pub reference: String,
-    /// The metric: `ua`, `oa`, `target_set_area` or `loc_error_m`.
-    pub metric: &'static str,
-    /// Which of its values: `final` (the table's row from `summary.json`) or the steady
-    /// window's mean.
-    pub window: Window,
-    /// The statistics of `value − reference` seed by seed, in the metric's unit; `a_better`
-    /// counts the seeds on which `value` was lower, `b_better` those on which `reference` was.
+    /// The metric, its window and the statistics of `value − reference` seed by seed;
+    /// `a_better` counts the seeds on which `value` was lower, `b_better` those on which
+    /// `reference` was.
     #[serde(flatten)]
-    pub differences: Differences,
+    pub compared: PairedMetric,
 }
 
 impl Comparison for AxisPaired {
@@ -384,16 +376,8 @@ impl Comparison for AxisPaired {
         )
     }
 
-    fn metric(&self) -> &'static str {
-        self.metric
-    }
-
-    fn window(&self) -> Window {
-        self.window
-    }
-
-    fn differences(&self) -> &Differences {
-        &self.differences
+    fn compared(&self) -> &PairedMetric {
+        &self.compared
     }
 }
 
@@ -633,6 +617,7 @@ fn draw_panel(
 #[cfg(test)]
 mod tests {
     use super::super::collect::FoundRun;
+    use super::super::paired::{Differences, Window};
     use super::super::table::{ROW_COUNT, run_values};
     use super::*;
 
@@ -786,7 +771,7 @@ mod tests {
             let p = table
                 .paired
                 .iter()
-                .find(|p| (p.metric, p.window) == (metric, window));
+                .find(|p| (p.compared.metric, p.compared.window) == (metric, window));
             p.unwrap()
         };
         for (metric, window, columns) in [
@@ -799,13 +784,13 @@ mod tests {
             assert_eq!((p.variant, p.value.as_str()), (Variant::Paper, "0.5"));
             assert_eq!(p.reference, "0");
             let expected = Differences::of(&columns[1], &columns[0]);
-            assert_eq!(p.differences, expected, "{metric} {window:?}");
+            assert_eq!(p.compared.differences, expected, "{metric} {window:?}");
         }
         // 0.5 − 0 on seeds 1, 2 and 4: UA 0.05, 0.1, 0 (0.5 lower on none, 0 on two, a tie).
-        let d = &find("ua", Window::Final).differences;
+        let d = &find("ua", Window::Final).compared.differences;
         assert_eq!((d.n, d.a_better, d.b_better, d.ties), (3, 0, 2, 1));
         assert!((d.mean.unwrap() - 0.05).abs() < 1e-12 && (d.sd.unwrap() - 0.05).abs() < 1e-12);
-        assert_eq!(find("oa", Window::Steady).differences.n, 0);
+        assert_eq!(find("oa", Window::Steady).compared.differences.n, 0);
 
         let json = serde_json::to_value(&table).unwrap();
         let first = &json["paired"][0];

@@ -121,6 +121,20 @@ impl Differences {
     }
 }
 
+/// One metric compared between two sides: the part every paired comparison shares.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PairedMetric {
+    /// The metric: `ua`, `oa`, `target_set_area` or `loc_error_m`.
+    pub metric: &'static str,
+    /// Which of its values: `final` (the table's row from `summary.json`) or the steady
+    /// window's mean.
+    pub window: Window,
+    /// The statistics of `a − b` seed by seed, in the metric's unit (fractions of the
+    /// region, metres).
+    #[serde(flatten)]
+    pub differences: Differences,
+}
+
 /// Two variants compared on one metric: an object of `paired` in `table.json`.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Paired {
@@ -128,14 +142,9 @@ pub struct Paired {
     pub a: Variant,
     /// The second variant.
     pub b: Variant,
-    /// The metric: `ua`, `oa`, `target_set_area` or `loc_error_m`.
-    pub metric: &'static str,
-    /// Which of its values: `final` (the table's row from `summary.json`) or the steady
-    /// window's mean.
-    pub window: Window,
-    /// The statistics of `a − b`, in the metric's unit (fractions of the region, metres).
+    /// The metric, its window and the statistics of `a − b`.
     #[serde(flatten)]
-    pub differences: Differences,
+    pub compared: PairedMetric,
 }
 
 /// Every two variants of `results` (in order, `a` before `b`), on every metric of
@@ -150,17 +159,11 @@ pub(super) fn compare(results: &[(Variant, Vec<Vec<Option<f64>>>)]) -> Vec<Paire
     for (i, (a, a_runs)) in results.iter().enumerate() {
         for (b, b_runs) in &results[i + 1..] {
             let metrics = compare_metrics(|key| column(a_runs, key), |key| column(b_runs, key));
-            paired.extend(
-                metrics
-                    .into_iter()
-                    .map(|(metric, window, differences)| Paired {
-                        a: *a,
-                        b: *b,
-                        metric,
-                        window,
-                        differences,
-                    }),
-            );
+            paired.extend(metrics.into_iter().map(|compared| Paired {
+                a: *a,
+                b: *b,
+                compared,
+            }));
         }
     }
     paired
@@ -172,12 +175,16 @@ pub(super) fn compare(results: &[(Variant, Vec<Vec<Option<f64>>>)]) -> Vec<Paire
 pub(super) fn compare_metrics(
     a: impl Fn(&str) -> Option<Vec<Option<f64>>>,
     b: impl Fn(&str) -> Option<Vec<Option<f64>>>,
-) -> Vec<(&'static str, Window, Differences)> {
+) -> Vec<PairedMetric> {
     let mut compared = Vec::new();
     for metric in &COMPARED {
         for (window, key) in Window::BOTH.into_iter().zip(metric.rows) {
             if let (Some(a), Some(b)) = (a(key), b(key)) {
-                compared.push((metric.metric, window, Differences::of(&a, &b)));
+                compared.push(PairedMetric {
+                    metric: metric.metric,
+                    window,
+                    differences: Differences::of(&a, &b),
+                });
             }
         }
     }
@@ -189,12 +196,8 @@ pub(super) trait Comparison {
     /// The row's first cells, naming the sides (`paper − setfleet`); rows with the same
     /// sides and metric are one row of the table, final and window.
     fn sides(&self) -> String;
-    /// The metric, a `metric` of [`COMPARED`].
-    fn metric(&self) -> &'static str;
-    /// Which of its values.
-    fn window(&self) -> Window;
-    /// The statistics of the differences.
-    fn differences(&self) -> &Differences;
+    /// The metric (a `metric` of [`COMPARED`]), its window and the differences.
+    fn compared(&self) -> &PairedMetric;
 }
 
 impl Comparison for Paired {
@@ -202,16 +205,8 @@ impl Comparison for Paired {
         format!("{} − {}", self.a.name(), self.b.name())
     }
 
-    fn metric(&self) -> &'static str {
-        self.metric
-    }
-
-    fn window(&self) -> Window {
-        self.window
-    }
-
-    fn differences(&self) -> &Differences {
-        &self.differences
+    fn compared(&self) -> &PairedMetric {
+        &self.compared
     }
 }
 
@@ -264,21 +259,24 @@ pub(super) fn write_section<C: Comparison>(sides: &Sides<'_>, compared: &[C], md
     );
     let lead = "---|".repeat(heads.split('|').count());
     let _ = writeln!(md, "|{lead}---|---:|---:|---:|---:|");
-    for c in compared.iter().filter(|c| c.window() == Window::Final) {
-        let Some(metric) = COMPARED.iter().find(|m| m.metric == c.metric()) else {
+    for (c, at_end) in compared.iter().map(|c| (c, c.compared())) {
+        if at_end.window != Window::Final {
+            continue;
+        }
+        let Some(metric) = COMPARED.iter().find(|m| m.metric == at_end.metric) else {
             continue;
         };
         let names = c.sides();
-        let steady = compared.iter().find(|s| {
-            s.window() == Window::Steady && s.metric() == c.metric() && s.sides() == names
+        let steady = compared.iter().map(|s| (s, s.compared())).find(|(s, d)| {
+            d.window == Window::Steady && d.metric == at_end.metric && s.sides() == names
         });
         let scale = metric.scale();
         let cells = |d: Option<&Differences>| match d {
             Some(d) if d.n > 0 => [format_difference(d, scale), format_counts(d)],
             _ => ["-".into(), "-".into()],
         };
-        let [final_delta, final_counts] = cells(Some(c.differences()));
-        let [steady_delta, steady_counts] = cells(steady.map(|s| s.differences()));
+        let [final_delta, final_counts] = cells(Some(&at_end.differences));
+        let [steady_delta, steady_counts] = cells(steady.map(|(_, d)| &d.differences));
         let _ = writeln!(
             md,
             "| {names} | {} | {final_delta} | {final_counts} | {steady_delta} | {steady_counts} |",

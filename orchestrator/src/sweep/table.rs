@@ -620,7 +620,12 @@ mod tests {
         assert_eq!(table.paired.len(), 3 * 4 * 2);
         let first = &table.paired[0];
         assert_eq!(
-            (first.a, first.b, first.metric, first.window),
+            (
+                first.a,
+                first.b,
+                first.compared.metric,
+                first.compared.window
+            ),
             (
                 Variant::Paper,
                 Variant::Setfleet,
@@ -629,19 +634,19 @@ mod tests {
             )
         );
         // d = 0.2, 0.1, 0 on seeds 1 to 3: mean 0.1, sd 0.1.
-        let d = &first.differences;
+        let d = &first.compared.differences;
         assert_eq!((d.n, d.a_better, d.b_better, d.ties), (3, 0, 2, 1));
         assert!((d.mean.unwrap() - 0.1).abs() < 1e-12);
         assert!((d.sd.unwrap() - 0.1).abs() < 1e-12);
         let steady = &table.paired[1];
-        assert_eq!(steady.window, paired::Window::Steady);
-        assert_eq!(steady.differences.n, 3);
+        assert_eq!(steady.compared.window, paired::Window::Steady);
+        assert_eq!(steady.compared.differences.n, 3);
         let last = table.paired.last().unwrap();
         assert_eq!(
-            (last.a, last.b, last.metric),
+            (last.a, last.b, last.compared.metric),
             (Variant::Setfleet, Variant::Nomap, "loc_error_m")
         );
-        assert_eq!(last.differences.n, 0);
+        assert_eq!(last.compared.differences.n, 0);
         let json = serde_json::to_value(&table).unwrap();
         assert_eq!(json["steady_window_s"], serde_json::json!([100.0, 300.0]));
         let p = &json["paired"][1];

@@ -474,12 +474,23 @@ mod tests {
         obstacles: &[ObstacleCell],
         others: &[PlannedView],
     ) -> Decision {
+        decide_from(params, start(), sets, obstacles, others)
+    }
+
+    /// UAV 1's decision from `state`, nothing recently hidden.
+    fn decide_from(
+        params: &GuidanceParams,
+        state: UavState,
+        sets: &[&CellSet],
+        obstacles: &[ObstacleCell],
+        others: &[PlannedView],
+    ) -> Decision {
         let hidden = CellSet::empty(&params.grids.fine);
         plan(
             params,
             &PlanningInput {
                 uav: 1,
-                state: start(),
+                state,
                 sets,
                 recently_hidden: &hidden,
                 obstacles,
@@ -564,22 +575,12 @@ mod tests {
         s.guidance.border = PlanBorder::Region;
         let params = GuidanceParams::from_scenario(&s);
         // Near the east border heading east: most sequences leave; the chosen one must not.
-        let hidden = CellSet::empty(&params.grids.fine);
         let everything = CellSet::full(&params.grids.fine);
-        let d = plan(
-            &params,
-            &PlanningInput {
-                uav: 0,
-                state: UavState {
-                    position: Point3::new(125.0, 0.0, 60.0),
-                    yaw: 0.0,
-                },
-                sets: &[&everything],
-                recently_hidden: &hidden,
-                obstacles: &[],
-                others: &[],
-            },
-        );
+        let east = UavState {
+            position: Point3::new(125.0, 0.0, 60.0),
+            yaw: 0.0,
+        };
+        let d = decide_from(&params, east, &[&everything], &[], &[]);
         assert!(d.excluded > 0);
         assert!(
             d.view
@@ -599,22 +600,12 @@ mod tests {
         let params = GuidanceParams::from_scenario(&s);
         assert_eq!(params.region.max.x, fence);
         assert_eq!(params.region.min.y, -fence);
-        let hidden = CellSet::empty(&params.grids.fine);
         let everything = CellSet::full(&params.grids.fine);
-        let d = plan(
-            &params,
-            &PlanningInput {
-                uav: 0,
-                state: UavState {
-                    position: Point3::new(fence - 30.0, 0.0, 60.0),
-                    yaw: 0.0,
-                },
-                sets: &[&everything],
-                recently_hidden: &hidden,
-                obstacles: &[],
-                others: &[],
-            },
-        );
+        let east = UavState {
+            position: Point3::new(fence - 30.0, 0.0, 60.0),
+            yaw: 0.0,
+        };
+        let d = decide_from(&params, east, &[&everything], &[], &[]);
         assert!(d.excluded > 0, "{d:?}");
         assert!(
             d.view
@@ -637,19 +628,7 @@ mod tests {
             s.guidance.predicted_views = views;
             let params = GuidanceParams::from_scenario(&s);
             let set = blob(&params, Point2::new(50.0, 0.0), 2.0);
-            let hidden = CellSet::empty(&params.grids.fine);
-            plan(
-                &params,
-                &PlanningInput {
-                    uav: 0,
-                    state: start(),
-                    sets: &[&set],
-                    recently_hidden: &hidden,
-                    obstacles: &[],
-                    others: &[],
-                },
-            )
-            .cost
+            decide(&params, &[&set], &[], &[]).cost
         };
         let every_frame = cost(PredictedViews::EveryFrame);
         let period_end = cost(PredictedViews::PeriodEnd);
