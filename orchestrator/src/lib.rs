@@ -32,15 +32,11 @@
 pub mod bench;
 pub mod cli;
 pub mod host_cmd;
-pub mod observe;
-pub mod pictures;
 pub mod render_cmd;
-pub mod results;
 pub mod run;
 pub mod sweep;
 pub mod usage;
 pub mod variant;
-pub mod viewer;
 
 use cli::{BenchKind, Cli, FleetCommand};
 use usage::UsageError;
@@ -69,7 +65,7 @@ impl Outcome {
 
 /// Runs a parsed command line, printing errors to stderr.
 pub fn run(cli: Cli) -> Outcome {
-    if let Err(e) = pictures::register_fonts() {
+    if let Err(e) = fleet_observe::pictures::register_fonts() {
         eprintln!("fleet: {e}");
         return Outcome::Failed;
     }

@@ -8,8 +8,8 @@ use protocol::scenario::Scenario;
 use serde::Serialize;
 use world_server::World;
 
-use crate::pictures::frame::{draw_depth, draw_labels};
-use crate::pictures::topview::draw_topview;
+use fleet_observe::pictures::frame::{draw_depth, draw_labels};
+use fleet_observe::pictures::topview::draw_topview;
 use crate::usage::{ScenarioArgs, UsageError};
 
 /// `fleet render`.

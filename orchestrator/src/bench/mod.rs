@@ -17,58 +17,7 @@ use std::path::Path;
 use serde::Serialize;
 use serde::ser::SerializeMap;
 
-/// Order statistics of a sample of timings (or any measure).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct Stats {
-    /// Sample size.
-    pub n: usize,
-    /// Smallest value.
-    pub min: f64,
-    /// 10th percentile.
-    pub p10: f64,
-    /// Median.
-    pub median: f64,
-    /// 90th percentile.
-    pub p90: f64,
-    /// 99th percentile.
-    pub p99: f64,
-    /// Largest value.
-    pub max: f64,
-    /// Mean.
-    pub mean: f64,
-}
-
-impl Stats {
-    /// Statistics of `samples` (non-finite values are dropped); `None` if nothing is left.
-    pub fn from_samples(samples: &[f64]) -> Option<Stats> {
-        let mut v: Vec<f64> = samples.iter().copied().filter(|x| x.is_finite()).collect();
-        if v.is_empty() {
-            return None;
-        }
-        v.sort_by(f64::total_cmp);
-        let q = |p: f64| {
-            // Nearest-rank percentile: the smallest value with at least p of the sample at or
-            // below it.
-            let rank = ((p * v.len() as f64).ceil() as usize).clamp(1, v.len());
-            v[rank - 1]
-        };
-        let median = if v.len() % 2 == 1 {
-            v[v.len() / 2]
-        } else {
-            (v[v.len() / 2 - 1] + v[v.len() / 2]) / 2.0
-        };
-        Some(Stats {
-            n: v.len(),
-            min: v[0],
-            p10: q(0.10),
-            median,
-            p90: q(0.90),
-            p99: q(0.99),
-            max: v[v.len() - 1],
-            mean: v.iter().sum::<f64>() / v.len() as f64,
-        })
-    }
-}
+pub use fleet_observe::stats::Stats;
 
 /// The machine a benchmark ran on.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -163,7 +112,7 @@ impl BenchReport {
         BenchReport {
             kind: kind.to_owned(),
             command: std::env::args().collect::<Vec<_>>().join(" "),
-            date: utc_now_rfc3339(),
+            date: fleet_observe::clock::utc_now_rfc3339(),
             machine: MachineInfo::detect(),
             summary: BTreeMap::new(),
             cases: Vec::new(),
@@ -240,57 +189,9 @@ fn format_value(v: f64) -> String {
     }
 }
 
-/// The current UTC time as RFC 3339 (seconds), without a date crate.
-pub fn utc_now_rfc3339() -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    format_utc(secs)
-}
-
-fn format_utc(secs: u64) -> String {
-    let days = (secs / 86_400) as i64;
-    let rem = secs % 86_400;
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    format!(
-        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn stats_use_nearest_rank_percentiles() {
-        let v: Vec<f64> = (1..=10).map(f64::from).collect();
-        let s = Stats::from_samples(&v).unwrap();
-        assert_eq!(
-            (s.min, s.p10, s.median, s.p90, s.max),
-            (1.0, 1.0, 5.5, 9.0, 10.0)
-        );
-        assert_eq!(s.p99, 10.0);
-        assert!(Stats::from_samples(&[f64::NAN]).is_none());
-    }
-
-    #[test]
-    fn dates_are_rfc3339_utc() {
-        assert_eq!(format_utc(0), "1970-01-01T00:00:00Z");
-        assert_eq!(format_utc(951_782_400), "2000-02-29T00:00:00Z");
-        assert_eq!(format_utc(1_700_000_000), "2023-11-14T22:13:20Z");
-    }
 
     #[test]
     fn report_json_has_the_headline_keys_at_the_top() {

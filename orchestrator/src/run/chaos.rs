@@ -32,7 +32,7 @@ use rand_chacha::ChaCha8Rng;
 use protocol::scenario::Scenario;
 use protocol::timeouts::Timeouts;
 
-use super::config::{Fault, FaultKind, FaultOrigin};
+use fleet_observe::faults::{Fault, FaultKind, FaultOrigin};
 
 /// Faults per minute of simulated time when `--chaos-faults` is not given.
 pub const FAULTS_PER_MINUTE: f64 = 6.0;

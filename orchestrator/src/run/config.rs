@@ -1,20 +1,20 @@
 //! `fleet run`'s command line: raw clap arguments, and their validation into a [`RunConfig`]
 //! whose errors name the flag or scenario key and the accepted range (exit code 2).
 
-use std::fmt;
 use std::path::PathBuf;
-use std::str::FromStr;
 
 use clap::{Args, ValueEnum};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use world_server::server::StepMode;
 
+use fleet_observe::faults::{Fault, FaultKind};
+
 use super::chaos;
 use super::hosts::{HostLayout, RemoteHost};
 use crate::usage::{ScenarioArgs, UsageError};
 use crate::variant::Variant;
-use crate::viewer::{LiveAddress, ViewConfig};
+use fleet_observe::viewer::{LiveAddress, ViewConfig};
 
 /// The flags that make a run's scenario, shared by `fleet run` and `fleet host` so that the
 /// same flags give every host the same scenario.
@@ -137,118 +137,6 @@ pub enum ModeArg {
     Lockstep,
     /// The world advances every `T / speedup` of wall time.
     Realtime,
-}
-
-/// What a fault does.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum FaultKind {
-    /// SIGKILL the agent's process.
-    Kill,
-    /// Start the agent again (same id).
-    Restart,
-    /// SIGSTOP the agent's process, and SIGCONT it after a wall-clock delay.
-    Pause,
-}
-
-impl FaultKind {
-    /// The name on the command line and in `summary.json`.
-    pub fn name(self) -> &'static str {
-        match self {
-            FaultKind::Kill => "kill",
-            FaultKind::Restart => "restart",
-            FaultKind::Pause => "pause",
-        }
-    }
-}
-
-/// Where a fault comes from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum FaultOrigin {
-    /// A `--fault` of the command line.
-    Explicit,
-    /// The `--chaos` schedule.
-    Chaos,
-}
-
-/// A fault to inject: `kind` on UAV `uav` once simulated time reaches `at_s`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Fault {
-    /// What to do.
-    pub kind: FaultKind,
-    /// The UAV.
-    pub uav: u32,
-    /// Simulated time, seconds.
-    pub at_s: f64,
-    /// How long a pause lasts, seconds of wall time (`Some` exactly for a pause): the world
-    /// is simulated, but a stopped process is stopped in real time.
-    pub pause_s: Option<f64>,
-    /// A `--fault` or the `--chaos` schedule.
-    pub origin: FaultOrigin,
-}
-
-/// Why a `--fault` value could not be read.
-#[derive(Debug, thiserror::Error, PartialEq, Eq)]
-#[error(
-    "{0:?}: expected kill:UAV@S, restart:UAV@S or pause:UAV@S+D (S seconds of simulated time, \
-     D seconds of wall time), e.g. kill:1@30 or pause:1@30+8"
-)]
-pub struct FaultParseError(String);
-
-impl FromStr for Fault {
-    type Err = FaultParseError;
-
-    fn from_str(text: &str) -> Result<Fault, FaultParseError> {
-        let bad = || FaultParseError(text.to_owned());
-        let (kind, rest) = text.split_once(':').ok_or_else(bad)?;
-        let kind = match kind.trim() {
-            "kill" => FaultKind::Kill,
-            "restart" => FaultKind::Restart,
-            "pause" => FaultKind::Pause,
-            _ => return Err(bad()),
-        };
-        let (uav, when) = rest.split_once('@').ok_or_else(bad)?;
-        let uav = uav.trim().parse().map_err(|_| bad())?;
-        let (at, pause) = match kind {
-            FaultKind::Pause => {
-                let (at, pause) = when.split_once('+').ok_or_else(bad)?;
-                (at, Some(pause))
-            }
-            FaultKind::Kill | FaultKind::Restart => (when, None),
-        };
-        let at_s: f64 = at.trim().parse().map_err(|_| bad())?;
-        if !at_s.is_finite() {
-            return Err(bad());
-        }
-        let pause_s = match pause {
-            Some(p) => {
-                let p: f64 = p.trim().parse().map_err(|_| bad())?;
-                if !(p.is_finite() && p > 0.0) {
-                    return Err(bad());
-                }
-                Some(p)
-            }
-            None => None,
-        };
-        Ok(Fault {
-            kind,
-            uav,
-            at_s,
-            pause_s,
-            origin: FaultOrigin::Explicit,
-        })
-    }
-}
-
-impl fmt::Display for Fault {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}@{}", self.kind.name(), self.uav, self.at_s)?;
-        if let Some(p) = self.pause_s {
-            write!(f, "+{p}")?;
-        }
-        Ok(())
-    }
 }
 
 /// A validated `fleet run`.
@@ -433,7 +321,7 @@ pub fn check_faults(faults: &[Fault], scenario: &Scenario) -> Result<Vec<Fault>,
 /// `runs/<prefix><UTC timestamp>`, e.g. `runs/20250101T120000Z` or
 /// `runs/sweep-20250101T120000Z`.
 pub fn default_out_dir(prefix: &str) -> PathBuf {
-    let stamp: String = crate::bench::utc_now_rfc3339()
+    let stamp: String = fleet_observe::clock::utc_now_rfc3339()
         .chars()
         .filter(|c| !matches!(c, '-' | ':'))
         .collect();
@@ -454,58 +342,10 @@ pub fn new_run_id(sequence: u32) -> RunId {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use fleet_observe::faults::FaultOrigin;
 
     fn scenario() -> Scenario {
         Scenario::load(None, &["duration_s=60".into(), "uavs.count=2".into()]).unwrap()
-    }
-
-    #[test]
-    fn faults_parse_and_print_back() {
-        let f: Fault = "kill:1@30".parse().unwrap();
-        assert_eq!(
-            f,
-            Fault {
-                kind: FaultKind::Kill,
-                uav: 1,
-                at_s: 30.0,
-                pause_s: None,
-                origin: FaultOrigin::Explicit,
-            }
-        );
-        assert_eq!(f.to_string(), "kill:1@30");
-        assert_eq!("restart:0@2.5".parse::<Fault>().unwrap().at_s, 2.5);
-        let p: Fault = "pause:2@12.5+8".parse().unwrap();
-        assert_eq!(
-            (p.kind, p.uav, p.at_s, p.pause_s),
-            (FaultKind::Pause, 2, 12.5, Some(8.0))
-        );
-        assert_eq!(p.to_string(), "pause:2@12.5+8");
-        assert_eq!(
-            " pause : 0 @ 1 + 0.5 ".parse::<Fault>().unwrap().pause_s,
-            Some(0.5)
-        );
-        for bad in [
-            "kill",
-            "kill:1",
-            "stop:1@3",
-            "kill:x@3",
-            "kill:1@nan",
-            "kill:-1@3",
-            "kill:1@3+2",
-            "restart:1@3+2",
-            "pause:1@3",
-            "pause:1@3+",
-            "pause:1@+2",
-            "pause:1@3+0",
-            "pause:1@3+-1",
-            "pause:1@3+inf",
-            "pause:1@3+2+1",
-        ] {
-            let e = bad.parse::<Fault>().unwrap_err().to_string();
-            for form in ["kill:UAV@S", "restart:UAV@S", "pause:UAV@S+D"] {
-                assert!(e.contains(form), "{bad}: {e}");
-            }
-        }
     }
 
     #[test]

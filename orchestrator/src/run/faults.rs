@@ -8,39 +8,10 @@
 //! ([`StepMetrics::estimated_by`]). 1 is the best there is: the agent's estimate of the very
 //! next step arrived in time.
 
-use serde::Serialize;
 use tokio::time::Instant;
 
-use super::config::{Fault, FaultKind, FaultOrigin};
-use crate::observe::StepMetrics;
-
-/// One fault as injected.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct FaultRecord {
-    /// `kill`, `restart` or `pause`.
-    pub kind: FaultKind,
-    /// The UAV.
-    pub uav: u32,
-    /// The time asked for, seconds of simulated time.
-    pub at_s: f64,
-    /// How long a pause was asked to last, seconds of wall time (`null` for other kinds).
-    pub pause_s: Option<f64>,
-    /// `explicit` (a `--fault`) or `chaos` (the `--chaos` schedule).
-    pub origin: FaultOrigin,
-    /// The step at which it was applied (`null` if the run ended first).
-    pub applied_at_step: Option<u64>,
-    /// The simulated time of that step, seconds.
-    pub applied_at_s: Option<f64>,
-    /// Whether it took effect (a kill found a running agent, a restart started one, a pause
-    /// stopped a running agent that was not stopped already).
-    pub effective: bool,
-    /// A pause: the step at which SIGCONT was sent (the last step the observer had
-    /// acknowledged then); `null` if the agent died or was killed while stopped.
-    pub resumed_at_step: Option<u64>,
-    /// A restart or pause: steps until the agent's estimates were back (see the module
-    /// docs); `null` if they never were, or for a kill.
-    pub resync_steps: Option<u64>,
-}
+use fleet_observe::faults::{Fault, FaultKind, FaultRecord};
+use fleet_observe::observe::StepMetrics;
 
 /// The faults of a run, in the order they apply.
 #[derive(Clone, Debug, Default)]
@@ -125,10 +96,7 @@ impl FaultPlan {
 
     /// Effective restarts of `uav`.
     pub fn restarts(&self, uav: u32) -> u64 {
-        self.records
-            .iter()
-            .filter(|r| r.uav == uav && r.kind == FaultKind::Restart && r.effective)
-            .count() as u64
+        fleet_observe::faults::restarts(&self.records, uav)
     }
 
     /// Every fault with what happened to it.
@@ -170,10 +138,7 @@ impl FaultPlan {
 
     /// The worst and the mean resync over the faults that have one (`None` when none has).
     pub fn resync_max_mean(&self) -> (Option<u64>, Option<f64>) {
-        let all: Vec<u64> = self.records.iter().filter_map(|r| r.resync_steps).collect();
-        let max = all.iter().copied().max();
-        let mean = (!all.is_empty()).then(|| all.iter().sum::<u64>() as f64 / all.len() as f64);
-        (max, mean)
+        fleet_observe::faults::resync_max_mean(&self.records)
     }
 }
 
@@ -229,7 +194,7 @@ mod tests {
     use std::time::Duration;
 
     use super::*;
-    use crate::observe::metrics::SetMetrics;
+    use fleet_observe::observe::metrics::SetMetrics;
 
     fn plan(faults: &[&str]) -> FaultPlan {
         let faults: Vec<Fault> = faults.iter().map(|t| t.parse().unwrap()).collect();

@@ -2,7 +2,7 @@
 //!
 //! [`execute`] is the whole run on a tokio runtime: it cleans what killed runs left, writes
 //! the resolved scenario into the output directory (every child reads that file), starts the
-//! observer thread ([`crate::observe`]), the world-server and one `uav-agent` per UAV
+//! observer thread ([`fleet_observe::observe`]), the world-server and one `uav-agent` per UAV
 //! ([`children`]), then reacts to what happens until the world ends the run:
 //!
 //! - each measured step moves the progress display ([`progress`]);
@@ -21,7 +21,7 @@
 //! [`run`] is the command: it executes, then writes `summary.json`, `timeseries.csv` and the
 //! pictures (with `run.gif`), and prints the summary table. While the run goes on, its
 //! directory holds the run's iceoryx2 configuration for iceoryx2's own tools ([`iox2`]);
-//! with `--record` or `--live` the observer shows the run in Foxglove ([`crate::viewer`]).
+//! with `--record` or `--live` the observer shows the run in Foxglove ([`fleet_observe::viewer`]).
 
 pub mod chaos;
 pub mod children;
@@ -45,15 +45,20 @@ use protocol::timeouts::Timeouts;
 use tokio::signal::unix::{SignalKind, signal};
 use tokio::sync::mpsc;
 
+use fleet_observe::faults::FaultKind;
+use fleet_observe::observe::{self, ObserverConfig, ObserverEvent, ObserverReport, StepMetrics};
+use fleet_observe::results::resources::{Resources, RunSize};
+use fleet_observe::results::summary::{RunFacts, Summary};
+use fleet_observe::results::maps::AnimationSink;
+use fleet_observe::results::{curves, maps, timeseries};
+use fleet_observe::viewer::Viewer;
+
 use crate::Outcome;
-use crate::observe::{self, ObserverConfig, ObserverEvent, ObserverReport, StepMetrics};
-use crate::results::summary::Summary;
-use crate::results::{curves, maps, timeseries};
 use children::{Binaries, Children};
-use config::{FaultKind, RunConfig};
+use config::RunConfig;
 use faults::{DueFault, FaultPlan, PendingResume, Resumes};
 use progress::Progress;
-use resources::{OwnUsage, Resources, RunSize};
+use resources::OwnUsage;
 
 /// Longest wait for a fault to be applied before the observer acknowledges its step.
 const FAULT_WAIT: Duration = Duration::from_secs(10);
@@ -92,6 +97,35 @@ impl RunRecord {
     /// Guarantee violations over the run.
     pub fn violations(&self) -> u64 {
         self.series.iter().map(|m| u64::from(m.violations)).sum()
+    }
+
+    /// What the summary reads of the run.
+    pub fn facts(&self) -> RunFacts<'_> {
+        let config = &self.config;
+        RunFacts {
+            scenario: &config.scenario,
+            variant: config.variant.name(),
+            mode: match config.mode {
+                world_server::server::StepMode::Lockstep => "lockstep",
+                world_server::server::StepMode::Realtime { .. } => "realtime",
+            },
+            chaos_seed: config.chaos_seed,
+            hosts: config.layout.hosts().len() as u16,
+            run_id: config.run_id.as_str(),
+            series: &self.series,
+            observer: self.observer.as_ref(),
+            faults: self.faults.records(),
+            wall_s: self.wall_s,
+            interrupted: self.interrupted || self.failure.is_some(),
+            started_utc: &self.started_utc,
+            leftover_files: self.leftover_files,
+            resources: &self.resources,
+        }
+    }
+
+    /// The run's summary.
+    pub fn summary(&self) -> Summary {
+        Summary::build(&self.facts())
     }
 }
 
@@ -142,7 +176,7 @@ pub fn outcome(record: &RunRecord) -> Outcome {
 pub fn write_results(record: &RunRecord) -> anyhow::Result<Summary> {
     let out = &record.config.out;
     let scenario = &record.config.scenario;
-    let summary = Summary::build(record);
+    let summary = record.summary();
     summary.write_json(&out.join("summary.json"))?;
     timeseries::write(&record.series, &out.join("timeseries.csv"))?;
     let title = format!(
@@ -155,9 +189,9 @@ pub fn write_results(record: &RunRecord) -> anyhow::Result<Summary> {
         if let Some(state) = &observer.final_state {
             maps::draw_sets(state, &observer.tracks, scenario, &out.join("sets.png"))?;
         }
-        if let Some(gif) = &observer.animation {
-            let path = out.join("run.gif");
-            std::fs::write(&path, gif)
+        for file in &observer.files {
+            let path = out.join(file.name);
+            std::fs::write(&path, &file.bytes)
                 .with_context(|| format!("cannot write {}", path.display()))?;
         }
     }
@@ -176,7 +210,7 @@ enum Ending {
 pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecord> {
     let started = Instant::now();
     let own_at_start = protocol::resources::own_usage().ok();
-    let started_utc = crate::bench::utc_now_rfc3339();
+    let started_utc = fleet_observe::clock::utc_now_rfc3339();
     let run = &config.run_id;
     let out = &config.out;
     let logs = out.join("logs");
@@ -212,7 +246,11 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
             fault_times: plan.times(),
             fault_wait: FAULT_WAIT,
             resumed: resumed.clone(),
-            view: config.view.clone(),
+            sinks: vec![
+                Viewer::maker(config.view.clone()),
+                AnimationSink::maker(),
+            ],
+            shown_uav: config.view.uav,
         },
         stop.clone(),
         events_tx,
@@ -354,7 +392,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
     let observer = join_observer(observer).await;
     let observer = match observer {
         Ok(report) => {
-            if let Some(why) = &report.viewer_failure {
+            if let Some(why) = &report.sink_failure {
                 failure.get_or_insert_with(|| why.clone());
             }
             Some(report)
@@ -421,7 +459,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         sim_s: steps as f64 * config.scenario.timing.cvs_period_s,
         wall_s,
     };
-    let resources = Resources::gather(&own, children.exited(), &logs, size);
+    let resources = resources::gather(&own, children.exited(), &logs, size);
     Ok(RunRecord {
         config: config.clone(),
         series,

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::observe::StepMetrics;
+use fleet_observe::observe::StepMetrics;
 
 /// The progress display of one run.
 pub struct Progress {

@@ -46,9 +46,9 @@ use super::Shard;
 use super::collect::{FoundRuns, assemble, write_table};
 use super::paired::{self, Comparison, PairedMetric, Sides, compare_metrics};
 use super::table::{Cell, ROWS, format_cell, seed_range};
-use crate::observe::StepMetrics;
-use crate::pictures::{FONT, palette, short_number};
-use crate::results::curves::draw_bands;
+use fleet_observe::observe::StepMetrics;
+use fleet_observe::pictures::{FONT, palette, short_number};
+use fleet_observe::results::curves::draw_bands;
 use crate::variant::Variant;
 
 /// Most values an axis takes.
@@ -842,7 +842,7 @@ mod tests {
 
     #[test]
     fn the_axis_picture_is_drawn() {
-        crate::pictures::register_fonts().unwrap();
+        fleet_observe::pictures::register_fonts().unwrap();
         let dir = std::env::temp_dir().join(format!("setfleet-axis-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         for text in ["comms.loss=0,0.5", "estimator.sets=cells,reach"] {

@@ -13,9 +13,9 @@ use serde::Deserialize as _;
 
 use super::table::{ROW_COUNT, SummaryValues, Table, run_values};
 use crate::Outcome;
-use crate::observe::StepMetrics;
-use crate::results::curves::draw_sweep;
-use crate::results::timeseries;
+use fleet_observe::observe::StepMetrics;
+use fleet_observe::results::curves::draw_sweep;
+use fleet_observe::results::timeseries;
 use crate::variant::Variant;
 
 /// A validated `fleet sweep --merge`.
@@ -284,7 +284,7 @@ pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Resul
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::results::summary::Summary;
+    use fleet_observe::results::summary::Summary;
 
     /// Writes a fake run of `variant` and `seed` under `dir` as a sweep would.
     fn fake_run(dir: &Path, variant: Variant, seed: u64, ua: f64) {
@@ -304,7 +304,7 @@ mod tests {
         let step = StepMetrics {
             step: 1,
             time_s: 0.5,
-            mean: Some(crate::observe::metrics::SetMetrics {
+            mean: Some(fleet_observe::observe::metrics::SetMetrics {
                 ua,
                 ..Default::default()
             }),
@@ -315,7 +315,7 @@ mod tests {
 
     #[test]
     fn merged_sweeps_give_the_table_of_all_their_runs() {
-        crate::pictures::register_fonts().unwrap();
+        fleet_observe::pictures::register_fonts().unwrap();
         let root = std::env::temp_dir().join(format!("setfleet-merge-{}", std::process::id()));
         let (a, b, out) = (root.join("a"), root.join("b"), root.join("out"));
         fake_run(&a, Variant::Paper, 1, 0.4);

@@ -24,7 +24,7 @@ use tokio::signal::unix::{SignalKind, signal};
 
 use super::PlannedRun;
 use crate::Outcome;
-use crate::results::summary::Summary;
+use fleet_observe::results::summary::Summary;
 use crate::run::{execute, outcome, write_results};
 
 /// How one run ended.

@@ -235,7 +235,7 @@ impl SweepArgs {
                     listen: None,
                     tls: None,
                     insecure_links: false,
-                    view: crate::viewer::ViewConfig::default(),
+                    view: fleet_observe::viewer::ViewConfig::default(),
                 },
             });
         }

@@ -22,9 +22,9 @@ use std::fmt::Write as _;
 use serde::{Deserialize, Serialize};
 
 use super::paired::{self, Paired};
-use crate::observe::StepMetrics;
-use crate::observe::metrics::SetMetrics;
-use crate::results::curves::mean_sd;
+use fleet_observe::observe::StepMetrics;
+use fleet_observe::observe::metrics::SetMetrics;
+use fleet_observe::results::curves::mean_sd;
 use crate::variant::Variant;
 
 /// The steady window of the `*_window` rows and of the paired comparisons: the steps whose
@@ -458,7 +458,7 @@ pub(super) fn format_cell(cell: &Cell, scale: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::results::summary::Summary;
+    use fleet_observe::results::summary::Summary;
 
     /// The row values of a run with these final UA and OA and no time series.
     fn values(ua: f64, oa: Option<f64>) -> Vec<Option<f64>> {

@@ -30,7 +30,7 @@ use protocol::wire::MAX_UAVS;
 use world_server::server::StepMode;
 
 use crate::Outcome;
-use crate::results::summary::Summary;
+
 use crate::run::config::{RunConfig, default_out_dir, new_run_id};
 use crate::run::hosts::HostLayout;
 use crate::run::{execute, runtime, write_results};
@@ -182,7 +182,7 @@ impl BenchScaleArgs {
                     listen: None,
                     tls: None,
                     insecure_links: false,
-                    view: crate::viewer::ViewConfig::default(),
+                    view: fleet_observe::viewer::ViewConfig::default(),
                     layout: HostLayout::single(uavs),
                 },
             });
@@ -224,7 +224,7 @@ pub fn run(config: &ScaleConfig) -> anyhow::Result<Outcome> {
                 if let Err(e) = &written {
                     eprintln!("fleet: [{label}] cannot write the run's results: {e:#}");
                 }
-                ScaleRow::of_run(point, &record, &Summary::build(&record), written.is_ok())
+                ScaleRow::of_run(point, &record, &record.summary(), written.is_ok())
             }
             Err(e) => {
                 eprintln!("fleet: [{label}] the run failed: {e:#}");

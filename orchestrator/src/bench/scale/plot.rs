@@ -9,7 +9,7 @@ use plotters::prelude::*;
 
 use super::ScaleConfig;
 use super::report::{GOAL_RTF_16, RowStatus, ScaleRow};
-use crate::pictures::{FONT, palette, short_number};
+use fleet_observe::pictures::{FONT, palette, short_number};
 
 /// One panel: its points (fleet size, value) and how its y axis reads.
 struct Panel {

@@ -14,9 +14,9 @@ use serde_json::{Value, json};
 
 use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint};
 use crate::bench::{BenchCase, BenchReport, Metrics};
-use crate::results::summary::Summary;
+use fleet_observe::results::summary::Summary;
 use crate::run::RunRecord;
-use crate::run::resources::ProcessResources;
+use fleet_observe::results::resources::ProcessResources;
 
 /// The goal: real-time factor of a 16-UAV fleet (on 2 cores).
 pub const GOAL_RTF_16: f64 = 2.0;

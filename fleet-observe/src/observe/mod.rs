@@ -18,7 +18,7 @@
 //! What is measured ([`metrics`] has the details):
 //! - **per agent**, on the sets that agent holds after its own fusion of the step (its
 //!   estimate fused with those of the peers it fuses, by the agents' law and the agents' own
-//!   radio: range, loss and latency, [`uav_agent::agent::radio`]; with a latency of `d`
+//!   radio: range, loss and latency, `Radio`; with a latency of `d`
 //!   steps the observer keeps the estimates of the last `d` steps it measured):
 //!   explored, UA, OA, target-set area, localisation error, identified count
 //!   ([`StepMetrics::agents`]), summarised as the mean over agents ([`StepMetrics::mean`])
@@ -27,15 +27,16 @@
 //!   targets identified by any agent ([`StepMetrics::identified_any`]), traffic, and the
 //!   fleet's map (every map update merged).
 //!
-//! What is shown: with [`ObserverConfig::view`] on, each measured step goes to the Foxglove
-//! [`Viewer`] (the recording and the live view), with the chosen UAV's camera frames (the
-//! observer subscribes to that UAV's frames, lossy like every frame subscriber) and the
-//! guidance token's plans (decoded then); every run draws `run.gif` ([`Animation`]) from the
-//! same steps. Both only read what was measured: the run is the same with them or without.
+//! What is shown: each measured step goes to the run's [`sink::Sink`]s
+//! ([`ObserverConfig::sinks`]: the Foxglove viewer, `run.gif`), with the camera frames of the
+//! UAV a sink asks for (the observer subscribes to that UAV's frames, lossy like every frame
+//! subscriber) and the guidance token's plans (decoded then). Sinks only read what was
+//! measured: the run is the same with them or without.
 //!
 //! Signals are left to the tokio side ([`SignalHandlingMode::Disabled`]).
 
 pub mod metrics;
+pub mod sink;
 pub mod tally;
 
 use std::collections::{BTreeMap, VecDeque};
@@ -70,16 +71,14 @@ use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::EstimateInbox;
 use uav_agent::occupancy::OccupancyMap;
 
-use crate::results::maps::{Animation, FRAME_PERIOD_S};
-use crate::viewer::{StepView, ViewConfig, Viewer};
 use metrics::{
     AgentSpread, EstimateObserveError, FusedSets, ObservedEstimate, SetMetrics, identified_ids,
     violations,
 };
+use sink::{Sink, SinkMaker, StepView};
 use tally::{AgentTally, Comms, ServiceKind};
 
 /// What the observer needs to know about the run.
-#[derive(Clone, Debug)]
 pub struct ObserverConfig {
     /// The run.
     pub run: RunId,
@@ -95,8 +94,10 @@ pub struct ObserverConfig {
     /// The next ack announces them to the world as it does restarts, so a lockstep world
     /// that skipped a stopped agent waits for it before its next frame instead of running on.
     pub resumed: Arc<AtomicU32>,
-    /// What the run is shown to (Foxglove).
-    pub view: ViewConfig,
+    /// What the run is shown to (Foxglove, `run.gif`).
+    pub sinks: Vec<SinkMaker>,
+    /// The UAV whose sets are shown (the lowest id's when its estimate of a step is missing).
+    pub shown_uav: u32,
 }
 
 /// The metrics of one step.
@@ -208,10 +209,10 @@ pub struct ObserverReport {
     pub stepping: Option<Duration>,
     /// Where the observer thread's time went ([`phase`]): thread CPU and wall time.
     pub phases: PhaseTimes,
-    /// `run.gif`, when it could be made.
-    pub animation: Option<Vec<u8>>,
-    /// Why the recording or the live view failed, if it did.
-    pub viewer_failure: Option<String>,
+    /// The files the sinks made (`run.gif`), to be written into the run's output.
+    pub files: Vec<sink::SinkFile>,
+    /// Why an essential sink (the recording or the live view) failed, if one did.
+    pub sink_failure: Option<String>,
 }
 
 /// What the observer says once it has started.
@@ -242,14 +243,17 @@ pub mod phase {
 /// thread ends at the world's end of run or once `stop` is raised (checked every few tens of
 /// milliseconds).
 pub fn spawn(
-    config: ObserverConfig,
+    mut config: ObserverConfig,
     stop: Arc<AtomicBool>,
     events: UnboundedSender<ObserverEvent>,
 ) -> anyhow::Result<(JoinHandle<anyhow::Result<ObserverReport>>, ObserverStarted)> {
     let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel(1);
     let thread = std::thread::Builder::new()
         .name("observer".into())
-        .spawn(move || observe(&config, &stop, &events, &ready_tx))
+        .spawn(move || {
+            let sinks = std::mem::take(&mut config.sinks);
+            observe(&config, sinks, &stop, &events, &ready_tx)
+        })
         .context("cannot start the observer thread")?;
     match ready_rx.recv() {
         Ok(started) => Ok((thread, started)),
@@ -340,6 +344,7 @@ impl Ports {
 
 fn observe(
     config: &ObserverConfig,
+    makers: Vec<SinkMaker>,
     stop: &AtomicBool,
     events: &UnboundedSender<ObserverEvent>,
     ready: &std::sync::mpsc::SyncSender<ObserverStarted>,
@@ -348,21 +353,23 @@ fn observe(
     let uavs = config.scenario.uavs.count;
     let node = RunNode::new(&config.run, RunNode::OBSERVER, SignalHandlingMode::Disabled)
         .context("cannot create the observer's iceoryx2 node")?;
-    // The city, for the viewer and the animation (the same the world builds).
+    // The city, for the sinks (the same the world builds).
     let world = world_server::World::new(&config.scenario)
-        .context("cannot rebuild the city for run.gif and the viewer")?;
+        .context("cannot rebuild the city for the run's views")?;
     let buildings = &world.scene().buildings;
-    let viewer = Viewer::start(&config.view, &config.scenario, buildings)?;
+    let mut sinks = Vec::new();
+    for make in makers {
+        if let Some(sink) = make(&config.scenario, buildings).map_err(|e| anyhow::anyhow!(e))? {
+            sinks.push(sink);
+        }
+    }
     let started = ObserverStarted {
-        live_url: viewer.as_ref().and_then(Viewer::live_url),
+        live_url: sinks.iter().find_map(|s| s.live_url()),
     };
     // The spawner waits for this; it is gone only if the spawner is.
     let _ = ready.send(started);
-    let animation = Animation::new(&config.scenario, buildings)
-        .map_err(|e| tracing::warn!(error = %e, "no run.gif"))
-        .ok();
     drop(world);
-    let camera = config.view.is_on().then_some(config.view.uav);
+    let camera = sinks.iter().find_map(|s| s.camera());
     let ports = Ports::open(&node, uavs, camera).context("cannot open the observer's ports")?;
     let waitset = node.waitset()?;
     let _guard = waitset
@@ -391,8 +398,8 @@ fn observe(
             geofence_overrides: vec![0; uavs as usize],
             stepping: None,
             phases: PhaseTimes::new(),
-            animation: None,
-            viewer_failure: None,
+            files: Vec::new(),
+            sink_failure: None,
         },
         estimator,
         truths: VecDeque::new(),
@@ -402,11 +409,9 @@ fn observe(
         end_of_run: false,
         first_truth: None,
         clock,
-        viewer,
-        animation,
-        frame_every: (FRAME_PERIOD_S / config.scenario.timing.cvs_period_s)
-            .round()
-            .max(1.0) as u64,
+        camera,
+        shows_plans: sinks.iter().any(|s| s.shows_plans()),
+        sinks,
         plans: (0, BTreeMap::new()),
         oem_changed: false,
     };
@@ -440,10 +445,12 @@ struct Observer<'a> {
     end_of_run: bool,
     first_truth: Option<Instant>,
     clock: PhaseClock,
-    viewer: Option<Viewer>,
-    animation: Option<Animation>,
-    /// Steps between two frames of the animation.
-    frame_every: u64,
+    /// What the run is shown to.
+    sinks: Vec<Box<dyn Sink>>,
+    /// The UAV whose camera frames a sink shows.
+    camera: Option<u32>,
+    /// Whether a sink shows the guidance plans.
+    shows_plans: bool,
     /// The newest guidance round seen and its plans, by UAV (the first plan seen of each).
     plans: (u64, BTreeMap<u32, PlannedView>),
     /// Whether the fleet's map changed since the last step shown.
@@ -555,9 +562,9 @@ impl Observer<'_> {
         self.drain_frames();
     }
 
-    /// Hands the shown UAV's frames of this run to the viewer.
+    /// Hands the shown UAV's frames of this run to the sinks that show them.
     fn drain_frames(&mut self) {
-        let (Some(frames), Some(viewer)) = (&self.ports.frames, &mut self.viewer) else {
+        let Some(frames) = &self.ports.frames else {
             return;
         };
         loop {
@@ -565,9 +572,13 @@ impl Observer<'_> {
                 Ok(Some(sample)) => {
                     let frame = sample.payload();
                     if frame.header.run_tag == self.run_tag && frame.is_well_formed() {
-                        let before = self.clock.enter(phase::VIEW);
-                        viewer.frame(frame);
-                        self.clock.enter(before);
+                        for sink in &mut self.sinks {
+                            if sink.camera() == self.camera {
+                                let before = self.clock.enter(sink.phase());
+                                sink.frame(frame);
+                                self.clock.enter(before);
+                            }
+                        }
                     }
                 }
                 Ok(None) => return,
@@ -662,7 +673,7 @@ impl Observer<'_> {
                 self.drop_message("token", reason);
                 continue;
             }
-            if self.viewer.is_some() {
+            if self.shows_plans {
                 match codec::decode::<GuidanceToken>(sample.payload()) {
                     Ok(token) => self.note_plans(token),
                     Err(e) => {
@@ -697,45 +708,48 @@ impl Observer<'_> {
         }
     }
 
-    /// Completes the recording, stops the live view and ends the animation.
+    /// Ends every sink, keeping the files they made.
     fn finish_showing(&mut self) {
-        if let Some(viewer) = self.viewer.take()
-            && let Err(e) = viewer.finish()
-        {
-            tracing::error!(error = %e, "the viewer failed");
-            self.report.viewer_failure = Some(e.to_string());
-        }
-        if let Some(animation) = self.animation.take() {
-            match animation.finish() {
-                Ok(bytes) => self.report.animation = Some(bytes),
-                Err(e) => tracing::warn!(error = %e, "no run.gif"),
+        for sink in std::mem::take(&mut self.sinks) {
+            let essential = sink.essential();
+            match sink.finish() {
+                Ok(file) => self.report.files.extend(file),
+                Err(e) => self.sink_failed(essential, &*e),
             }
         }
     }
 
-    /// Shows a measured step: to the viewer, and as a frame of the animation when one is due.
+    /// Shows a measured step to every sink; a sink that fails is abandoned.
     fn show(&mut self, truth: &TruthState, sets: Option<(u32, &FusedSets)>, step: &StepMetrics) {
-        if let Some(viewer) = &mut self.viewer {
-            let before = self.clock.enter(phase::VIEW);
-            viewer.step(&StepView {
-                truth,
-                sets,
-                oem: &self.report.oem,
-                oem_changed: std::mem::take(&mut self.oem_changed),
-                plans: &self.plans.1,
-                metrics: step,
-            });
-            self.clock.enter(before);
-        }
-        if let Some(animation) = &mut self.animation
-            && truth.step.is_multiple_of(self.frame_every)
-        {
-            let before = self.clock.enter(phase::ANIMATION);
-            if let Err(e) = animation.add(truth, sets) {
-                tracing::warn!(error = %e, "run.gif abandoned");
-                self.animation = None;
+        let view = StepView {
+            truth,
+            sets,
+            oem: &self.report.oem,
+            oem_changed: std::mem::take(&mut self.oem_changed),
+            plans: &self.plans.1,
+            metrics: step,
+        };
+        let mut failed = Vec::new();
+        for (i, sink) in self.sinks.iter_mut().enumerate() {
+            let before = self.clock.enter(sink.phase());
+            if let Err(e) = sink.step(&view) {
+                failed.push((i, e));
             }
             self.clock.enter(before);
+        }
+        for (i, e) in failed.into_iter().rev() {
+            let sink = self.sinks.remove(i);
+            self.sink_failed(sink.essential(), &*e);
+        }
+    }
+
+    /// Logs a sink's failure; an essential sink's fails the run.
+    fn sink_failed(&mut self, essential: bool, e: &(dyn std::error::Error + Send + Sync)) {
+        if essential {
+            tracing::error!(error = %e, "a view of the run failed");
+            self.report.sink_failure.get_or_insert_with(|| e.to_string());
+        } else {
+            tracing::warn!(error = %e, "a view of the run abandoned");
         }
     }
 
@@ -879,7 +893,7 @@ impl Observer<'_> {
         // the lowest id comes first, and its sets are the ones drawn in `sets.png`.
         let shown = all_fused
             .iter()
-            .find(|(uav, _)| *uav == self.config.view.uav)
+            .find(|(uav, _)| *uav == self.config.shown_uav)
             .or(all_fused.first())
             .map(|(uav, fused)| (*uav, fused));
         self.show(truth, shown, &step);

@@ -31,7 +31,6 @@ pub mod images;
 pub mod scene;
 pub mod topics;
 
-use std::collections::BTreeMap;
 use std::fmt;
 use std::fs::File;
 use std::io::BufWriter;
@@ -47,12 +46,11 @@ use protocol::camera::CameraModel;
 use protocol::frame::CvsFrame;
 use protocol::grid::GroundGrid;
 use protocol::scenario::Scenario;
-use protocol::wire::{PlannedView, TruthState};
-use uav_agent::occupancy::OccupancyMap;
 use world_server::scene::Building;
 
 use crate::observe::StepMetrics;
 use crate::observe::metrics::{FusedSets, SetMetrics};
+use crate::observe::sink::{Sink, SinkError, SinkFile, SinkMaker, StepView};
 use topics::{Channels, FleetMetrics, IMAGE_PERIOD_S, SLOW_PERIOD_S};
 
 /// The port `--live` listens on when none is given (Foxglove's default).
@@ -144,22 +142,6 @@ pub enum ViewerError {
     },
 }
 
-/// One measured step, as the observer hands it over.
-pub struct StepView<'a> {
-    /// The truth of the step.
-    pub truth: &'a TruthState,
-    /// The shown agent and its fused sets (`None` when no estimate of the step arrived).
-    pub sets: Option<(u32, &'a FusedSets)>,
-    /// The fleet's map.
-    pub oem: &'a OccupancyMap,
-    /// Whether the map changed since the previous step.
-    pub oem_changed: bool,
-    /// The plans of the newest guidance round, by UAV.
-    pub plans: &'a BTreeMap<u32, PlannedView>,
-    /// The step's metrics.
-    pub metrics: &'a StepMetrics,
-}
-
 /// The recording and the live view of a run.
 pub struct Viewer {
     channels: Channels,
@@ -176,9 +158,19 @@ pub struct Viewer {
     last_image_s: Option<f64>,
     /// Whether the map changed since it was last logged.
     oem_changed: bool,
+    /// The UAV whose camera frames are shown.
+    uav: u32,
 }
 
 impl Viewer {
+    /// The viewer `config` asks for, as one of the run's sinks (none when it asks for
+    /// nothing). A viewer that cannot start fails the run.
+    pub fn maker(config: ViewConfig) -> SinkMaker {
+        Box::new(move |scenario, buildings| {
+            Ok(Viewer::start(&config, scenario, buildings)?.map(|v| Box::new(v) as Box<dyn Sink>))
+        })
+    }
+
     /// Opens the recording and starts the live server that `config` asks for, for a run of
     /// `scenario` in a city of `buildings`; `None` when it asks for neither. Call it outside
     /// any tokio runtime: the live server runs on the Foxglove SDK's own.
@@ -228,6 +220,7 @@ impl Viewer {
             mcap,
             server,
             buildings: scene::city(buildings, Timestamp::new(0, 0)),
+            uav: config.uav,
             camera: scenario.camera_model(),
             car_size_m: scenario.targets.size_m,
             grid: scenario.grid(),
@@ -350,6 +343,42 @@ impl Viewer {
                 .map_err(|source| ViewerError::Record { path, source })?;
         }
         Ok(())
+    }
+}
+
+impl Sink for Viewer {
+    fn phase(&self) -> &'static str {
+        crate::observe::phase::VIEW
+    }
+
+    fn essential(&self) -> bool {
+        true
+    }
+
+    fn camera(&self) -> Option<u32> {
+        Some(self.uav)
+    }
+
+    fn shows_plans(&self) -> bool {
+        true
+    }
+
+    fn live_url(&self) -> Option<String> {
+        Viewer::live_url(self)
+    }
+
+    fn frame(&mut self, frame: &CvsFrame) {
+        Viewer::frame(self, frame);
+    }
+
+    fn step(&mut self, view: &StepView<'_>) -> Result<(), SinkError> {
+        Viewer::step(self, view);
+        Ok(())
+    }
+
+    fn finish(self: Box<Self>) -> Result<Option<SinkFile>, SinkError> {
+        Viewer::finish(*self)?;
+        Ok(None)
     }
 }
 

@@ -27,13 +27,14 @@ use std::io::Write;
 
 use serde::Serialize;
 
-use crate::bench::Stats;
-use crate::observe::StepMetrics;
+use protocol::scenario::Scenario;
+
+use super::resources::Resources;
+use crate::faults::{self, FaultRecord};
 use crate::observe::metrics::SetMetrics;
 use crate::observe::tally::ServiceKind;
-use crate::run::RunRecord;
-use crate::run::faults::FaultRecord;
-use crate::run::resources::Resources;
+use crate::observe::{ObserverReport, StepMetrics};
+use crate::stats::Stats;
 
 /// The summary of a run.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -277,11 +278,45 @@ pub struct RunTiming {
     pub leftover_ipc_files: usize,
 }
 
+/// What the summary needs of a run: what it was, what the observer measured, the faults and
+/// how it ended.
+#[derive(Clone, Copy, Debug)]
+pub struct RunFacts<'a> {
+    /// The scenario run.
+    pub scenario: &'a Scenario,
+    /// The guidance variant's name.
+    pub variant: &'static str,
+    /// `lockstep` or `realtime`.
+    pub mode: &'static str,
+    /// The `--chaos` seed, if one was given.
+    pub chaos_seed: Option<u64>,
+    /// Hosts the fleet ran on.
+    pub hosts: u16,
+    /// The run id.
+    pub run_id: &'a str,
+    /// The metrics of every measured step, in order.
+    pub series: &'a [StepMetrics],
+    /// What the observer gathered (`None` if its thread failed).
+    pub observer: Option<&'a ObserverReport>,
+    /// The faults and what became of them.
+    pub faults: &'a [FaultRecord],
+    /// Wall time of the whole run, seconds.
+    pub wall_s: f64,
+    /// Whether the run was interrupted or failed.
+    pub interrupted: bool,
+    /// Start of the run, UTC.
+    pub started_utc: &'a str,
+    /// The run's iceoryx2 files still present after cleanup.
+    pub leftover_files: usize,
+    /// CPU time, peak memory and phases per process.
+    pub resources: &'a Resources,
+}
+
 impl Summary {
     /// Summarises a run.
-    pub fn build(record: &RunRecord) -> Summary {
-        let scenario = &record.config.scenario;
-        let series = &record.series;
+    pub fn build(record: &RunFacts<'_>) -> Summary {
+        let scenario = record.scenario;
+        let series = record.series;
         let all = scenario.targets.count;
         let mean = MetricFinals::of(
             series
@@ -313,10 +348,10 @@ impl Summary {
             .iter()
             .find(|m| all > 0 && m.identified_any >= all)
             .map(|m| m.time_s);
-        let (resync_steps_max, resync_steps_mean) = record.faults.resync_max_mean();
+        let (resync_steps_max, resync_steps_mean) = faults::resync_max_mean(record.faults);
         let steps = series.len() as u64;
         let sim_s = steps as f64 * scenario.timing.cvs_period_s;
-        let observer = record.observer.as_ref();
+        let observer = record.observer;
         let agents: Vec<AgentSummary> = (0..scenario.uavs.count)
             .map(|uav| {
                 let t = observer.and_then(|o| o.agents.get(&uav));
@@ -334,7 +369,7 @@ impl Summary {
                     tokens_lost: t.map_or(0, |t| t.tokens_lost()),
                     final_undetected_digest: last.map(|(_, set)| set.digest()),
                     final_measured_step: last.map(|(step, _)| *step),
-                    restarts: record.faults.restarts(uav),
+                    restarts: faults::restarts(record.faults, uav),
                     geofence_overrides: observer
                         .and_then(|o| o.geofence_overrides.get(uav as usize))
                         .copied()
@@ -369,13 +404,10 @@ impl Summary {
             .unwrap_or_default();
         Summary {
             seed: scenario.seed,
-            variant: record.config.variant.name(),
+            variant: record.variant,
             uavs: scenario.uavs.count,
             targets: all,
-            mode: match record.config.mode {
-                world_server::server::StepMode::Lockstep => "lockstep",
-                world_server::server::StepMode::Realtime { .. } => "realtime",
-            },
+            mode: record.mode,
             duration_s: scenario.duration_s,
             sim_s,
             wall_s: record.wall_s,
@@ -385,8 +417,8 @@ impl Summary {
                 0.0
             },
             steps,
-            interrupted: record.interrupted || record.failure.is_some(),
-            violations: record.violations(),
+            interrupted: record.interrupted,
+            violations: series.iter().map(|m| u64::from(m.violations)).sum(),
             explored_final: mean.explored_final,
             ua_final: mean.ua_final,
             oa_final: mean.oa_final,
@@ -403,9 +435,9 @@ impl Summary {
             time_all_identified_s_worst,
             identified_any_final: last.map_or(0, |m| m.identified_any),
             time_all_identified_any_s,
-            faults: record.faults.records().to_vec(),
-            chaos_seed: record.config.chaos_seed,
-            hosts: record.config.layout.hosts().len() as u16,
+            faults: record.faults.to_vec(),
+            chaos_seed: record.chaos_seed,
+            hosts: record.hosts,
             resync_steps_max,
             resync_steps_mean,
             geofence_overrides: agents.iter().map(|a| a.geofence_overrides).sum(),
@@ -417,8 +449,8 @@ impl Summary {
             },
             resources: record.resources.clone(),
             timing: RunTiming {
-                run_id: record.config.run_id.to_string(),
-                started_utc: record.started_utc.clone(),
+                run_id: record.run_id.to_owned(),
+                started_utc: record.started_utc.to_owned(),
                 stepping_s: observer.and_then(|o| o.stepping).map(|d| d.as_secs_f64()),
                 leftover_ipc_files: record.leftover_files,
             },

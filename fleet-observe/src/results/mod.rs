@@ -4,5 +4,6 @@
 
 pub mod curves;
 pub mod maps;
+pub mod resources;
 pub mod summary;
 pub mod timeseries;

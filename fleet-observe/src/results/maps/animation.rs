@@ -25,6 +25,7 @@ use super::chart::{OPEN, OUTSIDE};
 use super::raster::{blend, cells_spanned, rgb};
 use super::sets::{EXPLORED, OBSTACLE_NEIGHBOURHOOD, TARGET_ALPHA, UNDETECTED, target_colour};
 use crate::observe::metrics::FusedSets;
+use crate::observe::sink::{Sink, SinkError, SinkFile, SinkMaker, StepView};
 use crate::pictures::{FONT, palette};
 
 /// Simulated seconds between two frames.
@@ -405,6 +406,54 @@ fn paint_text(header: &mut [u8], text: &str) -> Result<(), AnimationError> {
         *pixel = if grey < 128 { BLACK_INK } else { WHITE_INK };
     }
     Ok(())
+}
+
+
+/// `run.gif` as one of the run's sinks: a frame every [`FRAME_PERIOD_S`] of simulated time.
+/// It is not essential: a failure is logged and the run goes on without it.
+pub struct AnimationSink {
+    animation: Animation,
+    /// Steps between two frames.
+    every: u64,
+}
+
+impl AnimationSink {
+    /// The animation of every run, as a sink (none, with a warning, if it cannot be made).
+    pub fn maker() -> SinkMaker {
+        Box::new(|scenario, buildings| {
+            let every = (FRAME_PERIOD_S / scenario.timing.cvs_period_s)
+                .round()
+                .max(1.0) as u64;
+            Ok(Animation::new(scenario, buildings)
+                .map_err(|e| tracing::warn!(error = %e, "no run.gif"))
+                .ok()
+                .map(|animation| Box::new(AnimationSink { animation, every }) as Box<dyn Sink>))
+        })
+    }
+}
+
+impl Sink for AnimationSink {
+    fn phase(&self) -> &'static str {
+        crate::observe::phase::ANIMATION
+    }
+
+    fn essential(&self) -> bool {
+        false
+    }
+
+    fn step(&mut self, view: &StepView<'_>) -> Result<(), SinkError> {
+        if view.truth.step.is_multiple_of(self.every) {
+            self.animation.add(view.truth, view.sets)?;
+        }
+        Ok(())
+    }
+
+    fn finish(self: Box<Self>) -> Result<Option<SinkFile>, SinkError> {
+        Ok(Some(SinkFile {
+            name: "run.gif",
+            bytes: self.animation.finish()?,
+        }))
+    }
 }
 
 #[cfg(test)]

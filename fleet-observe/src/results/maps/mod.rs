@@ -23,6 +23,6 @@ mod map;
 mod raster;
 mod sets;
 
-pub use animation::{Animation, AnimationError, FRAME_PERIOD_S};
+pub use animation::{Animation, AnimationError, AnimationSink, FRAME_PERIOD_S};
 pub use map::draw_map;
 pub use sets::draw_sets;
