@@ -2,7 +2,7 @@
 //! command validates its own arguments into a config whose errors ([`UsageError`]) name the
 //! flag or scenario key and the accepted range.
 //!
-//! [`UsageError`]: crate::usage::UsageError
+//! [`UsageError`]: protocol::usage::UsageError
 
 use clap::{Args, Parser, Subcommand};
 
@@ -31,9 +31,6 @@ pub enum FleetCommand {
     Render(crate::render_cmd::RenderArgs),
     /// Measure a part of the system and write a JSON report.
     Bench(BenchArgs),
-    /// One process of `fleet bench ipc` (started by it).
-    #[command(hide = true)]
-    BenchChild(crate::bench::ipc::BenchChildArgs),
 }
 
 /// `fleet bench`.
@@ -48,17 +45,17 @@ pub struct BenchArgs {
 #[derive(Debug, Subcommand)]
 pub enum BenchKind {
     /// CVS frame rendering (ray casts), per thread count.
-    Render(crate::bench::render::BenchRenderArgs),
+    Render(fleet_bench::render::BenchRenderArgs),
     /// Moving frames, estimates and the token between processes (iceoryx2, Zenoh over TCP and
     /// TLS, and a Unix socket).
-    Ipc(crate::bench::ipc::BenchIpcArgs),
+    Ipc(fleet_bench::ipc::BenchIpcArgs),
     /// One estimator step per frame, its phases, message sizes and fusion.
-    Estimator(crate::bench::estimator::BenchEstimatorArgs),
+    Estimator(fleet_bench::estimator::BenchEstimatorArgs),
     /// One MPC guidance decision.
-    Guidance(crate::bench::guidance::BenchGuidanceArgs),
+    Guidance(fleet_bench::guidance::BenchGuidanceArgs),
     /// Whole runs of 1 to 16 UAVs, the region scaled with the fleet: speed, CPU, traffic
     /// and memory per fleet size.
-    Scale(crate::bench::scale::BenchScaleArgs),
+    Scale(crate::scale::BenchScaleArgs),
 }
 
 #[cfg(test)]

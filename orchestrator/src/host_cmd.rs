@@ -25,7 +25,7 @@ use crate::Outcome;
 use crate::run::children::{Binaries, Children};
 use crate::run::config::{RunScenarioArgs, default_out_dir};
 use crate::run::hosts::HostLayout;
-use crate::usage::UsageError;
+use protocol::usage::UsageError;
 
 /// `fleet host`.
 #[derive(Debug, Args)]

@@ -6,15 +6,14 @@
 //! - [`cli`]: the subcommands; each command's raw clap arguments live with the command and
 //!   validate into its config (errors name the flag or the scenario key and the accepted
 //!   range: exit code 2).
-//! - [`usage`]: what the commands' arguments share: the scenario flags and [`UsageError`].
-//! - [`run`](mod@run): `fleet run`, one run of the fleet as processes; [`observe`] measures it and
-//!   [`results`] writes what it produced.
-//! - [`variant`]: the guidance variants, named sets of scenario settings (`--variant`).
+//! - [`run`](mod@run): `fleet run`, one run of the fleet as processes; the `fleet-observe`
+//!   crate measures it, writes its results and shows it.
+//! - [`host_cmd`]: `fleet host`, this machine's share of a run over several hosts, and
+//!   `fleet certs`.
 //! - [`sweep`]: `fleet sweep`, every variant on several seeds, the paper's Table I.
 //! - [`render_cmd`]: `fleet render`, one frame as pictures.
-//! - [`bench`](mod@bench): `fleet bench`, whole-system measurements as [`bench::BenchReport`]s.
-//! - [`pictures`]: plotters drawings with the bundled font.
-//! - [`viewer`]: a run in Foxglove, recorded (`--record`) or live (`--live`).
+//! - [`scale`]: `fleet bench scale`, whole runs per fleet size; the other benchmarks are the
+//!   `fleet-bench` crate's.
 //!
 //! The library uses `anyhow` for a command's failures (exit code 1): it is the body of the
 //! `fleet` binary, and [`UsageError`] is the one error a caller must tell apart.
@@ -29,17 +28,15 @@
 
 #![warn(missing_docs)]
 
-pub mod bench;
 pub mod cli;
 pub mod host_cmd;
 pub mod render_cmd;
 pub mod run;
+pub mod scale;
 pub mod sweep;
-pub mod usage;
-pub mod variant;
 
 use cli::{BenchKind, Cli, FleetCommand};
-use usage::UsageError;
+use protocol::usage::UsageError;
 
 /// How a `fleet` command ended, and its exit code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -90,26 +87,25 @@ pub fn run(cli: Cli) -> Outcome {
             Ok(config) => render_cmd::run(&config),
             Err(e) => return bad_input(e),
         },
-        FleetCommand::BenchChild(args) => bench::ipc::roles::run(&args),
         FleetCommand::Bench(args) => match args.kind {
             BenchKind::Render(args) => match args.validate() {
                 Ok(config) => bench_render(&config),
                 Err(e) => return bad_input(e),
             },
             BenchKind::Ipc(args) => match args.validate() {
-                Ok(c) => bench::ipc::run(&c).and_then(|r| r.publish(c.out.as_deref())),
+                Ok(c) => fleet_bench::ipc::run(&c).and_then(|r| r.publish(c.out.as_deref())),
                 Err(e) => return bad_input(e),
             },
             BenchKind::Estimator(args) => match args.validate() {
-                Ok(c) => bench::estimator::run(&c).and_then(|r| r.publish(c.out.as_deref())),
+                Ok(c) => fleet_bench::estimator::run(&c).and_then(|r| r.publish(c.out.as_deref())),
                 Err(e) => return bad_input(e),
             },
             BenchKind::Guidance(args) => match args.validate() {
-                Ok(c) => bench::guidance::run(&c).and_then(|r| r.publish(c.out.as_deref())),
+                Ok(c) => fleet_bench::guidance::run(&c).and_then(|r| r.publish(c.out.as_deref())),
                 Err(e) => return bad_input(e),
             },
             BenchKind::Scale(args) => match args.validate() {
-                Ok(config) => return finish(bench::scale::run(&config)),
+                Ok(config) => return finish(scale::run(&config)),
                 Err(e) => return bad_input(e),
             },
         },
@@ -136,8 +132,8 @@ fn bad_input(e: UsageError) -> Outcome {
     Outcome::BadInput
 }
 
-fn bench_render(config: &bench::render::BenchRenderConfig) -> anyhow::Result<()> {
-    let report = bench::render::run(config)?;
+fn bench_render(config: &fleet_bench::render::BenchRenderConfig) -> anyhow::Result<()> {
+    let report = fleet_bench::render::run(config)?;
     report.print_table(&mut std::io::stdout().lock())?;
     if let Some(path) = &config.out {
         report.write_json(path)?;

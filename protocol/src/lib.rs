@@ -18,6 +18,9 @@
 //!   kernel's account of a process (CPU time, peak resident memory).
 //! - [`process`]: how every setfleet binary starts (logging, arguments, dying with its
 //!   parent).
+//! - [`usage`]: what every command's arguments share: where the scenario comes from and the
+//!   error of bad input.
+//! - [`variant`]: the guidance variants, named sets of scenario settings.
 
 #![warn(missing_docs)]
 
@@ -34,4 +37,6 @@ pub mod resources;
 pub mod scenario;
 pub mod service;
 pub mod timeouts;
+pub mod usage;
+pub mod variant;
 pub mod wire;

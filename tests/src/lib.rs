@@ -32,11 +32,12 @@ use protocol::service::RunId;
 
 /// The binaries the tests run, the packages that build them and the features the tests need
 /// (the agent's fault-injection hooks, which shipped builds leave out).
-const BINARIES: [(&str, &str, &str); 4] = [
+const BINARIES: [(&str, &str, &str); 5] = [
     ("world-server", "world-server", ""),
     ("uav-agent", "uav-agent", "test-hooks"),
     ("fleet", "orchestrator", ""),
     ("fleet-bridge", "bridge", ""),
+    ("fleet-bench-child", "fleet-bench", ""),
 ];
 
 /// Most simulated hosts a test's run uses: their domains' files are checked and removed too.

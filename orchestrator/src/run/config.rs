@@ -12,8 +12,8 @@ use fleet_observe::faults::{Fault, FaultKind};
 
 use super::chaos;
 use super::hosts::{HostLayout, RemoteHost};
-use crate::usage::{ScenarioArgs, UsageError};
-use crate::variant::Variant;
+use protocol::usage::{ScenarioArgs, UsageError};
+use protocol::variant::Variant;
 use fleet_observe::viewer::{LiveAddress, ViewConfig};
 
 /// The flags that make a run's scenario, shared by `fleet run` and `fleet host` so that the

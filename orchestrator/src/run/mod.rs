@@ -40,6 +40,7 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
+use bridge::endpoint::{Transport, free_loopback_port};
 use protocol::ipc::{cleanup_stale, remove_run_files, run_files};
 use protocol::timeouts::Timeouts;
 use tokio::signal::unix::{SignalKind, signal};
@@ -271,9 +272,9 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         let endpoint = match &config.listen {
             Some(e) => e.clone(),
             None if config.insecure_links => {
-                format!("tcp/127.0.0.1:{}", free_loopback_port(Transport::Tcp)?)
+                format!("tcp/127.0.0.1:{}", free_loopback_port(Transport::Tcp).context("cannot find a free loopback port for the bridges")?)
             }
-            None => format!("quic/127.0.0.1:{}", free_loopback_port(Transport::Udp)?),
+            None => format!("quic/127.0.0.1:{}", free_loopback_port(Transport::Udp).context("cannot find a free loopback port for the bridges")?),
         };
         let tls = match &config.tls {
             _ if config.insecure_links => None,
@@ -486,27 +487,6 @@ fn run_certificates(layout: &hosts::HostLayout, out: &std::path::Path) -> anyhow
     bridge::security::write_fleet_certs(&dir, &names, &[], true)
         .with_context(|| format!("cannot make the run's certificates in {}", dir.display()))?;
     Ok(dir)
-}
-
-/// What a bridge (or the ipc bench's router) listens with on the loopback.
-#[derive(Clone, Copy)]
-pub(crate) enum Transport {
-    /// Plain TCP (`--insecure-links`).
-    Tcp,
-    /// UDP, for QUIC.
-    Udp,
-}
-
-/// A loopback port of `transport` that nothing uses now, for a bridge to listen on.
-pub(crate) fn free_loopback_port(transport: Transport) -> anyhow::Result<u16> {
-    let address = ("127.0.0.1", 0);
-    let bound = match transport {
-        Transport::Tcp => std::net::TcpListener::bind(address).and_then(|l| l.local_addr()),
-        Transport::Udp => std::net::UdpSocket::bind(address).and_then(|s| s.local_addr()),
-    };
-    Ok(bound
-        .context("cannot find a free loopback port for the bridges")?
-        .port())
 }
 
 /// Creates `dir`, emptied of what an earlier run into the same output directory left (an

@@ -49,7 +49,7 @@ use super::table::{Cell, ROWS, format_cell, seed_range};
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::pictures::{FONT, palette, short_number};
 use fleet_observe::results::curves::draw_bands;
-use crate::variant::Variant;
+use protocol::variant::Variant;
 
 /// Most values an axis takes.
 pub const MAX_AXIS_VALUES: usize = 32;

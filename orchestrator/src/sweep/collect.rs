@@ -16,7 +16,7 @@ use crate::Outcome;
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::results::curves::draw_sweep;
 use fleet_observe::results::timeseries;
-use crate::variant::Variant;
+use protocol::variant::Variant;
 
 /// A validated `fleet sweep --merge`.
 #[derive(Debug, Clone)]

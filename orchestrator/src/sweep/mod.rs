@@ -35,7 +35,7 @@
 //! radio's `comms.loss=0,0.1,0.3,0.5`) and compares the values ([`axis`]): each value's runs
 //! and table under `KEY=V/`, the comparison in `axis.md`, `axis.json` and `axis.png`.
 //!
-//! The variants are those of [`crate::variant`]: `nomap`, `kappa0`, `paper` (the paper's
+//! The variants are those of [`protocol::variant`]: `nomap`, `kappa0`, `paper` (the paper's
 //! Table I columns) and `setfleet` (the project's planner).
 
 pub mod axis;
@@ -55,8 +55,8 @@ use crate::Outcome;
 use crate::run::config::{RunConfig, new_run_id};
 use crate::run::hosts::HostLayout;
 use crate::run::runtime;
-use crate::usage::{ScenarioArgs, UsageError};
-pub use crate::variant::Variant;
+use protocol::usage::{ScenarioArgs, UsageError};
+pub use protocol::variant::Variant;
 pub use axis::Axis;
 use collect::{FoundRuns, assemble, read_run, write_table};
 pub use collect::{MergeConfig, merge};

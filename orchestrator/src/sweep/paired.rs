@@ -32,7 +32,7 @@ use std::fmt::Write as _;
 use serde::{Serialize, Serializer};
 
 use super::table::{COMPARED, ROWS, digits, window_text};
-use crate::variant::Variant;
+use protocol::variant::Variant;
 
 /// Which value of a metric a comparison is of.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

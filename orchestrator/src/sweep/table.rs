@@ -25,7 +25,7 @@ use super::paired::{self, Paired};
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::observe::metrics::SetMetrics;
 use fleet_observe::results::curves::mean_sd;
-use crate::variant::Variant;
+use protocol::variant::Variant;
 
 /// The steady window of the `*_window` rows and of the paired comparisons: the steps whose
 /// simulated time `t` (seconds) has `100 <= t <= 300`.

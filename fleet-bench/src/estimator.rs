@@ -24,7 +24,7 @@ use uav_agent::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput};
 use world_server::World;
 
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use crate::usage::{ScenarioArgs, UsageError};
+use protocol::usage::{ScenarioArgs, UsageError};
 
 /// Run tag stamped on the frames of the in-process simulation.
 const SIM_RUN_TAG: u64 = 1;

@@ -1,16 +1,15 @@
-//! `fleet bench-child`: the processes of `fleet bench ipc`, one role each. A child opens its
+//! `fleet-bench-child`: the processes of `fleet bench ipc`, one role each. A child opens its
 //! ports, prints `ready`, waits for `go` on stdin, measures, and prints `result {json}` (a
 //! [`ChildReport`]). It never waits longer than [`IDLE`] for a peer: a silent peer is an error,
-//! not a hang. Started by the parent with `PR_SET_PDEATHSIG`, it dies with it.
+//! not a hang. It dies with the parent (`protocol::process::die_with_parent`).
 
 use std::collections::BTreeSet;
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::os::unix::net::{UnixListener, UnixStream};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
-use clap::{Args, ValueEnum};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -26,96 +25,16 @@ use protocol::wire::{GuidanceToken, PlannedView, WireHeader, WireKind, unix_now_
 use uav_agent::guidance::ring::ROUND_COMPLETE;
 use uav_agent::guidance::{TokenRing, Turn};
 
-use super::children::{GO, READY, RESULT};
+use super::handshake::{BenchChildArgs, IDLE, RESULT, Role, ready_then_go};
 use super::message::{
     Ack, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame, monotonic_ns,
 };
 use super::services::BenchServices;
 use super::socket::{self, SocketFrame};
-use super::zenoh_link::{self, Payload, ZenohTransport};
+use super::zenoh_link::{self, Payload};
 
-/// Longest wait for a peer's message, an ack or the parent's `go`.
-pub const IDLE: Duration = Duration::from_secs(10);
 /// Poses in a plan of the token: the default horizon, 2 periods of 6 CVS steps.
 const POSES_PER_PLAN: usize = 12;
-
-/// What a child does.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Role {
-    /// Writes frames into loaned iceoryx2 samples and sends them.
-    FramePublisher,
-    /// Receives iceoryx2 frames, checks and acknowledges them.
-    FrameSubscriber,
-    /// Sends bincode frames over a Unix socket (it listens).
-    SocketPublisher,
-    /// Receives bincode frames from a Unix socket (it connects).
-    SocketSubscriber,
-    /// Sends its estimate to every peer and receives theirs, round after round.
-    Estimates,
-    /// Takes its turns in the guidance token ring.
-    Token,
-    /// A Zenoh router that sends bridge-encoded frames to a client (it listens).
-    ZenohFramePublisher,
-    /// A Zenoh client that receives bridge-encoded frames, checks and acknowledges them.
-    ZenohFrameSubscriber,
-    /// A Zenoh router that sends bridge-encoded estimates to a client (it listens).
-    ZenohEstimatePublisher,
-    /// A Zenoh client that receives bridge-encoded estimates, checks and acknowledges them.
-    ZenohEstimateSubscriber,
-}
-
-impl Role {
-    /// The command-line spelling.
-    pub fn as_arg(self) -> &'static str {
-        match self {
-            Role::FramePublisher => "frame-publisher",
-            Role::FrameSubscriber => "frame-subscriber",
-            Role::SocketPublisher => "socket-publisher",
-            Role::SocketSubscriber => "socket-subscriber",
-            Role::Estimates => "estimates",
-            Role::Token => "token",
-            Role::ZenohFramePublisher => "zenoh-frame-publisher",
-            Role::ZenohFrameSubscriber => "zenoh-frame-subscriber",
-            Role::ZenohEstimatePublisher => "zenoh-estimate-publisher",
-            Role::ZenohEstimateSubscriber => "zenoh-estimate-subscriber",
-        }
-    }
-}
-
-/// `fleet bench-child` (hidden): one process of `fleet bench ipc`.
-#[derive(Debug, Args)]
-pub struct BenchChildArgs {
-    /// The bench's run id.
-    #[arg(long)]
-    pub run: String,
-    /// What this process does.
-    #[arg(long, value_enum)]
-    pub role: Role,
-    /// This process's index among its peers.
-    #[arg(long, default_value_t = 0)]
-    pub index: u32,
-    /// Subscribers (frame roles) or processes (estimates, token).
-    #[arg(long, default_value_t = 1)]
-    pub peers: u32,
-    /// Messages per phase (frames) or rounds.
-    #[arg(long)]
-    pub iterations: u64,
-    /// The socket path of the baseline.
-    #[arg(long)]
-    pub socket: PathBuf,
-    /// The estimate message file.
-    #[arg(long)]
-    pub message: PathBuf,
-    /// The Zenoh link of the Zenoh roles.
-    #[arg(long, value_enum, default_value_t = ZenohTransport::Tcp)]
-    pub transport: ZenohTransport,
-    /// The loopback port the Zenoh router listens on.
-    #[arg(long, default_value_t = 0)]
-    pub port: u16,
-    /// The fleet's certificates of the Zenoh roles over TLS (`fleet certs`' layout).
-    #[arg(long)]
-    pub certs: PathBuf,
-}
 
 /// Runs the child's role and prints its report.
 pub fn run(args: &BenchChildArgs) -> anyhow::Result<()> {
@@ -144,21 +63,6 @@ pub fn run(args: &BenchChildArgs) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
     writeln!(out, "{RESULT}{}", serde_json::to_string(&report)?)?;
     out.flush()?;
-    Ok(())
-}
-
-/// Says `ready` and waits for `go`.
-pub(super) fn ready_then_go() -> anyhow::Result<()> {
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "{READY}")?;
-    out.flush()?;
-    drop(out);
-    // The parent sends `go` or kills this process; PR_SET_PDEATHSIG covers its death.
-    let mut line = String::new();
-    std::io::stdin().lock().read_line(&mut line)?;
-    if line.trim() != GO {
-        bail!("expected {GO:?} on stdin, got {line:?}");
-    }
     Ok(())
 }
 

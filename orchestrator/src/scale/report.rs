@@ -13,7 +13,7 @@ use std::io::Write;
 use serde_json::{Value, json};
 
 use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint};
-use crate::bench::{BenchCase, BenchReport, Metrics};
+use fleet_bench::{BenchCase, BenchReport, Metrics};
 use fleet_observe::results::summary::Summary;
 use crate::run::RunRecord;
 use fleet_observe::results::resources::ProcessResources;

@@ -1,12 +1,12 @@
-//! The benchmark's child processes, seen from the parent: each is the `fleet` binary itself
-//! re-executed as `fleet bench-child ...`, dies with the parent (`PR_SET_PDEATHSIG`), says
+//! The benchmark's child processes, seen from the parent: each is `fleet-bench-child`, which
+//! dies with the parent (`protocol::process::die_with_parent`), says
 //! `ready` on stdout once its ports are open, starts on `go` from stdin and ends by printing
 //! `result {json}`. Every wait is bounded; a child that fails or falls silent fails the bench
 //! with its stderr, and every child still running is killed when the set is dropped.
 
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Read, Write};
-use std::os::unix::process::CommandExt;
+use std::path::PathBuf;
 use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc;
 use std::thread::JoinHandle;
@@ -14,14 +14,20 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
 
+use super::handshake::{GO, READY, RESULT};
 use super::message::ChildReport;
 
-/// The line a child prints once its ports are open.
-pub const READY: &str = "ready";
-/// The line that starts the children.
-pub const GO: &str = "go";
-/// The prefix of a child's last line, followed by its [`ChildReport`] as JSON.
-pub const RESULT: &str = "result ";
+/// The child binary: `fleet-bench-child` beside the running binary (`fleet`, or a test's
+/// binary in `target/<profile>/deps`, whose parent directory holds the binaries).
+fn child_binary() -> anyhow::Result<PathBuf> {
+    const NAME: &str = "fleet-bench-child";
+    let exe = std::env::current_exe().context("cannot locate the running binary")?;
+    let dir = exe.parent().context("the running binary has no directory")?;
+    [dir.join(NAME), dir.join("..").join(NAME)]
+        .into_iter()
+        .find(|p| p.is_file())
+        .with_context(|| format!("{NAME} not found beside {}", exe.display()))
+}
 
 /// How long a child may hold the end of its stderr in an error message.
 const STDERR_TAIL: usize = 2000;
@@ -58,7 +64,7 @@ impl ChildSet {
         }
     }
 
-    /// Starts `fleet bench-child ARGS` as `name` and waits (at most `timeout`) until it is
+    /// Starts `fleet-bench-child ARGS` as `name` and waits (at most `timeout`) until it is
     /// ready.
     pub fn spawn_ready(
         &mut self,
@@ -66,28 +72,11 @@ impl ChildSet {
         args: &[String],
         timeout: Duration,
     ) -> anyhow::Result<()> {
-        let exe = std::env::current_exe().context("cannot locate the fleet binary")?;
-        let mut cmd = Command::new(exe);
-        cmd.arg("bench-child")
-            .args(args)
+        let mut cmd = Command::new(child_binary()?);
+        cmd.args(args)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
-        let parent = std::process::id() as libc::pid_t;
-        // SAFETY: the closure runs in the forked child before exec and only makes
-        // async-signal-safe system calls (prctl, getppid), allocating nothing.
-        unsafe {
-            cmd.pre_exec(move || {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                // The parent may have died before prctl took effect.
-                if libc::getppid() != parent {
-                    return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
-                }
-                Ok(())
-            });
-        }
         let mut process = cmd
             .spawn()
             .with_context(|| format!("cannot start bench child {name}"))?;

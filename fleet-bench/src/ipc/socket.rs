@@ -121,7 +121,7 @@ impl<'a> SocketFrame<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::ipc::fill_frame;
+    use crate::ipc::fill_frame;
 
     #[test]
     fn messages_and_acks_round_trip_through_a_byte_stream() {

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 use protocol::scenario::Scenario;
 
-use crate::usage::{ScenarioArgs, UsageError};
+use protocol::usage::{ScenarioArgs, UsageError};
 
 /// Iterations of `--quick`.
 const QUICK_ITERATIONS: u64 = 50;

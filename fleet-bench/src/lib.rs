@@ -1,14 +1,19 @@
-//! `fleet bench`: whole-system measurements, each written as a [`BenchReport`] (JSON) and
-//! printed as a table. The report type is shared by every kind (`render`, `ipc`,
-//! `estimator`, `guidance`, `scale`): a headline `summary` (the keys docs/design.md names, flattened at
+//! # fleet-bench
+//!
+//! `fleet bench`'s measurements, each written as a [`BenchReport`] (JSON) and printed as a
+//! table: [`render`] (frames), [`ipc`] (moving messages between processes, with its own child
+//! binary, `fleet-bench-child`), [`estimator`] (an estimator step) and [`guidance`] (one MPC
+//! decision). `fleet bench scale`, which times whole runs of the fleet, lives with the run in
+//! the `fleet` command and writes the same report. The report type is shared by every kind: a headline `summary` (the keys docs/design.md names, flattened at
 //! the top level of the JSON), one [`BenchCase`] per configuration measured, the machine, the
 //! command line and the date.
+
+#![warn(missing_docs)]
 
 pub mod estimator;
 pub mod guidance;
 pub mod ipc;
 pub mod render;
-pub mod scale;
 
 use std::collections::BTreeMap;
 use std::io::Write;

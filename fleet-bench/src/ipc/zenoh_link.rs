@@ -36,15 +36,14 @@ use std::collections::VecDeque;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use crate::run::Transport;
 use anyhow::{Context, anyhow, bail};
+use bridge::endpoint::{Transport, free_loopback_port};
 use bridge::envelope;
 use bridge::keys;
 use bridge::plan::{self, HostShare};
 use bridge::security::{
     HostName, HostTlsFiles, LinkMode, LinkPlan, write_fleet_certs, zenoh_config,
 };
-use clap::ValueEnum;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::prelude::*;
@@ -60,7 +59,7 @@ use zenoh::sample::Locality;
 use super::message::{
     Ack, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame, monotonic_ns,
 };
-use super::roles::{BenchChildArgs, IDLE, ready_then_go};
+use super::handshake::{BenchChildArgs, IDLE, ZenohTransport, ready_then_go};
 use super::services::BenchServices;
 
 /// The world host: the router, and the publisher.
@@ -78,45 +77,6 @@ const FRAME_UAV: u32 = CLIENT_UAVS[0];
 /// How long the router waits for an ack before it sends the unacknowledged messages again:
 /// far above any delivery on loopback (milliseconds), far below [`IDLE`].
 const RESEND_AFTER: Duration = Duration::from_millis(100);
-
-/// The link between the two hosts.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum ZenohTransport {
-    /// Plain TCP, no access control.
-    Tcp,
-    /// Mutually authenticated TLS over TCP with the run's access policy.
-    Tls,
-    /// Mutually authenticated QUIC (TLS 1.3) with the run's access policy, as the bridge runs
-    /// by default.
-    Quic,
-}
-
-impl ZenohTransport {
-    /// Every link, in the bench's order.
-    pub const ALL: [ZenohTransport; 3] = [
-        ZenohTransport::Tcp,
-        ZenohTransport::Tls,
-        ZenohTransport::Quic,
-    ];
-
-    /// The command-line spelling, also the endpoint's protocol.
-    pub fn as_arg(self) -> &'static str {
-        match self {
-            ZenohTransport::Tcp => "tcp",
-            ZenohTransport::Tls => "tls",
-            ZenohTransport::Quic => "quic",
-        }
-    }
-
-    /// What the link is, for the report.
-    pub fn description(self) -> &'static str {
-        match self {
-            ZenohTransport::Tcp => "tcp",
-            ZenohTransport::Tls => "tls over tcp, mutual authentication, access control",
-            ZenohTransport::Quic => "quic, mutual authentication, access control",
-        }
-    }
-}
 
 /// What a Zenoh case sends.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -148,10 +108,11 @@ pub(super) fn write_certs(dir: &Path) -> anyhow::Result<()> {
 
 /// A loopback port free right now, for a router to listen on over `transport` (UDP for QUIC).
 pub(super) fn free_port(transport: ZenohTransport) -> anyhow::Result<u16> {
-    crate::run::free_loopback_port(match transport {
+    free_loopback_port(match transport {
         ZenohTransport::Quic => Transport::Udp,
         ZenohTransport::Tcp | ZenohTransport::Tls => Transport::Tcp,
     })
+    .context("cannot find a free loopback port for the router")
 }
 
 /// The two hosts, as `fleet-bridge --member` names them.

@@ -26,8 +26,8 @@ use uav_agent::guidance::{self, Decision, GuidanceParams};
 
 use super::estimator::{FleetSim, PlanningState};
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use crate::usage::{ScenarioArgs, UsageError};
-use crate::variant::Variant;
+use protocol::usage::{ScenarioArgs, UsageError};
+use protocol::variant::Variant;
 
 /// Most plans of other UAVs put in the token.
 const MAX_OTHERS: usize = 3;

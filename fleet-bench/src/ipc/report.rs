@@ -3,8 +3,8 @@
 
 use std::collections::BTreeMap;
 
-use super::super::{BenchCase, Metrics, Stats};
-use super::zenoh_link::ZenohTransport;
+use crate::{BenchCase, Metrics, Stats};
+use super::handshake::ZenohTransport;
 
 /// A case's row: its parameters, latency percentiles, rates and message size.
 pub(super) fn case(

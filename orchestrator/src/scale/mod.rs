@@ -34,8 +34,8 @@ use crate::Outcome;
 use crate::run::config::{RunConfig, default_out_dir, new_run_id};
 use crate::run::hosts::HostLayout;
 use crate::run::{execute, runtime, write_results};
-use crate::usage::{ScenarioArgs, UsageError};
-use crate::variant::Variant;
+use protocol::usage::{ScenarioArgs, UsageError};
+use protocol::variant::Variant;
 use report::{RowStatus, ScaleRow};
 
 /// The fleet size the scenario's region and cars are for.

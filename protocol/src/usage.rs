@@ -1,11 +1,11 @@
 //! What every command's arguments share: where the scenario comes from ([`ScenarioArgs`]) and
-//! the error of bad input ([`UsageError`], exit code 2). The command line ([`crate::cli`]) and
-//! the commands both import it.
+//! the error of bad input ([`UsageError`], exit code 2). The `fleet` command line and the
+//! commands' libraries both import it.
 
 use std::path::PathBuf;
 
 use clap::Args;
-use protocol::scenario::Scenario;
+use crate::scenario::Scenario;
 
 /// Where the scenario comes from: a file and `KEY=VALUE` overrides.
 #[derive(Debug, Clone, Default, Args)]

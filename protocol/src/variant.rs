@@ -113,7 +113,7 @@ impl Variant {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::scenario::{Planner, Scenario};
+    use crate::scenario::{Planner, Scenario};
 
     #[test]
     fn names_parse_back_to_their_variant() {

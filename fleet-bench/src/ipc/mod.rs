@@ -1,7 +1,7 @@
 //! `fleet bench ipc`: what moving setfleet's messages between processes costs, side by side,
 //! every role in its own process.
 //!
-//! Cases, each run in fresh child processes (`fleet bench-child`, see [`roles`]):
+//! Cases, each run in fresh child processes (`fleet-bench-child`, see [`roles`]):
 //! - `iox-1sub`, `iox-4sub`: the 864 KB [`CvsFrame`] over iceoryx2, zero-copy: the publisher
 //!   loans a sample, writes the frame in place ([`CvsFrame::init_in_place`], depth, labels,
 //!   checksum) and sends it; each subscriber takes it and verifies the checksum.
@@ -49,6 +49,7 @@
 mod bench_run;
 mod children;
 mod config;
+pub mod handshake;
 mod measure;
 mod message;
 mod report;
@@ -63,14 +64,14 @@ use super::BenchReport;
 use bench_run::{RunFiles, remove_stale_runs};
 use measure::{CaseSpec, Shared, latency_us, rate, run_case, typical_estimate};
 use report::{Headline, ZenohFigures, ZenohHeadline, case};
-use roles::Role;
-use zenoh_link::{Payload, ZenohTransport};
+use handshake::{Role, ZenohTransport};
+use zenoh_link::Payload;
 
 pub use config::{BenchIpcArgs, BenchIpcConfig};
 pub use message::{
     Ack, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame, monotonic_ns,
 };
-pub use roles::BenchChildArgs;
+pub use handshake::BenchChildArgs;
 pub use services::{AckService, BenchServices, FrameService, StampedService};
 
 /// Processes of the all-to-all and token cases (the default fleet).
