@@ -4,8 +4,8 @@
 
 use std::path::PathBuf;
 
-use clap::Args;
 use crate::scenario::Scenario;
+use clap::Args;
 
 /// Where the scenario comes from: a file and `KEY=VALUE` overrides.
 #[derive(Debug, Clone, Default, Args)]

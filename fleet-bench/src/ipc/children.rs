@@ -22,7 +22,9 @@ use super::message::ChildReport;
 fn child_binary() -> anyhow::Result<PathBuf> {
     const NAME: &str = "fleet-bench-child";
     let exe = std::env::current_exe().context("cannot locate the running binary")?;
-    let dir = exe.parent().context("the running binary has no directory")?;
+    let dir = exe
+        .parent()
+        .context("the running binary has no directory")?;
     [dir.join(NAME), dir.join("..").join(NAME)]
         .into_iter()
         .find(|p| p.is_file())

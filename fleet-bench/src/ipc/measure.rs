@@ -8,12 +8,12 @@ use anyhow::Context;
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 
+use super::children::ChildSet;
+use super::handshake::{Role, ZenohTransport};
+use super::message::ChildReport;
+use super::zenoh_link;
 use crate::Stats;
 use crate::estimator::FleetSim;
-use super::children::ChildSet;
-use super::message::ChildReport;
-use super::handshake::{Role, ZenohTransport};
-use super::zenoh_link;
 
 /// Longest wait for a child to open its ports.
 const READY_TIMEOUT: Duration = Duration::from_secs(30);

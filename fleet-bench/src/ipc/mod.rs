@@ -62,16 +62,16 @@ use protocol::frame::CvsFrame;
 
 use super::BenchReport;
 use bench_run::{RunFiles, remove_stale_runs};
+use handshake::{Role, ZenohTransport};
 use measure::{CaseSpec, Shared, latency_us, rate, run_case, typical_estimate};
 use report::{Headline, ZenohFigures, ZenohHeadline, case};
-use handshake::{Role, ZenohTransport};
 use zenoh_link::Payload;
 
 pub use config::{BenchIpcArgs, BenchIpcConfig};
+pub use handshake::BenchChildArgs;
 pub use message::{
     Ack, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame, monotonic_ns,
 };
-pub use handshake::BenchChildArgs;
 pub use services::{AckService, BenchServices, FrameService, StampedService};
 
 /// Processes of the all-to-all and token cases (the default fleet).

@@ -3,8 +3,8 @@
 
 use std::collections::BTreeMap;
 
-use crate::{BenchCase, Metrics, Stats};
 use super::handshake::ZenohTransport;
+use crate::{BenchCase, Metrics, Stats};
 
 /// A case's row: its parameters, latency percentiles, rates and message size.
 pub(super) fn case(

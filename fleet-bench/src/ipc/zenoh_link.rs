@@ -56,10 +56,10 @@ use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 use zenoh::sample::Locality;
 
+use super::handshake::{BenchChildArgs, IDLE, ZenohTransport, ready_then_go};
 use super::message::{
     Ack, ChildReport, PHASE_LATENCY, PHASE_RATE, Stamp, WINDOW, fill_frame, monotonic_ns,
 };
-use super::handshake::{BenchChildArgs, IDLE, ZenohTransport, ready_then_go};
 use super::services::BenchServices;
 
 /// The world host: the router, and the publisher.

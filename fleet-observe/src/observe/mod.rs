@@ -747,7 +747,9 @@ impl Observer<'_> {
     fn sink_failed(&mut self, essential: bool, e: &(dyn std::error::Error + Send + Sync)) {
         if essential {
             tracing::error!(error = %e, "a view of the run failed");
-            self.report.sink_failure.get_or_insert_with(|| e.to_string());
+            self.report
+                .sink_failure
+                .get_or_insert_with(|| e.to_string());
         } else {
             tracing::warn!(error = %e, "a view of the run abandoned");
         }

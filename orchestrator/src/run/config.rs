@@ -12,9 +12,9 @@ use fleet_observe::faults::{Fault, FaultKind};
 
 use super::chaos;
 use super::hosts::{HostLayout, RemoteHost};
+use fleet_observe::viewer::{LiveAddress, ViewConfig};
 use protocol::usage::{ScenarioArgs, UsageError};
 use protocol::variant::Variant;
-use fleet_observe::viewer::{LiveAddress, ViewConfig};
 
 /// The flags that make a run's scenario, shared by `fleet run` and `fleet host` so that the
 /// same flags give every host the same scenario.

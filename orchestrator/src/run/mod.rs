@@ -48,9 +48,9 @@ use tokio::sync::mpsc;
 
 use fleet_observe::faults::FaultKind;
 use fleet_observe::observe::{self, ObserverConfig, ObserverEvent, ObserverReport, StepMetrics};
+use fleet_observe::results::maps::AnimationSink;
 use fleet_observe::results::resources::{Resources, RunSize};
 use fleet_observe::results::summary::{RunFacts, Summary};
-use fleet_observe::results::maps::AnimationSink;
 use fleet_observe::results::{curves, maps, timeseries};
 use fleet_observe::viewer::Viewer;
 
@@ -247,10 +247,7 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
             fault_times: plan.times(),
             fault_wait: FAULT_WAIT,
             resumed: resumed.clone(),
-            sinks: vec![
-                Viewer::maker(config.view.clone()),
-                AnimationSink::maker(),
-            ],
+            sinks: vec![Viewer::maker(config.view.clone()), AnimationSink::maker()],
             shown_uav: config.view.uav,
         },
         stop.clone(),
@@ -272,9 +269,17 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         let endpoint = match &config.listen {
             Some(e) => e.clone(),
             None if config.insecure_links => {
-                format!("tcp/127.0.0.1:{}", free_loopback_port(Transport::Tcp).context("cannot find a free loopback port for the bridges")?)
+                format!(
+                    "tcp/127.0.0.1:{}",
+                    free_loopback_port(Transport::Tcp)
+                        .context("cannot find a free loopback port for the bridges")?
+                )
             }
-            None => format!("quic/127.0.0.1:{}", free_loopback_port(Transport::Udp).context("cannot find a free loopback port for the bridges")?),
+            None => format!(
+                "quic/127.0.0.1:{}",
+                free_loopback_port(Transport::Udp)
+                    .context("cannot find a free loopback port for the bridges")?
+            ),
         };
         let tls = match &config.tls {
             _ if config.insecure_links => None,

@@ -36,12 +36,7 @@ pub struct OwnUsage {
 /// The resources of a run: the orchestrator's `own`, the children that `exited` (their
 /// phases read from the reports in the logs in `logs`), over `uavs` UAVs, `steps` steps
 /// of `sim_s` simulated seconds in `wall_s`.
-pub fn gather(
-    own: &OwnUsage,
-    exited: &[ExitedProcess],
-    logs: &Path,
-    run: RunSize,
-) -> Resources {
+pub fn gather(own: &OwnUsage, exited: &[ExitedProcess], logs: &Path, run: RunSize) -> Resources {
     let reports = reported_phases(logs);
     let mut processes = vec![orchestrator(own)];
     let mut children: Vec<ProcessResources> = exited

@@ -13,10 +13,10 @@ use std::io::Write;
 use serde_json::{Value, json};
 
 use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint};
-use fleet_bench::{BenchCase, BenchReport, Metrics};
-use fleet_observe::results::summary::Summary;
 use crate::run::RunRecord;
+use fleet_bench::{BenchCase, BenchReport, Metrics};
 use fleet_observe::results::resources::ProcessResources;
+use fleet_observe::results::summary::Summary;
 
 /// The goal: real-time factor of a 16-UAV fleet (on 2 cores).
 pub const GOAL_RTF_16: f64 = 2.0;

@@ -7,7 +7,7 @@
 //! `fleet sweep --merge` reads it like any sweep). Beside them the sweep writes:
 //!
 //! - `axis.json` and `axis.md`: per variant, one row per metric of the sweep's table
-//!   ([`super::table`], its final values and its means over the steady window) plus the
+//!   ([`super::rows`], its final values and its means over the steady window) plus the
 //!   radio's rows (the share of peer estimates and of tokens the radio lost, measured, and
 //!   the estimates' traffic), one column per value, mean ± sample standard deviation over the
 //!   seeds; then, per variant, every value compared with the first seed by seed (`paired` in
@@ -34,7 +34,7 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use anyhow::Context as _;
@@ -43,9 +43,11 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 use super::Shard;
-use super::collect::{FoundRuns, assemble, write_table};
+use super::collect::{FoundRuns, MergeConfig, assemble, columns, gather, write_table};
 use super::paired::{self, Comparison, PairedMetric, Sides, compare_metrics};
-use super::table::{Cell, ROWS, format_cell, seed_range};
+use super::rows::{RADIO_ROWS, ROWS};
+use super::table::{Cell, format_cell, seed_range};
+use crate::Outcome;
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::pictures::{FONT, palette, short_number};
 use fleet_observe::results::curves::draw_bands;
@@ -133,60 +135,50 @@ impl Axis {
     }
 }
 
-/// A row of the axis table that the sweep's table does not have: read from a run's summary.
-struct RadioRow {
-    key: &'static str,
-    label: &'static str,
-    scale: f64,
-    value: fn(&serde_json::Value) -> Option<f64>,
-}
-
-/// The radio's rows: what the links lost, measured from the agents' counters, and what the
-/// estimates cost (under loss they carry whole sets).
-const RADIO_ROWS: [RadioRow; 3] = [
-    RadioRow {
-        key: "estimates_lost_share",
-        label: "peer estimates lost by the radio (%)",
-        scale: 100.0,
-        value: |s| {
-            let agents = s["agents"].as_array()?;
-            let sum = |k: &str| agents.iter().filter_map(|a| a[k].as_u64()).sum::<u64>();
-            let lost = sum("estimates_lost");
-            let heard = lost + sum("estimates_received");
-            (heard > 0).then(|| lost as f64 / heard as f64)
-        },
-    },
-    RadioRow {
-        key: "tokens_lost_share",
-        label: "tokens lost by the radio (%)",
-        scale: 100.0,
-        value: |s| {
-            let agents = s["agents"].as_array()?;
-            let lost: u64 = agents
-                .iter()
-                .filter_map(|a| a["tokens_lost"].as_u64())
-                .sum();
-            // Every token sent (the observer sees each once) goes to every other agent.
-            let sent = s["comms"]["tokens"]["messages"].as_u64()?;
-            let links = sent * s["uavs"].as_u64()?.saturating_sub(1);
-            (links > 0).then(|| lost as f64 / links as f64)
-        },
-    },
-    RadioRow {
-        key: "estimate_kb_per_s",
-        label: "estimates sent, kB per simulated s",
-        scale: 1.0,
-        value: |s| {
-            let bytes = s["comms"]["estimates"]["bytes"].as_f64()?;
-            let sim_s = s["sim_s"].as_f64().filter(|t| *t > 0.0)?;
-            Some(bytes / sim_s / 1e3)
-        },
-    },
-];
-
-/// A run's values of the radio rows, from its `summary.json`.
-pub(super) fn radio_values(summary: &serde_json::Value) -> Vec<Option<f64>> {
-    RADIO_ROWS.iter().map(|row| (row.value)(summary)).collect()
+/// `fleet sweep --merge DIR... --axis KEY=V1,...`: each value's runs from `KEY=V/` of every
+/// source (a source without it has none), its table under `out/KEY=V/`, and the values
+/// compared in `out`.
+pub fn merge(config: &MergeConfig, axis: &Axis) -> anyhow::Result<Outcome> {
+    let mut levels = Vec::new();
+    let mut failed = Vec::new();
+    let mut listed = Vec::new();
+    for i in 0..axis.values.len() {
+        let dirs: Vec<PathBuf> = config
+            .sources
+            .iter()
+            .map(|d| d.join(axis.setting(i)))
+            .filter(|d| d.is_dir())
+            .collect();
+        let (runs, level_failed, level_listed) = gather(&dirs)?;
+        levels.push(runs);
+        failed.push(level_failed);
+        listed.extend(level_listed);
+    }
+    anyhow::ensure!(
+        levels.iter().any(|l| !l.is_empty()),
+        "no run found under the merged directories (expected {}=<value>/<variant>/seed-<n>/summary.json)",
+        axis.key
+    );
+    let mut variants: Vec<Variant> = Vec::new();
+    for level in &levels {
+        for v in columns(level, listed.clone()) {
+            if !variants.contains(&v) {
+                variants.push(v);
+            }
+        }
+    }
+    let write = Levels {
+        axis,
+        variants: &variants,
+        shard: None,
+        flag_missing: true,
+    };
+    let table = write.write(levels, failed, &config.out)?;
+    Ok(if table.failed_runs.is_empty() {
+        Outcome::Success
+    } else {
+        Outcome::Failed
+    })
 }
 
 /// `axis.json`: per variant and value, the statistics over seeds of every row.
@@ -290,7 +282,7 @@ impl AxisTable {
             "Final metrics and means over {} of simulated time against `{}`, mean ± standard \
              deviation over {} seeds ({}); the set metrics are each agent's own, averaged over \
              agents unless marked worst agent.",
-            super::table::window_text(),
+            super::rows::window_text(),
             self.key,
             self.seeds.len(),
             seed_range(&self.seeds)
@@ -618,7 +610,7 @@ fn draw_panel(
 mod tests {
     use super::super::collect::FoundRun;
     use super::super::paired::{Differences, Window};
-    use super::super::table::{ROW_COUNT, run_values};
+    use super::super::rows::{ROW_COUNT, radio_values, run_values};
     use super::*;
 
     #[test]

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use serde::Deserialize as _;
 
-use super::table::{ROW_COUNT, SummaryValues, Table, run_values};
+use super::rows::{ROW_COUNT, SummaryValues, radio_values, run_values};
+use super::table::Table;
 use crate::Outcome;
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::results::curves::draw_sweep;
@@ -103,18 +104,12 @@ pub(super) fn write_table(table: &Table, curves: &Curves, out: &Path) -> anyhow:
     Ok(())
 }
 
-/// `fleet sweep --merge`: the table and picture of every run under the sources'
+/// `fleet sweep --merge` without an axis: the table and picture of every run under the sources'
 /// `<variant>/seed-<n>/`, seeds in order. The columns are the variants that have runs, in
 /// the order the sources' `table.json` list them (then in [`Variant::ALL`]'s). A run missing
 /// for one variant but present for another is listed as missing; the sources' failed runs
 /// are carried over.
-pub fn merge(config: &MergeConfig) -> anyhow::Result<Outcome> {
-    for dir in &config.sources {
-        anyhow::ensure!(dir.is_dir(), "{} is not a sweep directory", dir.display());
-    }
-    if let Some(axis) = &config.axis {
-        return merge_axis(config, axis);
-    }
+pub(super) fn merge(config: &MergeConfig) -> anyhow::Result<Outcome> {
     let (runs, failed, listed) = gather(&config.sources)?;
     anyhow::ensure!(
         !runs.is_empty(),
@@ -131,55 +126,9 @@ pub fn merge(config: &MergeConfig) -> anyhow::Result<Outcome> {
     Ok(code)
 }
 
-/// `fleet sweep --merge DIR... --axis KEY=V1,...`: each value's runs from `KEY=V/` of every
-/// source (a source without it has none), its table under `out/KEY=V/`, and the values
-/// compared in `out` ([`super::axis`]).
-fn merge_axis(config: &MergeConfig, axis: &super::Axis) -> anyhow::Result<Outcome> {
-    let mut levels = Vec::new();
-    let mut failed = Vec::new();
-    let mut listed = Vec::new();
-    for i in 0..axis.values.len() {
-        let dirs: Vec<PathBuf> = config
-            .sources
-            .iter()
-            .map(|d| d.join(axis.setting(i)))
-            .filter(|d| d.is_dir())
-            .collect();
-        let (runs, level_failed, level_listed) = gather(&dirs)?;
-        levels.push(runs);
-        failed.push(level_failed);
-        listed.extend(level_listed);
-    }
-    anyhow::ensure!(
-        levels.iter().any(|l| !l.is_empty()),
-        "no run found under the merged directories (expected {}=<value>/<variant>/seed-<n>/summary.json)",
-        axis.key
-    );
-    let mut variants: Vec<Variant> = Vec::new();
-    for level in &levels {
-        for v in columns(level, listed.clone()) {
-            if !variants.contains(&v) {
-                variants.push(v);
-            }
-        }
-    }
-    let write = super::axis::Levels {
-        axis,
-        variants: &variants,
-        shard: None,
-        flag_missing: true,
-    };
-    let table = write.write(levels, failed, &config.out)?;
-    Ok(if table.failed_runs.is_empty() {
-        Outcome::Success
-    } else {
-        Outcome::Failed
-    })
-}
-
 /// The runs under `<variant>/seed-<n>/` of every directory of `dirs`, the failed runs their
 /// `table.json` list, and the variants they list in order.
-fn gather(dirs: &[PathBuf]) -> anyhow::Result<(FoundRuns, Vec<String>, Vec<Variant>)> {
+pub(super) fn gather(dirs: &[PathBuf]) -> anyhow::Result<(FoundRuns, Vec<String>, Vec<Variant>)> {
     let mut runs = FoundRuns::new();
     let mut failed = Vec::new();
     let mut listed = Vec::new();
@@ -214,7 +163,7 @@ fn gather(dirs: &[PathBuf]) -> anyhow::Result<(FoundRuns, Vec<String>, Vec<Varia
 
 /// The columns of a merged table: the variants that have runs, in the order the sources'
 /// tables list them, then in [`Variant::ALL`]'s.
-fn columns(runs: &FoundRuns, listed: Vec<Variant>) -> Vec<Variant> {
+pub(super) fn columns(runs: &FoundRuns, listed: Vec<Variant>) -> Vec<Variant> {
     let mut variants: Vec<Variant> = Vec::new();
     for v in listed.into_iter().chain(Variant::ALL) {
         if !variants.contains(&v) && runs.keys().any(|k| k.0 == v) {
@@ -275,7 +224,7 @@ pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Resul
         .with_context(|| format!("{}: timeseries.csv", dir.display()))?;
     Ok(FoundRun {
         values: run_values(&finals, &series),
-        radio: super::axis::radio_values(&summary),
+        radio: radio_values(&summary),
         series,
         source: dir.to_owned(),
     })

@@ -24,8 +24,8 @@ use tokio::signal::unix::{SignalKind, signal};
 
 use super::PlannedRun;
 use crate::Outcome;
-use fleet_observe::results::summary::Summary;
 use crate::run::{execute, outcome, write_results};
+use fleet_observe::results::summary::Summary;
 
 /// How one run ended.
 pub(super) enum RunEnd {

@@ -42,6 +42,7 @@ pub mod axis;
 pub mod collect;
 pub mod jobs;
 pub mod paired;
+pub mod rows;
 pub mod seeds;
 pub mod shard;
 pub mod table;
@@ -55,16 +56,29 @@ use crate::Outcome;
 use crate::run::config::{RunConfig, new_run_id};
 use crate::run::hosts::HostLayout;
 use crate::run::runtime;
-use protocol::usage::{ScenarioArgs, UsageError};
-pub use protocol::variant::Variant;
 pub use axis::Axis;
+pub use collect::MergeConfig;
 use collect::{FoundRuns, assemble, read_run, write_table};
-pub use collect::{MergeConfig, merge};
 use jobs::RunEnd;
 pub use paired::{Differences, Paired, t_quantile};
+use protocol::usage::{ScenarioArgs, UsageError};
+pub use protocol::variant::Variant;
+pub use rows::{STEADY_WINDOW_S, SummaryValues};
 pub use seeds::{MAX_SEEDS, SeedSet};
 pub use shard::Shard;
-pub use table::{Cell, STEADY_WINDOW_S, SummaryValues, Table};
+pub use table::{Cell, Table};
+
+/// `fleet sweep --merge`: the table and picture of the runs under the sources (one table), or
+/// of each value of `--axis` and the values compared ([`axis::merge`]).
+pub fn merge(config: &MergeConfig) -> anyhow::Result<Outcome> {
+    for dir in &config.sources {
+        anyhow::ensure!(dir.is_dir(), "{} is not a sweep directory", dir.display());
+    }
+    match &config.axis {
+        Some(axis) => axis::merge(config, axis),
+        None => collect::merge(config),
+    }
+}
 use world_server::server::StepMode;
 
 /// Most runs `--jobs` runs at once.

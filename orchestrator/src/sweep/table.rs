@@ -15,30 +15,15 @@
 //! value of every seed ([`Cell`]), the window (`steady_window_s`) and the comparisons
 //! (`paired`, [`Paired`]); `table.md` the same as two Markdown tables.
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use super::paired::{self, Paired};
-use fleet_observe::observe::StepMetrics;
-use fleet_observe::observe::metrics::SetMetrics;
+use super::rows::{ROWS, STEADY_WINDOW_S, digits, window_text};
 use fleet_observe::results::curves::mean_sd;
 use protocol::variant::Variant;
-
-/// The steady window of the `*_window` rows and of the paired comparisons: the steps whose
-/// simulated time `t` (seconds) has `100 <= t <= 300`.
-pub const STEADY_WINDOW_S: (f64, f64) = (100.0, 300.0);
-
-/// How far a step's time may stray from a bound of [`STEADY_WINDOW_S`] and count as on it
-/// (step times are multiples of the step period, which a float may miss by an ulp).
-const WINDOW_SLACK_S: f64 = 1e-9;
-
-/// The steady window as the tables write it: `100-300 s`.
-pub fn window_text() -> String {
-    format!("{}-{} s", STEADY_WINDOW_S.0, STEADY_WINDOW_S.1)
-}
 
 /// One metric of the table: mean, standard deviation and the values per seed.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -63,223 +48,6 @@ impl Cell {
         }
     }
 }
-
-/// What the table reads of a run's `summary.json`: the values of its rows, under the same
-/// keys. A key that is absent or `null` is no value.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
-pub struct SummaryValues {
-    /// UA at the last step, mean over agents.
-    pub ua_final: Option<f64>,
-    /// OA at the last step, mean over agents.
-    pub oa_final: Option<f64>,
-    /// UA of the worst agent at the last step.
-    pub ua_final_worst: Option<f64>,
-    /// OA of the worst agent at the last step.
-    pub oa_final_worst: Option<f64>,
-    /// Explored ground at the last step.
-    pub explored_final: Option<f64>,
-    /// Target-set area, mean over the run.
-    pub target_set_area_mean: Option<f64>,
-    /// Localisation error, mean over the run, metres.
-    pub loc_error_mean_m: Option<f64>,
-    /// Targets identified at the last step.
-    pub identified_final: Option<f64>,
-    /// Guarantee violations.
-    pub violations: Option<f64>,
-    /// When every target was identified, seconds.
-    pub time_all_identified_s: Option<f64>,
-    /// Simulated over wall time.
-    pub real_time_factor: Option<f64>,
-}
-
-/// Where a row's value of a run comes from.
-pub(super) enum Source {
-    /// A value of the run's `summary.json`.
-    Summary(fn(&SummaryValues) -> Option<f64>),
-    /// The mean of a per-step value (of the step's mean over agents) over the steps of
-    /// [`STEADY_WINDOW_S`] that have it; `unit` goes in the label.
-    Window {
-        step: fn(&SetMetrics) -> Option<f64>,
-        unit: &'static str,
-    },
-}
-
-/// One row of the table: the `table.json` key, the label in `table.md`, the factor to
-/// display it with, and where a run's value comes from.
-pub(super) struct Row {
-    pub(super) key: &'static str,
-    label: &'static str,
-    pub(super) scale: f64,
-    source: Source,
-}
-
-impl Row {
-    /// The row's label in `table.md`; a window row's names the window.
-    pub(super) fn label(&self) -> Cow<'static, str> {
-        match self.source {
-            Source::Summary(_) => Cow::Borrowed(self.label),
-            Source::Window { unit, .. } => Cow::Owned(format!(
-                "{}, mean over {} ({unit})",
-                self.label,
-                window_text()
-            )),
-        }
-    }
-}
-
-/// How many rows the table has.
-pub(super) const ROW_COUNT: usize = ROWS.len();
-
-/// The metrics of the table, in row order.
-pub(super) const ROWS: [Row; 15] = [
-    Row {
-        key: "ua_final",
-        label: "UA, undetected-set area (%)",
-        scale: 100.0,
-        source: Source::Summary(|s| s.ua_final),
-    },
-    Row {
-        key: "oa_final",
-        label: "OA, undetected and occluded (%)",
-        scale: 100.0,
-        source: Source::Summary(|s| s.oa_final),
-    },
-    Row {
-        key: "ua_final_worst",
-        label: "UA, worst agent (%)",
-        scale: 100.0,
-        source: Source::Summary(|s| s.ua_final_worst),
-    },
-    Row {
-        key: "oa_final_worst",
-        label: "OA, worst agent (%)",
-        scale: 100.0,
-        source: Source::Summary(|s| s.oa_final_worst),
-    },
-    Row {
-        key: "explored_final",
-        label: "explored (%)",
-        scale: 100.0,
-        source: Source::Summary(|s| s.explored_final),
-    },
-    Row {
-        key: "target_set_area_mean",
-        label: "target-set area, mean (%)",
-        scale: 100.0,
-        source: Source::Summary(|s| s.target_set_area_mean),
-    },
-    Row {
-        key: "loc_error_mean_m",
-        label: "localisation error, mean (m)",
-        scale: 1.0,
-        source: Source::Summary(|s| s.loc_error_mean_m),
-    },
-    Row {
-        key: "ua_window",
-        label: "UA",
-        scale: 100.0,
-        source: Source::Window {
-            step: |m| Some(m.ua),
-            unit: "%",
-        },
-    },
-    Row {
-        key: "oa_window",
-        label: "OA",
-        scale: 100.0,
-        source: Source::Window {
-            step: |m| Some(m.oa),
-            unit: "%",
-        },
-    },
-    Row {
-        key: "target_set_area_window",
-        label: "target-set area",
-        scale: 100.0,
-        source: Source::Window {
-            step: |m| m.target_set_area,
-            unit: "%",
-        },
-    },
-    Row {
-        key: "loc_error_m_window",
-        label: "localisation error",
-        scale: 1.0,
-        source: Source::Window {
-            step: |m| m.loc_error_m,
-            unit: "m",
-        },
-    },
-    Row {
-        key: "identified_final",
-        label: "identified targets (final)",
-        scale: 1.0,
-        source: Source::Summary(|s| s.identified_final),
-    },
-    Row {
-        key: "violations",
-        label: "guarantee violations",
-        scale: 1.0,
-        source: Source::Summary(|s| s.violations),
-    },
-    Row {
-        key: "time_all_identified_s",
-        label: "all identified at (s)",
-        scale: 1.0,
-        source: Source::Summary(|s| s.time_all_identified_s),
-    },
-    Row {
-        key: "real_time_factor",
-        label: "real-time factor",
-        scale: 1.0,
-        source: Source::Summary(|s| s.real_time_factor),
-    },
-];
-
-/// A metric every two variants are compared on seed by seed ([`super::paired`]); lower is
-/// better for each.
-pub(super) struct Compared {
-    /// Its name in `paired` of `table.json`.
-    pub(super) metric: &'static str,
-    /// Its name in `table.md`'s comparison, with the unit of a difference.
-    pub(super) label: &'static str,
-    /// The keys of its two rows: the value of `summary.json`, the mean over the window.
-    pub(super) rows: [&'static str; 2],
-}
-
-impl Compared {
-    /// The factor its differences are displayed with: its rows' (100 for fractions, so
-    /// percentage points).
-    pub(super) fn scale(&self) -> f64 {
-        ROWS.iter()
-            .find(|r| r.key == self.rows[0])
-            .map_or(1.0, |r| r.scale)
-    }
-}
-
-/// The metrics compared, in the order of `paired`.
-pub(super) const COMPARED: [Compared; 4] = [
-    Compared {
-        metric: "ua",
-        label: "UA (pp)",
-        rows: ["ua_final", "ua_window"],
-    },
-    Compared {
-        metric: "oa",
-        label: "OA (pp)",
-        rows: ["oa_final", "oa_window"],
-    },
-    Compared {
-        metric: "target_set_area",
-        label: "target-set area (pp)",
-        rows: ["target_set_area_mean", "target_set_area_window"],
-    },
-    Compared {
-        metric: "loc_error_m",
-        label: "localisation error (m)",
-        rows: ["loc_error_mean_m", "loc_error_m_window"],
-    },
-];
 
 /// `table.json`: per variant, per metric, the statistics over seeds, and every two variants
 /// compared seed by seed.
@@ -411,39 +179,6 @@ pub(super) fn seed_range(seeds: &[u64]) -> String {
     }
 }
 
-/// A run's value of every row of the table, in row order: from its summary's values and its
-/// series of metrics per step (its `timeseries.csv`).
-pub(super) fn run_values(summary: &SummaryValues, series: &[StepMetrics]) -> Vec<Option<f64>> {
-    ROWS.iter()
-        .map(|row| match row.source {
-            Source::Summary(value) => value(summary),
-            Source::Window { step, .. } => window_mean(series, step),
-        })
-        .collect()
-}
-
-/// The mean of `value` of each step's mean over agents, over the steps of [`STEADY_WINDOW_S`]
-/// that have one; `None` when none has.
-fn window_mean(series: &[StepMetrics], value: fn(&SetMetrics) -> Option<f64>) -> Option<f64> {
-    let (from, to) = STEADY_WINDOW_S;
-    let values: Vec<f64> = series
-        .iter()
-        .filter(|m| m.time_s >= from - WINDOW_SLACK_S && m.time_s <= to + WINDOW_SLACK_S)
-        .filter_map(|m| m.mean.as_ref().and_then(value))
-        .collect();
-    (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
-}
-
-/// The digits a value of a row of factor `scale` is shown with: 2 for percentages and small
-/// values, 1 for the others.
-pub(super) fn digits(value: f64, scale: f64) -> usize {
-    if scale == 100.0 || value.abs() < 10.0 {
-        2
-    } else {
-        1
-    }
-}
-
 /// "mean ± sd" of a cell, times `scale`, or "-".
 pub(super) fn format_cell(cell: &Cell, scale: f64) -> String {
     match (cell.mean, cell.sd) {
@@ -458,7 +193,7 @@ pub(super) fn format_cell(cell: &Cell, scale: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fleet_observe::results::summary::Summary;
+    use crate::sweep::rows::{ROW_COUNT, SummaryValues, run_values};
 
     /// The row values of a run with these final UA and OA and no time series.
     fn values(ua: f64, oa: Option<f64>) -> Vec<Option<f64>> {
@@ -505,85 +240,6 @@ mod tests {
             md.contains("| localisation error, mean over 100-300 s (m) | - | - |"),
             "{md}"
         );
-    }
-
-    #[test]
-    fn the_rows_read_the_summary_by_its_own_keys() {
-        let s = Summary {
-            ua_final: Some(0.31),
-            oa_final: Some(0.25),
-            ua_final_worst: Some(0.4),
-            oa_final_worst: Some(0.2),
-            explored_final: Some(0.9),
-            target_set_area_mean: Some(0.01),
-            loc_error_mean_m: Some(3.5),
-            identified_final: 7.5,
-            violations: 2,
-            time_all_identified_s: Some(42.0),
-            real_time_factor: 4.0,
-            ..Summary::default()
-        };
-        let json = serde_json::to_value(&s).unwrap();
-        let read = SummaryValues::deserialize(&json).unwrap();
-        let values = run_values(&read, &[]);
-        // Every row from the summary reads the value its key names, and every such key has one.
-        for (i, row) in ROWS.iter().enumerate() {
-            if matches!(row.source, Source::Summary(_)) {
-                assert_eq!(values[i], json[row.key].as_f64(), "{}", row.key);
-                assert!(values[i].is_some(), "{}", row.key);
-            } else {
-                assert_eq!(values[i], None, "{}: no series, no window mean", row.key);
-            }
-        }
-        // A summary without a key, or with null, has no value there.
-        let sparse = serde_json::json!({"ua_final": null, "violations": 0, "other": "x"});
-        let read = SummaryValues::deserialize(&sparse).unwrap();
-        assert_eq!((read.ua_final, read.violations), (None, Some(0.0)));
-    }
-
-    /// A step at `time_s` whose mean over agents has these UA and localisation error.
-    fn step(time_s: f64, ua: f64, error: Option<f64>) -> StepMetrics {
-        StepMetrics {
-            time_s,
-            mean: Some(SetMetrics {
-                ua,
-                loc_error_m: error,
-                ..SetMetrics::default()
-            }),
-            ..StepMetrics::default()
-        }
-    }
-
-    #[test]
-    fn the_window_rows_average_the_steps_from_100_to_300_s() {
-        assert_eq!(STEADY_WINDOW_S, (100.0, 300.0));
-        assert_eq!(window_text(), "100-300 s");
-        let series = [
-            step(99.5, 0.9, Some(50.0)),
-            step(100.0, 0.4, None),
-            step(200.0, 0.2, Some(4.0)),
-            // A step time a float's rounding put just past the bound is still on it.
-            step(300.000_000_000_000_06, 0.3, Some(2.0)),
-            step(300.5, 0.9, Some(50.0)),
-            StepMetrics {
-                time_s: 250.0,
-                ..StepMetrics::default()
-            },
-        ];
-        let values = run_values(&SummaryValues::default(), &series);
-        assert!((values[row("ua_window")].unwrap() - 0.3).abs() < 1e-12);
-        assert_eq!(values[row("loc_error_m_window")], Some(3.0));
-        assert_eq!(values[row("target_set_area_window")], None);
-        // A run shorter than 100 s has no window mean.
-        let short = [step(50.0, 0.5, Some(1.0)), step(99.0, 0.5, Some(1.0))];
-        let values = run_values(&SummaryValues::default(), &short);
-        assert_eq!(values[row("ua_window")], None);
-        // Every compared metric has both its rows.
-        for c in &COMPARED {
-            for key in c.rows {
-                assert!(ROWS.iter().any(|r| r.key == key), "{key}");
-            }
-        }
     }
 
     #[test]

@@ -408,7 +408,6 @@ fn paint_text(header: &mut [u8], text: &str) -> Result<(), AnimationError> {
     Ok(())
 }
 
-
 /// `run.gif` as one of the run's sinks: a frame every [`FRAME_PERIOD_S`] of simulated time.
 /// It is not essential: a failure is logged and the run goes on without it.
 pub struct AnimationSink {
