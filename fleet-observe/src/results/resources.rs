@@ -5,13 +5,14 @@
 
 use std::collections::BTreeMap;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One process of the run.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct ProcessResources {
     /// `orchestrator`, `world`, `agent` or `bridge`.
-    pub role: &'static str,
+    pub role: String,
     /// An agent's UAV.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub uav: Option<u32>,
@@ -36,7 +37,8 @@ pub struct ProcessResources {
 }
 
 /// Every process of the run and the totals.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Resources {
     /// The orchestrator, the world-server, then the agents by UAV and incarnation.
     pub processes: Vec<ProcessResources>,
@@ -45,7 +47,8 @@ pub struct Resources {
 }
 
 /// Sums over a run's processes.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct ResourceTotals {
     /// CPU seconds of every process whose usage was read.
     pub cpu_s: f64,

@@ -25,7 +25,7 @@
 use std::collections::BTreeMap;
 use std::io::Write;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use protocol::scenario::Scenario;
 
@@ -37,18 +37,19 @@ use crate::observe::{ObserverReport, StepMetrics};
 use crate::stats::Stats;
 
 /// The summary of a run.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Summary {
     /// Scenario seed.
     pub seed: u64,
     /// The guidance variant (`paper`, `kappa0`, `nomap`, `setfleet`).
-    pub variant: &'static str,
+    pub variant: String,
     /// UAVs in the fleet.
     pub uavs: u32,
     /// Targets in the world.
     pub targets: u32,
     /// `lockstep` or `realtime`.
-    pub mode: &'static str,
+    pub mode: String,
     /// Scenario duration, seconds.
     pub duration_s: f64,
     /// Simulated time measured, seconds (steps x T).
@@ -117,7 +118,7 @@ pub struct Summary {
     /// Per agent.
     pub agents: Vec<AgentSummary>,
     /// Traffic per service kind.
-    pub comms: BTreeMap<&'static str, CommsSummary>,
+    pub comms: BTreeMap<String, CommsSummary>,
     /// What the observer could not use.
     pub observer: ObserverSummary,
     /// CPU time, peak memory and phases per process, and totals.
@@ -127,7 +128,8 @@ pub struct Summary {
 }
 
 /// One agent over the run (summed over its incarnations).
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct AgentSummary {
     /// UAV index.
     pub uav: u32,
@@ -168,7 +170,8 @@ pub struct AgentSummary {
 
 /// The summary values of one series of set metrics: one agent's, or the per-step mean over
 /// agents or worst agent (see the module docs). Fractions of the region, seconds, metres.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct MetricFinals {
     /// Explored ground at the last step of the series.
     pub explored_final: Option<f64>,
@@ -234,7 +237,8 @@ fn mean_and_max(values: &[Option<f64>]) -> (Option<f64>, Option<f64>) {
 }
 
 /// Traffic of one service kind.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct CommsSummary {
     /// Messages.
     pub messages: u64,
@@ -246,7 +250,8 @@ pub struct CommsSummary {
 }
 
 /// Latency percentiles, milliseconds.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct LatencySummary {
     /// Median.
     pub latency_p50_ms: f64,
@@ -257,7 +262,8 @@ pub struct LatencySummary {
 }
 
 /// Messages the observer dropped and steps it could not measure.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct ObserverSummary {
     /// Steps for which no estimate arrived.
     pub steps_without_estimates: u64,
@@ -266,7 +272,8 @@ pub struct ObserverSummary {
 }
 
 /// Run-specific values (wall clock, ids).
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct RunTiming {
     /// The run id.
     pub run_id: String,
@@ -397,17 +404,17 @@ impl Summary {
                             bytes: t.bytes,
                             timing,
                         };
-                        (kind.key(), summary)
+                        (kind.key().to_owned(), summary)
                     })
                     .collect()
             })
             .unwrap_or_default();
         Summary {
             seed: scenario.seed,
-            variant: record.variant,
+            variant: record.variant.to_owned(),
             uavs: scenario.uavs.count,
             targets: all,
-            mode: record.mode,
+            mode: record.mode.to_owned(),
             duration_s: scenario.duration_s,
             sim_s,
             wall_s: record.wall_s,

@@ -71,7 +71,7 @@ fn orchestrator(own: &OwnUsage) -> ProcessResources {
         *phases.entry("other".to_owned()).or_insert(0.0) += rest;
     }
     ProcessResources {
-        role: "orchestrator",
+        role: "orchestrator".to_owned(),
         end: "running".to_owned(),
         cpu_s: own.usage.map(|u| u.cpu_s()),
         user_s: own.usage.map(|u| u.user_s),
@@ -99,7 +99,8 @@ fn child(p: &ExitedProcess, phases: Option<&PhaseTimes>) -> ProcessResources {
             (Some(_), _) => "agent",
             (None, Some(_)) => "bridge",
             (None, None) => "world",
-        },
+        }
+        .to_owned(),
         uav: p.uav,
         incarnation: p.incarnation,
         end,
@@ -214,7 +215,7 @@ mod tests {
             wall_s: 25.0,
         };
         let r = gather(&own, &exited, Path::new("/nonexistent"), run);
-        let roles: Vec<&str> = r.processes.iter().map(|p| p.role).collect();
+        let roles: Vec<&str> = r.processes.iter().map(|p| p.role.as_str()).collect();
         assert_eq!(roles, ["orchestrator", "world", "agent"]);
         let orchestrator = &r.processes[0];
         assert_eq!(orchestrator.phases["other"], 1.5);

@@ -612,6 +612,7 @@ mod tests {
     use super::super::paired::{Differences, Window};
     use super::super::rows::{ROW_COUNT, radio_values, run_values};
     use super::*;
+    use fleet_observe::results::summary::Summary;
 
     #[test]
     fn axes_are_parsed_and_bad_ones_named() {
@@ -647,8 +648,8 @@ mod tests {
         );
     }
 
-    fn summary(ua: f64, lost: u64, received: u64) -> serde_json::Value {
-        serde_json::json!({
+    fn summary(ua: f64, lost: u64, received: u64) -> Summary {
+        let json = serde_json::json!({
             "ua_final": ua,
             "uavs": 2,
             "sim_s": 10.0,
@@ -657,12 +658,13 @@ mod tests {
                 {"estimates_lost": lost, "estimates_received": received, "tokens_lost": 0},
             ],
             "comms": {"tokens": {"messages": 4}, "estimates": {"bytes": 20000}},
-        })
+        });
+        serde_json::from_value(json).unwrap()
     }
 
-    fn run(s: &serde_json::Value) -> FoundRun {
+    fn run(s: &Summary) -> FoundRun {
         FoundRun {
-            values: run_values(&serde::Deserialize::deserialize(s).unwrap(), &[]),
+            values: run_values(s, &[]),
             radio: radio_values(s),
             series: Vec::new(),
             source: std::path::PathBuf::new(),

@@ -9,13 +9,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use serde::Deserialize as _;
 
-use super::rows::{ROW_COUNT, SummaryValues, radio_values, run_values};
+use super::rows::{ROW_COUNT, radio_values, run_values};
 use super::table::Table;
 use crate::Outcome;
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::results::curves::draw_sweep;
+use fleet_observe::results::summary::Summary;
 use fleet_observe::results::timeseries;
 use protocol::variant::Variant;
 
@@ -194,36 +194,26 @@ fn seed_dirs(dir: &Path) -> anyhow::Result<Vec<(u64, PathBuf)>> {
     Ok(found)
 }
 
-/// Which run a `summary.json` is of.
-#[derive(serde::Deserialize)]
-struct RunIdentity {
-    variant: String,
-    seed: u64,
-}
-
 /// A run's table values and series, checking that its summary is the variant's and seed's.
 pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Result<FoundRun> {
     let read = |name: &str| {
         std::fs::read_to_string(dir.join(name))
             .with_context(|| format!("cannot read {}", dir.join(name).display()))
     };
-    let summary: serde_json::Value = serde_json::from_str(&read("summary.json")?)
-        .with_context(|| format!("{}: summary.json is not JSON", dir.display()))?;
-    let not_a_summary = || format!("{}: summary.json is not a run's summary", dir.display());
-    let identity = RunIdentity::deserialize(&summary).with_context(not_a_summary)?;
+    let summary: Summary = serde_json::from_str(&read("summary.json")?)
+        .with_context(|| format!("{}: summary.json is not a run's summary", dir.display()))?;
     anyhow::ensure!(
-        identity.variant == variant.name() && identity.seed == seed,
+        summary.variant == variant.name() && summary.seed == seed,
         "{}: summary.json is of variant {} seed {}, not {} seed {seed}",
         dir.display(),
-        identity.variant,
-        identity.seed,
+        summary.variant,
+        summary.seed,
         variant.name()
     );
-    let finals = SummaryValues::deserialize(&summary).with_context(not_a_summary)?;
     let series = timeseries::from_csv(&read("timeseries.csv")?)
         .with_context(|| format!("{}: timeseries.csv", dir.display()))?;
     Ok(FoundRun {
-        values: run_values(&finals, &series),
+        values: run_values(&summary, &series),
         radio: radio_values(&summary),
         series,
         source: dir.to_owned(),
@@ -233,7 +223,6 @@ pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Resul
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fleet_observe::results::summary::Summary;
 
     /// Writes a fake run of `variant` and `seed` under `dir` as a sweep would.
     fn fake_run(dir: &Path, variant: Variant, seed: u64, ua: f64) {
@@ -241,7 +230,7 @@ mod tests {
         std::fs::create_dir_all(&run).unwrap();
         let summary = Summary {
             seed,
-            variant: variant.name(),
+            variant: variant.name().to_owned(),
             ua_final: Some(ua),
             ..Summary::default()
         };

@@ -63,7 +63,7 @@ use jobs::RunEnd;
 pub use paired::{Differences, Paired, t_quantile};
 use protocol::usage::{ScenarioArgs, UsageError};
 pub use protocol::variant::Variant;
-pub use rows::{STEADY_WINDOW_S, SummaryValues};
+pub use rows::STEADY_WINDOW_S;
 pub use seeds::{MAX_SEEDS, SeedSet};
 pub use shard::Shard;
 pub use table::{Cell, Table};

@@ -7,7 +7,7 @@ use std::borrow::Cow;
 
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::observe::metrics::SetMetrics;
-use serde::Deserialize;
+use fleet_observe::results::summary::Summary;
 
 /// The steady window of the `*_window` rows and of the paired comparisons: the steps whose
 /// simulated time `t` (seconds) has `100 <= t <= 300`.
@@ -22,38 +22,10 @@ pub fn window_text() -> String {
     format!("{}-{} s", STEADY_WINDOW_S.0, STEADY_WINDOW_S.1)
 }
 
-/// What the table reads of a run's `summary.json`: the values of its rows, under the same
-/// keys. A key that is absent or `null` is no value.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
-pub struct SummaryValues {
-    /// UA at the last step, mean over agents.
-    pub ua_final: Option<f64>,
-    /// OA at the last step, mean over agents.
-    pub oa_final: Option<f64>,
-    /// UA of the worst agent at the last step.
-    pub ua_final_worst: Option<f64>,
-    /// OA of the worst agent at the last step.
-    pub oa_final_worst: Option<f64>,
-    /// Explored ground at the last step.
-    pub explored_final: Option<f64>,
-    /// Target-set area, mean over the run.
-    pub target_set_area_mean: Option<f64>,
-    /// Localisation error, mean over the run, metres.
-    pub loc_error_mean_m: Option<f64>,
-    /// Targets identified at the last step.
-    pub identified_final: Option<f64>,
-    /// Guarantee violations.
-    pub violations: Option<f64>,
-    /// When every target was identified, seconds.
-    pub time_all_identified_s: Option<f64>,
-    /// Simulated over wall time.
-    pub real_time_factor: Option<f64>,
-}
-
 /// Where a row's value of a run comes from.
 pub(super) enum Source {
-    /// A value of the run's `summary.json`.
-    Summary(fn(&SummaryValues) -> Option<f64>),
+    /// A value of the run's `summary.json` (`None` where the run has none).
+    Summary(fn(&Summary) -> Option<f64>),
     /// The mean of a per-step value (of the step's mean over agents) over the steps of
     /// [`STEADY_WINDOW_S`] that have it; `unit` goes in the label.
     Window {
@@ -172,13 +144,13 @@ pub(super) const ROWS: [Row; 15] = [
         key: "identified_final",
         label: "identified targets (final)",
         scale: 1.0,
-        source: Source::Summary(|s| s.identified_final),
+        source: Source::Summary(|s| Some(s.identified_final)),
     },
     Row {
         key: "violations",
         label: "guarantee violations",
         scale: 1.0,
-        source: Source::Summary(|s| s.violations),
+        source: Source::Summary(|s| Some(s.violations as f64)),
     },
     Row {
         key: "time_all_identified_s",
@@ -190,7 +162,7 @@ pub(super) const ROWS: [Row; 15] = [
         key: "real_time_factor",
         label: "real-time factor",
         scale: 1.0,
-        source: Source::Summary(|s| s.real_time_factor),
+        source: Source::Summary(|s| Some(s.real_time_factor)),
     },
 ];
 
@@ -241,7 +213,7 @@ pub(super) const COMPARED: [Compared; 4] = [
 
 /// A run's value of every row of the table, in row order: from its summary's values and its
 /// series of metrics per step (its `timeseries.csv`).
-pub(super) fn run_values(summary: &SummaryValues, series: &[StepMetrics]) -> Vec<Option<f64>> {
+pub(super) fn run_values(summary: &Summary, series: &[StepMetrics]) -> Vec<Option<f64>> {
     ROWS.iter()
         .map(|row| match row.source {
             Source::Summary(value) => value(summary),
@@ -277,7 +249,7 @@ pub(super) struct RadioRow {
     pub(super) key: &'static str,
     pub(super) label: &'static str,
     pub(super) scale: f64,
-    value: fn(&serde_json::Value) -> Option<f64>,
+    value: fn(&Summary) -> Option<f64>,
 }
 
 /// The radio's rows: what the links lost, measured from the agents' counters, and what the
@@ -288,10 +260,8 @@ pub(super) const RADIO_ROWS: [RadioRow; 3] = [
         label: "peer estimates lost by the radio (%)",
         scale: 100.0,
         value: |s| {
-            let agents = s["agents"].as_array()?;
-            let sum = |k: &str| agents.iter().filter_map(|a| a[k].as_u64()).sum::<u64>();
-            let lost = sum("estimates_lost");
-            let heard = lost + sum("estimates_received");
+            let lost: u64 = s.agents.iter().map(|a| a.estimates_lost).sum();
+            let heard = lost + s.agents.iter().map(|a| a.estimates_received).sum::<u64>();
             (heard > 0).then(|| lost as f64 / heard as f64)
         },
     },
@@ -300,14 +270,10 @@ pub(super) const RADIO_ROWS: [RadioRow; 3] = [
         label: "tokens lost by the radio (%)",
         scale: 100.0,
         value: |s| {
-            let agents = s["agents"].as_array()?;
-            let lost: u64 = agents
-                .iter()
-                .filter_map(|a| a["tokens_lost"].as_u64())
-                .sum();
+            let lost: u64 = s.agents.iter().map(|a| a.tokens_lost).sum();
             // Every token sent (the observer sees each once) goes to every other agent.
-            let sent = s["comms"]["tokens"]["messages"].as_u64()?;
-            let links = sent * s["uavs"].as_u64()?.saturating_sub(1);
+            let sent = s.comms.get("tokens")?.messages;
+            let links = sent * u64::from(s.uavs.saturating_sub(1));
             (links > 0).then(|| lost as f64 / links as f64)
         },
     },
@@ -316,22 +282,21 @@ pub(super) const RADIO_ROWS: [RadioRow; 3] = [
         label: "estimates sent, kB per simulated s",
         scale: 1.0,
         value: |s| {
-            let bytes = s["comms"]["estimates"]["bytes"].as_f64()?;
-            let sim_s = s["sim_s"].as_f64().filter(|t| *t > 0.0)?;
+            let bytes = s.comms.get("estimates")?.bytes as f64;
+            let sim_s = Some(s.sim_s).filter(|t| *t > 0.0)?;
             Some(bytes / sim_s / 1e3)
         },
     },
 ];
 
 /// A run's values of the radio rows, from its `summary.json`.
-pub(super) fn radio_values(summary: &serde_json::Value) -> Vec<Option<f64>> {
+pub(super) fn radio_values(summary: &Summary) -> Vec<Option<f64>> {
     RADIO_ROWS.iter().map(|row| (row.value)(summary)).collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fleet_observe::results::summary::Summary;
 
     fn row(key: &str) -> usize {
         ROWS.iter().position(|r| r.key == key).unwrap()
@@ -354,7 +319,7 @@ mod tests {
             ..Summary::default()
         };
         let json = serde_json::to_value(&s).unwrap();
-        let read = SummaryValues::deserialize(&json).unwrap();
+        let read: Summary = serde_json::from_value(json.clone()).unwrap();
         let values = run_values(&read, &[]);
         // Every row from the summary reads the value its key names, and every such key has one.
         for (i, row) in ROWS.iter().enumerate() {
@@ -365,10 +330,13 @@ mod tests {
                 assert_eq!(values[i], None, "{}: no series, no window mean", row.key);
             }
         }
-        // A summary without a key, or with null, has no value there.
-        let sparse = serde_json::json!({"ua_final": null, "violations": 0, "other": "x"});
-        let read = SummaryValues::deserialize(&sparse).unwrap();
-        assert_eq!((read.ua_final, read.violations), (None, Some(0.0)));
+        // A summary of an older release, without a key or with null, reads as the default.
+        let sparse = serde_json::json!({"ua_final": null, "violations": 3, "other": "x"});
+        let read: Summary = serde_json::from_value(sparse).unwrap();
+        assert_eq!(
+            (read.ua_final, read.violations, read.oa_final),
+            (None, 3, None)
+        );
     }
 
     /// A step at `time_s` whose mean over agents has these UA and localisation error.
@@ -400,13 +368,13 @@ mod tests {
                 ..StepMetrics::default()
             },
         ];
-        let values = run_values(&SummaryValues::default(), &series);
+        let values = run_values(&Summary::default(), &series);
         assert!((values[row("ua_window")].unwrap() - 0.3).abs() < 1e-12);
         assert_eq!(values[row("loc_error_m_window")], Some(3.0));
         assert_eq!(values[row("target_set_area_window")], None);
         // A run shorter than 100 s has no window mean.
         let short = [step(50.0, 0.5, Some(1.0)), step(99.0, 0.5, Some(1.0))];
-        let values = run_values(&SummaryValues::default(), &short);
+        let values = run_values(&Summary::default(), &short);
         assert_eq!(values[row("ua_window")], None);
         // Every compared metric has both its rows.
         for c in &COMPARED {

@@ -2,7 +2,7 @@
 //! variant, mean ± sample standard deviation over the seeds (`table.json`, `table.md`), then
 //! every two variants compared seed by seed ([`super::paired`]).
 //!
-//! Most rows are values of each run's `summary.json`, read into [`SummaryValues`]: UA, OA and
+//! Most rows are values of each run's `summary.json`, read from its typed [`Summary`](fleet_observe::results::summary::Summary): UA, OA and
 //! explored ground at the last step, the target-set area and localisation error averaged over
 //! the run, and so on. Four rows are steadier: the mean of UA, OA, target-set area and
 //! localisation error over the steps of [`STEADY_WINDOW_S`] (simulated time 100 s to 300 s,
@@ -193,14 +193,15 @@ pub(super) fn format_cell(cell: &Cell, scale: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sweep::rows::{ROW_COUNT, SummaryValues, run_values};
+    use crate::sweep::rows::{ROW_COUNT, run_values};
+    use fleet_observe::results::summary::Summary;
 
     /// The row values of a run with these final UA and OA and no time series.
     fn values(ua: f64, oa: Option<f64>) -> Vec<Option<f64>> {
-        let summary = SummaryValues {
+        let summary = Summary {
             ua_final: Some(ua),
             oa_final: oa,
-            ..SummaryValues::default()
+            ..Summary::default()
         };
         run_values(&summary, &[])
     }
