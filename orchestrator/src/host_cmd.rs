@@ -10,7 +10,6 @@
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::Context as _;
@@ -18,13 +17,13 @@ use bridge::security::{HostName, write_fleet_certs};
 use clap::Args;
 use protocol::ipc::{RunNode, scan_nodes};
 use protocol::service::RunId;
-use tokio::signal::unix::{SignalKind, signal};
 use world_server::server::StepMode;
 
 use crate::Outcome;
 use crate::run::children::{Binaries, Children};
 use crate::run::config::{RunScenarioArgs, default_out_dir};
 use crate::run::hosts::HostLayout;
+use crate::run::lifecycle::{RunDirs, Signals, clean_run_files, stop_agents_and_bridges};
 use protocol::usage::UsageError;
 
 /// `fleet host`.
@@ -103,8 +102,6 @@ impl HostArgs {
 
 /// How often `fleet host` looks for the world host (its proxy) and for exited agents.
 const POLL: Duration = Duration::from_millis(100);
-/// How long the agents and the bridge get to stop after SIGTERM.
-const EXIT_GRACE: Duration = Duration::from_secs(5);
 
 /// Runs `fleet host`: the bridge, then the agents once the world host is reached, until the
 /// agents end or a signal stops them.
@@ -113,24 +110,14 @@ pub fn run(config: &HostConfig) -> anyhow::Result<Outcome> {
 }
 
 async fn serve(config: &HostConfig) -> anyhow::Result<Outcome> {
-    let logs = config.out.join("logs");
-    std::fs::create_dir_all(&logs)
-        .with_context(|| format!("cannot create the output directory {}", logs.display()))?;
-    let scenario_file = config.out.join("scenario.toml");
-    std::fs::write(&scenario_file, config.scenario.to_toml_string())
-        .with_context(|| format!("cannot write {}", scenario_file.display()))?;
-    crate::run::iox2::write_configs(&config.out, &config.layout, &config.run)?;
-    let checkpoints = config.out.join("checkpoints");
-    std::fs::create_dir_all(&checkpoints)
-        .with_context(|| format!("cannot create {}", checkpoints.display()))?;
-    let mut sigint = signal(SignalKind::interrupt()).context("cannot handle SIGINT")?;
-    let mut sigterm = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
+    let dirs = RunDirs::prepare(&config.out, &config.scenario, &config.layout, &config.run)?;
+    let mut signals = Signals::take()?;
     let mut children = Children::new(
         config.run.clone(),
         Binaries::locate()?,
-        scenario_file,
-        logs.clone(),
-        checkpoints,
+        dirs.scenario_file.clone(),
+        dirs.logs.clone(),
+        dirs.checkpoints.clone(),
         StepMode::Lockstep,
         config.layout.clone(),
     );
@@ -139,57 +126,61 @@ async fn serve(config: &HostConfig) -> anyhow::Result<Outcome> {
     eprintln!(
         "fleet host: waiting for the world host at {} (logs in {})",
         config.connect,
-        logs.display()
+        dirs.logs.display()
     );
-    let stop = AtomicBool::new(false);
     let reached = tokio::select! {
-        reached = world_reached(&local, &mut children) => reached,
-        _ = sigint.recv() => { stop.store(true, Ordering::Relaxed); false }
-        _ = sigterm.recv() => { stop.store(true, Ordering::Relaxed); false }
+        reached = world_reached(&local, &mut children) => Some(reached),
+        _ = signals.recv() => None,
     };
-    let mut outcome = Outcome::Success;
-    if reached {
-        eprintln!("fleet host: the world host is reached; starting the agents");
-        for uav in config.layout.agents_on(1) {
-            children.spawn_agent(uav)?;
+    let outcome = match reached {
+        Some(true) => {
+            eprintln!("fleet host: the world host is reached; starting the agents");
+            serve_agents(config, &mut children, &mut signals).await?
         }
-        let mut failed = false;
-        let mut running = config.layout.agents_on(1).len();
-        while running > 0 {
-            tokio::select! {
-                _ = tokio::time::sleep(POLL) => {
-                    for exit in children.reap_agents() {
-                        running -= 1;
-                        eprintln!("fleet host: agent {} exited with {}", exit.uav, exit.status);
-                        failed |= !exit.status.success();
-                    }
-                }
-                _ = sigint.recv() => break,
-                _ = sigterm.recv() => break,
-            }
+        Some(false) => {
+            eprintln!(
+                "fleet host: the bridge ended before it reached the world host; see {}",
+                dirs.logs
+                    .join(format!("bridge-{}.log", config.layout.hosts()[1].name))
+                    .display()
+            );
+            Outcome::Failed
         }
-        if failed {
-            outcome = Outcome::Failed;
-        }
-    } else if !stop.load(Ordering::Relaxed) {
-        eprintln!(
-            "fleet host: the bridge ended before it reached the world host; see {}",
-            logs.join(format!("bridge-{}.log", config.layout.hosts()[1].name))
-                .display()
-        );
-        outcome = Outcome::Failed;
-    }
-    children.terminate_agents();
-    children.wait_agents(EXIT_GRACE).await;
-    children.kill_agents().await;
-    children.stop_bridges(EXIT_GRACE).await;
-    if let Err(e) = protocol::ipc::cleanup_stale(&local) {
-        tracing::debug!(error = %e, "cannot scan the run's nodes");
-    }
-    if let Err(e) = protocol::ipc::remove_run_files(&local) {
-        tracing::warn!(error = %e, "cannot remove the run's iceoryx2 files");
-    }
+        None => Outcome::Success,
+    };
+    stop_agents_and_bridges(&mut children, false).await;
+    clean_run_files(&local);
     Ok(outcome)
+}
+
+/// Runs this host's agents until they all end or a signal arrives; failed if one failed.
+async fn serve_agents(
+    config: &HostConfig,
+    children: &mut Children,
+    signals: &mut Signals,
+) -> anyhow::Result<Outcome> {
+    for uav in config.layout.agents_on(1) {
+        children.spawn_agent(uav)?;
+    }
+    let mut failed = false;
+    let mut running = config.layout.agents_on(1).len();
+    while running > 0 {
+        tokio::select! {
+            _ = tokio::time::sleep(POLL) => {
+                for exit in children.reap_agents() {
+                    running -= 1;
+                    eprintln!("fleet host: agent {} exited with {}", exit.uav, exit.status);
+                    failed |= !exit.status.success();
+                }
+            }
+            _ = signals.recv() => break,
+        }
+    }
+    Ok(if failed {
+        Outcome::Failed
+    } else {
+        Outcome::Success
+    })
 }
 
 /// Waits until the world-server shows up in this host's domain (the bridge made its proxy:

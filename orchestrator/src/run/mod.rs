@@ -29,6 +29,7 @@ pub mod config;
 pub mod faults;
 pub mod hosts;
 pub mod iox2;
+pub mod lifecycle;
 pub mod progress;
 pub mod resources;
 pub mod stale;
@@ -41,9 +42,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use bridge::endpoint::{Transport, free_loopback_port};
-use protocol::ipc::{cleanup_stale, remove_run_files, run_files};
+use protocol::ipc::cleanup_stale;
 use protocol::timeouts::Timeouts;
-use tokio::signal::unix::{SignalKind, signal};
 use tokio::sync::mpsc;
 
 use fleet_observe::faults::FaultKind;
@@ -58,6 +58,7 @@ use crate::Outcome;
 use children::{Binaries, Children};
 use config::RunConfig;
 use faults::{DueFault, FaultPlan, PendingResume, Resumes};
+use lifecycle::{EXIT_GRACE, RunDirs, Signals, clean_run_files, stop_agents_and_bridges};
 use progress::Progress;
 use resources::OwnUsage;
 
@@ -65,8 +66,6 @@ use resources::OwnUsage;
 const FAULT_WAIT: Duration = Duration::from_secs(10);
 /// How long the observer may go on after the world exited (it drains the last steps).
 const OBSERVER_DRAIN: Duration = Duration::from_secs(5);
-/// How long the children get to exit on their own at the end, and after SIGTERM.
-const EXIT_GRACE: Duration = Duration::from_secs(10);
 /// Interval of the housekeeping tick (agent exits, deadlines).
 const TICK: Duration = Duration::from_millis(100);
 
@@ -209,19 +208,14 @@ enum Ending {
 
 /// Runs the fleet once; `label` prefixes the progress lines (a sweep's variant and seed).
 pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecord> {
-    let started = Instant::now();
-    let own_at_start = protocol::resources::own_usage().ok();
-    let started_utc = fleet_observe::clock::utc_now_rfc3339();
-    let run = &config.run_id;
-    let out = &config.out;
-    let logs = out.join("logs");
-    std::fs::create_dir_all(&logs)
-        .with_context(|| format!("cannot create the output directory {}", logs.display()))?;
-    let scenario_file = out.join("scenario.toml");
-    std::fs::write(&scenario_file, config.scenario.to_toml_string())
-        .with_context(|| format!("cannot write {}", scenario_file.display()))?;
-    iox2::write_configs(out, &config.layout, run)?;
-    let (stale_runs, stale_files) = stale::remove_stale_runs(run);
+    let clock = RunClock::start();
+    let dirs = RunDirs::prepare(
+        &config.out,
+        &config.scenario,
+        &config.layout,
+        &config.run_id,
+    )?;
+    let (stale_runs, stale_files) = stale::remove_stale_runs(&config.run_id);
     if stale_runs > 0 {
         tracing::info!(
             runs = stale_runs,
@@ -230,254 +224,365 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
         );
     }
     let binaries = Binaries::locate()?;
-    // Signals are taken before any child starts, so an early Ctrl-C still cleans up.
-    let mut sigint = signal(SignalKind::interrupt()).context("cannot handle SIGINT")?;
-    let mut sigterm = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
+    let mut signals = Signals::take()?;
+    let mut running = Running::start(config, &dirs, binaries, label)?;
+    let ending = running.drive(&mut signals).await;
+    Ok(running.stop(ending, clock).await)
+}
 
-    let mut plan = FaultPlan::new(&config.faults);
-    let resumed = Arc::new(AtomicU32::new(0));
-    let stop = Arc::new(AtomicBool::new(false));
-    let (events_tx, mut events) = mpsc::unbounded_channel();
-    let (observer, observer_started) = observe::spawn(
-        ObserverConfig {
-            run: run.clone(),
-            scenario: config.scenario.clone(),
-            // An agent killed mid-step is noticed sooner, by the node scan.
-            estimate_wait: Timeouts::default().estimate_wait(),
-            fault_times: plan.times(),
-            fault_wait: FAULT_WAIT,
-            resumed: resumed.clone(),
-            sinks: vec![Viewer::maker(config.view.clone()), AnimationSink::maker()],
-            shown_uav: config.view.uav,
-        },
-        stop.clone(),
-        events_tx,
-    )?;
+/// When a run started, by the wall clock and by this process's CPU.
+struct RunClock {
+    started: Instant,
+    started_utc: String,
+    own_at_start: Option<protocol::resources::ProcessUsage>,
+}
 
-    let checkpoints = out.join("checkpoints");
-    fresh_dir(&checkpoints)?;
-    let mut children = Children::new(
-        run.clone(),
-        binaries,
-        scenario_file,
-        logs.clone(),
-        checkpoints,
-        config.mode,
-        config.layout.clone(),
-    );
-    if config.layout.is_distributed() {
-        let endpoint = match &config.listen {
-            Some(e) => e.clone(),
-            None if config.insecure_links => {
-                format!(
-                    "tcp/127.0.0.1:{}",
-                    free_loopback_port(Transport::Tcp)
-                        .context("cannot find a free loopback port for the bridges")?
-                )
-            }
-            None => format!(
-                "quic/127.0.0.1:{}",
-                free_loopback_port(Transport::Udp)
-                    .context("cannot find a free loopback port for the bridges")?
-            ),
-        };
-        let tls = match &config.tls {
-            _ if config.insecure_links => None,
-            Some(dir) => Some(dir.clone()),
-            None => Some(run_certificates(&config.layout, out)?),
-        };
-        children.spawn_bridges(&endpoint, tls.as_deref())?;
-    }
-    children.spawn_world()?;
-    let mut failure = None;
-    for uav in (0..config.scenario.uavs.count).filter(|&u| config.layout.is_here(u)) {
-        if let Err(e) = children.spawn_agent(uav) {
-            failure = Some(format!("{e:#}"));
-            break;
+impl RunClock {
+    fn start() -> RunClock {
+        RunClock {
+            started: Instant::now(),
+            started_utc: fleet_observe::clock::utc_now_rfc3339(),
+            own_at_start: protocol::resources::own_usage().ok(),
         }
     }
-    let total = (config.scenario.duration_s / config.scenario.timing.cvs_period_s).round() as u64;
-    let mut progress = Progress::new(total, config.progress_bar, label);
-    if let Some(url) = &observer_started.live_url {
-        progress.note(&format!(
-            "live view on {url}: in Foxglove, open a connection to this address"
-        ));
-    }
-    if let Some(file) = &config.view.record {
-        progress.note(&format!("recording into {}", file.display()));
-    }
-    let mut series = Vec::with_capacity(total as usize + 1);
-    let mut world_exit: Option<(ExitStatus, Instant)> = None;
-    let mut tick = tokio::time::interval(TICK);
-    let mut ending = Ending::ObserverDone;
-    let mut resumes = Resumes::default();
-    // The newest step the observer handed over (faults due, or measured), and its time.
-    let mut latest = (0, 0.0);
-    if failure.is_some() {
-        stop.store(true, Ordering::Relaxed);
-    }
+}
 
-    loop {
-        let next_resume = resumes.next_due();
-        // Evaluated even when disabled: any instant will do then.
-        let resume_at = next_resume.unwrap_or_else(|| tokio::time::Instant::now() + TICK);
-        tokio::select! {
-            event = events.recv() => match event {
-                Some(ObserverEvent::Step(m)) => {
-                    if m.step >= latest.0 {
-                        latest = (m.step, m.time_s);
-                    }
-                    progress.step(&m);
-                    series.push(m);
-                }
-                Some(ObserverEvent::FaultsDue { step, time_s, done }) => {
-                    if step >= latest.0 {
-                        latest = (step, time_s);
-                    }
-                    let mut restarted = 0;
-                    for due in plan.due(time_s) {
-                        let host_run = config.layout.run_on(run, config.layout.host_of(due.uav));
-                        let effective =
-                            apply_fault(&mut children, &host_run, due, &mut resumes).await;
-                        plan.applied(due.index, step, time_s, effective);
-                        if effective && due.kind == FaultKind::Restart {
-                            restarted |= protocol::wire::uav_bit(due.uav);
-                        }
-                        progress.note(&fault_note(time_s, due, effective));
-                    }
-                    // The observer may have given up waiting; then nobody listens.
-                    let _ = done.send(restarted);
-                }
-                None => break,
+/// A run under way: its processes, its faults and what the observer handed over so far.
+struct Running<'a> {
+    config: &'a RunConfig,
+    logs: PathBuf,
+    children: Children,
+    plan: FaultPlan,
+    resumes: Resumes,
+    /// Agents continued since the observer's last ack, for the observer to announce.
+    resumed: Arc<AtomicU32>,
+    /// Raised to stop the observer.
+    stop: Arc<AtomicBool>,
+    events: mpsc::UnboundedReceiver<ObserverEvent>,
+    observer: std::thread::JoinHandle<anyhow::Result<ObserverReport>>,
+    progress: Progress,
+    series: Vec<StepMetrics>,
+    world_exit: Option<(ExitStatus, Instant)>,
+    failure: Option<String>,
+    /// The newest step the observer handed over (faults due, or measured), and its time.
+    latest: (u64, f64),
+}
+
+impl<'a> Running<'a> {
+    /// Starts the observer, the bridges of a distributed run, the world and this host's
+    /// agents.
+    fn start(
+        config: &'a RunConfig,
+        dirs: &RunDirs,
+        binaries: Binaries,
+        label: &str,
+    ) -> anyhow::Result<Running<'a>> {
+        let run = &config.run_id;
+        let plan = FaultPlan::new(&config.faults);
+        let resumed = Arc::new(AtomicU32::new(0));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (events_tx, events) = mpsc::unbounded_channel();
+        let (observer, observer_started) = observe::spawn(
+            ObserverConfig {
+                run: run.clone(),
+                scenario: config.scenario.clone(),
+                // An agent killed mid-step is noticed sooner, by the node scan.
+                estimate_wait: Timeouts::default().estimate_wait(),
+                fault_times: plan.times(),
+                fault_wait: FAULT_WAIT,
+                resumed: resumed.clone(),
+                sinks: vec![Viewer::maker(config.view.clone()), AnimationSink::maker()],
+                shown_uav: config.view.uav,
             },
-            _ = tokio::time::sleep_until(resume_at), if next_resume.is_some() => {
-                for due in resumes.take_due(tokio::time::Instant::now()) {
-                    if resume(&mut children, &mut plan, &progress, due, latest) {
-                        // Announced in the observer's next ack, so the world waits for it.
-                        resumed.fetch_or(protocol::wire::uav_bit(due.uav), Ordering::AcqRel);
-                    }
-                }
+            stop.clone(),
+            events_tx,
+        )?;
+        let mut children = Children::new(
+            run.clone(),
+            binaries,
+            dirs.scenario_file.clone(),
+            dirs.logs.clone(),
+            dirs.checkpoints.clone(),
+            config.mode,
+            config.layout.clone(),
+        );
+        if config.layout.is_distributed() {
+            spawn_bridges(config, &mut children)?;
+        }
+        children.spawn_world()?;
+        let mut failure = None;
+        for uav in (0..config.scenario.uavs.count).filter(|&u| config.layout.is_here(u)) {
+            if let Err(e) = children.spawn_agent(uav) {
+                failure = Some(format!("{e:#}"));
+                break;
             }
-            _ = sigint.recv() => { ending = Ending::Signal("SIGINT"); break; }
-            _ = sigterm.recv() => { ending = Ending::Signal("SIGTERM"); break; }
-            _ = tick.tick() => {
-                if world_exit.is_none()
-                    && let Some(status) = children.poll_world()
-                {
-                    if !status.success() {
-                        failure.get_or_insert_with(|| format!(
-                            "the world-server exited with {status}; see {}",
-                            logs.join("world.log").display()
-                        ));
-                    }
-                    world_exit = Some((status, Instant::now()));
+        }
+        let total =
+            (config.scenario.duration_s / config.scenario.timing.cvs_period_s).round() as u64;
+        let progress = Progress::new(total, config.progress_bar, label);
+        if let Some(url) = &observer_started.live_url {
+            progress.note(&format!(
+                "live view on {url}: in Foxglove, open a connection to this address"
+            ));
+        }
+        if let Some(file) = &config.view.record {
+            progress.note(&format!("recording into {}", file.display()));
+        }
+        if failure.is_some() {
+            stop.store(true, Ordering::Relaxed);
+        }
+        Ok(Running {
+            config,
+            logs: dirs.logs.clone(),
+            children,
+            plan,
+            resumes: Resumes::default(),
+            resumed,
+            stop,
+            events,
+            observer,
+            progress,
+            series: Vec::with_capacity(total as usize + 1),
+            world_exit: None,
+            failure,
+            latest: (0, 0.0),
+        })
+    }
+
+    /// Reacts to the observer, the pauses' timers, the signals and the children until the
+    /// observer is done or a signal arrives.
+    async fn drive(&mut self, signals: &mut Signals) -> Ending {
+        let mut tick = tokio::time::interval(TICK);
+        loop {
+            let next_resume = self.resumes.next_due();
+            // Evaluated even when disabled: any instant will do then.
+            let resume_at = next_resume.unwrap_or_else(|| tokio::time::Instant::now() + TICK);
+            tokio::select! {
+                event = self.events.recv() => match event {
+                    Some(event) => self.on_event(event).await,
+                    None => return Ending::ObserverDone,
+                },
+                _ = tokio::time::sleep_until(resume_at), if next_resume.is_some() => {
+                    self.resume_due();
                 }
-                for exit in children.reap_agents() {
-                    progress.note(&format!("agent {} exited with {}", exit.uav, exit.status));
-                    tracing::warn!(uav = exit.uav, status = %exit.status, "agent exited");
-                }
-                if let Some((_, at)) = world_exit
-                    && at.elapsed() > OBSERVER_DRAIN
-                {
-                    stop.store(true, Ordering::Relaxed);
-                }
+                name = signals.recv() => return Ending::Signal(name),
+                _ = tick.tick() => self.on_tick(),
             }
         }
     }
-    // No process is left stopped: a pause still running ends with the run.
-    for due in resumes.take_all() {
-        resume(&mut children, &mut plan, &progress, due, latest);
-    }
-    progress.finish();
-    let interrupted = matches!(ending, Ending::Signal(_));
-    if let Ending::Signal(name) = ending {
-        eprintln!("fleet: {name} received: stopping the run");
-    }
-    // Stopping: the observer first (it must not wait on anyone), then the children.
-    stop.store(true, Ordering::Relaxed);
-    let observer = join_observer(observer).await;
-    let observer = match observer {
-        Ok(report) => {
-            if let Some(why) = &report.sink_failure {
-                failure.get_or_insert_with(|| why.clone());
+
+    /// A measured step moves the progress; faults due at a step are applied before the
+    /// observer acknowledges it.
+    async fn on_event(&mut self, event: ObserverEvent) {
+        match event {
+            ObserverEvent::Step(m) => {
+                if m.step >= self.latest.0 {
+                    self.latest = (m.step, m.time_s);
+                }
+                self.progress.step(&m);
+                self.series.push(m);
             }
-            Some(report)
+            ObserverEvent::FaultsDue { step, time_s, done } => {
+                if step >= self.latest.0 {
+                    self.latest = (step, time_s);
+                }
+                let layout = &self.config.layout;
+                let mut restarted = 0;
+                for due in self.plan.due(time_s) {
+                    let host_run = layout.run_on(&self.config.run_id, layout.host_of(due.uav));
+                    let effective =
+                        apply_fault(&mut self.children, &host_run, due, &mut self.resumes).await;
+                    self.plan.applied(due.index, step, time_s, effective);
+                    if effective && due.kind == FaultKind::Restart {
+                        restarted |= protocol::wire::uav_bit(due.uav);
+                    }
+                    self.progress.note(&fault_note(time_s, due, effective));
+                }
+                // The observer may have given up waiting; then nobody listens.
+                let _ = done.send(restarted);
+            }
         }
-        Err(e) => {
-            failure.get_or_insert_with(|| {
+    }
+
+    /// Continues the paused agents whose pause is over.
+    fn resume_due(&mut self) {
+        for due in self.resumes.take_due(tokio::time::Instant::now()) {
+            if self.resume(due) {
+                // Announced in the observer's next ack, so the world waits for it.
+                self.resumed
+                    .fetch_or(protocol::wire::uav_bit(due.uav), Ordering::AcqRel);
+            }
+        }
+    }
+
+    /// Sends a pause's SIGCONT and notes it in the plan, with the newest step the observer
+    /// handed over; whether the agent was still there to continue.
+    fn resume(&mut self, due: PendingResume) -> bool {
+        let (step, time_s) = self.latest;
+        if self.children.resume_agent(due.uav, due.incarnation) {
+            self.plan.resumed(due.index, step);
+            self.progress
+                .note(&format!("t={time_s:.1}s: agent {} continued", due.uav));
+            true
+        } else {
+            tracing::warn!(uav = due.uav, "the paused agent ended before its SIGCONT");
+            self.progress.note(&format!(
+                "t={time_s:.1}s: agent {} ended while paused",
+                due.uav
+            ));
+            false
+        }
+    }
+
+    /// Housekeeping: the world's exit, agents that exited, the observer's drain after the
+    /// world left.
+    fn on_tick(&mut self) {
+        if self.world_exit.is_none()
+            && let Some(status) = self.children.poll_world()
+        {
+            if !status.success() {
+                self.failure.get_or_insert_with(|| {
+                    format!(
+                        "the world-server exited with {status}; see {}",
+                        self.logs.join("world.log").display()
+                    )
+                });
+            }
+            self.world_exit = Some((status, Instant::now()));
+        }
+        for exit in self.children.reap_agents() {
+            self.progress
+                .note(&format!("agent {} exited with {}", exit.uav, exit.status));
+            tracing::warn!(uav = exit.uav, status = %exit.status, "agent exited");
+        }
+        if let Some((_, at)) = self.world_exit
+            && at.elapsed() > OBSERVER_DRAIN
+        {
+            self.stop.store(true, Ordering::Relaxed);
+        }
+    }
+
+    /// Stops everything, the observer first (it must not wait on anyone), then the world
+    /// and the agents; what the run measured.
+    async fn stop(mut self, ending: Ending, clock: RunClock) -> RunRecord {
+        // No process is left stopped: a pause still running ends with the run.
+        for due in self.resumes.take_all() {
+            self.resume(due);
+        }
+        self.progress.finish();
+        let interrupted = matches!(ending, Ending::Signal(_));
+        if let Ending::Signal(name) = ending {
+            eprintln!("fleet: {name} received: stopping the run");
+        }
+        self.stop.store(true, Ordering::Relaxed);
+        let observer = match join_observer(self.observer).await {
+            Ok(report) => {
+                if let Some(why) = &report.sink_failure {
+                    self.failure.get_or_insert_with(|| why.clone());
+                }
+                Some(report)
+            }
+            Err(e) => {
+                self.failure.get_or_insert_with(|| {
+                    format!(
+                        "the observer failed: {e:#}; see the logs in {}",
+                        self.logs.display()
+                    )
+                });
+                None
+            }
+        };
+        if interrupted {
+            self.children.terminate_agents();
+        }
+        if self.world_exit.is_none() {
+            let grace = if interrupted || self.failure.is_some() {
+                Duration::ZERO
+            } else {
+                EXIT_GRACE
+            };
+            match self.children.wait_world(grace).await {
+                Some(status) if !status.success() && !interrupted => {
+                    self.failure
+                        .get_or_insert_with(|| format!("the world-server exited with {status}"));
+                }
+                Some(_) => {}
+                None => {
+                    self.children.stop_world(EXIT_GRACE).await;
+                }
+            }
+        }
+        stop_agents_and_bridges(&mut self.children, true).await;
+        let run = &self.config.run_id;
+        let leftover_files = self
+            .config
+            .layout
+            .runs(run)
+            .iter()
+            .map(clean_run_files)
+            .sum();
+        if let Some(report) = &observer
+            && report.end != observe::ObserverEnd::EndOfRun
+            && !interrupted
+        {
+            self.failure.get_or_insert_with(|| {
                 format!(
-                    "the observer failed: {e:#}; see the logs in {}",
-                    logs.display()
+                    "the run ended before the world announced its end; see the logs in {}",
+                    self.logs.display()
                 )
             });
-            None
         }
-    };
-    if interrupted {
-        children.terminate_agents();
-    }
-    if world_exit.is_none() {
-        let grace = if interrupted || failure.is_some() {
-            Duration::ZERO
-        } else {
-            EXIT_GRACE
+        self.plan.measure_resync(&self.series);
+        let wall_s = clock.started.elapsed().as_secs_f64();
+        let own = OwnUsage {
+            usage: own_usage_since(clock.own_at_start),
+            observer: observer
+                .as_ref()
+                .map(|o| o.phases.clone())
+                .unwrap_or_default(),
         };
-        match children.wait_world(grace).await {
-            Some(status) if !status.success() && !interrupted => {
-                failure.get_or_insert_with(|| format!("the world-server exited with {status}"));
-            }
-            Some(_) => {}
-            None => {
-                children.stop_world(EXIT_GRACE).await;
-            }
+        let steps = self.series.len() as u64;
+        let scenario = &self.config.scenario;
+        let size = RunSize {
+            uavs: scenario.uavs.count,
+            steps,
+            sim_s: steps as f64 * scenario.timing.cvs_period_s,
+            wall_s,
+        };
+        let resources = resources::gather(&own, self.children.exited(), &self.logs, size);
+        RunRecord {
+            config: self.config.clone(),
+            series: self.series,
+            observer,
+            faults: self.plan,
+            wall_s,
+            interrupted,
+            failure: self.failure,
+            started_utc: clock.started_utc,
+            leftover_files,
+            resources,
         }
     }
-    children.wait_agents(EXIT_GRACE).await;
-    children.terminate_agents();
-    children.wait_agents(EXIT_GRACE).await;
-    children.kill_agents().await;
-    children.stop_bridges(EXIT_GRACE).await;
-    let leftover_files = config.layout.runs(run).iter().map(clean_run_files).sum();
-    if let Some(report) = &observer
-        && report.end != observe::ObserverEnd::EndOfRun
-        && !interrupted
-    {
-        failure.get_or_insert_with(|| {
-            format!(
-                "the run ended before the world announced its end; see the logs in {}",
-                logs.display()
-            )
-        });
-    }
-    plan.measure_resync(&series);
-    let wall_s = started.elapsed().as_secs_f64();
-    let own = OwnUsage {
-        usage: own_usage_since(own_at_start),
-        observer: observer
-            .as_ref()
-            .map(|o| o.phases.clone())
-            .unwrap_or_default(),
+}
+
+/// Starts the bridges of a distributed run: listening on `--listen`, or on a free loopback
+/// port (QUIC, or plain TCP with `--insecure-links`), with `--tls` or the run's own
+/// certificates.
+fn spawn_bridges(config: &RunConfig, children: &mut Children) -> anyhow::Result<()> {
+    let free_port = |transport| {
+        free_loopback_port(transport).context("cannot find a free loopback port for the bridges")
     };
-    let steps = series.len() as u64;
-    let size = RunSize {
-        uavs: config.scenario.uavs.count,
-        steps,
-        sim_s: steps as f64 * config.scenario.timing.cvs_period_s,
-        wall_s,
+    let endpoint = match &config.listen {
+        Some(e) => e.clone(),
+        None if config.insecure_links => format!("tcp/127.0.0.1:{}", free_port(Transport::Tcp)?),
+        None => format!("quic/127.0.0.1:{}", free_port(Transport::Udp)?),
     };
-    let resources = resources::gather(&own, children.exited(), &logs, size);
-    Ok(RunRecord {
-        config: config.clone(),
-        series,
-        observer,
-        faults: plan,
-        wall_s,
-        interrupted,
-        failure,
-        started_utc,
-        leftover_files,
-        resources,
-    })
+    let tls = match &config.tls {
+        _ if config.insecure_links => None,
+        Some(dir) => Some(dir.clone()),
+        None => Some(run_certificates(&config.layout, &config.out)?),
+    };
+    children.spawn_bridges(&endpoint, tls.as_deref())
 }
 
 /// A fleet authority and a certificate for every simulated host, made for this run in
@@ -492,17 +597,6 @@ fn run_certificates(layout: &hosts::HostLayout, out: &std::path::Path) -> anyhow
     bridge::security::write_fleet_certs(&dir, &names, &[], true)
         .with_context(|| format!("cannot make the run's certificates in {}", dir.display()))?;
     Ok(dir)
-}
-
-/// Creates `dir`, emptied of what an earlier run into the same output directory left (an
-/// agent must never resume from another run's checkpoint; it would refuse it anyway).
-fn fresh_dir(dir: &std::path::Path) -> anyhow::Result<()> {
-    match std::fs::remove_dir_all(dir) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => return Err(e).with_context(|| format!("cannot empty {}", dir.display())),
-    }
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
 }
 
 /// This process's CPU since `start` (its usage then), with its peak memory so far.
@@ -576,30 +670,6 @@ fn fault_note(time_s: f64, due: DueFault, effective: bool) -> String {
     }
 }
 
-/// Sends a pause's SIGCONT and notes it in the plan, with the newest step the observer
-/// handed over (`latest`: step and time); whether the agent was still there to continue.
-fn resume(
-    children: &mut Children,
-    plan: &mut FaultPlan,
-    progress: &Progress,
-    due: PendingResume,
-    latest: (u64, f64),
-) -> bool {
-    let (step, time_s) = latest;
-    if children.resume_agent(due.uav, due.incarnation) {
-        plan.resumed(due.index, step);
-        progress.note(&format!("t={time_s:.1}s: agent {} continued", due.uav));
-        true
-    } else {
-        tracing::warn!(uav = due.uav, "the paused agent ended before its SIGCONT");
-        progress.note(&format!(
-            "t={time_s:.1}s: agent {} ended while paused",
-            due.uav
-        ));
-        false
-    }
-}
-
 /// Joins the observer thread without blocking the runtime.
 async fn join_observer(
     handle: std::thread::JoinHandle<anyhow::Result<ObserverReport>>,
@@ -608,21 +678,4 @@ async fn join_observer(
         .await
         .context("cannot join the observer thread")?
         .map_err(|_| anyhow::anyhow!("the observer thread panicked"))?
-}
-
-/// Removes the run's iceoryx2 files once every process of it is gone; returns how many
-/// remain (0 unless the removal failed).
-fn clean_run_files(run: &protocol::service::RunId) -> usize {
-    if let Err(e) = cleanup_stale(run) {
-        tracing::debug!(error = %e, "cannot scan the run's nodes");
-    }
-    if let Err(e) = remove_run_files(run) {
-        tracing::warn!(error = %e, "cannot remove the run's iceoryx2 files");
-    }
-    run_files(run).map_or(0, |files| {
-        for f in &files {
-            tracing::warn!(file = %f.display(), "iceoryx2 file left behind");
-        }
-        files.len()
-    })
 }
