@@ -22,10 +22,77 @@
 //! }
 //! ```
 
+use std::ffi::OsString;
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
 use tracing_subscriber::EnvFilter;
+
+use crate::scenario::{Scenario, ScenarioError};
+use crate::service::RunId;
+
+/// What every process of a run is told on its command line, whoever starts it (`fleet`, a
+/// test, a user): the run, its host's domain and the scenario. The world-server, the agent
+/// and the bridge flatten it into their arguments; [`ChildArgs::to_args`] writes it back as
+/// the command line that parses to it.
+#[derive(Clone, Debug, PartialEq, clap::Args)]
+pub struct ChildArgs {
+    /// Run id: prefixes every service and shared-memory file of the run.
+    #[arg(long)]
+    pub run_id: RunId,
+    /// Simulated host whose iceoryx2 domain to join (`fleet run --hosts`): its processes meet
+    /// the other hosts' only through the Zenoh bridge (default: the run's one domain).
+    #[arg(long)]
+    pub domain: Option<u16>,
+    /// Scenario TOML file (default: the paper's scenario; `fleet` gives every process the
+    /// run's resolved scenario).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Overrides a scenario key, e.g. `--set targets.count=4` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+}
+
+impl ChildArgs {
+    /// The arguments of run `run_id`, in `domain`, of the scenario file `scenario`.
+    pub fn new(run_id: RunId, domain: Option<u16>, scenario: PathBuf) -> ChildArgs {
+        ChildArgs {
+            run_id,
+            domain,
+            scenario: Some(scenario),
+            overrides: Vec::new(),
+        }
+    }
+
+    /// The command line that parses back to these arguments.
+    pub fn to_args(&self) -> Vec<OsString> {
+        let mut args: Vec<OsString> = vec!["--run-id".into(), self.run_id.as_str().into()];
+        if let Some(domain) = self.domain {
+            args.extend(["--domain".into(), domain.to_string().into()]);
+        }
+        if let Some(file) = &self.scenario {
+            args.extend(["--scenario".into(), file.clone().into_os_string()]);
+        }
+        for o in &self.overrides {
+            args.extend(["--set".into(), o.into()]);
+        }
+        args
+    }
+
+    /// The run as this process sees it: in its host's domain, if it has one.
+    pub fn run(&self) -> RunId {
+        match self.domain {
+            Some(host) => self.run_id.in_domain(host),
+            None => self.run_id.clone(),
+        }
+    }
+
+    /// Loads the scenario file with the overrides.
+    pub fn load_scenario(&self) -> Result<Scenario, ScenarioError> {
+        Scenario::load(self.scenario.as_deref(), &self.overrides)
+    }
+}
 
 /// What kind of setfleet process is starting.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -110,4 +177,31 @@ pub fn parse_args<A: Parser>() -> Result<A, ExitCode> {
         let _ = e.print();
         ExitCode::from(e.exit_code().clamp(0, 255) as u8)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, Parser)]
+    struct Child {
+        #[command(flatten)]
+        child: ChildArgs,
+    }
+
+    #[test]
+    fn child_arguments_parse_back_from_their_command_line() {
+        let run = RunId::new("argsrt").expect("run id");
+        let mut args = ChildArgs::new(run.clone(), Some(2), PathBuf::from("/tmp/s c.toml"));
+        args.overrides = vec!["targets.count=4".into(), "uavs.count=2".into()];
+        for a in [
+            args.clone(),
+            ChildArgs::new(run, None, PathBuf::from("s.toml")),
+        ] {
+            let line = std::iter::once(OsString::from("child")).chain(a.to_args());
+            let parsed = Child::try_parse_from(line).expect("parses");
+            assert_eq!(parsed.child, a);
+        }
+        assert_eq!(args.run(), args.run_id.in_domain(2));
+    }
 }

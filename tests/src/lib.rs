@@ -28,6 +28,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use protocol::ipc;
+use protocol::process::ChildArgs;
 use protocol::service::RunId;
 
 /// The binaries the tests run, the packages that build them and the features the tests need
@@ -318,10 +319,7 @@ pub fn fleet_run(t: &TestRun, scenario: &Path, out: &Path, extra: &[&str]) -> Co
 /// `name` with the run's id and `scenario`; the caller adds the rest.
 pub fn run_process(name: &str, t: &TestRun, scenario: &Path) -> Command {
     let mut cmd = Command::new(binary(name));
-    cmd.arg("--run-id")
-        .arg(t.run.as_str())
-        .arg("--scenario")
-        .arg(scenario);
+    cmd.args(ChildArgs::new(t.run.clone(), None, scenario.to_owned()).to_args());
     cmd
 }
 

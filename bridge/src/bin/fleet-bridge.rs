@@ -11,21 +11,16 @@ use std::sync::atomic::AtomicBool;
 use bridge::plan::{self, HostPlan, HostShare};
 use bridge::security::{HostName, HostTlsFiles, LinkMode, LinkPlan, zenoh_config};
 use clap::Parser;
-use protocol::process::{self, Role};
-use protocol::scenario::Scenario;
-use protocol::service::RunId;
+use protocol::process::{self, ChildArgs, Role};
 
 /// Forwards a run's iceoryx2 services between this host and the others over Zenoh, on
 /// mutually authenticated, encrypted links (QUIC or TLS over TCP).
 #[derive(Debug, Parser)]
 #[command(name = "fleet-bridge", version)]
 struct Args {
-    /// Run id of the run to join.
-    #[arg(long)]
-    run_id: RunId,
-    /// Simulated host whose iceoryx2 domain to join (default: the run's one domain).
-    #[arg(long)]
-    domain: Option<u16>,
+    /// The run, its host's domain and the scenario (the same as the other processes').
+    #[command(flatten)]
+    child: ChildArgs,
     /// This host's name: one of the `--member`s, and its certificate's common name.
     #[arg(long)]
     host: HostName,
@@ -33,12 +28,6 @@ struct Args {
     /// `--member h0=0,1 --member h1=2,3`. The world host's bridge is the Zenoh router.
     #[arg(long, value_name = "NAME=UAVS", required = true)]
     member: Vec<HostShare>,
-    /// Scenario TOML file (the same as the other processes').
-    #[arg(long)]
-    scenario: Option<PathBuf>,
-    /// Overrides a scenario key (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    overrides: Vec<String>,
     /// Zenoh endpoint the world host listens on, e.g. `quic/0.0.0.0:7447` (QUIC) or
     /// `tls/0.0.0.0:7447` (TLS over TCP).
     #[arg(long, value_name = "ENDPOINT", conflicts_with = "connect")]
@@ -85,12 +74,11 @@ fn main() -> ExitCode {
 
 /// The host's plan and its Zenoh configuration, or what is wrong with the arguments.
 fn configure(args: &Args) -> Result<(HostPlan, zenoh::Config), String> {
-    let scenario = Scenario::load(args.scenario.as_deref(), &args.overrides)
+    let scenario = args
+        .child
+        .load_scenario()
         .map_err(|e| format!("bad scenario: {e}"))?;
-    let run = match args.domain {
-        Some(host) => args.run_id.in_domain(host),
-        None => args.run_id.clone(),
-    };
+    let run = args.child.run();
     let me = args
         .member
         .iter()
@@ -117,7 +105,8 @@ fn configure(args: &Args) -> Result<(HostPlan, zenoh::Config), String> {
         .tls
         .as_ref()
         .map(|dir| HostTlsFiles::in_dir(dir, &args.host));
-    let policy = plan::access_policy(&args.run_id, &args.member).map_err(|e| e.to_string())?;
+    let policy =
+        plan::access_policy(&args.child.run_id, &args.member).map_err(|e| e.to_string())?;
     let policy = tls.as_ref().map(|_| &policy);
     let mut config = zenoh_config(&link, tls.as_ref(), policy).map_err(|e| e.to_string())?;
     if !world {

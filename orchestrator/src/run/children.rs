@@ -25,6 +25,7 @@ use std::process::{ExitStatus, Stdio};
 use std::time::Duration;
 
 use anyhow::Context as _;
+use protocol::process::ChildArgs;
 use protocol::resources::{ProcessUsage, exited_child_usage};
 use protocol::service::RunId;
 use tokio::process::{Child, Command};
@@ -254,16 +255,12 @@ impl Children {
 
     /// The arguments every child of host `host` is started with.
     fn common_args(&self, host: u16) -> Vec<OsString> {
-        let mut args: Vec<OsString> = vec![
-            "--run-id".into(),
-            self.run.as_str().into(),
-            "--scenario".into(),
-            self.scenario.clone().into_os_string(),
-        ];
-        if let Some(domain) = self.layout.domain_arg(host) {
-            args.extend(["--domain".into(), domain.to_string().into()]);
-        }
-        args
+        ChildArgs::new(
+            self.run.clone(),
+            self.layout.domain_arg(host),
+            self.scenario.clone(),
+        )
+        .to_args()
     }
 
     /// Starts the world-server, which waits for the agents' and the observer's hellos.

@@ -9,9 +9,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use clap::Parser;
-use protocol::process::{self, Role};
-use protocol::scenario::Scenario;
-use protocol::service::RunId;
+use protocol::process::{self, ChildArgs, Role};
 use protocol::timeouts::Timeouts;
 use uav_agent::agent::{self, AgentConfig};
 
@@ -25,22 +23,12 @@ const HOLD_TOKEN_ENV: &str = "SETFLEET_TEST_HOLD_TOKEN_MS";
 #[derive(Debug, Parser)]
 #[command(name = "uav-agent", version)]
 struct Args {
-    /// Run id of the run to join.
-    #[arg(long)]
-    run_id: RunId,
-    /// Simulated host whose iceoryx2 domain to join (`fleet run --hosts`): its processes meet
-    /// the other hosts' only through the Zenoh bridge (default: the run's one domain).
-    #[arg(long)]
-    domain: Option<u16>,
+    /// The run, its host's domain and the scenario (the same as the world-server's).
+    #[command(flatten)]
+    child: ChildArgs,
     /// This agent's UAV index (0-based).
     #[arg(long)]
     id: u32,
-    /// Scenario TOML file (the same as the world-server's).
-    #[arg(long)]
-    scenario: Option<PathBuf>,
-    /// Overrides a scenario key, e.g. `--set guidance.kappa=0` (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    overrides: Vec<String>,
     /// Longest wait for the peers' estimates of a step, milliseconds (default: 2000; give
     /// the world-server the same value).
     #[arg(long)]
@@ -64,17 +52,14 @@ fn main() -> ExitCode {
         Ok(args) => args,
         Err(code) => return code,
     };
-    let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
+    let scenario = match args.child.load_scenario() {
         Ok(s) => s,
         Err(e) => {
             eprintln!("uav-agent: bad scenario: {e}");
             return ExitCode::from(2);
         }
     };
-    let run_id = match args.domain {
-        Some(host) => args.run_id.in_domain(host),
-        None => args.run_id,
-    };
+    let run_id = args.child.run();
     let mut config = AgentConfig::new(run_id, args.id, scenario);
     config.timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms);
     config.world_timeout = args

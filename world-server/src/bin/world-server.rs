@@ -6,15 +6,12 @@
 //! Exit codes: 0 the run ended (or was stopped by SIGTERM/SIGINT), 1 the run failed, 2 bad
 //! arguments or scenario.
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use clap::{Parser, ValueEnum};
-use protocol::process::{self, Role};
-use protocol::scenario::Scenario;
-use protocol::service::RunId;
+use protocol::process::{self, ChildArgs, Role};
 use protocol::timeouts::Timeouts;
 use world_server::server::{self, ServerConfig, StepMode};
 
@@ -22,19 +19,9 @@ use world_server::server::{self, ServerConfig, StepMode};
 #[derive(Debug, Parser)]
 #[command(name = "world-server", version)]
 struct Args {
-    /// Run id: prefixes every service and shared-memory file of the run.
-    #[arg(long)]
-    run_id: RunId,
-    /// Simulated host whose iceoryx2 domain to join (`fleet run --hosts`): its processes meet
-    /// the other hosts' only through the Zenoh bridge (default: the run's one domain).
-    #[arg(long)]
-    domain: Option<u16>,
-    /// Scenario TOML file (default: the paper's scenario).
-    #[arg(long)]
-    scenario: Option<PathBuf>,
-    /// Overrides a scenario key, e.g. `--set targets.count=4` (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    overrides: Vec<String>,
+    /// The run, its host's domain and the scenario.
+    #[command(flatten)]
+    child: ChildArgs,
     /// Stepping mode.
     #[arg(long, value_enum, default_value_t = Mode::Lockstep)]
     mode: Mode,
@@ -75,7 +62,7 @@ fn main() -> ExitCode {
         Ok(args) => args,
         Err(code) => return code,
     };
-    let scenario = match Scenario::load(args.scenario.as_deref(), &args.overrides) {
+    let scenario = match args.child.load_scenario() {
         Ok(s) => s,
         Err(e) => {
             eprintln!("world-server: bad scenario: {e}");
@@ -89,10 +76,7 @@ fn main() -> ExitCode {
         },
     };
     let timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms);
-    let run_id = match args.domain {
-        Some(host) => args.run_id.in_domain(host),
-        None => args.run_id,
-    };
+    let run_id = args.child.run();
     let mut config = ServerConfig::new(run_id, scenario, &timeouts);
     if let Some(agents) = args.agents {
         config.expected_agents = agents;
