@@ -2,10 +2,9 @@
 //!
 //! The shared vocabulary of setfleet: everything two processes must agree on.
 //!
-//! - [`math`]: geometry aliases (`Point3`, `Vector3`, `Isometry3` over nalgebra, `f64`).
 //! - [`camera`]: the pinhole camera used by both the renderer and the estimator.
-//! - [`grid`] and [`raster`]: the ground grid and the bit-raster [`raster::CellSet`] with the
-//!   algebra that keeps the sets' guarantee.
+//! - [`math`], [`grid`] and [`raster`]: the `sets` crate's geometry, ground grid and
+//!   bit-raster sets, re-exported while the crates that use them move to `sets` itself.
 //! - [`scenario`]: the TOML scenario with the paper's defaults built in.
 //! - [`frame`]: the fixed-size CVS frame rendered in place into shared memory.
 //! - [`wire`]: commands, truth, estimates and the guidance token.
@@ -24,15 +23,14 @@
 
 #![warn(missing_docs)]
 
+pub use sets::{grid, math, raster};
+
 pub mod camera;
 pub mod codec;
 pub mod flight;
 pub mod frame;
-pub mod grid;
 pub mod ipc;
-pub mod math;
 pub mod process;
-pub mod raster;
 pub mod resources;
 pub mod scenario;
 pub mod service;

@@ -10,9 +10,9 @@ mod common;
 
 use common::{box_set, cell_box};
 use proptest::prelude::*;
-use protocol::grid::{CellIndex, GroundGrid};
-use protocol::math::Point2;
-use protocol::raster::{CellBox, CellSet, REACH_UNIT_M, ReachSet};
+use sets::grid::{CellIndex, GroundGrid};
+use sets::math::Point2;
+use sets::raster::{CellBox, CellSet, REACH_UNIT_M, ReachSet};
 
 const SAMPLES: u32 = 3;
 
@@ -130,7 +130,7 @@ proptest! {
     }
 
     /// Advancing within a dilation read word by word ([`ReachSet::advance_within`] with a
-    /// [`protocol::raster::WordDilation`] of the set's rows, which skips the rows and words no
+    /// [`sets::raster::WordDilation`] of the set's rows, which skips the rows and words no
     /// cell is near) leaves the set, its reach and its clock exactly as advancing and then
     /// intersecting with the whole dilation does, and as a bound that reads every word does,
     /// through any history, on a grid several words wide; and advancing with the scans a set

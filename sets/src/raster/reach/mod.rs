@@ -65,8 +65,8 @@
 //!   window's edges as not free, which only lowers the bounds.
 //!
 //! ```
-//! use protocol::grid::GroundGrid;
-//! use protocol::raster::{CellBox, CellSet, ReachSet};
+//! use sets::grid::GroundGrid;
+//! use sets::raster::{CellBox, CellSet, ReachSet};
 //!
 //! let grid = GroundGrid::new(10.0, 0.5); // 40 x 40 cells
 //! let mut set = ReachSet::full(&grid);

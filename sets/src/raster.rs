@@ -19,9 +19,9 @@
 //! and `reach` keeps sets that grow exactly.
 //!
 //! ```
-//! use protocol::grid::GroundGrid;
-//! use protocol::math::Point2;
-//! use protocol::raster::{CellSet, Coverage};
+//! use sets::grid::GroundGrid;
+//! use sets::math::Point2;
+//! use sets::raster::{CellSet, Coverage};
 //!
 //! let grid = GroundGrid::new(10.0, 0.5);
 //! let mut seen = CellSet::empty(&grid);

@@ -6,9 +6,9 @@
 use std::collections::HashSet;
 
 use proptest::prelude::*;
-use protocol::grid::{CellIndex, GroundGrid, Rect};
-use protocol::math::{Point2, Real, convex_hull};
-use protocol::raster::{CellBox, CellSet, Coverage, EncodedSet};
+use sets::grid::{CellIndex, GroundGrid, Rect};
+use sets::math::{Point2, Real, convex_hull};
+use sets::raster::{CellBox, CellSet, Coverage, EncodedSet};
 
 /// Slack of the checks that a present cell is no larger than needed: far above the
 /// rasteriser's margin (about 1e-9 relative), far below a cell.
@@ -314,7 +314,7 @@ proptest! {
 
     /// Every word read through [`CellSet::word_dilation`] (or
     /// [`CellSet::word_dilation_within`] the set's rows) is that word of the whole dilation,
-    /// and a word or row it says cannot hold cells ([`protocol::raster::WordDilation::may_hold`],
+    /// and a word or row it says cannot hold cells ([`sets::raster::WordDilation::may_hold`],
     /// `may_hold_row`) is empty: across word boundaries and grid edges, for empty sets, radii from negative to
     /// past the grid and radii no cell size bounds.
     #[test]

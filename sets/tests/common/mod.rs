@@ -1,8 +1,8 @@
 //! Helpers shared by the raster proptests.
 
 use proptest::prelude::*;
-use protocol::grid::GroundGrid;
-use protocol::raster::{CellBox, CellSet};
+use sets::grid::GroundGrid;
+use sets::raster::{CellBox, CellSet};
 
 /// A box of cells inside an `n x n` grid, sides from 1 to `max_side` cells (clipped).
 pub fn cell_box(n: u32, max_side: u32) -> impl Strategy<Value = CellBox> {

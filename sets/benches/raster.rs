@@ -2,11 +2,11 @@
 //! `cargo bench -p protocol --bench raster`.
 
 use divan::{Bencher, black_box};
-use protocol::grid::GroundGrid;
-use protocol::math::{Point2, Real};
-use protocol::raster::{CellSet, Coverage};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use sets::grid::GroundGrid;
+use sets::math::{Point2, Real};
+use sets::raster::{CellSet, Coverage};
 
 fn main() {
     divan::main();
@@ -178,8 +178,8 @@ mod algebra {
 /// with a frame's proven-free ground costs.
 #[divan::bench]
 fn gap_field_frame_window(bencher: Bencher) {
-    use protocol::raster::CellBox;
-    use protocol::raster::distance::GapField;
+    use sets::raster::CellBox;
+    use sets::raster::distance::GapField;
     let g = grid();
     // Seeds where the ground was not proven free: the complement of blobs covering about
     // 80 % of the window, as around a frame's footprint.

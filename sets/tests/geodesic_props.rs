@@ -14,9 +14,9 @@ mod common;
 
 use common::{box_set, cell_box};
 use proptest::prelude::*;
-use protocol::grid::{CellIndex, GroundGrid};
-use protocol::math::Point2;
-use protocol::raster::{CellBox, CellSet, ReachSet};
+use sets::grid::{CellIndex, GroundGrid};
+use sets::math::Point2;
+use sets::raster::{CellBox, CellSet, ReachSet};
 
 /// Where the samples sit across a cell, as fractions of its side.
 const SAMPLES: [f64; 3] = [0.02, 0.5, 0.98];
