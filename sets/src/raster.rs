@@ -14,7 +14,7 @@
 //!   of [`geodesic`].
 //!
 //! The operations live one per file: `polygon` and `disc` rasterise shapes, `dilate` grows a
-//! set, `extent` measures and crops it, `encode` turns it into an [`EncodedSet`] and back,
+//! set, `coarse` coarsens it to blocks (a block in the set when any of its cells is), `extent` measures and crops it, `encode` turns it into an [`EncodedSet`] and back,
 //! `distance` measures gaps between cells, `geodesic` the ways round what cannot be crossed,
 //! and `reach` keeps sets that grow exactly.
 //!
@@ -32,6 +32,7 @@
 //! assert_eq!(back, grown);
 //! ```
 
+mod coarse;
 pub mod delta;
 mod dilate;
 mod disc;

@@ -529,3 +529,65 @@ proptest! {
         prop_assert_eq!(set.count_in_box(&b), full);
     }
 }
+
+/// A grid up to 200 cells wide (rows of several words), a set of scattered cells and row
+/// spans on it, and an area of it.
+fn coarsening_cases() -> impl Strategy<Value = (GroundGrid, CellSet, CellBox, u32)> {
+    (
+        1u32..200,
+        1u32..40,
+        proptest::collection::vec((0u32..200, 0u32..40), 0..120),
+        proptest::collection::vec((0u32..200, 0u32..200, 0u32..40), 0..6),
+        (0u32..200, 0u32..200, 0u32..40, 0u32..40),
+        1u32..12,
+    )
+        .prop_map(|(nx, ny, cells, spans, (a, b, c, d), factor)| {
+            let grid = GroundGrid {
+                origin: Point2::new(0.0, 0.0),
+                cell_m: 0.5,
+                nx,
+                ny,
+            };
+            let mut set = CellSet::empty(&grid);
+            for (x, y) in cells {
+                set.set((x % nx, y % ny), true);
+            }
+            for (a, b, y) in spans {
+                let (a, b) = (a % nx, b % nx);
+                set.fill_row_span(y % ny, a.min(b), a.max(b));
+            }
+            let (a, b, c, d) = (a % nx, b % nx, c % ny, d % ny);
+            let area = CellBox {
+                x0: a.min(b),
+                x1: a.max(b),
+                y0: c.min(d),
+                y1: c.max(d),
+            };
+            (grid, set, area, factor)
+        })
+}
+
+proptest! {
+    /// A block is in the coarsened set exactly when one of its fine cells of the area is in
+    /// the set: the coarsening never loses a cell (it stays outer) and adds no block.
+    #[test]
+    fn coarsening_keeps_a_block_when_any_of_its_cells_is_in_the_set(
+        (grid, set, area, factor) in coarsening_cases()
+    ) {
+        let blocks = GroundGrid {
+            origin: grid.origin,
+            cell_m: grid.cell_m * f64::from(factor),
+            nx: (area.x1 - area.x0 + 1).div_ceil(factor),
+            ny: (area.y1 - area.y0 + 1).div_ceil(factor),
+        };
+        let coarse = set.coarsen_any(&area, factor, &blocks);
+        for cy in 0..blocks.ny {
+            for cx in 0..blocks.nx {
+                let xs = area.x0 + cx * factor..=(area.x0 + (cx + 1) * factor - 1).min(area.x1);
+                let ys = area.y0 + cy * factor..=(area.y0 + (cy + 1) * factor - 1).min(area.y1);
+                let any = ys.clone().any(|y| xs.clone().any(|x| set.contains((x, y))));
+                prop_assert_eq!(coarse.contains((cx, cy)), any, "block {:?}", (cx, cy));
+            }
+        }
+    }
+}

@@ -11,6 +11,7 @@ use foxglove::messages::{
     packed_element_field::NumericType,
 };
 use protocol::grid::GroundGrid;
+use protocol::math::Point2;
 use protocol::raster::{CellBox, CellSet};
 use uav_agent::occupancy::OccupancyMap;
 
@@ -56,16 +57,21 @@ fn set_grid(
 ) -> Grid {
     let columns = (area.x1 - area.x0 + 1).div_ceil(factor);
     let rows = (area.y1 - area.y0 + 1).div_ceil(factor);
-    let mut data = vec![0u8; columns as usize * rows as usize];
-    for (ix, iy) in set.iter().filter(|&cell| area.contains(cell)) {
-        let (c, r) = ((ix - area.x0) / factor, (iy - area.y0) / factor);
-        data[r as usize * columns as usize + c as usize] = 1;
-    }
     let cell = grid.cell_m * f64::from(factor);
     let corner = [
         grid.origin.x + f64::from(area.x0) * grid.cell_m,
         grid.origin.y + f64::from(area.y0) * grid.cell_m,
     ];
+    let blocks = GroundGrid {
+        origin: Point2::new(corner[0], corner[1]),
+        cell_m: cell,
+        nx: columns,
+        ny: rows,
+    };
+    let mut data = vec![0u8; columns as usize * rows as usize];
+    for (c, r) in set.coarsen_any(&area, factor, &blocks).iter() {
+        data[r as usize * columns as usize + c as usize] = 1;
+    }
     Grid {
         timestamp: Some(stamp),
         frame_id: WORLD_FRAME.into(),

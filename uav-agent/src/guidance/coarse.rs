@@ -7,7 +7,7 @@
 //! a set has, so the area of that set inside any coarse set is measured at the fine resolution.
 
 use protocol::grid::GroundGrid;
-use protocol::raster::CellSet;
+use protocol::raster::{CellBox, CellSet};
 
 /// Side the planning cells aim for, metres.
 pub const PLANNING_CELL_M: f64 = 2.5;
@@ -40,40 +40,16 @@ impl CoarseGrid {
         }
     }
 
-    /// The coarse set of every coarse cell holding a cell of `fine_set`.
-    ///
-    /// The `factor` fine rows of a coarse row are merged (a word at a time) first, so each
-    /// coarse cell is looked at once per coarse row.
+    /// The coarse set of every coarse cell holding a cell of `fine_set`
+    /// ([`CellSet::coarsen_any`] over the whole fine grid).
     pub fn downsample(&self, fine_set: &CellSet) -> CellSet {
-        let mut out = CellSet::empty(&self.coarse);
-        let f = self.factor as usize;
-        let mut merged = vec![0u64; fine_set.words_per_row()];
-        for cy in 0..self.coarse.ny {
-            let y0 = cy * self.factor;
-            let y1 = (y0 + self.factor).min(self.fine.ny);
-            merged.fill(0);
-            for fy in y0..y1 {
-                for (m, &word) in merged.iter_mut().zip(fine_set.row(fy)) {
-                    *m |= word;
-                }
-            }
-            for (w, &word) in merged.iter().enumerate() {
-                let mut bits = word;
-                while bits != 0 {
-                    let b = bits.trailing_zeros() as usize;
-                    let cx = (w * 64 + b) / f;
-                    out.set((cx as u32, cy), true);
-                    // Skip the rest of this coarse cell's bits in the word.
-                    let next = ((cx + 1) * f).saturating_sub(w * 64);
-                    bits = if next >= 64 {
-                        0
-                    } else {
-                        bits & (u64::MAX << next)
-                    };
-                }
-            }
-        }
-        out
+        let whole = CellBox {
+            x0: 0,
+            y0: 0,
+            x1: self.fine.nx - 1,
+            y1: self.fine.ny - 1,
+        };
+        fine_set.coarsen_any(&whole, self.factor, &self.coarse)
     }
 
     /// How many cells of `fine_set` each coarse cell holds, as [`CellWeights`].
