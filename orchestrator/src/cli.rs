@@ -21,14 +21,14 @@ pub enum FleetCommand {
     /// Run the fleet once: world-server and agents as processes; results into `--out`.
     Run(crate::run::config::RunArgs),
     /// Join a run of another machine with some of its agents (`fleet run --remote`).
-    Host(crate::host_cmd::HostArgs),
+    Host(crate::host::HostArgs),
     /// Make a fleet authority and a TLS certificate for each host.
-    Certs(crate::host_cmd::CertsArgs),
+    Certs(crate::host::CertsArgs),
     /// Run every variant on the seeds given and write the paper's Table I layout, with the
     /// variants' paired differences.
     Sweep(crate::sweep::SweepArgs),
     /// Render one UAV's camera frame at a given time as pictures.
-    Render(crate::render_cmd::RenderArgs),
+    Render(crate::render::RenderArgs),
     /// Measure a part of the system and write a JSON report.
     Bench(BenchArgs),
 }

@@ -6,12 +6,12 @@
 //! - [`cli`]: the subcommands; each command's raw clap arguments live with the command and
 //!   validate into its config (errors name the flag or the scenario key and the accepted
 //!   range: exit code 2).
-//! - [`run`](mod@run): `fleet run`, one run of the fleet as processes; the `fleet-observe`
+//! - [`run`]: `fleet run`, one run of the fleet as processes; the `fleet-observe`
 //!   crate measures it, writes its results and shows it.
-//! - [`host_cmd`]: `fleet host`, this machine's share of a run over several hosts, and
+//! - [`host`]: `fleet host`, this machine's share of a run over several hosts, and
 //!   `fleet certs`.
 //! - [`sweep`]: `fleet sweep`, every variant on several seeds, the paper's Table I.
-//! - [`render_cmd`]: `fleet render`, one frame as pictures.
+//! - [`render`]: `fleet render`, one frame as pictures.
 //! - [`scale`]: `fleet bench scale`, whole runs per fleet size; the other benchmarks are the
 //!   `fleet-bench` crate's.
 //!
@@ -22,15 +22,15 @@
 //! use clap::Parser;
 //! use orchestrator::cli::Cli;
 //! let cli = Cli::parse_from(["fleet", "render", "--uav", "0", "--time", "10", "--out", "frame"]);
-//! let code = orchestrator::run(cli);
+//! let code = orchestrator::dispatch(cli);
 //! assert_eq!(code, orchestrator::Outcome::Success);
 //! ```
 
 #![warn(missing_docs)]
 
 pub mod cli;
-pub mod host_cmd;
-pub mod render_cmd;
+pub mod host;
+pub mod render;
 pub mod run;
 pub mod scale;
 pub mod sweep;
@@ -61,30 +61,30 @@ impl Outcome {
 }
 
 /// Runs a parsed command line, printing errors to stderr.
-pub fn run(cli: Cli) -> Outcome {
+pub fn dispatch(cli: Cli) -> Outcome {
     if let Err(e) = fleet_observe::pictures::register_fonts() {
         eprintln!("fleet: {e}");
         return Outcome::Failed;
     }
     let result = match cli.command {
         FleetCommand::Run(args) => match args.validate() {
-            Ok(config) => return finish(run::run(&config)),
+            Ok(config) => return finish(run::command(&config)),
             Err(e) => return bad_input(e),
         },
         FleetCommand::Host(args) => match args.validate() {
-            Ok(config) => return finish(host_cmd::run(&config)),
+            Ok(config) => return finish(host::command(&config)),
             Err(e) => return bad_input(e),
         },
-        FleetCommand::Certs(args) => host_cmd::certs(&args),
+        FleetCommand::Certs(args) => host::certs(&args),
         FleetCommand::Sweep(args) => match args.merge_config() {
             Some(merge) => return finish(sweep::merge(&merge)),
             None => match args.validate() {
-                Ok(config) => return finish(sweep::run(&config)),
+                Ok(config) => return finish(sweep::command(&config)),
                 Err(e) => return bad_input(e),
             },
         },
         FleetCommand::Render(args) => match args.validate() {
-            Ok(config) => render_cmd::run(&config),
+            Ok(config) => render::command(&config),
             Err(e) => return bad_input(e),
         },
         FleetCommand::Bench(args) => match args.kind {
@@ -105,7 +105,7 @@ pub fn run(cli: Cli) -> Outcome {
                 Err(e) => return bad_input(e),
             },
             BenchKind::Scale(args) => match args.validate() {
-                Ok(config) => return finish(scale::run(&config)),
+                Ok(config) => return finish(scale::command(&config)),
                 Err(e) => return bad_input(e),
             },
         },

@@ -10,5 +10,5 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(code) => return code,
     };
-    ExitCode::from(orchestrator::run(cli).code())
+    ExitCode::from(orchestrator::dispatch(cli).code())
 }

@@ -18,7 +18,7 @@
 //! then SIGKILL after a bounded grace), the run's iceoryx2 files are removed, and the
 //! [`RunRecord`] holds what was measured, with each restarted or resumed agent's resync and
 //! where every process's time went ([`resources`]).
-//! [`run`] is the command: it executes, then writes `summary.json`, `timeseries.csv` and the
+//! [`command`] is `fleet run`: it executes, then writes `summary.json`, `timeseries.csv` and the
 //! pictures (with `run.gif`), and prints the summary table. While the run goes on, its
 //! directory holds the run's iceoryx2 configuration for iceoryx2's own tools ([`iox2`]);
 //! with `--record` or `--live` the observer shows the run in Foxglove ([`fleet_observe::viewer`]).
@@ -131,7 +131,7 @@ impl RunRecord {
 
 /// `fleet run`: executes the run, writes its results into `config.out` and prints the
 /// summary table.
-pub fn run(config: &RunConfig) -> anyhow::Result<Outcome> {
+pub fn command(config: &RunConfig) -> anyhow::Result<Outcome> {
     let record = runtime()?.block_on(execute(config, ""))?;
     let summary = write_results(&record)?;
     let mut out = std::io::stdout().lock();

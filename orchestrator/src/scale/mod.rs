@@ -200,7 +200,7 @@ impl BenchScaleArgs {
 
 /// `fleet bench scale`: runs every fleet size in turn, writes `scale.json` and `scale.png`,
 /// prints the table. Exit code 1 if a run failed, was interrupted or saw a violation.
-pub fn run(config: &ScaleConfig) -> anyhow::Result<Outcome> {
+pub fn command(config: &ScaleConfig) -> anyhow::Result<Outcome> {
     std::fs::create_dir_all(&config.out)
         .with_context(|| format!("cannot create {}", config.out.display()))?;
     let rt = runtime()?;

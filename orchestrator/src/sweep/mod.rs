@@ -281,7 +281,7 @@ impl SweepArgs {
 /// ran and the band plot, prints the table. A run that fails is listed in the table's
 /// `failed_runs` and does not stop the others; a signal stops the sweep (the runs that
 /// completed stay in the table).
-pub fn run(config: &SweepConfig) -> anyhow::Result<Outcome> {
+pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
     std::fs::create_dir_all(&config.out)
         .with_context(|| format!("cannot create {}", config.out.display()))?;
     if let Some(shard) = config.shard {

@@ -105,7 +105,7 @@ const POLL: Duration = Duration::from_millis(100);
 
 /// Runs `fleet host`: the bridge, then the agents once the world host is reached, until the
 /// agents end or a signal stops them.
-pub fn run(config: &HostConfig) -> anyhow::Result<Outcome> {
+pub fn command(config: &HostConfig) -> anyhow::Result<Outcome> {
     crate::run::runtime()?.block_on(serve(config))
 }
 

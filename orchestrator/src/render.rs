@@ -122,7 +122,7 @@ struct LabelCounts {
 
 /// Builds the world, advances it to the frame's step, renders the UAV's frame and writes
 /// `labels.png`, `depth.png`, `topview.png` and `frame.json` into the output directory.
-pub fn run(config: &RenderConfig) -> anyhow::Result<()> {
+pub fn command(config: &RenderConfig) -> anyhow::Result<()> {
     let mut world = World::new(&config.scenario)?;
     while world.step() < config.step {
         world.advance();
