@@ -39,6 +39,7 @@ use std::str::FromStr;
 
 use anyhow::Context as _;
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use serde::Serialize;
 
@@ -503,6 +504,9 @@ fn draw(table: &AxisTable, axis: &Axis, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Per variant (its index in the table), a panel's points: x, mean and sd, scaled.
+type PanelSeries = Vec<(usize, Vec<(f64, f64, f64)>)>;
+
 fn draw_panel(
     area: &DrawingArea<BitMapBackend<'_>, Shift>,
     panel: &Panel,
@@ -516,25 +520,7 @@ fn draw_panel(
     let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let margin = ((hi - lo) * 0.06).max(0.05);
-    // Per variant (its index), the points: x, mean and sd, scaled.
-    type Points = Vec<(f64, f64, f64)>;
-    let series: Vec<(usize, Points)> = table
-        .variants
-        .iter()
-        .enumerate()
-        .map(|(v, variant)| {
-            let points = xs
-                .iter()
-                .enumerate()
-                .filter_map(|(i, &x)| {
-                    let cell = table.cell(variant.name(), i, panel.key)?;
-                    let (mean, sd) = (cell.mean?, cell.sd?);
-                    Some((x, mean * panel.scale, sd * panel.scale))
-                })
-                .collect();
-            (v, points)
-        })
-        .collect();
+    let series = panel_series(panel, table, &xs);
     let top = series
         .iter()
         .flat_map(|(_, p)| p.iter().map(|&(_, m, sd)| m + sd))
@@ -566,35 +552,13 @@ fn draw_panel(
         .label_style((FONT, 12))
         .draw()?;
     for (v, points) in &series {
-        let colour = palette(*v);
-        let line: Vec<(f64, f64)> = points.iter().map(|&(x, m, _)| (x, m)).collect();
-        let name = table.variants[*v].name();
-        chart
-            .draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))?
-            .label(name)
-            .legend(move |(px, py)| {
-                PathElement::new(vec![(px, py), (px + 22, py)], colour.stroke_width(2))
-            });
-        // ±1 sd bars with caps (plotters' error bars are a feature the workspace leaves out).
-        let cap = margin * 0.25;
-        chart.draw_series(points.iter().flat_map(|&(x, m, sd)| {
-            let (lo, hi) = ((m - sd).max(0.0), m + sd);
-            [
-                vec![(x, lo), (x, hi)],
-                vec![(x - cap, lo), (x + cap, lo)],
-                vec![(x - cap, hi), (x + cap, hi)],
-            ]
-            .map(|line| PathElement::new(line, colour.stroke_width(2)))
-        }))?;
-        chart.draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
-        chart.draw_series(points.iter().map(|&(x, m, _)| {
-            EmptyElement::at((x, m))
-                + Text::new(
-                    short_number(m),
-                    (7, -17),
-                    (FONT, 12).into_font().color(&BLACK),
-                )
-        }))?;
+        draw_variant(
+            &mut chart,
+            table.variants[*v].name(),
+            palette(*v),
+            points,
+            margin,
+        )?;
     }
     chart
         .configure_series_labels()
@@ -603,6 +567,67 @@ fn draw_panel(
         .border_style(BLACK)
         .label_font((FONT, 12))
         .draw()?;
+    Ok(())
+}
+
+/// Each variant's points of `panel` at the axis positions `xs` (a value without a mean and
+/// an sd has no point).
+fn panel_series(panel: &Panel, table: &AxisTable, xs: &[f64]) -> PanelSeries {
+    table
+        .variants
+        .iter()
+        .enumerate()
+        .map(|(v, variant)| {
+            let points = xs
+                .iter()
+                .enumerate()
+                .filter_map(|(i, &x)| {
+                    let cell = table.cell(variant.name(), i, panel.key)?;
+                    let (mean, sd) = (cell.mean?, cell.sd?);
+                    Some((x, mean * panel.scale, sd * panel.scale))
+                })
+                .collect();
+            (v, points)
+        })
+        .collect()
+}
+
+/// One variant's line, its ±1 sd bars (with caps `margin / 4` wide), its points and their
+/// values.
+fn draw_variant(
+    chart: &mut ChartContext<'_, BitMapBackend<'_>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    name: &'static str,
+    colour: RGBColor,
+    points: &[(f64, f64, f64)],
+    margin: f64,
+) -> anyhow::Result<()> {
+    let line: Vec<(f64, f64)> = points.iter().map(|&(x, m, _)| (x, m)).collect();
+    chart
+        .draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))?
+        .label(name)
+        .legend(move |(px, py)| {
+            PathElement::new(vec![(px, py), (px + 22, py)], colour.stroke_width(2))
+        });
+    // ±1 sd bars with caps (plotters' error bars are a feature the workspace leaves out).
+    let cap = margin * 0.25;
+    chart.draw_series(points.iter().flat_map(|&(x, m, sd)| {
+        let (lo, hi) = ((m - sd).max(0.0), m + sd);
+        [
+            vec![(x, lo), (x, hi)],
+            vec![(x - cap, lo), (x + cap, lo)],
+            vec![(x - cap, hi), (x + cap, hi)],
+        ]
+        .map(|line| PathElement::new(line, colour.stroke_width(2)))
+    }))?;
+    chart.draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+    chart.draw_series(points.iter().map(|&(x, m, _)| {
+        EmptyElement::at((x, m))
+            + Text::new(
+                short_number(m),
+                (7, -17),
+                (FONT, 12).into_font().color(&BLACK),
+            )
+    }))?;
     Ok(())
 }
 

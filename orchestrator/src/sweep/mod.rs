@@ -206,52 +206,20 @@ impl SweepArgs {
             .collect();
         let mut runs = Vec::with_capacity(mine.len());
         for (n, &(index, level, variant, seed)) in mine.iter().enumerate() {
-            let mut overrides = variant.with_user_overrides(&self.scenario.overrides);
-            let setting = self.axis.as_ref().map(|a| a.setting(level));
-            overrides.extend(setting.clone());
-            overrides.push(format!("seed={seed}"));
-            if let Some(d) = self.duration {
-                overrides.push(format!("duration_s={d:?}"));
-            }
-            let scenario = ScenarioArgs {
-                scenario: self.scenario.scenario.clone(),
-                overrides,
-            }
-            .load()?;
-            // The run's place in the whole sweep: distinct across shards too.
-            let sequence = u32::try_from(index).unwrap_or(u32::MAX);
-            let base = setting
-                .as_ref()
-                .map_or_else(|| out.clone(), |s| out.join(s));
-            let at = setting.map(|s| format!("{s} ")).unwrap_or_default();
-            runs.push(PlannedRun {
-                variant,
-                seed,
-                level,
-                index,
-                label: format!(
+            let label_of = |at: &str| {
+                format!(
                     "{}/{} {at}{} seed {seed}",
                     n + 1,
                     mine.len(),
                     variant.name()
-                ),
-                config: RunConfig {
-                    layout: HostLayout::single(scenario.uavs.count),
-                    scenario,
-                    mode: StepMode::Lockstep,
-                    faults: Vec::new(),
-                    out: base.join(variant.name()).join(format!("seed-{seed}")),
-                    strict: false,
-                    run_id: new_run_id(sequence),
-                    progress_bar,
-                    variant,
-                    chaos_seed: None,
-                    listen: None,
-                    tls: None,
-                    insecure_links: false,
-                    view: fleet_observe::viewer::ViewConfig::default(),
-                },
-            });
+                )
+            };
+            runs.push(self.planned_run(
+                (index, level, variant, seed),
+                &out,
+                progress_bar,
+                label_of,
+            )?);
         }
         Ok(SweepConfig {
             runs,
@@ -261,6 +229,59 @@ impl SweepArgs {
             shard: self.shard,
             total_runs,
             out,
+        })
+    }
+
+    /// Run `index` of the whole sweep: `variant` on `seed` at the axis's `level`, into its
+    /// directory under `out`, labelled by `label_of` (given the axis setting and a space, or
+    /// nothing).
+    fn planned_run(
+        &self,
+        (index, level, variant, seed): (usize, usize, Variant, u64),
+        out: &std::path::Path,
+        progress_bar: bool,
+        label_of: impl Fn(&str) -> String,
+    ) -> Result<PlannedRun, UsageError> {
+        let mut overrides = variant.with_user_overrides(&self.scenario.overrides);
+        let setting = self.axis.as_ref().map(|a| a.setting(level));
+        overrides.extend(setting.clone());
+        overrides.push(format!("seed={seed}"));
+        if let Some(d) = self.duration {
+            overrides.push(format!("duration_s={d:?}"));
+        }
+        let scenario = ScenarioArgs {
+            scenario: self.scenario.scenario.clone(),
+            overrides,
+        }
+        .load()?;
+        // The run's place in the whole sweep: distinct across shards too.
+        let sequence = u32::try_from(index).unwrap_or(u32::MAX);
+        let base = setting
+            .as_ref()
+            .map_or_else(|| out.to_owned(), |s| out.join(s));
+        let at = setting.map(|s| format!("{s} ")).unwrap_or_default();
+        Ok(PlannedRun {
+            variant,
+            seed,
+            level,
+            index,
+            label: label_of(&at),
+            config: RunConfig {
+                layout: HostLayout::single(scenario.uavs.count),
+                scenario,
+                mode: StepMode::Lockstep,
+                faults: Vec::new(),
+                out: base.join(variant.name()).join(format!("seed-{seed}")),
+                strict: false,
+                run_id: new_run_id(sequence),
+                progress_bar,
+                variant,
+                chaos_seed: None,
+                listen: None,
+                tls: None,
+                insecure_links: false,
+                view: fleet_observe::viewer::ViewConfig::default(),
+            },
         })
     }
 
