@@ -208,7 +208,7 @@ impl FleetSim {
         let mut out = Vec::with_capacity(self.uav_count());
         for i in 0..self.uav_count() {
             let input = PlanningState::of(&self.estimators[i])?;
-            let decision = guidance::plan(&self.guidance, &input.input(i as u32, &token));
+            let decision = guidance::paper::plan(&self.guidance, &input.input(i as u32, &token));
             token.push(decision.view.clone());
             out.push((decision.yaw_ref, decision.view));
         }

@@ -1,5 +1,5 @@
 //! `fleet bench guidance`: the time of one guidance decision on realistic inputs, for both
-//! planners: the paper's MPC ([`uav_agent::guidance::plan`], the `paper` variant) and the
+//! planners: the paper's MPC ([`uav_agent::guidance::paper::plan`], the `paper` variant) and the
 //! project's ([`uav_agent::guidance::setfleet::plan`], the `setfleet` variant).
 //!
 //! Method: the fleet runs in-process ([`FleetSim`]) so the sets and each UAV's map are a run's.
@@ -161,7 +161,7 @@ fn time_decisions(
                     for _ in 0..config.repeats {
                         if paper {
                             let start = Instant::now();
-                            let decision = guidance::plan(sim.guidance(), &input);
+                            let decision = guidance::paper::plan(sim.guidance(), &input);
                             t.paper[count].push(start.elapsed().as_secs_f64() * 1e3);
                             t.sequences = decision.sequences;
                         }
