@@ -37,9 +37,9 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
+use protocol::radio::{LinkKind, Radio};
 use protocol::raster::CellSet;
 use protocol::wire::{AgentStats, TargetTruth};
-use uav_agent::agent::radio::{LinkKind, Radio};
 use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::{self, EstimateInbox};
 use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate, Unseen};

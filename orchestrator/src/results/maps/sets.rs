@@ -294,7 +294,7 @@ pub(super) fn target_colour(id: u32) -> RGBColor {
 
 #[cfg(test)]
 mod tests {
-    use uav_agent::agent::radio::Radio;
+    use protocol::radio::Radio;
     use uav_agent::occupancy::OccupancyMap;
     use world_server::World;
 

@@ -27,7 +27,7 @@
 //!
 //! ```
 //! use protocol::scenario::Scenario;
-//! use uav_agent::agent::radio::{LinkKind, Radio};
+//! use protocol::radio::{LinkKind, Radio};
 //!
 //! let scenario = Scenario::load(None, &["comms.loss=0.3".to_owned()])?;
 //! let radio = Radio::from_scenario(&scenario);
@@ -39,8 +39,8 @@
 //! # Ok::<(), protocol::scenario::ScenarioError>(())
 //! ```
 
-use protocol::camera::CameraPose;
-use protocol::scenario::Scenario;
+use crate::camera::CameraPose;
+use crate::scenario::Scenario;
 
 /// The kinds of message a link carries, each drawn on its own (a lost estimate says nothing
 /// about the token of the same step).
@@ -121,7 +121,7 @@ impl Radio {
     }
 
     /// Whether some message may be lost: then estimates must carry whole sets, since a delta
-    /// against a lost message rebuilds nothing (see [`crate::estimator::message`]).
+    /// against a lost message rebuilds nothing (see `uav_agent::estimator::message`).
     pub fn is_lossy(&self) -> bool {
         self.loss > 0.0
     }
