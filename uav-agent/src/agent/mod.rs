@@ -60,7 +60,7 @@ use protocol::codec::{self, EncodeError};
 use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_for_wake};
-use protocol::radio::{LinkKind, Radio};
+use protocol::radio::{Endpoint, LinkKind, Radio};
 use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
@@ -864,9 +864,15 @@ impl Agent<'_> {
 
     /// Fuses every queued estimate that has arrived by step `k` (of step `k - d` and older
     /// with a latency of `d` steps; older ones than `k` are dilated by the fusion), in
-    /// ascending order of peer, and counts the lost estimates of the steps up to `k`.
+    /// ascending order of peer, as the radio's rule says ([`Radio::fuses`]: the queue holds
+    /// only delivered estimates, so what is left out is out of range), and counts the lost
+    /// estimates of the steps up to `k`.
     fn fuse_pending(&mut self, k: u64) {
-        let my_pose = self.estimator.state().pose;
+        let me = Endpoint {
+            uav: self.config.uav,
+            step: k,
+            pose: self.estimator.state().pose,
+        };
         let radio = self.radio;
         let later = self.lost_by_step.split_off(&k.saturating_add(1));
         let lost = std::mem::replace(&mut self.lost_by_step, later);
@@ -882,7 +888,7 @@ impl Agent<'_> {
                     continue;
                 }
                 info.fused_step = Some(p.step);
-                if radio.in_range(my_pose, p.pose) {
+                if radio.fuses(&me, &p.endpoint()) {
                     self.estimator.fuse(&p);
                     self.report.estimates_received += 1;
                 } else {
