@@ -934,8 +934,6 @@ pub(crate) mod tests {
     /// its estimator holds once it fused its peers' (every one, as with perfect links).
     #[test]
     fn the_observer_rebuilds_each_estimators_fused_sets_over_a_rendered_run() {
-        use crate::bench::estimator::FleetSim;
-
         let scenario = Scenario::load(
             None,
             &[
@@ -946,14 +944,14 @@ pub(crate) mod tests {
         )
         .expect("scenario");
         let cfg = EstimatorConfig::from_scenario(&scenario);
-        let mut sim = FleetSim::new(&scenario).expect("fleet");
+        let mut sim = crate::bench::estimator::fleet(&scenario).expect("fleet");
         // Cells that a peer's frame of the step proved free, which the old rule (the agent's
         // published H̄ joined with its peers' hidden ground) kept.
         let mut cleared_by_peers = 0;
         for _ in 0..16 {
             sim.step().expect("step");
             let observed: Vec<ObservedEstimate> = sim
-                .last_messages()
+                .messages()
                 .iter()
                 .map(|bytes| ObservedEstimate::decode(bytes, &cfg).expect("decode").0)
                 .collect();

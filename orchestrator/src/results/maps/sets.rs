@@ -363,7 +363,7 @@ mod tests {
     #[test]
     #[ignore = "slow (renders frames); run with SETFLEET_KEEP_MAPS=DIR to look at the pictures"]
     fn real_case_pictures() {
-        use crate::bench::estimator::FleetSim;
+        use crate::bench::estimator::fleet;
         use crate::observe::metrics::ObservedEstimate;
         use uav_agent::estimator::EstimatorConfig;
 
@@ -378,7 +378,7 @@ mod tests {
         )
         .unwrap();
         let steps = 120;
-        let mut sim = FleetSim::new(&scenario).unwrap();
+        let mut sim = fleet(&scenario).unwrap();
         let mut tracks = vec![Vec::new(); sim.uav_count()];
         for _ in 0..steps {
             sim.step().unwrap();
@@ -391,7 +391,7 @@ mod tests {
         let config = EstimatorConfig::from_scenario(&scenario);
         let mut oem = OccupancyMap::new(config.oem_grid);
         let mut observed = Vec::new();
-        for bytes in sim.last_messages() {
+        for bytes in sim.messages() {
             let (estimate, _) = ObservedEstimate::decode(bytes, &config).unwrap();
             observed.push(estimate);
         }
