@@ -1,33 +1,26 @@
 //! `fleet bench estimator`: one estimator step per UAV per frame of the default scenario, with
 //! its phases, the size of the estimate messages and the fusion of a peer's estimate.
 //!
-//! Method: the world runs in-process ([`FleetSim`]); every step renders each UAV's frame and
-//! feeds it to that UAV's [`Estimator`]; only the estimator step is timed (not the rendering).
-//! The UAVs fly as they would in a run: every guidance period each plans its yaw with the MPC,
-//! in token order, so the views sweep the city and the sets look like a run's. Each step, each
-//! UAV's estimate is composed and encoded ([`EstimateOutbox`], [`message::to_bytes`]) and every
-//! UAV fuses its peers' estimates ([`PeerEstimate::from_bytes`] + [`Estimator::fuse`]); one
-//! fusion is "decode and validate, then fuse" of one peer's message.
+//! Method: the world runs in-process ([`fleet`], a [`sim::Fleet`]); every step renders each
+//! UAV's frame and feeds it to that UAV's estimator; only the estimator step is timed (not the
+//! rendering). The UAVs fly as they would in a run: every guidance period each plans its yaw
+//! with the MPC, in token order, so the views sweep the city and the sets look like a run's. Each step, each
+//! UAV's estimate is composed and encoded and every UAV decodes and fuses its peers' estimates
+//! ([`sim::Fleet::share`]); one fusion is "decode and validate, then fuse" of one peer's
+//! message.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use clap::Args;
-use protocol::flight::UavState;
-use protocol::frame::CvsFrame;
-use protocol::scenario::Scenario;
-use protocol::wire::PlannedView;
-use uav_agent::estimator::message::{self, EstimateOutbox};
-use uav_agent::estimator::{Estimator, EstimatorConfig, PeerEstimate, StepTimings};
-use uav_agent::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput};
-use world_server::World;
+use protocol::scenario::{Planner, Scenario};
+use sim::{Fleet, FleetOptions, Steering, StepSample};
+use uav_agent::estimator::StepTimings;
+use uav_agent::guidance::GuidanceParams;
 
 use super::{BenchCase, BenchReport, Metrics, Stats};
 use protocol::usage::{ScenarioArgs, UsageError};
-
-/// Run tag stamped on the frames of the in-process simulation.
-const SIM_RUN_TAG: u64 = 1;
 
 /// `fleet bench estimator`.
 #[derive(Debug, Args)]
@@ -78,188 +71,24 @@ impl BenchEstimatorArgs {
     }
 }
 
-/// What one simulated step measured, per UAV.
-#[derive(Clone, Debug, Default)]
-pub struct StepSample {
-    /// Step index.
-    pub step: u64,
-    /// Wall time of each UAV's estimator step.
-    pub step_time: Vec<Duration>,
-    /// The phases of each UAV's step.
-    pub timings: Vec<StepTimings>,
-    /// Encoded size of each UAV's estimate, bytes.
-    pub message_bytes: Vec<usize>,
-    /// Time to compose and encode each UAV's estimate.
-    pub encode_time: Vec<Duration>,
-    /// Time to decode and validate each peer message fused this step (every receiver, every
-    /// sender).
-    pub decode_time: Vec<Duration>,
-    /// Time to fuse each peer estimate (after decoding).
-    pub fuse_time: Vec<Duration>,
-}
-
-/// The world and one estimator per UAV, run in-process as a fleet would run them, with the MPC
-/// choosing the yaws every guidance period (in token order, each UAV planning around the
-/// plans of those before it).
-pub struct FleetSim {
-    world: World,
-    estimators: Vec<Estimator>,
-    outboxes: Vec<EstimateOutbox>,
-    guidance: GuidanceParams,
-    frame: Box<CvsFrame>,
-    last_messages: Vec<Vec<u8>>,
-}
-
-impl FleetSim {
-    /// The world of `scenario` and fresh estimators.
-    pub fn new(scenario: &Scenario) -> anyhow::Result<FleetSim> {
-        let world = World::new(scenario)?;
-        let config = EstimatorConfig::from_scenario(scenario);
-        let n = world.uav_count();
-        Ok(FleetSim {
-            estimators: (0..n).map(|_| Estimator::new(config.clone())).collect(),
-            outboxes: (0..n)
-                .map(|i| EstimateOutbox::new(i as u32, 1, config.oem_full_every))
-                .collect(),
-            guidance: GuidanceParams::from_scenario(scenario),
-            world,
-            frame: CvsFrame::new_boxed(),
-            last_messages: vec![Vec::new(); n],
-        })
-    }
-
-    /// Number of UAVs.
-    pub fn uav_count(&self) -> usize {
-        self.estimators.len()
-    }
-
-    /// The estimators.
-    pub fn estimators(&self) -> &[Estimator] {
-        &self.estimators
-    }
-
-    /// The guidance parameters of the scenario.
-    pub fn guidance(&self) -> &GuidanceParams {
-        &self.guidance
-    }
-
-    /// Each UAV's encoded estimate of the last step.
-    pub fn last_messages(&self) -> &[Vec<u8>] {
-        &self.last_messages
-    }
-
-    /// Whether the current step starts a guidance period.
-    pub fn is_guidance_step(&self) -> bool {
-        self.world
-            .step()
-            .is_multiple_of(self.guidance.steps_per_period.max(1) as u64)
-    }
-
-    /// One step: every UAV's frame through its estimator (timed), estimates exchanged and
-    /// fused, on a guidance step the MPC round, then the world advances.
-    pub fn step(&mut self) -> anyhow::Result<StepSample> {
-        let n = self.uav_count();
-        let mut sample = StepSample {
-            step: self.world.step(),
-            ..StepSample::default()
-        };
-        for i in 0..n {
-            self.world.render(i, SIM_RUN_TAG, &mut self.frame);
-            let start = Instant::now();
-            let report = self.estimators[i].step(&self.frame)?;
-            sample.step_time.push(start.elapsed());
-            sample.timings.push(report.timings);
-        }
-        for i in 0..n {
-            let start = Instant::now();
-            let msg = self.outboxes[i].compose(self.estimators[i].state_mut());
-            let bytes = message::to_bytes(&msg)?;
-            sample.encode_time.push(start.elapsed());
-            sample.message_bytes.push(bytes.len());
-            self.last_messages[i] = bytes;
-        }
-        for (i, receiver) in self.estimators.iter_mut().enumerate() {
-            for (j, bytes) in self.last_messages.iter().enumerate() {
-                if i == j {
-                    continue;
-                }
-                let start = Instant::now();
-                let peer = PeerEstimate::from_bytes(bytes, receiver.config())?;
-                sample.decode_time.push(start.elapsed());
-                let start = Instant::now();
-                receiver.fuse(&peer);
-                sample.fuse_time.push(start.elapsed());
-            }
-        }
-        if self.is_guidance_step() {
-            let plans = self.plan_round(&[])?;
-            for (i, (yaw_ref, _)) in plans.into_iter().enumerate() {
-                self.world.set_yaw_ref(i, yaw_ref);
-            }
-        }
-        self.world.advance();
-        Ok(sample)
-    }
-
-    /// One guidance round in token order at the current state: each UAV plans around the plans
-    /// of the UAVs before it (and `extra`); returns each UAV's yaw reference and plan.
-    pub fn plan_round(&self, extra: &[PlannedView]) -> anyhow::Result<Vec<(f64, PlannedView)>> {
-        let mut token: Vec<PlannedView> = extra.to_vec();
-        let mut out = Vec::with_capacity(self.uav_count());
-        for i in 0..self.uav_count() {
-            let input = PlanningState::of(&self.estimators[i])?;
-            let decision = guidance::plan(&self.guidance, &input.input(i as u32, &token));
-            token.push(decision.view.clone());
-            out.push((decision.yaw_ref, decision.view));
-        }
-        Ok(out)
+/// The MPC `fleet bench` flies the fleet with: the paper's, whatever the scenario's planner,
+/// with the scenario's settings.
+pub fn paper_guidance(scenario: &Scenario) -> GuidanceParams {
+    GuidanceParams {
+        planner: Planner::Paper,
+        ..GuidanceParams::from_scenario(scenario)
     }
 }
 
-/// What the MPC of one UAV looks at, owned, gathered from its estimator as the agent does it
-/// (`uav_agent::agent`, when it takes its turn): its pose, `X̄` and every `X_j`, the ground
-/// hidden recently and the obstacle cells of its map.
-pub struct PlanningState<'a> {
-    state: UavState,
-    sets: Vec<&'a protocol::raster::CellSet>,
-    hidden: protocol::raster::CellSet,
-    obstacles: Vec<ObstacleCell>,
-}
-
-impl<'a> PlanningState<'a> {
-    /// Gathers the inputs from an estimator that has folded at least one frame.
-    pub fn of(estimator: &'a Estimator) -> anyhow::Result<PlanningState<'a>> {
-        let st = estimator.state();
-        let pose = st
-            .pose
-            .ok_or_else(|| anyhow::anyhow!("no pose to plan from at step {}", st.step))?;
-        Ok(PlanningState {
-            state: UavState {
-                position: pose.position,
-                yaw: pose.yaw,
-            },
-            sets: st.target_sets().collect(),
-            hidden: st.hidden_history.recently_hidden(),
-            obstacles: ObstacleCell::known(&st.oem),
-        })
-    }
-
-    /// The planning input of UAV `uav` with the token's plans `others`.
-    pub fn input<'b>(&'b self, uav: u32, others: &'b [PlannedView]) -> PlanningInput<'b> {
-        PlanningInput {
-            uav,
-            state: self.state,
-            sets: &self.sets,
-            recently_hidden: &self.hidden,
-            obstacles: &self.obstacles,
-            others,
-        }
-    }
-
-    /// Obstacle cells known to the map.
-    pub fn obstacle_count(&self) -> usize {
-        self.obstacles.len()
-    }
+/// The world and one estimator per UAV of `scenario`, run in-process as a fleet would run
+/// them, with the paper's MPC choosing the yaws every guidance period ([`paper_guidance`], in
+/// token order, each UAV planning around the plans of those before it).
+pub fn fleet(scenario: &Scenario) -> anyhow::Result<Fleet> {
+    let options = FleetOptions {
+        steering: Steering::Guided(Box::new(paper_guidance(scenario))),
+        ..FleetOptions::default()
+    };
+    Ok(Fleet::new(scenario, options)?)
 }
 
 fn ms(d: Duration) -> f64 {
@@ -291,7 +120,7 @@ fn timing_case(name: &str, unit: &str, s: &Stats) -> BenchCase {
 /// Runs the fleet for `config.steps` steps and reports the estimator's figures.
 pub fn run(config: &BenchEstimatorConfig) -> anyhow::Result<BenchReport> {
     let mut report = BenchReport::new("estimator");
-    let mut sim = FleetSim::new(&config.scenario)?;
+    let mut sim = fleet(&config.scenario)?;
     let mut samples = Vec::new();
     for _ in 0..config.steps {
         let s = sim.step()?;

@@ -1,8 +1,8 @@
 //! `fleet bench guidance`: the time of one guidance decision on realistic inputs, for both
-//! planners: the paper's MPC ([`uav_agent::guidance::plan`], the `paper` variant) and the
+//! planners: the paper's MPC ([`uav_agent::guidance::paper::plan`], the `paper` variant) and the
 //! project's ([`uav_agent::guidance::setfleet::plan`], the `setfleet` variant).
 //!
-//! Method: the fleet runs in-process ([`FleetSim`]) so the sets and each UAV's map are a run's.
+//! Method: the fleet runs in-process ([`fleet`]) so the sets and each UAV's map are a run's.
 //! At every guidance step after the warm-up, each UAV's decision is timed as the agent takes it
 //! (the same inputs as `uav_agent::agent`: its pose, `X̄` and every `X_j`, the recently hidden
 //! ground, the obstacle cells of its map) with 0, 1, 2 and 3 other UAVs' plans in the token
@@ -22,9 +22,10 @@ use std::time::Instant;
 use clap::Args;
 use protocol::scenario::Scenario;
 use protocol::wire::PlannedView;
+use sim::PlanningState;
 use uav_agent::guidance::{self, Decision, GuidanceParams};
 
-use super::estimator::{FleetSim, PlanningState};
+use super::estimator::{fleet, paper_guidance};
 use super::{BenchCase, BenchReport, Metrics, Stats};
 use protocol::usage::{ScenarioArgs, UsageError};
 use protocol::variant::Variant;
@@ -137,23 +138,27 @@ fn time_decisions(
     setfleet: &GuidanceParams,
     paper: bool,
 ) -> anyhow::Result<Timings> {
-    let mut sim = FleetSim::new(&config.scenario)?;
+    let mpc = paper_guidance(&config.scenario);
+    let mut sim = fleet(&config.scenario)?;
     let mut t = Timings {
         paper: vec![Vec::new(); MAX_OTHERS + 1],
         setfleet: vec![Vec::new(); MAX_OTHERS + 1],
         ..Timings::default()
     };
-    let period = u64::from(sim.guidance().steps_per_period.max(1));
+    let period = u64::from(mpc.steps_per_period.max(1));
     for _ in 0..config.steps {
         // Time the decisions where the agents take them: after the frame of a guidance step
         // has been folded in and the peers' estimates fused.
         let step = sim.step()?.step;
         if step >= config.warm_up && step.is_multiple_of(period) {
             t.rounds += 1;
-            let round: Vec<PlannedView> =
-                sim.plan_round(&[])?.into_iter().map(|(_, v)| v).collect();
+            let round: Vec<PlannedView> = sim
+                .plan_round(&mpc, &[])?
+                .into_iter()
+                .map(|d| d.view)
+                .collect();
             for (i, estimator) in sim.estimators().iter().enumerate() {
-                let state = PlanningState::of(estimator)?;
+                let state = PlanningState::of(i, estimator)?;
                 t.obstacle_cells.push(state.obstacle_count() as f64);
                 for count in 0..=MAX_OTHERS {
                     let others = token_for(i, &round, count);
@@ -161,7 +166,7 @@ fn time_decisions(
                     for _ in 0..config.repeats {
                         if paper {
                             let start = Instant::now();
-                            let decision = guidance::plan(sim.guidance(), &input);
+                            let decision = guidance::paper::plan(&mpc, &input);
                             t.paper[count].push(start.elapsed().as_secs_f64() * 1e3);
                             t.sequences = decision.sequences;
                         }

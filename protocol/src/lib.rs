@@ -8,6 +8,8 @@
 //! - [`scenario`]: the TOML scenario with the paper's defaults built in.
 //! - [`frame`]: the fixed-size CVS frame rendered in place into shared memory.
 //! - [`wire`]: commands, truth, estimates and the guidance token.
+//! - [`radio`]: the simulated radio links between agents (range, loss, latency), which the
+//!   receivers and the observer apply alike.
 //! - [`service`]: run ids and every iceoryx2 service name.
 //! - [`ipc`]: iceoryx2 nodes and services with the fleet's quality of service, wake-up events,
 //!   cleanup after dead processes.
@@ -31,6 +33,7 @@ pub mod flight;
 pub mod frame;
 pub mod ipc;
 pub mod process;
+pub mod radio;
 pub mod resources;
 pub mod scenario;
 pub mod service;

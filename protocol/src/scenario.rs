@@ -416,7 +416,7 @@ impl Planner {
 
 /// `[comms]`: the simulated radio links between agents. Every message still crosses the IPC
 /// (or the bridge); the receiving agent decides, by the same rules the observer applies, whether
-/// the radio carried it (`uav_agent::agent::radio`).
+/// the radio carried it ([`crate::radio`]).
 ///
 /// | key | default | accepted | meaning |
 /// |---|---|---|---|

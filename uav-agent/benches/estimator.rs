@@ -10,9 +10,8 @@ use divan::Bencher;
 use divan::counter::BytesCount;
 use protocol::frame::CvsFrame;
 use protocol::scenario::Scenario;
-use uav_agent::estimator::message::{self, EstimateOutbox};
-use uav_agent::estimator::{Estimator, EstimatorConfig, PeerEstimate, StepTimings};
-use world_server::World;
+use sim::{Fleet, FleetOptions};
+use uav_agent::estimator::{Estimator, PeerEstimate, StepTimings};
 
 /// Steps run before measuring, so the sets look like a run's rather than a fresh start's.
 const WARMUP_STEPS: u64 = 100;
@@ -31,46 +30,19 @@ struct Fixture {
 fn fixture() -> &'static Fixture {
     static FIXTURE: OnceLock<Fixture> = OnceLock::new();
     FIXTURE.get_or_init(|| {
-        let scenario = Scenario::default();
-        let mut world = World::new(&scenario).expect("default world");
-        let config = EstimatorConfig::from_scenario(&scenario);
-        let n = world.uav_count();
-        let mut estimators: Vec<Estimator> =
-            (0..n).map(|_| Estimator::new(config.clone())).collect();
-        let mut outboxes: Vec<EstimateOutbox> = (0..n)
-            .map(|i| EstimateOutbox::new(i as u32, 1, config.oem_full_every))
-            .collect();
-        let mut frame = CvsFrame::new_boxed();
+        let mut fleet =
+            Fleet::new(&Scenario::default(), FleetOptions::default()).expect("default world");
+        let n = fleet.uav_count();
         let mut sizes = Vec::new();
-        let mut last = Vec::new();
         for k in 0..WARMUP_STEPS {
             // Turn now and then so the views sweep the city as the guidance would make them.
             if k % 12 == 0 {
                 for i in 0..n {
-                    let yaw = world.uav_state(i).map_or(0.0, |s| s.yaw);
-                    world.set_yaw_ref(i, yaw + 0.5);
+                    let yaw = fleet.world().uav_state(i).map_or(0.0, |s| s.yaw);
+                    fleet.world_mut().set_yaw_ref(i, yaw + 0.5);
                 }
             }
-            for (i, e) in estimators.iter_mut().enumerate() {
-                world.render(i, 1, &mut frame);
-                e.step(&frame).expect("frame");
-            }
-            let mut peers = Vec::new();
-            last.clear();
-            for (e, o) in estimators.iter_mut().zip(&mut outboxes) {
-                let bytes = message::to_bytes(&o.compose(e.state_mut())).expect("encode");
-                sizes.push(bytes.len());
-                peers.push(PeerEstimate::from_bytes(&bytes, &config).expect("decode"));
-                last.push(bytes);
-            }
-            for (i, e) in estimators.iter_mut().enumerate() {
-                for (j, p) in peers.iter().enumerate() {
-                    if i != j {
-                        e.fuse(p);
-                    }
-                }
-            }
-            world.advance();
+            sizes.extend(fleet.step().expect("step").message_bytes);
         }
         sizes.sort_unstable();
         eprintln!(
@@ -80,6 +52,8 @@ fn fixture() -> &'static Fixture {
             sizes[sizes.len() - 1]
         );
         // Measure the UAV that sees the most targets, so every phase has work.
+        let world = fleet.world();
+        let mut frame = CvsFrame::new_boxed();
         let chosen = (0..n)
             .max_by_key(|&i| {
                 world.render(i, 1, &mut frame);
@@ -91,6 +65,7 @@ fn fixture() -> &'static Fixture {
             "measured UAV {chosen}: {} target boxes",
             frame.header.box_count
         );
+        let estimators = fleet.estimators();
         let estimator = estimators[chosen].clone();
         print_phase_medians(&estimator, &frame);
         let other = (chosen + 1) % n;
@@ -99,7 +74,7 @@ fn fixture() -> &'static Fixture {
             estimator,
             peer,
             frame,
-            message: last.swap_remove(chosen),
+            message: fleet.messages()[chosen].clone(),
         }
     })
 }

@@ -9,14 +9,12 @@ use std::sync::OnceLock;
 use divan::Bencher;
 use protocol::camera::CameraPose;
 use protocol::flight::UavState;
-use protocol::frame::CvsFrame;
 use protocol::raster::CellSet;
 use protocol::scenario::{Planner, Scenario};
 use protocol::wire::PlannedView;
-use uav_agent::estimator::message::{self, EstimateOutbox};
-use uav_agent::estimator::{Estimator, EstimatorConfig, PeerEstimate};
+use sim::{Fleet, FleetOptions, Steering};
+use uav_agent::estimator::Estimator;
 use uav_agent::guidance::{self, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput};
-use world_server::World;
 
 /// Steps flown before measuring, so the sets and the maps are a run's.
 const WARMUP_STEPS: u64 = 60;
@@ -83,54 +81,26 @@ fn fixture() -> &'static Fixture {
         variant.guidance.target_weight = 1.0;
         variant.guidance.spread_m = 60.0;
         let setfleet = GuidanceParams::from_scenario(&variant);
-        let mut world = World::new(&scenario).expect("default world");
-        let config = EstimatorConfig::from_scenario(&scenario);
-        let n = world.uav_count();
-        let mut estimators: Vec<Estimator> =
-            (0..n).map(|_| Estimator::new(config.clone())).collect();
-        let mut outboxes: Vec<EstimateOutbox> = (0..n)
-            .map(|i| EstimateOutbox::new(i as u32, 1, config.oem_full_every))
+        // The fleet flies the paper's MPC in token order, as in a run.
+        let options = FleetOptions {
+            steering: Steering::Guided(Box::new(paper.clone())),
+            ..FleetOptions::default()
+        };
+        let mut fleet = Fleet::new(&scenario, options).expect("default world");
+        let decisions = loop {
+            let sample = fleet.step().expect("step");
+            if sample.step >= WARMUP_STEPS && !sample.decisions.is_empty() {
+                break sample.decisions;
+            }
+        };
+        // Each UAV's inputs of that round: its estimator's state, the plans of those before it.
+        let views: Vec<PlannedView> = decisions.into_iter().map(|d| d.view).collect();
+        let round: Vec<Inputs> = fleet
+            .estimators()
+            .iter()
+            .enumerate()
+            .map(|(i, e)| Inputs::of(e, views[..i].to_vec()))
             .collect();
-        let mut frame = CvsFrame::new_boxed();
-        let period = u64::from(paper.steps_per_period.max(1));
-        let mut round = Vec::new();
-        for k in 0.. {
-            for (i, e) in estimators.iter_mut().enumerate() {
-                world.render(i, 1, &mut frame);
-                e.step(&frame).expect("frame");
-            }
-            let peers: Vec<PeerEstimate> = estimators
-                .iter_mut()
-                .zip(&mut outboxes)
-                .map(|(e, o)| {
-                    let bytes = message::to_bytes(&o.compose(e.state_mut())).expect("encode");
-                    PeerEstimate::from_bytes(&bytes, &config).expect("decode")
-                })
-                .collect();
-            for (i, e) in estimators.iter_mut().enumerate() {
-                for (j, p) in peers.iter().enumerate() {
-                    if i != j {
-                        e.fuse(p);
-                    }
-                }
-            }
-            if k % period == 0 {
-                // A round of the paper's MPC in token order, as the fleet flies it.
-                let mut token = Vec::new();
-                round.clear();
-                for (i, e) in estimators.iter().enumerate() {
-                    let inputs = Inputs::of(e, token.clone());
-                    let d = inputs.decide(&paper);
-                    world.set_yaw_ref(i, d.yaw_ref);
-                    token.push(d.view);
-                    round.push(inputs);
-                }
-                if k >= WARMUP_STEPS {
-                    break;
-                }
-            }
-            world.advance();
-        }
         let obstacles: Vec<usize> = round.iter().map(|r| r.obstacles.len()).collect();
         eprintln!("obstacle cells known per UAV: {obstacles:?}");
         Fixture {

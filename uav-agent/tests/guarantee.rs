@@ -2,17 +2,14 @@
 //! every agent (and after fusing the agents' estimates), every target is in `X̄`, every
 //! identified target is in its `X_j`, and no proven-free cell (`P^g`, `S^o`) holds a target.
 
-mod common;
-
 use protocol::frame::CvsFrame;
 use protocol::grid::GroundGrid;
 use protocol::math::Point2;
 use protocol::scenario::Scenario;
 use protocol::wire::TruthState;
+use sim::{Fleet, FleetOptions};
 use uav_agent::estimator::measure::{self, FrameView};
-use uav_agent::estimator::message::EstimateOutbox;
-use uav_agent::estimator::{Estimator, EstimatorConfig, EstimatorState};
-use world_server::World;
+use uav_agent::estimator::{EstimatorConfig, EstimatorState};
 
 const RUN_TAG: u64 = 0x5e7f_1ee7;
 
@@ -105,54 +102,54 @@ struct Outcome {
 /// each step and, when `fuse`, after fusing every agent's estimate (through encoded messages)
 /// into every other.
 fn run(scenario: &Scenario, steps: u64, fuse: bool) -> Outcome {
-    let mut world = World::new(scenario).expect("world");
-    let config = EstimatorConfig::from_scenario(scenario);
-    let n = world.uav_count();
-    for i in 0..n {
-        let yaw = world.uav_state(i).expect("uav").yaw;
-        world.set_yaw_ref(i, yaw);
+    let options = FleetOptions {
+        run_tag: RUN_TAG,
+        oem_full_every: Some(10),
+        ..FleetOptions::default()
+    };
+    let mut fleet = Fleet::new(scenario, options).expect("world");
+    for i in 0..fleet.uav_count() {
+        let yaw = fleet.world().uav_state(i).expect("uav").yaw;
+        fleet.world_mut().set_yaw_ref(i, yaw);
     }
-    let mut estimators: Vec<Estimator> = (0..n).map(|_| Estimator::new(config.clone())).collect();
-    let mut outboxes: Vec<EstimateOutbox> = (0..n)
-        .map(|i| EstimateOutbox::new(i as u32, 1, 10))
-        .collect();
-    let mut frame = CvsFrame::new_boxed();
+    let config = fleet.config().clone();
     let mut truth = Box::<TruthState>::default();
     let mut checks = 0;
     for k in 0..steps {
-        world.truth(RUN_TAG, &mut truth);
-        for (i, est) in estimators.iter_mut().enumerate() {
-            world.render(i, RUN_TAG, &mut frame);
-            let context = format!("seed {} step {k} uav {i}", scenario.seed);
-            let report = est.step(&frame).expect("frame accepted");
-            assert!(
-                report.empty_intersections.is_empty(),
-                "{context}: empty X_j"
-            );
-            check_frame(&config, &frame, &truth, &context);
-            checks += check_state(&config.grid, est.state(), &truth, &context);
-        }
+        fleet.world().truth(RUN_TAG, &mut truth);
+        let mut sample = fleet.sample();
+        fleet
+            .sense(&mut sample, |s| {
+                let context = format!("seed {} step {k} uav {}", scenario.seed, s.uav);
+                assert!(
+                    s.report.empty_intersections.is_empty(),
+                    "{context}: empty X_j"
+                );
+                check_frame(&config, s.frame, &truth, &context);
+                checks += check_state(&config.grid, s.estimator.state(), &truth, &context);
+            })
+            .expect("frame accepted");
         if fuse {
-            let peers = common::exchanged(&mut estimators, &mut outboxes, &config);
-            for (i, est) in estimators.iter_mut().enumerate() {
-                for (j, peer) in peers.iter().enumerate() {
-                    if i != j {
-                        let r = est.fuse(peer);
-                        assert!(r.empty_intersections.is_empty());
-                    }
-                }
+            fleet
+                .share(&mut sample, |f| {
+                    assert!(f.report.empty_intersections.is_empty())
+                })
+                .expect("estimates exchanged");
+            for (i, est) in fleet.estimators().iter().enumerate() {
                 let context = format!("seed {} step {k} uav {i} fused", scenario.seed);
                 checks += check_state(&config.grid, est.state(), &truth, &context);
             }
         }
-        world.advance();
+        fleet.advance();
     }
-    let identified = estimators
+    let identified = fleet
+        .estimators()
         .iter()
         .map(|e| e.state().targets.len())
         .max()
         .unwrap_or(0);
-    let explored_m2 = estimators
+    let explored_m2 = fleet
+        .estimators()
         .iter()
         .map(|e| e.state().explored.area(&config.grid))
         .fold(0.0, f64::max);

@@ -1,11 +1,9 @@
 //! The occupancy elevation map built from real frames, compared with the world's buildings.
 
-use protocol::frame::CvsFrame;
 use protocol::grid::Rect;
 use protocol::scenario::Scenario;
-use uav_agent::estimator::{Estimator, EstimatorConfig};
+use sim::{Fleet, FleetOptions};
 use uav_agent::occupancy::OemStatus;
-use world_server::World;
 
 /// Height tolerance of obstacle cells: the depth noise moves a roof point by at most
 /// `|w| * range` along its ray, under 2 m at the ranges of the default camera; 3 m leaves room.
@@ -22,20 +20,17 @@ fn overlaps(a: &Rect, min: (f64, f64), max: (f64, f64), slack: f64) -> bool {
 
 #[test]
 fn map_marks_buildings_with_their_heights_and_open_ground() {
-    let scenario = Scenario::default();
-    let mut world = World::new(&scenario).expect("world");
-    let config = EstimatorConfig::from_scenario(&scenario);
-    let n = world.uav_count();
-    let mut estimators: Vec<Estimator> = (0..n).map(|_| Estimator::new(config.clone())).collect();
-    let mut frame = CvsFrame::new_boxed();
+    // Each UAV maps alone, flying straight on: no estimate is exchanged.
+    let options = FleetOptions {
+        exchange: false,
+        ..FleetOptions::default()
+    };
+    let mut fleet = Fleet::new(&Scenario::default(), options).expect("world");
     for _ in 0..30 {
-        for (i, est) in estimators.iter_mut().enumerate() {
-            world.render(i, 1, &mut frame);
-            est.step(&frame).expect("frame accepted");
-        }
-        world.advance();
+        fleet.step().expect("frame accepted");
     }
-    let buildings = &world.scene().buildings;
+    let buildings = &fleet.world().scene().buildings;
+    let estimators = fleet.estimators();
     let mut map = estimators[0].state().oem.clone();
     for e in &estimators[1..] {
         map.merge(&e.state().oem);

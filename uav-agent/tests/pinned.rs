@@ -7,15 +7,11 @@
 //! `SETFLEET_PRINT_DIGESTS=1 cargo test -p uav-agent --test pinned -- --nocapture` prints the
 //! digests a run computes (to record them after a deliberate change of the results).
 
-mod common;
-
-use protocol::frame::CvsFrame;
 use protocol::raster::{CellSet, ReachSet};
 use protocol::scenario::{Scenario, SetGrowth};
-use uav_agent::estimator::message::EstimateOutbox;
-use uav_agent::estimator::{Estimator, EstimatorConfig, EstimatorState};
+use sim::{Fleet, FleetOptions};
+use uav_agent::estimator::EstimatorState;
 use uav_agent::occupancy::OccupancyMap;
-use world_server::World;
 
 const RUN_TAG: u64 = 0x0b17_1de7;
 
@@ -94,17 +90,15 @@ struct Digests {
 /// every step. The running digest folds every agent's state after its step and after its
 /// fusion.
 fn run(scenario: &Scenario, steps: u64, every: u64) -> Digests {
-    let mut world = World::new(scenario).expect("world");
-    let config = EstimatorConfig::from_scenario(scenario);
-    let n = world.uav_count();
+    let options = FleetOptions {
+        run_tag: RUN_TAG,
+        ..FleetOptions::default()
+    };
+    let mut fleet = Fleet::new(scenario, options).expect("world");
+    let n = fleet.uav_count();
     let yaw0: Vec<f64> = (0..n)
-        .map(|i| world.uav_state(i).expect("uav").yaw)
+        .map(|i| fleet.world().uav_state(i).expect("uav").yaw)
         .collect();
-    let mut estimators: Vec<Estimator> = (0..n).map(|_| Estimator::new(config.clone())).collect();
-    let mut outboxes: Vec<EstimateOutbox> = (0..n)
-        .map(|i| EstimateOutbox::new(i as u32, 1, config.oem_full_every))
-        .collect();
-    let mut frame = CvsFrame::new_boxed();
     let mut chain = Fnv::new();
     let mut out = Vec::new();
     for k in 0..steps {
@@ -115,28 +109,27 @@ fn run(scenario: &Scenario, steps: u64, every: u64) -> Digests {
             } else {
                 ((k / 12 + i as u64) % 3) as f64 * 0.5
             };
-            world.set_yaw_ref(i, y + swing);
+            fleet.world_mut().set_yaw_ref(i, y + swing);
         }
-        for (i, est) in estimators.iter_mut().enumerate() {
-            world.render(i, RUN_TAG, &mut frame);
-            est.step(&frame).expect("frame accepted");
-            chain.word(state_digest(est.state()));
-        }
-        let peers = common::exchanged(&mut estimators, &mut outboxes, &config);
-        for (i, est) in estimators.iter_mut().enumerate() {
-            for (j, peer) in peers.iter().enumerate() {
-                if i != j {
-                    est.fuse(peer);
-                }
-            }
+        let mut sample = fleet.sample();
+        fleet
+            .sense(&mut sample, |s| {
+                chain.word(state_digest(s.estimator.state()))
+            })
+            .expect("frame accepted");
+        fleet
+            .share(&mut sample, |_| {})
+            .expect("estimates exchanged");
+        for est in fleet.estimators() {
             chain.word(state_digest(est.state()));
         }
         if (k + 1).is_multiple_of(every) {
             out.push(chain.0);
         }
-        world.advance();
+        fleet.advance();
     }
-    let identified = estimators
+    let identified = fleet
+        .estimators()
         .iter()
         .map(|e| e.state().targets.len())
         .max()

@@ -13,7 +13,7 @@ use super::handshake::{Role, ZenohTransport};
 use super::message::ChildReport;
 use super::zenoh_link;
 use crate::Stats;
-use crate::estimator::FleetSim;
+use crate::estimator::fleet;
 
 /// Longest wait for a child to open its ports.
 const READY_TIMEOUT: Duration = Duration::from_secs(30);
@@ -122,11 +122,11 @@ pub(super) fn rate(reports: &[ChildReport]) -> (f64, f64) {
 /// The message a fleet agent typically sends: the fleet runs `steps` steps in-process and the
 /// median-sized of the last step's estimates is taken.
 pub(super) fn typical_estimate(scenario: &Scenario, steps: u64) -> anyhow::Result<Vec<u8>> {
-    let mut sim = FleetSim::new(scenario)?;
+    let mut sim = fleet(scenario)?;
     for _ in 0..steps.max(1) {
         sim.step()?;
     }
-    let mut messages: Vec<&Vec<u8>> = sim.last_messages().iter().collect();
+    let mut messages: Vec<&Vec<u8>> = sim.messages().iter().collect();
     messages.sort_by_key(|m| m.len());
     messages
         .get(messages.len() / 2)

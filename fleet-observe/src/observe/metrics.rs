@@ -7,11 +7,11 @@
 //! holds after its step-`k` fusion: its own estimate fused with the estimates of the peers it
 //! fuses at that step, in the order it fuses them (ascending UAV id), with the agents' own law
 //! ([`PeerEstimate::fuse`]). Which peers' estimates those are is the agents' own rule
-//! ([`Radio`]): the estimates of step `k - d` (`d` the link latency in steps, 0 by default;
-//! older estimates are dilated by the law), each only if the radio delivered it to `i`
-//! ([`Radio::delivers`], drawn from the seed, the link and the step: the observer draws the same)
-//! and its sender was in range ([`Radio::in_range`]). [`SetMetrics::measure`] then gives UA, OA, explored,
-//! target-set area, localisation error and identified count of those sets, and
+//! ([`Radio::fused_peers`]): the estimates of step `k - d` (`d` the link latency in steps, 0
+//! by default; older estimates are dilated by the law), each only if the radio delivered it to
+//! `i` ([`Radio::delivers`], drawn from the seed, the link and the step: the observer draws the
+//! same) and its sender was in range ([`Radio::in_range`]). [`SetMetrics::measure`] then gives
+//! UA, OA, explored, target-set area, localisation error and identified count of those sets, and
 //! [`AgentSpread::over`] their mean over agents and their worst agent.
 //!
 //! `H̄` is the fleet's, as in the paper: ground hidden from any UAV and proven free by none
@@ -37,9 +37,9 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use protocol::grid::{CellIndex, GroundGrid};
 use protocol::math::Point2;
+use protocol::radio::Radio;
 use protocol::raster::CellSet;
 use protocol::wire::{AgentStats, TargetTruth};
-use uav_agent::agent::radio::{LinkKind, Radio};
 use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::{self, EstimateInbox};
 use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate, Unseen};
@@ -232,28 +232,18 @@ fn fuse_in_order(group: &[&ObservedEstimate], config: &EstimatorConfig) -> Optio
     Some(fused)
 }
 
-/// The estimates among `sent` that agent `own.uav()` fuses at its step `k`, in its order: the
-/// other agents' estimates of step `k - d` (`d = radio.latency_steps()`) that the radio
-/// delivered to it ([`Radio::delivers`]) from a sender in range ([`Radio::in_range`]: the
-/// sender's pose as it sent, the agent's as it fuses), by ascending UAV id (as the agent keeps
-/// its peers). None before step `d`.
+/// The estimates among `sent` that agent `own.uav()` fuses at its step `k`, in its order, by
+/// the agents' own rule ([`Radio::fused_peers`]): the other agents' estimates of step `k - d`
+/// (`d = radio.latency_steps()`) that the radio delivered to it from a sender in range, by
+/// ascending UAV id. None before step `d`.
 pub fn fused_peers<'a>(
     own: &'a ObservedEstimate,
     sent: &'a [ObservedEstimate],
     radio: &'a Radio,
 ) -> impl Iterator<Item = &'a ObservedEstimate> + 'a {
-    let from = own.step().checked_sub(radio.latency_steps());
-    let mut peers: Vec<&ObservedEstimate> = sent
-        .iter()
-        .filter(move |p| {
-            p.uav() != own.uav()
-                && Some(p.step()) == from
-                && radio.delivers(LinkKind::Estimate, p.uav(), own.uav(), p.step())
-                && radio.in_range(own.estimate.pose, p.estimate.pose)
-        })
-        .collect();
-    peers.sort_by_key(|p| p.uav());
-    peers.into_iter()
+    radio
+        .fused_peers(&own.estimate.endpoint(), sent, |p| p.estimate.endpoint())
+        .into_iter()
 }
 
 /// The set metrics of one agent at one step (fractions of the grid's area, distances in
@@ -468,11 +458,24 @@ pub(crate) mod tests {
 
     use protocol::camera::CameraPose;
     use protocol::math::Point3;
+    use protocol::radio::LinkKind;
     use protocol::raster::ReachSet;
     use protocol::scenario::Scenario;
     use uav_agent::estimator::EstimatorState;
 
     use super::*;
+
+    /// The world and the estimators of `scenario`'s fleet in one process, flown by the
+    /// scenario's planner in token order.
+    pub(crate) fn guided_fleet(scenario: &Scenario) -> Result<sim::Fleet, sim::FleetCreateError> {
+        let options = sim::FleetOptions {
+            steering: sim::Steering::Guided(Box::new(
+                uav_agent::guidance::GuidanceParams::from_scenario(scenario),
+            )),
+            ..sim::FleetOptions::default()
+        };
+        sim::Fleet::new(scenario, options)
+    }
 
     /// A 10 x 10 grid of 1 m cells over [-5, 5]^2.
     fn grid() -> GroundGrid {
@@ -943,8 +946,6 @@ pub(crate) mod tests {
     /// its estimator holds once it fused its peers' (every one, as with perfect links).
     #[test]
     fn the_observer_rebuilds_each_estimators_fused_sets_over_a_rendered_run() {
-        use crate::bench::estimator::FleetSim;
-
         let scenario = Scenario::load(
             None,
             &[
@@ -955,14 +956,14 @@ pub(crate) mod tests {
         )
         .expect("scenario");
         let cfg = EstimatorConfig::from_scenario(&scenario);
-        let mut sim = FleetSim::new(&scenario).expect("fleet");
+        let mut sim = guided_fleet(&scenario).expect("fleet");
         // Cells that a peer's frame of the step proved free, which the old rule (the agent's
         // published H̄ joined with its peers' hidden ground) kept.
         let mut cleared_by_peers = 0;
         for _ in 0..16 {
             sim.step().expect("step");
             let observed: Vec<ObservedEstimate> = sim
-                .last_messages()
+                .messages()
                 .iter()
                 .map(|bytes| ObservedEstimate::decode(bytes, &cfg).expect("decode").0)
                 .collect();

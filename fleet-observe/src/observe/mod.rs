@@ -18,7 +18,7 @@
 //! What is measured ([`metrics`] has the details):
 //! - **per agent**, on the sets that agent holds after its own fusion of the step (its
 //!   estimate fused with those of the peers it fuses, by the agents' law and the agents' own
-//!   radio: range, loss and latency, `Radio`; with a latency of `d`
+//!   radio: range, loss and latency, [`protocol::radio`]; with a latency of `d`
 //!   steps the observer keeps the estimates of the last `d` steps it measured):
 //!   explored, UA, OA, target-set area, localisation error, identified count
 //!   ([`StepMetrics::agents`]), summarised as the mean over agents ([`StepMetrics::mean`])
@@ -57,6 +57,7 @@ use protocol::ipc::{
     EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, WireSubscriber, scan_nodes,
     wait_for_wake,
 };
+use protocol::radio::Radio;
 use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
@@ -65,7 +66,6 @@ use protocol::wire::{
     UavCommand, WireHeader, WireKind, unix_now_ns,
 };
 use tokio::sync::mpsc::UnboundedSender;
-use uav_agent::agent::radio::Radio;
 use uav_agent::estimator::EstimatorConfig;
 use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::EstimateInbox;

@@ -33,7 +33,7 @@
 //! deltas against the previous message ([`message`]); a peer's estimate that cannot be
 //! rebuilt (a missed message) is dropped, not awaited, and whole sets are asked of its sender.
 //!
-//! The radio between agents is simulated by the receiver ([`radio`]): every estimate and
+//! The radio between agents is simulated by the receiver ([`protocol::radio`]): every estimate and
 //! token crosses the IPC, and the receiving agent decides from the scenario's seed whether the
 //! radio lost it (`comms.loss`), when it arrives (`comms.latency_ms`) and whether its sender
 //! was in range (`comms.range_m`). A lost estimate is not read and not awaited: the agent
@@ -49,7 +49,6 @@
 
 pub mod checkpoint;
 mod links;
-pub mod radio;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
@@ -61,6 +60,7 @@ use protocol::codec::{self, EncodeError};
 use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_for_wake};
+use protocol::radio::{Endpoint, LinkKind, Radio};
 use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
@@ -77,8 +77,6 @@ use crate::estimator::{
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use checkpoint::{CheckpointFile, CheckpointFlusher, Owner};
 use links::{LinkError, Links};
-pub use radio::in_comms_range;
-use radio::{LinkKind, Radio};
 
 /// How an agent runs.
 #[derive(Clone, Debug)]
@@ -431,7 +429,7 @@ struct Agent<'a> {
     outbox: message::EstimateOutbox,
     /// The peers' sets, the bases of their deltas.
     inbox: message::EstimateInbox,
-    /// The simulated links ([`radio`]).
+    /// The simulated links ([`protocol::radio`]).
     radio: Radio,
     /// Estimates the radio lost, by step, not yet counted in the report: they are counted
     /// once the agent has gathered their step, so the counters its estimates carry do not
@@ -866,9 +864,15 @@ impl Agent<'_> {
 
     /// Fuses every queued estimate that has arrived by step `k` (of step `k - d` and older
     /// with a latency of `d` steps; older ones than `k` are dilated by the fusion), in
-    /// ascending order of peer, and counts the lost estimates of the steps up to `k`.
+    /// ascending order of peer, as the radio's rule says ([`Radio::fuses`]: the queue holds
+    /// only delivered estimates, so what is left out is out of range), and counts the lost
+    /// estimates of the steps up to `k`.
     fn fuse_pending(&mut self, k: u64) {
-        let my_pose = self.estimator.state().pose;
+        let me = Endpoint {
+            uav: self.config.uav,
+            step: k,
+            pose: self.estimator.state().pose,
+        };
         let radio = self.radio;
         let later = self.lost_by_step.split_off(&k.saturating_add(1));
         let lost = std::mem::replace(&mut self.lost_by_step, later);
@@ -884,7 +888,7 @@ impl Agent<'_> {
                     continue;
                 }
                 info.fused_step = Some(p.step);
-                if radio.in_range(my_pose, p.pose) {
+                if radio.fuses(&me, &p.endpoint()) {
                     self.estimator.fuse(&p);
                     self.report.estimates_received += 1;
                 } else {

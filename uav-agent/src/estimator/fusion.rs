@@ -24,6 +24,7 @@ use std::sync::Arc;
 
 use protocol::camera::CameraPose;
 use protocol::grid::GroundGrid;
+use protocol::radio::Endpoint;
 use protocol::raster::{CellSet, ReachSet};
 use protocol::scenario::SetGrowth;
 
@@ -285,6 +286,16 @@ impl EstimatorState {
 }
 
 impl PeerEstimate {
+    /// Its sender, its step and the sender's pose then: the estimate's end of its link, which
+    /// the radio judges ([`protocol::radio::Radio::fuses`]).
+    pub fn endpoint(&self) -> Endpoint {
+        Endpoint {
+            uav: self.uav,
+            step: self.step,
+            pose: self.pose,
+        }
+    }
+
     /// Fuses another estimate into this one, at this one's step (the same law as
     /// [`EstimatorState::fuse`]).
     pub fn fuse(&mut self, other: &PeerEstimate, config: &EstimatorConfig) -> FuseReport {

@@ -19,7 +19,7 @@
 //! rebuilt from a wrong base is refused, never fused: the fused sets are exactly those a
 //! receiver of whole sets fuses.
 //!
-//! On lossy links (`comms.loss > 0`, [`crate::agent::radio`]) agents send whole sets in every
+//! On lossy links (`comms.loss > 0`, [`protocol::radio`]) agents send whole sets in every
 //! message: a receiver whose radio lost a message could place none of the deltas after it
 //! until whole sets came, so what it fused would depend on its history of losses, not only on
 //! which messages reached it. The map keeps its scheme there: its cells merge by a join (ground

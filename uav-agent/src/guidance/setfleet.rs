@@ -1,5 +1,5 @@
 //! The `setfleet` planner: the project's own guidance (`guidance.planner = "setfleet"`), beside
-//! the paper's MPC ([`super::plan`]), which stays exactly as the paper writes it.
+//! the paper's MPC ([`super::paper::plan`]), which stays exactly as the paper writes it.
 //!
 //! Same inputs, same dynamics ([`protocol::flight::advance`]), same camera and field-of-view
 //! prediction ([`super::view`]), same yaw increments `U` held for one guidance period each, same
@@ -741,7 +741,8 @@ impl DistanceMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::guidance::{GuidanceParams, plan as paper_plan};
+    use crate::guidance::GuidanceParams;
+    use crate::guidance::paper::plan as paper_plan;
     use protocol::math::Point3;
     use protocol::raster::Coverage;
     use protocol::scenario::{Planner, Scenario};

@@ -294,7 +294,7 @@ pub(super) fn target_colour(id: u32) -> RGBColor {
 
 #[cfg(test)]
 mod tests {
-    use uav_agent::agent::radio::Radio;
+    use protocol::radio::Radio;
     use uav_agent::occupancy::OccupancyMap;
     use world_server::World;
 
@@ -363,8 +363,8 @@ mod tests {
     #[test]
     #[ignore = "slow (renders frames); run with SETFLEET_KEEP_MAPS=DIR to look at the pictures"]
     fn real_case_pictures() {
-        use crate::bench::estimator::FleetSim;
         use crate::observe::metrics::ObservedEstimate;
+        use crate::observe::metrics::tests::guided_fleet as fleet;
         use uav_agent::estimator::EstimatorConfig;
 
         register_fonts().unwrap();
@@ -378,7 +378,7 @@ mod tests {
         )
         .unwrap();
         let steps = 120;
-        let mut sim = FleetSim::new(&scenario).unwrap();
+        let mut sim = fleet(&scenario).unwrap();
         let mut tracks = vec![Vec::new(); sim.uav_count()];
         for _ in 0..steps {
             sim.step().unwrap();
@@ -391,7 +391,7 @@ mod tests {
         let config = EstimatorConfig::from_scenario(&scenario);
         let mut oem = OccupancyMap::new(config.oem_grid);
         let mut observed = Vec::new();
-        for bytes in sim.last_messages() {
+        for bytes in sim.messages() {
             let (estimate, _) = ObservedEstimate::decode(bytes, &config).unwrap();
             observed.push(estimate);
         }

@@ -25,9 +25,14 @@
 //!   latency would have to stretch the round over several frames, which is another guidance
 //!   scheme, not a slower link.
 //!
+//! The three make one rule, written once: which estimates an agent fuses at its step
+//! ([`Radio::fuses`] for one estimate, [`Radio::fused_peers`] for those of a lockstep step, in
+//! the order the agent fuses them). The agent applies it to the estimates it holds, the
+//! observer to the estimates it saw published, and so both fuse the same.
+//!
 //! ```
 //! use protocol::scenario::Scenario;
-//! use uav_agent::agent::radio::{LinkKind, Radio};
+//! use protocol::radio::{LinkKind, Radio};
 //!
 //! let scenario = Scenario::load(None, &["comms.loss=0.3".to_owned()])?;
 //! let radio = Radio::from_scenario(&scenario);
@@ -39,8 +44,8 @@
 //! # Ok::<(), protocol::scenario::ScenarioError>(())
 //! ```
 
-use protocol::camera::CameraPose;
-use protocol::scenario::Scenario;
+use crate::camera::CameraPose;
+use crate::scenario::Scenario;
 
 /// The kinds of message a link carries, each drawn on its own (a lost estimate says nothing
 /// about the token of the same step).
@@ -69,6 +74,19 @@ pub struct Radio {
     loss: f64,
     latency_steps: u64,
     range_m: f64,
+}
+
+/// One end of an estimate's link, as the radio judges it: an agent, one of its steps and its
+/// camera pose then (the sender's as it sent, the receiver's as it fuses; unknown before the
+/// agent's first frame).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Endpoint {
+    /// The agent's UAV index.
+    pub uav: u32,
+    /// The sender's step (that of the estimate) or the receiver's (that it fuses at).
+    pub step: u64,
+    /// The agent's camera pose at that step.
+    pub pose: Option<CameraPose>,
 }
 
 /// Keeps the radio's draws apart from every other use of the scenario's seed.
@@ -121,7 +139,7 @@ impl Radio {
     }
 
     /// Whether some message may be lost: then estimates must carry whole sets, since a delta
-    /// against a lost message rebuilds nothing (see [`crate::estimator::message`]).
+    /// against a lost message rebuilds nothing (see `uav_agent::estimator::message`).
     pub fn is_lossy(&self) -> bool {
         self.loss > 0.0
     }
@@ -155,6 +173,41 @@ impl Radio {
     /// ([`in_comms_range`] with this radio's range).
     pub fn in_range(&self, receiver: Option<CameraPose>, sender: Option<CameraPose>) -> bool {
         in_comms_range(self.range_m, receiver, sender)
+    }
+
+    /// Whether `receiver` fuses, at its step, the estimate `sender` sent at its own: an
+    /// estimate of another agent that the radio delivered to it ([`Radio::delivers`]), that
+    /// has arrived by its step ([`Radio::arrived`]) and whose sender was in range of it
+    /// ([`Radio::in_range`]: the sender's pose as it sent, the receiver's as it fuses). An
+    /// agent fuses an estimate once, at the first step this holds, and never one older than
+    /// an estimate of the same sender it already fused.
+    pub fn fuses(&self, receiver: &Endpoint, sender: &Endpoint) -> bool {
+        sender.uav != receiver.uav
+            && self.delivers(LinkKind::Estimate, sender.uav, receiver.uav, sender.step)
+            && self.arrived(sender.step, receiver.step)
+            && self.in_range(receiver.pose, sender.pose)
+    }
+
+    /// The estimates among `sent` that `receiver` fuses at its step `k` when every estimate
+    /// comes in time (in lockstep): those of step `k - d` (`d` the latency in steps) that it
+    /// [fuses](Radio::fuses), in the order it fuses them, by ascending sender. None before
+    /// step `d`. `endpoint` gives each estimate's sender, step and pose.
+    pub fn fused_peers<'a, T>(
+        &self,
+        receiver: &Endpoint,
+        sent: &'a [T],
+        endpoint: impl Fn(&T) -> Endpoint,
+    ) -> Vec<&'a T> {
+        let due = receiver.step.checked_sub(self.latency_steps);
+        let mut peers: Vec<&T> = sent
+            .iter()
+            .filter(|estimate| {
+                let sender = endpoint(estimate);
+                Some(sender.step) == due && self.fuses(receiver, &sender)
+            })
+            .collect();
+        peers.sort_by_key(|estimate| endpoint(estimate).uav);
+        peers
     }
 }
 
@@ -217,6 +270,7 @@ mod tests {
     use proptest::prelude::*;
 
     use super::*;
+    use crate::math::Point3;
 
     fn lossy(seed: u64, loss: f64) -> Radio {
         Radio::perfect().with_loss(seed, loss)
@@ -272,6 +326,82 @@ mod tests {
         assert_eq!((r.loss(), r.latency_steps(), r.range_m()), (0.25, 3, 90.0));
         assert_eq!(r, lossy(5, 0.25).with_latency_steps(3).with_range(90.0));
         assert_eq!(Radio::from_scenario(&Scenario::default()).loss(), 0.0);
+    }
+
+    /// An agent at `x` metres along the x axis, at `step`.
+    fn at(uav: u32, step: u64, x: f64) -> Endpoint {
+        Endpoint {
+            uav,
+            step,
+            pose: Some(CameraPose {
+                position: Point3::new(x, 0.0, 50.0),
+                yaw: 0.0,
+            }),
+        }
+    }
+
+    /// The rule the agents and the observer share: at its step `k`, an agent fuses the other
+    /// agents' estimates of step `k - d` that the radio delivered to it from a sender in
+    /// range, by ascending sender, whatever order they are listed in; never its own, never
+    /// one of another step, nothing before step `d`, and an estimate with no pose only on
+    /// links of unlimited range.
+    #[test]
+    fn an_agent_fuses_the_delivered_due_estimates_in_range_by_ascending_sender() {
+        let radio = Radio::perfect()
+            .with_loss(11, 0.4)
+            .with_latency_steps(2)
+            .with_range(100.0);
+        // Senders 0..8 shuffled, 30 m apart, at steps 5 (due at 7), 6 and 7.
+        let mut sent: Vec<Endpoint> = [5, 2, 7, 0, 3, 6, 1, 4]
+            .into_iter()
+            .flat_map(|uav| [5, 6, 7].map(|step| at(uav, step, 30.0 * f64::from(uav))))
+            .collect();
+        sent.push(Endpoint {
+            pose: None,
+            ..at(8, 5, 0.0)
+        });
+        let mut heard_any = false;
+        for me in 0..9 {
+            let receiver = at(me, 7, 30.0 * f64::from(me.min(7)));
+            let fused: Vec<u32> = radio
+                .fused_peers(&receiver, &sent, |e| *e)
+                .into_iter()
+                .map(|e| e.uav)
+                .collect();
+            let expected: Vec<u32> = (0..8)
+                .filter(|&j| j != me)
+                .filter(|&j| radio.delivers(LinkKind::Estimate, j, me, 5))
+                .filter(|&j| (f64::from(j) - f64::from(me.min(7))).abs() * 30.0 <= 100.0)
+                .collect();
+            assert_eq!(fused, expected, "agent {me}");
+            heard_any |= !fused.is_empty();
+            // What one estimate's fate is, whatever the others'.
+            for e in &sent {
+                let fuses = radio.fuses(&receiver, e);
+                assert_eq!(
+                    fuses && e.step == 5,
+                    fused.contains(&e.uav) && e.step == 5,
+                    "agent {me}, {e:?}"
+                );
+                assert!(!fuses || e.step <= 5, "not arrived: {e:?}");
+            }
+        }
+        assert!(heard_any);
+        // Each delivered estimate of step 5 is fused by the agent's step 7 or later, not
+        // before; the estimate without a pose is out of every finite range.
+        let early = at(1, 6, 30.0);
+        assert!(radio.fused_peers(&early, &sent, |e| *e).is_empty());
+        let nowhere = Endpoint {
+            pose: None,
+            ..at(8, 5, 0.0)
+        };
+        assert!(!radio.fuses(&at(0, 9, 0.0), &nowhere));
+        assert!(Radio::perfect().fuses(&at(0, 5, 0.0), &nowhere));
+        assert!(
+            !Radio::perfect().fuses(&at(8, 5, 0.0), &nowhere),
+            "never its own"
+        );
+        assert!(radio.fused_peers(&at(0, 1, 0.0), &sent, |e| *e).is_empty());
     }
 
     /// Over 40,000 messages of a fixed seed the share lost is within 1.5 % of `loss` (the

@@ -26,10 +26,11 @@ use protocol::camera::CameraPose;
 use protocol::flight::UavState;
 use protocol::raster::CellSet;
 
-use super::view::same_pose;
-use super::{
+use super::{nearest_visible_distance, seen_by_others};
+use crate::guidance::view::{self, same_pose};
+use crate::guidance::{
     CellWeights, Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput,
-    decision, fly_step, nearest_visible_distance, seen_by_others, stray, view,
+    decision, fly_step, stray,
 };
 
 /// A sequence, simulated, with the lower bound of its cost.
