@@ -49,6 +49,12 @@ struct Route<S> {
     to: Publisher<'static>,
 }
 
+/// A UAV's frames from the local world to its remote agent.
+type FrameRoute = Route<Subscriber<Ipc, CvsFrame, ()>>;
+
+/// A local agent's commands to the remote world.
+type CommandRoute = Route<Subscriber<Ipc, UavCommand, ()>>;
+
 /// Keeps the services open for as long as the ports live.
 struct Services {
     _frames: Vec<PubSubService<CvsFrame>>,
@@ -62,8 +68,8 @@ pub struct Outbound<'a> {
     plan: &'a HostPlan,
     session: &'a zenoh::Session,
     node: RunNode,
-    frames: Vec<Route<Subscriber<Ipc, CvsFrame, ()>>>,
-    commands: Vec<Route<Subscriber<Ipc, UavCommand, ()>>>,
+    frames: Vec<FrameRoute>,
+    commands: Vec<CommandRoute>,
     estimates: Vec<Route<WireSubscriber>>,
     tokens_in: WireSubscriber,
     tokens_out: BTreeMap<u32, Publisher<'static>>,
@@ -102,21 +108,24 @@ fn publisher(session: &zenoh::Session, key: String) -> Result<Publisher<'static>
         .map_err(OpenError::Zenoh)
 }
 
-impl<'a> Outbound<'a> {
-    /// Opens the local subscribers and listeners and the Zenoh publishers of `plan`.
-    pub fn open(plan: &'a HostPlan, session: &'a zenoh::Session) -> Result<Self, OpenError> {
-        let node = RunNode::new(
-            &plan.run,
-            "bridge-out",
-            SignalHandlingMode::HandleTerminationRequests,
-        )?;
+/// The ports toward the agents of other hosts.
+struct RemoteAgents {
+    /// The local world's frames for them (none when the world is remote).
+    frames: Vec<FrameRoute>,
+    /// Listeners of what wakes a remote receiver: their wake-ups, and the world's and the
+    /// observer's when those are remote.
+    listeners: Vec<Listener<Ipc>>,
+}
+
+impl RemoteAgents {
+    /// Opens the ports toward the agents of other hosts, keeping their services in `services`.
+    fn open(
+        node: &RunNode,
+        session: &zenoh::Session,
+        plan: &HostPlan,
+        services: &mut Services,
+    ) -> Result<Self, OpenError> {
         let run = &plan.run;
-        let mut services = Services {
-            _frames: Vec::new(),
-            _commands: Vec::new(),
-            _wire: Vec::new(),
-            _events: Vec::new(),
-        };
         let mut frames = Vec::new();
         let mut listeners = Vec::new();
         for uav in plan.remote_agents() {
@@ -150,6 +159,29 @@ impl<'a> Outbound<'a> {
                 services._events.push(wake);
             }
         }
+        Ok(RemoteAgents { frames, listeners })
+    }
+}
+
+/// What this host's agents publish for other hosts.
+struct LocalAgents {
+    /// Their commands, for a remote world (none when the world is local).
+    commands: Vec<CommandRoute>,
+    /// Their estimates.
+    estimates: Vec<Route<WireSubscriber>>,
+    /// The Zenoh publisher of each one's tokens.
+    tokens_out: BTreeMap<u32, Publisher<'static>>,
+}
+
+impl LocalAgents {
+    /// Opens the ports of this host's agents, keeping their services in `services`.
+    fn open(
+        node: &RunNode,
+        session: &zenoh::Session,
+        plan: &HostPlan,
+        services: &mut Services,
+    ) -> Result<Self, OpenError> {
+        let run = &plan.run;
         let mut commands = Vec::new();
         let mut estimates = Vec::new();
         let mut tokens_out = BTreeMap::new();
@@ -178,6 +210,31 @@ impl<'a> Outbound<'a> {
             services._wire.push(service);
             tokens_out.insert(uav, publisher(session, keys::token(run, uav))?);
         }
+        Ok(LocalAgents {
+            commands,
+            estimates,
+            tokens_out,
+        })
+    }
+}
+
+impl<'a> Outbound<'a> {
+    /// Opens the local subscribers and listeners and the Zenoh publishers of `plan`: toward
+    /// the remote agents, from the local agents, the guidance token and the end of the run.
+    pub fn open(plan: &'a HostPlan, session: &'a zenoh::Session) -> Result<Self, OpenError> {
+        let node = RunNode::new(
+            &plan.run,
+            "bridge-out",
+            SignalHandlingMode::HandleTerminationRequests,
+        )?;
+        let mut services = Services {
+            _frames: Vec::new(),
+            _commands: Vec::new(),
+            _wire: Vec::new(),
+            _events: Vec::new(),
+        };
+        let remote = RemoteAgents::open(&node, session, plan, &mut services)?;
+        let local = LocalAgents::open(&node, session, plan, &mut services)?;
         let guidance = node.open_guidance()?;
         let tokens_in = guidance
             .subscriber_builder()
@@ -185,7 +242,7 @@ impl<'a> Outbound<'a> {
             .map_err(IpcOpenError::from)?;
         services._wire.push(guidance);
         let end_of_run = if plan.world {
-            Some(publisher(session, keys::end_of_run(run))?)
+            Some(publisher(session, keys::end_of_run(&plan.run))?)
         } else {
             None
         };
@@ -193,13 +250,13 @@ impl<'a> Outbound<'a> {
             plan,
             session,
             node,
-            frames,
-            commands,
-            estimates,
+            frames: remote.frames,
+            commands: local.commands,
+            estimates: local.estimates,
             tokens_in,
-            tokens_out,
+            tokens_out: local.tokens_out,
             end_of_run,
-            listeners,
+            listeners: remote.listeners,
             _services: services,
             alive: BTreeMap::new(),
             last_scan: None,

@@ -280,29 +280,14 @@ pub mod phase {
 
 /// Runs agent `config.uav` until the run ends, the shutdown flag is set or the world is lost.
 pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, AgentError> {
-    let count = config.scenario.uavs.count;
-    if config.uav >= count {
-        return Err(AgentStartError::OutsideFleet {
-            uav: config.uav,
-            count,
-        }
-        .into());
-    }
     let name = RunNode::agent_name(config.uav);
-    let scan = scan_nodes(&config.run_id, true).map_err(AgentStartError::from)?;
-    if scan.is_alive(&name) {
-        return Err(AgentStartError::AlreadyLive {
-            uav: config.uav,
-            run: config.run_id.to_string(),
-        }
-        .into());
-    }
+    check_start(&config, &name)?;
     let node = RunNode::new(
         &config.run_id,
         &name,
         SignalHandlingMode::HandleTerminationRequests,
     )?;
-    let links = Links::open(&node, config.uav, count)?;
+    let links = Links::open(&node, config.uav, config.scenario.uavs.count)?;
     let waitset = node.waitset()?;
     let _guard = waitset
         .attach_notification(&links.wake)
@@ -317,20 +302,7 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         )
     });
     let mut report = AgentReport::default();
-    let estimator = match checkpoint.as_ref().map(|c| c.load(&estimator_config)) {
-        Some(Ok(Some(estimator))) => {
-            let step = estimator.state().step;
-            tracing::info!(step, "resuming from the checkpoint");
-            report.resumed_from_step = Some(step);
-            estimator
-        }
-        Some(Err(e)) => {
-            tracing::warn!(error = %e, "checkpoint refused: starting fresh");
-            report.checkpoint_refused = Some(e.to_string());
-            Estimator::new(estimator_config.clone())
-        }
-        Some(Ok(None)) | None => Estimator::new(estimator_config.clone()),
-    };
+    let estimator = restore(checkpoint.as_ref(), &estimator_config, &mut report);
     let outbox =
         message::EstimateOutbox::new(config.uav, incarnation, estimator_config.oem_full_every);
     let mut agent = Agent {
@@ -375,25 +347,51 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
     agent.refresh_live();
     tracing::info!(uav = config.uav, run = %config.run_id, incarnation, "agent started");
     let result = agent.main_loop();
-    if let Some(flusher) = agent.checkpoint_flusher.take() {
-        let stats = flusher.finish();
-        agent.report.checkpoint_flushes = stats.flushes;
-        agent.report.checkpoint_flush_failures = stats.failed;
-        agent.report.checkpoint_flush_ms = stats.flush_ms;
+    agent.finish(result)
+}
+
+/// Refuses an agent outside the fleet, or whose UAV has a live agent (node `name`) already.
+fn check_start(config: &AgentConfig, name: &str) -> Result<(), AgentError> {
+    let count = config.scenario.uavs.count;
+    if config.uav >= count {
+        return Err(AgentStartError::OutsideFleet {
+            uav: config.uav,
+            count,
+        }
+        .into());
     }
-    let state = agent.estimator.state();
-    let report = AgentReport {
-        pid: std::process::id(),
-        phases: agent.clock.times(),
-        final_undetected_cells: state.undetected.cells().count(),
-        final_undetected_digest: state.undetected.cells().digest(),
-        final_step: state.step,
-        ..agent.report
-    };
-    result.map(|end| AgentReport {
-        end: Some(end),
-        ..report
-    })
+    let scan = scan_nodes(&config.run_id, true).map_err(AgentStartError::from)?;
+    if scan.is_alive(name) {
+        return Err(AgentStartError::AlreadyLive {
+            uav: config.uav,
+            run: config.run_id.to_string(),
+        }
+        .into());
+    }
+    Ok(())
+}
+
+/// The estimator the agent starts from: the checkpoint's when there is one that it accepts,
+/// else a fresh one; `report` notes a resumption or a refused checkpoint.
+fn restore(
+    checkpoint: Option<&CheckpointFile>,
+    config: &EstimatorConfig,
+    report: &mut AgentReport,
+) -> Estimator {
+    match checkpoint.map(|c| c.load(config)) {
+        Some(Ok(Some(estimator))) => {
+            let step = estimator.state().step;
+            tracing::info!(step, "resuming from the checkpoint");
+            report.resumed_from_step = Some(step);
+            estimator
+        }
+        Some(Err(e)) => {
+            tracing::warn!(error = %e, "checkpoint refused: starting fresh");
+            report.checkpoint_refused = Some(e.to_string());
+            Estimator::new(config.clone())
+        }
+        Some(Ok(None)) | None => Estimator::new(config.clone()),
+    }
 }
 
 /// A number that grows at each start of an agent process (the wall clock in nanoseconds), so
@@ -464,6 +462,30 @@ const WAIT_SLICE: Duration = Duration::from_millis(50);
 const LIVENESS_SCAN_PERIOD: Duration = Duration::from_millis(250);
 
 impl Agent<'_> {
+    /// The agent's report once its loop ended with `result`: the checkpoint thread's figures,
+    /// where the time went and a summary of its last `X̄`.
+    fn finish(mut self, result: Result<EndReason, AgentError>) -> Result<AgentReport, AgentError> {
+        if let Some(flusher) = self.checkpoint_flusher.take() {
+            let stats = flusher.finish();
+            self.report.checkpoint_flushes = stats.flushes;
+            self.report.checkpoint_flush_failures = stats.failed;
+            self.report.checkpoint_flush_ms = stats.flush_ms;
+        }
+        let state = self.estimator.state();
+        let report = AgentReport {
+            pid: std::process::id(),
+            phases: self.clock.times(),
+            final_undetected_cells: state.undetected.cells().count(),
+            final_undetected_digest: state.undetected.cells().digest(),
+            final_step: state.step,
+            ..self.report
+        };
+        result.map(|end| AgentReport {
+            end: Some(end),
+            ..report
+        })
+    }
+
     fn main_loop(&mut self) -> Result<EndReason, AgentError> {
         let mut last_hello: Option<Instant> = None;
         let mut first_frame = false;

@@ -335,8 +335,9 @@ impl Estimator {
         self.state
     }
 
-    /// Folds one frame into the state: predict to the frame's step, then correct with what the
-    /// frame proves. A malformed or stale frame is refused and the state left as it was.
+    /// Folds one frame into the state: predict to the frame's step, measure what the frame
+    /// proves, then correct the sets with it. A malformed or stale frame is refused and the
+    /// state left as it was.
     pub fn step(&mut self, frame: &CvsFrame) -> Result<StepReport, EstimatorStepError> {
         let started = Instant::now();
         let h = &frame.header;
@@ -350,136 +351,17 @@ impl Estimator {
             });
         }
         let cfg = &self.config;
-        let grid = &cfg.grid;
         let st = &mut self.state;
         let mut report = StepReport {
             step: h.step,
             steps_elapsed: h.step.saturating_sub(st.step),
             ..StepReport::default()
         };
-
-        let t = Instant::now();
-        let radius = predict::motion_radius(report.steps_elapsed, cfg.period_s, cfg.max_speed_mps);
-        let clock = predict::motion_radius(h.step, cfg.period_s, cfg.max_speed_mps);
-        predict::advance(&mut st.undetected, grid, clock, radius);
-        for set in st.targets.values_mut() {
-            predict::advance(set, grid, clock, radius);
-        }
-        report.timings.prediction = t.elapsed();
-
+        let clock = predict_sets(cfg, st, &mut report);
         let view = FrameView::new(frame, cfg.depth_noise);
         report.invalid_depth_pixels = view.invalid_depth_pixels();
-
-        let t = Instant::now();
-        let free_ground = measure::free_ground(&view, grid);
-        let hidden = measure::hidden_ground(&view, grid, &free_ground);
-        report.timings.free_ground = t.elapsed();
-
-        let t = Instant::now();
-        let boxes = usable_boxes(frame, &mut report);
-        let measurements: Vec<(u32, Option<CellSet>)> = boxes
-            .iter()
-            .map(|b| {
-                let m = measure::target_measurement(&view, grid, b, cfg.target_radius_m);
-                (b.id, m)
-            })
-            .collect();
-        report.timings.measurement_sets = t.elapsed();
-
-        let t = Instant::now();
-        measure::add_obstacle_free(
-            &view,
-            grid,
-            cfg.safety_distance_m,
-            cfg.obstacle_pixel_stride,
-            &mut st.obstacle_free,
-        );
-        report.timings.obstacle_sets = t.elapsed();
-
-        let t = Instant::now();
-        report.oem_cells_changed = measure::observe_map(&view, &mut st.oem);
-        report.timings.oem = t.elapsed();
-
-        let t = Instant::now();
-        let mut free = free_ground.clone();
-        free.or_assign(&st.obstacle_free);
-        let window = free_ground.bounding_box();
-        let clearing = Clearing {
-            grid,
-            growth: cfg.sets,
-            free: &free,
-            blocked: &st.obstacle_free,
-        };
-        clearing.clear(&mut st.undetected, window.as_ref());
-        let margin = target_reach_margin(grid);
-        let mut measured_ids = Vec::new();
-        for (id, measurement) in measurements {
-            let Some(mut xm) = measurement else {
-                report.boxes_without_pixels += 1;
-                continue;
-            };
-            xm.and_not_assign(&free);
-            let mut x = match st.targets.remove(&id) {
-                Some(x) => x,
-                None => {
-                    report.newly_identified.push(id);
-                    clearing.new_target(&st.undetected, &xm, margin)
-                }
-            };
-            if x.intersects(&xm) {
-                clearing.restrict(&mut x, &xm, margin);
-            } else {
-                tracing::error!(
-                    target_id = id,
-                    step = h.step,
-                    "empty target set after correction: keeping the measurement alone"
-                );
-                report.empty_intersections.push(id);
-                x = ReachSet::full(grid).with_row_margin(margin);
-                x.advance(clock);
-                clearing.restrict(&mut x, &xm, margin);
-            }
-            st.targets.insert(id, x);
-            measured_ids.push(id);
-        }
-        for (id, set) in st.targets.iter_mut() {
-            if measured_ids.contains(id) {
-                continue;
-            }
-            // Free ground the set does not touch tells it nothing it needs now.
-            let near = set
-                .intersects(&free_ground)
-                .then(|| set.bounding_box())
-                .flatten()
-                .and_then(|b| intersect_boxes(&grow_box(&b, margin), window.as_ref()?));
-            clearing.clear(set, near.as_ref());
-        }
-        report.measured = measured_ids;
-        st.explored.or_assign(&free_ground);
-        st.hidden_history.record(h.step, &hidden, &free_ground);
-        st.hidden = hidden;
-        st.step = h.step;
-        st.time_s = if h.time_s.is_finite() {
-            h.time_s
-        } else {
-            h.step as Real * cfg.period_s
-        };
-        st.frames += 1;
-        let cam = frame.camera();
-        st.pose = Some(cam.pose);
-
-        report.undetected_area_m2 = st.undetected.area(grid);
-        report.target_areas_m2 = st
-            .targets
-            .iter()
-            .map(|(id, s)| (*id, s.area(grid)))
-            .collect();
-        report.free_ground_area_m2 = free_ground.area(grid);
-        st.free_ground = free_ground;
-        report.obstacle_free_area_m2 = st.obstacle_free.area(grid);
-        report.explored_area_m2 = st.explored.area(grid);
-        report.hidden_area_m2 = st.hidden.area(grid);
-        report.timings.correction = t.elapsed();
+        let measured = measure_frame(cfg, st, frame, &view, &mut report);
+        correct_sets(cfg, st, frame, measured, clock, &mut report);
         report.timings.total = started.elapsed();
         Ok(report)
     }
@@ -490,8 +372,221 @@ impl Estimator {
     }
 }
 
-/// Removes `free` from `set`, raising the reach over `window` (the part of the frame's free
-/// ground that matters to the set), or only removing it when there is no such window.
+/// Prediction: `X̄` and every `X_j` grown by the targets' motion over the steps since the
+/// state's (`report.steps_elapsed`), their reach clock moved to the frame's step; returns that
+/// clock, m.
+fn predict_sets(cfg: &EstimatorConfig, st: &mut EstimatorState, report: &mut StepReport) -> f64 {
+    let t = Instant::now();
+    let grid = &cfg.grid;
+    let radius = predict::motion_radius(report.steps_elapsed, cfg.period_s, cfg.max_speed_mps);
+    let clock = predict::motion_radius(report.step, cfg.period_s, cfg.max_speed_mps);
+    predict::advance(&mut st.undetected, grid, clock, radius);
+    for set in st.targets.values_mut() {
+        predict::advance(set, grid, clock, radius);
+    }
+    report.timings.prediction = t.elapsed();
+    clock
+}
+
+/// What a frame measured, for the correction.
+struct Measurements {
+    /// `P^g`: ground the frame proves free.
+    free_ground: CellSet,
+    /// `H^CVS`: ground the frame's view holds but does not show.
+    hidden: CellSet,
+    /// `X^m_j` of each usable box, by id (none when no pixel of the box measured the ground).
+    targets: Vec<(u32, Option<CellSet>)>,
+}
+
+/// Measurement: what `frame` proves (`P^g`, `H^CVS`, each usable box's `X^m_j`), and what it
+/// adds to the state as it is measured (`S^o`, the map's observations).
+fn measure_frame(
+    cfg: &EstimatorConfig,
+    st: &mut EstimatorState,
+    frame: &CvsFrame,
+    view: &FrameView<'_>,
+    report: &mut StepReport,
+) -> Measurements {
+    let grid = &cfg.grid;
+    let t = Instant::now();
+    let free_ground = measure::free_ground(view, grid);
+    let hidden = measure::hidden_ground(view, grid, &free_ground);
+    report.timings.free_ground = t.elapsed();
+
+    let t = Instant::now();
+    let boxes = usable_boxes(frame, report);
+    let targets: Vec<(u32, Option<CellSet>)> = boxes
+        .iter()
+        .map(|b| {
+            let m = measure::target_measurement(view, grid, b, cfg.target_radius_m);
+            (b.id, m)
+        })
+        .collect();
+    report.timings.measurement_sets = t.elapsed();
+
+    let t = Instant::now();
+    measure::add_obstacle_free(
+        view,
+        grid,
+        cfg.safety_distance_m,
+        cfg.obstacle_pixel_stride,
+        &mut st.obstacle_free,
+    );
+    report.timings.obstacle_sets = t.elapsed();
+
+    let t = Instant::now();
+    report.oem_cells_changed = measure::observe_map(view, &mut st.oem);
+    report.timings.oem = t.elapsed();
+    Measurements {
+        free_ground,
+        hidden,
+        targets,
+    }
+}
+
+/// Correction: the frame's free ground (`P^g ∪ S^o`) leaves `X̄`, each measured target's set
+/// is restricted to its measurement and the others lose the free ground near them; then the
+/// state takes the frame's step, explored and hidden ground and pose, and the report the
+/// sets' areas.
+fn correct_sets(
+    cfg: &EstimatorConfig,
+    st: &mut EstimatorState,
+    frame: &CvsFrame,
+    measured: Measurements,
+    clock: f64,
+    report: &mut StepReport,
+) {
+    let t = Instant::now();
+    let grid = &cfg.grid;
+    let Measurements {
+        free_ground,
+        hidden,
+        targets,
+    } = measured;
+    let mut free = free_ground.clone();
+    free.or_assign(&st.obstacle_free);
+    let window = free_ground.bounding_box();
+    let clearing = Clearing {
+        grid,
+        growth: cfg.sets,
+        free: &free,
+        blocked: &st.obstacle_free,
+    };
+    clearing.clear(&mut st.undetected, window.as_ref());
+    let measured_ids = restrict_measured(
+        &clearing,
+        &mut st.targets,
+        &st.undetected,
+        targets,
+        clock,
+        report,
+    );
+    clear_unmeasured(
+        &clearing,
+        &mut st.targets,
+        &measured_ids,
+        &free_ground,
+        window.as_ref(),
+    );
+    report.measured = measured_ids;
+    st.explored.or_assign(&free_ground);
+    st.hidden_history.record(report.step, &hidden, &free_ground);
+    st.hidden = hidden;
+    st.step = report.step;
+    let time_s = frame.header.time_s;
+    st.time_s = if time_s.is_finite() {
+        time_s
+    } else {
+        report.step as Real * cfg.period_s
+    };
+    st.frames += 1;
+    let cam = frame.camera();
+    st.pose = Some(cam.pose);
+
+    report.undetected_area_m2 = st.undetected.area(grid);
+    report.target_areas_m2 = st
+        .targets
+        .iter()
+        .map(|(id, s)| (*id, s.area(grid)))
+        .collect();
+    report.free_ground_area_m2 = free_ground.area(grid);
+    st.free_ground = free_ground;
+    report.obstacle_free_area_m2 = st.obstacle_free.area(grid);
+    report.explored_area_m2 = st.explored.area(grid);
+    report.hidden_area_m2 = st.hidden.area(grid);
+    report.timings.correction = t.elapsed();
+}
+
+/// Each measured target's set restricted to its measurement `X^m_j` less the free ground (a
+/// newly identified target's taken from `X̄`, `undetected`); a set that misses its
+/// measurement is a bug, reported, and replaced by the measurement alone. Returns the ids
+/// measured, in order.
+fn restrict_measured(
+    clearing: &Clearing<'_>,
+    sets: &mut BTreeMap<u32, ReachSet>,
+    undetected: &ReachSet,
+    measurements: Vec<(u32, Option<CellSet>)>,
+    clock: f64,
+    report: &mut StepReport,
+) -> Vec<u32> {
+    let margin = target_reach_margin(clearing.grid);
+    let mut measured_ids = Vec::new();
+    for (id, measurement) in measurements {
+        let Some(mut xm) = measurement else {
+            report.boxes_without_pixels += 1;
+            continue;
+        };
+        xm.and_not_assign(clearing.free);
+        let mut x = match sets.remove(&id) {
+            Some(x) => x,
+            None => {
+                report.newly_identified.push(id);
+                clearing.new_target(undetected, &xm, margin)
+            }
+        };
+        if x.intersects(&xm) {
+            clearing.restrict(&mut x, &xm, margin);
+        } else {
+            tracing::error!(
+                target_id = id,
+                step = report.step,
+                "empty target set after correction: keeping the measurement alone"
+            );
+            report.empty_intersections.push(id);
+            x = ReachSet::full(clearing.grid).with_row_margin(margin);
+            x.advance(clock);
+            clearing.restrict(&mut x, &xm, margin);
+        }
+        sets.insert(id, x);
+        measured_ids.push(id);
+    }
+    measured_ids
+}
+
+/// The frame's free ground leaves the target sets it did not measure, each over the part of
+/// `window` (the frame's free ground's box) near it.
+fn clear_unmeasured(
+    clearing: &Clearing<'_>,
+    sets: &mut BTreeMap<u32, ReachSet>,
+    measured: &[u32],
+    free_ground: &CellSet,
+    window: Option<&CellBox>,
+) {
+    let margin = target_reach_margin(clearing.grid);
+    for (id, set) in sets.iter_mut() {
+        if measured.contains(id) {
+            continue;
+        }
+        // Free ground the set does not touch tells it nothing it needs now.
+        let near = set
+            .intersects(free_ground)
+            .then(|| set.bounding_box())
+            .flatten()
+            .and_then(|b| intersect_boxes(&grow_box(&b, margin), window?));
+        clearing.clear(set, near.as_ref());
+    }
+}
+
 /// What a frame proves free, and how the sets' reach learns from it ([`SetGrowth`]).
 struct Clearing<'a> {
     grid: &'a GroundGrid,

@@ -107,6 +107,28 @@ struct Node {
 }
 
 impl Node {
+    /// The empty sequence from `state`, with the sets as they are now.
+    fn root(state: UavState, undetected: CellSet, targets: CellSet) -> Node {
+        Node {
+            increments: Vec::new(),
+            state,
+            poses: Vec::new(),
+            undetected,
+            targets,
+            value_sum: 0.0,
+            stray_m: 0.0,
+            centre: Point2::origin(),
+            crowding: 0.0,
+            rank: 0.0,
+            cost: Cost {
+                area_m2: 0.0,
+                distance_m: 0.0,
+                hidden_m2: 0.0,
+                total: 0.0,
+            },
+        }
+    }
+
     /// Sets the ranking key: the mean value (`cost.area_m2`), plus `lambda` per metre from the
     /// view centre to the sets on `distance`, the crowding charge and `kappa` per m² of sets
     /// in occluded ground.
@@ -124,72 +146,133 @@ impl Node {
 /// Picks the yaw increments with the `setfleet` planner (see the module docs).
 pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let sp = &params.setfleet;
-    let grids = &params.grids;
-    let grid = grids.coarse;
+    let grid = params.grids.coarse;
     let mut predictor = GroundPredictor::new(&grid);
-    // `sets[0]` is `X̄`, the others the identified targets' sets (the agent's order).
+    let (undetected, targets, hidden) = coarse_inputs(params, input, &grid, &mut predictor);
+    let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
+    let depth = sp.lookahead_periods.max(1) as usize;
+    let sets = (&undetected, &targets);
+    let others_seen = others_seen(
+        params,
+        input.others,
+        &grid,
+        sets,
+        obstacles,
+        depth,
+        &mut predictor,
+    );
+    let others_centres = view_centres(params, input.others);
+    // The distance map: to the nearest cell of the sets nobody ahead will see.
+    let mut attractive = undetected.clone();
+    attractive.or_assign(&targets);
+    for seen in &others_seen {
+        attractive.and_not_assign(seen);
+    }
+    let fov_area = footprint_area(params, &input.state);
+    let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
+    let root = Node::root(input.state, undetected, targets);
+    let period = |d: usize| Period {
+        params,
+        grid,
+        obstacles,
+        seen_ahead: &others_seen[d],
+        rings: rings(params, &grid, d),
+        index: d,
+        last: d + 1 == depth,
+        hidden: &hidden,
+        others_centres: &others_centres,
+        fov_area,
+        growth_m2_per_cell,
+    };
+    let (best, sequences, excluded) =
+        beam_search(params, root, depth, &attractive, period, &mut predictor);
+    decision(input, best, sequences, excluded)
+}
+
+/// The inputs on the planning grid `grid`: `X̄` (`sets[0]`), the union of the identified
+/// targets' sets (the others) and the recently hidden ground.
+fn coarse_inputs(
+    params: &GuidanceParams,
+    input: &PlanningInput<'_>,
+    grid: &GroundGrid,
+    predictor: &mut GroundPredictor,
+) -> (CellSet, CellSet, CellSet) {
+    let grids = &params.grids;
     let (coarse, hidden) = join_if(
         params.parallel,
         || {
-            in_parallel(
-                input.sets,
-                params.parallel,
-                &grid,
-                &mut predictor,
-                |s, _| grids.downsample(s),
-            )
+            in_parallel(input.sets, params.parallel, grid, predictor, |s, _| {
+                grids.downsample(s)
+            })
         },
         || grids.downsample(input.recently_hidden),
     );
     let mut coarse = coarse.into_iter();
-    let undetected = coarse.next().unwrap_or_else(|| CellSet::empty(&grid));
-    let mut targets = CellSet::empty(&grid);
+    let undetected = coarse.next().unwrap_or_else(|| CellSet::empty(grid));
+    let mut targets = CellSet::empty(grid);
     for set in coarse {
         targets.or_assign(&set);
     }
-    let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
-    let depth = sp.lookahead_periods.max(1) as usize;
-    let per = params.steps_per_period as usize;
+    (undetected, targets, hidden)
+}
+
+/// Rings of cells the sets grow by in period `d` of the lookahead: the whole cells the
+/// targets' accumulated reach crosses in it.
+fn rings(params: &GuidanceParams, grid: &GroundGrid, d: usize) -> usize {
     let period_s = params.steps_per_period as f64 * params.dt;
     let reach = |d: usize| (params.target_max_speed * period_s * d as f64 / grid.cell_m).floor();
-    // The ground the others' views can change in period `d`: where the sets can be by then,
-    // the initial sets grown by every ring added so far (the predictions only lose cells
-    // besides).
-    let others_seen: Vec<CellSet> = if input.others.is_empty() {
-        vec![CellSet::empty(&grid); depth]
-    } else {
-        let mut reachable = undetected.clone();
-        reachable.or_assign(&targets);
-        let reachable: Vec<CellSet> = (0..depth)
-            .map(|d| {
-                for _ in 0..(reach(d + 1) - reach(d)) as usize {
-                    reachable = reachable.dilate(&grid, 0.0);
-                }
-                reachable.clone()
-            })
-            .collect();
-        let periods: Vec<(usize, CellSet)> = reachable.into_iter().enumerate().collect();
-        in_parallel(
-            &periods,
-            params.parallel,
-            &grid,
-            &mut predictor,
-            |(d, reachable), predictor| {
-                seen_by_others(
-                    params,
-                    &grid,
-                    input.others,
-                    d * per..(d + 1) * per,
-                    obstacles,
-                    predictor,
-                    reachable,
-                )
-            },
-        )
-    };
-    // Where the others' plans leave their view centres, per CVS step of this horizon.
-    let others_centres: Vec<Vec<Point2>> = input
-        .others
+    (reach(d + 1) - reach(d)) as usize
+}
+
+/// The ground the UAVs ahead in the token will see in each of the `depth` periods, where it
+/// can change the sets: where they can be by then, `sets` (`X̄`, the targets') grown by every
+/// ring added so far (the predictions only lose cells besides).
+fn others_seen(
+    params: &GuidanceParams,
+    others: &[PlannedView],
+    grid: &GroundGrid,
+    (undetected, targets): (&CellSet, &CellSet),
+    obstacles: &[ObstacleCell],
+    depth: usize,
+    predictor: &mut GroundPredictor,
+) -> Vec<CellSet> {
+    if others.is_empty() {
+        return vec![CellSet::empty(grid); depth];
+    }
+    let per = params.steps_per_period as usize;
+    let mut reachable = undetected.clone();
+    reachable.or_assign(targets);
+    let reachable: Vec<CellSet> = (0..depth)
+        .map(|d| {
+            for _ in 0..rings(params, grid, d) {
+                reachable = reachable.dilate(grid, 0.0);
+            }
+            reachable.clone()
+        })
+        .collect();
+    let periods: Vec<(usize, CellSet)> = reachable.into_iter().enumerate().collect();
+    in_parallel(
+        &periods,
+        params.parallel,
+        grid,
+        predictor,
+        |(d, reachable), predictor| {
+            seen_by_others(
+                params,
+                grid,
+                others,
+                d * per..(d + 1) * per,
+                obstacles,
+                predictor,
+                reachable,
+            )
+        },
+    )
+}
+
+/// Where the others' plans leave their view centres, per CVS step of this horizon.
+fn view_centres(params: &GuidanceParams, others: &[PlannedView]) -> Vec<Vec<Point2>> {
+    others
         .iter()
         .map(|v| {
             v.poses
@@ -199,52 +282,31 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
                 .collect::<Vec<_>>()
         })
         .filter(|c| !c.is_empty())
-        .collect();
-    // The distance map: to the nearest cell of the sets nobody ahead will see.
-    let mut attractive = undetected.clone();
-    attractive.or_assign(&targets);
-    for seen in &others_seen {
-        attractive.and_not_assign(seen);
-    }
-    let fov_area = footprint_area(params, &input.state);
-    let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
+        .collect()
+}
 
-    let root = Node {
-        increments: Vec::new(),
-        state: input.state,
-        poses: Vec::new(),
-        undetected,
-        targets,
-        value_sum: 0.0,
-        stray_m: 0.0,
-        centre: Point2::origin(),
-        crowding: 0.0,
-        rank: 0.0,
-        cost: Cost {
-            area_m2: 0.0,
-            distance_m: 0.0,
-            hidden_m2: 0.0,
-            total: 0.0,
-        },
-    };
-    let period = |d: usize| Period {
-        params,
-        grid,
-        obstacles,
-        seen_ahead: &others_seen[d],
-        rings: (reach(d + 1) - reach(d)) as usize,
-        index: d,
-        last: d + 1 == depth,
-        hidden: &hidden,
-        others_centres: &others_centres,
-        fov_area,
-        growth_m2_per_cell,
-    };
+/// The best sequence found by the beam search, with its cost and poses.
+type Best = (Vec<f64>, Cost, Vec<CameraPose>);
+
+/// The beam search of the module docs from `root` over `depth` periods (`period(d)` values
+/// the children of period `d`): each period's children ranked, with the distance map to
+/// `attractive` (made while the first period's children are expanded), and the best
+/// `beam_width` kept. Returns the best sequence, the sequences of the last period and those
+/// of them that leave the region.
+fn beam_search<'p>(
+    params: &GuidanceParams,
+    root: Node,
+    depth: usize,
+    attractive: &CellSet,
+    period: impl Fn(usize) -> Period<'p> + Sync,
+    predictor: &mut GroundPredictor,
+) -> (Option<Best>, usize, usize) {
+    let grid = params.grids.coarse;
     // The distance map ranks the children only: made while the first period's are expanded.
     let (distance, first) = join_if(
         params.parallel,
-        || DistanceMap::new(&grid, &attractive),
-        || period(0).expand_beam(std::slice::from_ref(&root), params.parallel, &mut predictor),
+        || DistanceMap::new(&grid, attractive),
+        || period(0).expand_beam(std::slice::from_ref(&root), params.parallel, predictor),
     );
     let mut first = Some(first);
     let mut beam = Vec::new();
@@ -253,7 +315,7 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     for d in 0..depth {
         let mut children = match first.take() {
             Some(children) => children,
-            None => period(d).expand_beam(&beam, params.parallel, &mut predictor),
+            None => period(d).expand_beam(&beam, params.parallel, predictor),
         };
         for child in &mut children {
             child.rank_by(&distance, params);
@@ -269,14 +331,14 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
                 .total_cmp(&b.stray_m)
                 .then(a.rank.total_cmp(&b.rank))
         });
-        children.truncate(sp.beam_width.max(1) as usize);
+        children.truncate(params.setfleet.beam_width.max(1) as usize);
         beam = children;
     }
     let best = beam
         .into_iter()
         .next()
         .map(|node| (node.increments, node.cost, node.poses));
-    decision(input, best, sequences, excluded)
+    (best, sequences, excluded)
 }
 
 /// One period of the beam search: what every child of the beam's nodes is valued against.
@@ -355,10 +417,23 @@ impl Period<'_> {
         increments: &[f64],
         predictor: &mut GroundPredictor,
     ) -> Vec<Node> {
-        let params = self.params;
-        let sp = &params.setfleet;
+        let grown = self.grown(node);
+        // The views of the children's first poses, by pose: the increments the yaw rate
+        // cannot reach in one CVS step (the large turns to either side) fly the same
+        // first step, whose view is computed once.
+        let mut first_views: Vec<(CameraPose, CellSet)> = Vec::with_capacity(increments.len());
+        let mut children = Vec::with_capacity(increments.len());
+        for &inc in increments {
+            let flight = self.fly(node, inc, &grown.relevant, &mut first_views, predictor);
+            children.push(self.child(node, inc, &grown, flight));
+        }
+        children
+    }
+
+    /// `node`'s sets grown by the period's rings, less the ground the UAVs ahead will see in
+    /// it: what each of its children starts the period from.
+    fn grown(&self, node: &Node) -> Grown {
         let grid = self.grid;
-        let per = params.steps_per_period as usize;
         let (mut u0, mut t0) = (node.undetected.clone(), node.targets.clone());
         for _ in 0..self.rings {
             // Radius 0 adds exactly the 8 neighbours: one ring of cells.
@@ -372,99 +447,159 @@ impl Period<'_> {
         relevant.or_assign(&t0);
         // A child's sets differ from these only on the rows its views meet, and their
         // boundaries only there and on the rows next to them: counted again there only.
-        let edges0 = (boundary_count(&u0), boundary_count(&t0));
-        // The views of the children's first poses, by pose: the increments the yaw rate
-        // cannot reach in one CVS step (the large turns to either side) fly the same
-        // first step, whose view is computed once.
-        let mut first_views: Vec<(CameraPose, CellSet)> = Vec::with_capacity(increments.len());
-        let mut children = Vec::with_capacity(increments.len());
-        for &inc in increments {
-            let yaw_ref = node.state.yaw + inc;
-            let mut state = node.state;
-            let mut poses = node.poses.clone();
-            let mut seen = CellSet::empty(&grid);
-            let mut stray_m = node.stray_m;
-            for step in 0..per {
-                let pose;
-                (state, pose) = fly_step(params, state, yaw_ref);
-                stray_m = stray_m.max(stray(&params.region, &state.position));
-                if step == 0 {
-                    let known = first_views.iter().position(|(p, _)| same_pose(p, &pose));
-                    let i = known.unwrap_or_else(|| {
-                        let mut view = CellSet::empty(&grid);
-                        predictor.add_visible_ground_within(
-                            &mut view,
-                            &grid,
-                            &params.camera,
-                            &pose,
-                            self.obstacles,
-                            &relevant,
-                        );
-                        first_views.push((pose, view));
-                        first_views.len() - 1
-                    });
-                    seen.or_assign(&first_views[i].1);
-                } else {
+        let edges = (boundary_count(&u0), boundary_count(&t0));
+        Grown {
+            undetected: u0,
+            targets: t0,
+            relevant,
+            edges,
+        }
+    }
+
+    /// The period's flight of `node`'s child by the increment `inc`: its poses (after
+    /// `node`'s), how far it strays and the ground of `relevant` its views see. The view of a
+    /// first pose is taken from `first_views`, or computed and kept there.
+    fn fly(
+        &self,
+        node: &Node,
+        inc: f64,
+        relevant: &CellSet,
+        first_views: &mut Vec<(CameraPose, CellSet)>,
+        predictor: &mut GroundPredictor,
+    ) -> Flight {
+        let params = self.params;
+        let grid = self.grid;
+        let per = params.steps_per_period as usize;
+        let yaw_ref = node.state.yaw + inc;
+        let mut state = node.state;
+        let mut poses = node.poses.clone();
+        let mut seen = CellSet::empty(&grid);
+        let mut stray_m = node.stray_m;
+        for step in 0..per {
+            let pose;
+            (state, pose) = fly_step(params, state, yaw_ref);
+            stray_m = stray_m.max(stray(&params.region, &state.position));
+            if step == 0 {
+                let known = first_views.iter().position(|(p, _)| same_pose(p, &pose));
+                let i = known.unwrap_or_else(|| {
+                    let mut view = CellSet::empty(&grid);
                     predictor.add_visible_ground_within(
-                        &mut seen,
+                        &mut view,
                         &grid,
                         &params.camera,
                         &pose,
                         self.obstacles,
-                        &relevant,
+                        relevant,
                     );
-                }
-                poses.push(pose);
-            }
-            let mut u = u0.clone();
-            u.and_not_assign(&seen);
-            let mut t = t0.clone();
-            t.and_not_assign(&seen);
-            let changed = occupied_rows(&seen);
-            let edges = (
-                recount_boundary(edges0.0, &u0, &u, changed),
-                recount_boundary(edges0.1, &t0, &t, changed),
-            );
-            let value_sum = node.value_sum + self.value((u.count(), t.count()), edges);
-            let centre = poses.last().map_or(Point2::new(0.0, 0.0), |p| {
-                view::view_centre(&params.camera, p)
-            });
-            let crowding = spread_charge(
-                sp.spread_m,
-                self.fov_area,
-                &centre,
-                self.others_centres,
-                poses.len(),
-            );
-            let hidden_m2 = if self.last {
-                (u.intersection_count(self.hidden) + t.intersection_count(self.hidden)) as f64
-                    * grid.cell_area()
+                    first_views.push((pose, view));
+                    first_views.len() - 1
+                });
+                seen.or_assign(&first_views[i].1);
             } else {
-                0.0
-            };
-            let mut increments = node.increments.clone();
-            increments.push(inc);
-            children.push(Node {
-                increments,
-                state,
-                poses,
-                undetected: u,
-                targets: t,
-                value_sum,
-                stray_m,
-                centre,
-                crowding,
-                rank: 0.0,
-                cost: Cost {
-                    area_m2: value_sum / (self.index + 1) as f64,
-                    distance_m: 0.0,
-                    hidden_m2,
-                    total: 0.0,
-                },
-            });
+                predictor.add_visible_ground_within(
+                    &mut seen,
+                    &grid,
+                    &params.camera,
+                    &pose,
+                    self.obstacles,
+                    relevant,
+                );
+            }
+            poses.push(pose);
         }
-        children
+        Flight {
+            state,
+            poses,
+            seen,
+            stray_m,
+        }
     }
+
+    /// `node`'s child by `inc` after its `flight`: the `grown` sets less what it saw, their
+    /// value (with the boundaries counted again where the views changed them), its view
+    /// centre, the charge for crowding the others and, in the last period, its sets in
+    /// occluded ground.
+    fn child(&self, node: &Node, inc: f64, grown: &Grown, flight: Flight) -> Node {
+        let params = self.params;
+        let grid = self.grid;
+        let Flight {
+            state,
+            poses,
+            seen,
+            stray_m,
+        } = flight;
+        let (u0, t0) = (&grown.undetected, &grown.targets);
+        let mut u = u0.clone();
+        u.and_not_assign(&seen);
+        let mut t = t0.clone();
+        t.and_not_assign(&seen);
+        let changed = occupied_rows(&seen);
+        let edges = (
+            recount_boundary(grown.edges.0, u0, &u, changed),
+            recount_boundary(grown.edges.1, t0, &t, changed),
+        );
+        let value_sum = node.value_sum + self.value((u.count(), t.count()), edges);
+        let centre = poses.last().map_or(Point2::new(0.0, 0.0), |p| {
+            view::view_centre(&params.camera, p)
+        });
+        let crowding = spread_charge(
+            params.setfleet.spread_m,
+            self.fov_area,
+            &centre,
+            self.others_centres,
+            poses.len(),
+        );
+        let hidden_m2 = if self.last {
+            (u.intersection_count(self.hidden) + t.intersection_count(self.hidden)) as f64
+                * grid.cell_area()
+        } else {
+            0.0
+        };
+        let mut increments = node.increments.clone();
+        increments.push(inc);
+        Node {
+            increments,
+            state,
+            poses,
+            undetected: u,
+            targets: t,
+            value_sum,
+            stray_m,
+            centre,
+            crowding,
+            rank: 0.0,
+            cost: Cost {
+                area_m2: value_sum / (self.index + 1) as f64,
+                distance_m: 0.0,
+                hidden_m2,
+                total: 0.0,
+            },
+        }
+    }
+}
+
+/// A beam node's sets grown for one period, which its children start from.
+struct Grown {
+    /// `X̄`, grown.
+    undetected: CellSet,
+    /// The identified targets' sets, grown.
+    targets: CellSet,
+    /// The ground that can change them: theirs.
+    relevant: CellSet,
+    /// Their boundary cells (`X̄`'s, the targets').
+    edges: (u64, u64),
+}
+
+/// One period's flight of a child.
+struct Flight {
+    /// Its state at the end of the period.
+    state: UavState,
+    /// Its poses so far, the period's appended.
+    poses: Vec<CameraPose>,
+    /// The ground its views of the period see (of the sets' ground).
+    seen: CellSet,
+    /// How far it strayed out of the region so far, m.
+    stray_m: f64,
 }
 
 /// `(a(), b())`, side by side on rayon's pool when `parallel`.

@@ -96,10 +96,7 @@ pub fn rays_per_frame(rows: u32, cols: u32) -> u64 {
 /// The caller guarantees `rows * cols <= FRAME_MAX_PIXELS` (the world checks its scenario);
 /// a larger camera renders an empty frame with `rows = cols = 0`.
 pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame: &mut CvsFrame) {
-    let (rows, cols) = (camera.model.rows, camera.model.cols);
-    let fits = rows as usize * cols as usize <= FRAME_MAX_PIXELS;
-    let (rows, cols) = if fits { (rows, cols) } else { (0, 0) };
-    let n = rows as usize * cols as usize;
+    let (rows, cols) = frame_size(camera);
     let origin = camera.origin();
     let grid = RayGrid::new(&Camera::new(
         CameraModel {
@@ -109,22 +106,51 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
         },
         camera.pose,
     ));
+    let visible = visible_objects(camera, objects, &origin);
+    let row_entries = row_entries(&visible, rows);
+    let view = View {
+        origin,
+        grid: &grid,
+        visible: &visible,
+        row_entries: &row_entries,
+        rows,
+        cols,
+    };
+    let corners = corner_codes(&view);
+    let row_targets = centre_rows(&view, &corners, spec, frame);
+    let found: Vec<TargetBox> = boxes::identified(&row_targets, spec.min_pixels);
+    write_header(frame, camera, spec, (rows, cols), &found);
+}
 
-    let visible: Vec<Visible> = objects
+/// The image size `render` draws: the camera's, or `0 x 0` for a camera larger than a frame.
+fn frame_size(camera: &Camera) -> (u32, u32) {
+    let (rows, cols) = (camera.model.rows, camera.model.cols);
+    let fits = rows as usize * cols as usize <= FRAME_MAX_PIXELS;
+    if fits { (rows, cols) } else { (0, 0) }
+}
+
+/// Rule 1: the objects whose box projects into the image, with their footprints and
+/// distances from the camera at `origin`.
+fn visible_objects(camera: &Camera, objects: &[SceneObject], origin: &Point3) -> Vec<Visible> {
+    objects
         .iter()
         .filter_map(|o| {
             let fp = footprint::footprint(camera, o)?;
             Some(Visible {
                 object: *o,
-                seen: o.seen_from(&origin),
+                seen: o.seen_from(origin),
                 footprint: fp,
-                nearest: o.nearest_distance(&origin),
-                farthest: o.farthest_distance(&origin),
+                nearest: o.nearest_distance(origin),
+                farthest: o.farthest_distance(origin),
             })
         })
-        .collect();
+        .collect()
+}
 
-    let row_entries: Vec<Vec<Entry>> = (0..rows)
+/// Per pixel row of `rows`, the objects of `visible` whose footprint touches it, with their
+/// spans.
+fn row_entries(visible: &[Visible], rows: u32) -> Vec<Vec<Entry>> {
+    (0..rows)
         .map(|r| {
             visible
                 .iter()
@@ -139,10 +165,32 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
                 })
                 .collect()
         })
-        .collect();
+        .collect()
+}
 
-    // Pass 1: corner rays. Corner (R, C) borders pixels R-1..=R x C-1..=C; an object touching
-    // pixel columns c0..=c1 of those rows can be hit by corners c0..=c1 + 1.
+/// What the two passes of [`render`] cast their rays at: the camera's rays, the objects in
+/// view and, per pixel row, those touching it.
+struct View<'a> {
+    origin: Point3,
+    grid: &'a RayGrid,
+    visible: &'a [Visible],
+    row_entries: &'a [Vec<Entry>],
+    rows: u32,
+    cols: u32,
+}
+
+/// Pass 1: the code of every corner ray, `rows + 1` rows of `cols + 1`. Corner (R, C) borders
+/// pixels R-1..=R x C-1..=C; an object touching pixel columns c0..=c1 of those rows can be hit
+/// by corners c0..=c1 + 1.
+fn corner_codes(view: &View<'_>) -> Vec<u32> {
+    let View {
+        origin,
+        grid,
+        visible,
+        row_entries,
+        rows,
+        cols,
+    } = *view;
     let corner_cols = cols as usize + 1;
     let mut corners = vec![HIT_NOTHING; (rows as usize + 1) * corner_cols];
     if rows > 0 {
@@ -151,7 +199,7 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
             .enumerate()
             .for_each_init(Scratch::default, |scratch, (r, out)| {
                 let r = r as u32;
-                let entries = corner_row_entries(&row_entries, r, rows);
+                let entries = corner_row_entries(row_entries, r, rows);
                 let touching = |c: u32| entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
                 scratch.touched.clear();
                 for (c, code) in out.iter_mut().enumerate() {
@@ -172,93 +220,138 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
                 }
                 for &c in &scratch.touched {
                     let (dir, inv) = scratch.rays.get(c);
-                    out[c as usize] = cast(&origin, (&dir, &inv), touching(c), &visible).0;
+                    out[c as usize] = cast(&origin, (&dir, &inv), touching(c), visible).0;
                 }
             });
     }
+    corners
+}
 
-    // Pass 2: centre rays, labels, depth, target hits, row by row.
-    let row_targets: Vec<RowTargets> = frame.depth[..n]
-        .par_chunks_mut(cols.max(1) as usize)
-        .zip(frame.labels[..n].par_chunks_mut(cols.max(1) as usize))
+/// Pass 2: the centre rays, labels, depth and target hits of every pixel row into `frame`,
+/// rows in parallel; the target hits of each row.
+fn centre_rows(
+    view: &View<'_>,
+    corners: &[u32],
+    spec: &FrameSpec,
+    frame: &mut CvsFrame,
+) -> Vec<RowTargets> {
+    let n = view.rows as usize * view.cols as usize;
+    let width = view.cols.max(1) as usize;
+    frame.depth[..n]
+        .par_chunks_mut(width)
+        .zip(frame.labels[..n].par_chunks_mut(width))
         .enumerate()
         .map_init(Scratch::default, |scratch, (r, (depth, labels))| {
-            let r = r as u32;
-            grid.centre_row(r, origin.z, &mut scratch.row);
-            let mut noise = RowNoise::new(
-                spec.seed,
-                spec.step,
-                spec.uav,
-                r,
-                spec.unknown_fraction,
-                spec.depth_noise,
-            );
-            let entries = &row_entries[r as usize];
-            let top = &corners[r as usize * corner_cols..(r as usize + 1) * corner_cols];
-            let bottom = &corners[(r as usize + 1) * corner_cols..(r as usize + 2) * corner_cols];
-            scratch.touched.clear();
-            scratch
-                .touched
-                .extend((0..cols).filter(|&c| entries.iter().any(|e| e.c0 <= c && c <= e.c1)));
-            for run in runs(&scratch.touched) {
-                grid.unit_rays(RowOf::Centres(r), run, &mut scratch.rays);
-            }
-            let (row, rays) = (&scratch.row, &scratch.rays);
-            let mut touched = scratch.touched.iter().peekable();
-            let mut targets = RowTargets::default();
-            for c in 0..cols {
-                let ci = c as usize;
-                let touching = || entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
-                let untouched = touched.next_if_eq(&&c).is_none();
-                let (centre, range) = if untouched {
-                    ground_only(&origin, row.z[ci], row.ground[ci])
-                } else {
-                    let (dir, inv) = rays.get(c);
-                    cast(&origin, (&dir, &inv), touching(), &visible)
-                };
-                let codes = [top[ci], top[ci + 1], bottom[ci + 1], bottom[ci], centre];
-                let mut label = if untouched {
-                    // `classify` when no object touches the pixel.
-                    if codes.iter().all(|&code| code == HIT_GROUND) {
-                        Label::Ground
-                    } else {
-                        Label::Unknown
-                    }
-                } else {
-                    classify(&codes, touching(), &visible)
-                };
-
-                let px = noise.next_pixel();
-                // A zero range means the camera is inside a box (a UAV flown into a building
-                // by an explicit altitude): nothing can be measured there.
-                let measured = centre != HIT_NOTHING && range > 0.0;
-                let doubted = (px.doubt || !measured) && label != Label::Unknown;
-                // Most pixels see only the ground or the sky: no target to note.
-                if codes.iter().any(|&code| code < HIT_GROUND) {
-                    for (k, &code) in codes.iter().enumerate() {
-                        if code >= HIT_GROUND || codes[..k].contains(&code) {
-                            continue;
-                        }
-                        if let ObjectKind::Target(id) = visible[code as usize].object.kind {
-                            targets.hit(id, c, label == Label::Target && !doubted);
-                        }
-                    }
-                }
-                if doubted {
-                    label = Label::Unknown;
-                }
-                labels[ci] = label as u8;
-                depth[ci] = if measured {
-                    (range * (1.0 + px.w)) as f32
-                } else {
-                    f32::NAN
-                };
-            }
-            targets
+            centre_row(view, corners, spec, scratch, r as u32, depth, labels)
         })
-        .collect();
+        .collect()
+}
 
-    let found: Vec<TargetBox> = boxes::identified(&row_targets, spec.min_pixels);
+/// Pass 2 on pixel row `r`: its centre rays cast, each pixel labelled (rules 3 and 4) from its
+/// 5 ray codes with the corner rows around it, its depth drawn with the row's noise, into
+/// `depth` and `labels`; returns the row's target hits.
+#[inline]
+fn centre_row(
+    view: &View<'_>,
+    corners: &[u32],
+    spec: &FrameSpec,
+    scratch: &mut Scratch,
+    r: u32,
+    depth: &mut [f32],
+    labels: &mut [u8],
+) -> RowTargets {
+    let View {
+        origin,
+        grid,
+        visible,
+        row_entries,
+        cols,
+        ..
+    } = *view;
+    let corner_cols = cols as usize + 1;
+    grid.centre_row(r, origin.z, &mut scratch.row);
+    let mut noise = RowNoise::new(
+        spec.seed,
+        spec.step,
+        spec.uav,
+        r,
+        spec.unknown_fraction,
+        spec.depth_noise,
+    );
+    let entries = &row_entries[r as usize];
+    let top = &corners[r as usize * corner_cols..(r as usize + 1) * corner_cols];
+    let bottom = &corners[(r as usize + 1) * corner_cols..(r as usize + 2) * corner_cols];
+    scratch.touched.clear();
+    scratch
+        .touched
+        .extend((0..cols).filter(|&c| entries.iter().any(|e| e.c0 <= c && c <= e.c1)));
+    for run in runs(&scratch.touched) {
+        grid.unit_rays(RowOf::Centres(r), run, &mut scratch.rays);
+    }
+    let (row, rays) = (&scratch.row, &scratch.rays);
+    let mut touched = scratch.touched.iter().peekable();
+    let mut targets = RowTargets::default();
+    for c in 0..cols {
+        let ci = c as usize;
+        let touching = || entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
+        let untouched = touched.next_if_eq(&&c).is_none();
+        let (centre, range) = if untouched {
+            ground_only(&origin, row.z[ci], row.ground[ci])
+        } else {
+            let (dir, inv) = rays.get(c);
+            cast(&origin, (&dir, &inv), touching(), visible)
+        };
+        let codes = [top[ci], top[ci + 1], bottom[ci + 1], bottom[ci], centre];
+        let mut label = if untouched {
+            // `classify` when no object touches the pixel.
+            if codes.iter().all(|&code| code == HIT_GROUND) {
+                Label::Ground
+            } else {
+                Label::Unknown
+            }
+        } else {
+            classify(&codes, touching(), visible)
+        };
+
+        let px = noise.next_pixel();
+        // A zero range means the camera is inside a box (a UAV flown into a building
+        // by an explicit altitude): nothing can be measured there.
+        let measured = centre != HIT_NOTHING && range > 0.0;
+        let doubted = (px.doubt || !measured) && label != Label::Unknown;
+        // Most pixels see only the ground or the sky: no target to note.
+        if codes.iter().any(|&code| code < HIT_GROUND) {
+            for (k, &code) in codes.iter().enumerate() {
+                if code >= HIT_GROUND || codes[..k].contains(&code) {
+                    continue;
+                }
+                if let ObjectKind::Target(id) = visible[code as usize].object.kind {
+                    targets.hit(id, c, label == Label::Target && !doubted);
+                }
+            }
+        }
+        if doubted {
+            label = Label::Unknown;
+        }
+        labels[ci] = label as u8;
+        depth[ci] = if measured {
+            (range * (1.0 + px.w)) as f32
+        } else {
+            f32::NAN
+        };
+    }
+    targets
+}
+
+/// The header of a frame of `rows x cols` pixels drawn by `camera`, its boxes `found` (as many
+/// as a frame holds) and its checksum.
+fn write_header(
+    frame: &mut CvsFrame,
+    camera: &Camera,
+    spec: &FrameSpec,
+    (rows, cols): (u32, u32),
+    found: &[TargetBox],
+) {
+    let origin = camera.origin();
     let h = &mut frame.header;
     h.run_tag = spec.run_tag;
     h.step = spec.step;
@@ -273,7 +366,7 @@ pub fn render(camera: &Camera, objects: &[SceneObject], spec: &FrameSpec, frame:
     h.camera_aperture = camera.model.aperture_rad;
     h.depth_noise = spec.depth_noise;
     frame.boxes = [TargetBox::default(); FRAME_MAX_BOXES];
-    for (slot, b) in frame.boxes.iter_mut().zip(&found) {
+    for (slot, b) in frame.boxes.iter_mut().zip(found) {
         *slot = *b;
     }
     frame.header.checksum = frame.checksum();

@@ -1,20 +1,20 @@
 //! The renderer as it was before [`super::render`] cast its rays with [`SeenFrom`]: every
 //! ray normalised and cast with parry3d against every object whose footprint touches it.
-//! Kept as the reference the fast renderer must match bit for bit.
+//! Kept as the reference the fast renderer must match bit for bit. What does not cast rays
+//! (the objects in view, their rows, the labels' rule, the header) is the fast renderer's.
 //!
 //! [`SeenFrom`]: super::objects::SeenFrom
 
 use protocol::camera::Camera;
-use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, Label, TargetBox};
+use protocol::frame::{CvsFrame, Label, TargetBox};
 use protocol::math::{Point3, Real, Vector3};
 use rayon::prelude::*;
 
 use super::boxes::{self, RowTargets};
-use super::footprint;
 use super::noise::RowNoise;
 use super::{
     Entry, FrameSpec, HIT_GROUND, HIT_NOTHING, ObjectKind, SceneObject, Visible, classify,
-    corner_row_entries,
+    corner_row_entries, frame_size, row_entries, visible_objects, write_header,
 };
 
 /// Renders `camera`'s view of the ground and `objects` into `frame`, in place.
@@ -27,45 +27,32 @@ pub(super) fn render(
     spec: &FrameSpec,
     frame: &mut CvsFrame,
 ) {
-    let (rows, cols) = (camera.model.rows, camera.model.cols);
-    let fits = rows as usize * cols as usize <= FRAME_MAX_PIXELS;
-    let (rows, cols) = if fits { (rows, cols) } else { (0, 0) };
-    let n = rows as usize * cols as usize;
+    let (rows, cols) = frame_size(camera);
+    let visible = visible_objects(camera, objects, &camera.origin());
+    let row_entries = row_entries(&visible, rows);
+    let corners = corner_codes(camera, &visible, &row_entries, (rows, cols));
+    let row_targets = centre_rows(
+        camera,
+        &visible,
+        &row_entries,
+        &corners,
+        spec,
+        (rows, cols),
+        frame,
+    );
+    let found: Vec<TargetBox> = boxes::identified(&row_targets, spec.min_pixels);
+    write_header(frame, camera, spec, (rows, cols), &found);
+}
+
+/// Pass 1: corner rays. Corner (R, C) borders pixels R-1..=R x C-1..=C; an object touching
+/// pixel columns c0..=c1 of those rows can be hit by corners c0..=c1 + 1.
+fn corner_codes(
+    camera: &Camera,
+    visible: &[Visible],
+    row_entries: &[Vec<Entry>],
+    (rows, cols): (u32, u32),
+) -> Vec<u32> {
     let origin = camera.origin();
-
-    let visible: Vec<Visible> = objects
-        .iter()
-        .filter_map(|o| {
-            let fp = footprint::footprint(camera, o)?;
-            Some(Visible {
-                object: *o,
-                seen: o.seen_from(&origin),
-                footprint: fp,
-                nearest: o.nearest_distance(&origin),
-                farthest: o.farthest_distance(&origin),
-            })
-        })
-        .collect();
-
-    let row_entries: Vec<Vec<Entry>> = (0..rows)
-        .map(|r| {
-            visible
-                .iter()
-                .enumerate()
-                .filter_map(|(i, v)| {
-                    let (c0, c1) = v.footprint.span(r)?;
-                    Some(Entry {
-                        visible: i as u32,
-                        c0,
-                        c1,
-                    })
-                })
-                .collect()
-        })
-        .collect();
-
-    // Pass 1: corner rays. Corner (R, C) borders pixels R-1..=R x C-1..=C; an object touching
-    // pixel columns c0..=c1 of those rows can be hit by corners c0..=c1 + 1.
     let corner_cols = cols as usize + 1;
     let mut corners = vec![HIT_NOTHING; (rows as usize + 1) * corner_cols];
     if rows > 0 {
@@ -74,18 +61,32 @@ pub(super) fn render(
             .enumerate()
             .for_each(|(r, out)| {
                 let r = r as u32;
-                let entries = corner_row_entries(&row_entries, r, rows);
+                let entries = corner_row_entries(row_entries, r, rows);
                 for (c, code) in out.iter_mut().enumerate() {
                     let c = c as u32;
                     let dir = camera.corner_ray(r, c);
                     let cands = entries.iter().filter(|e| e.c0 <= c && c <= e.c1);
-                    *code = cast(&origin, &dir, cands, &visible).0;
+                    *code = cast(&origin, &dir, cands, visible).0;
                 }
             });
     }
+    corners
+}
 
-    // Pass 2: centre rays, labels, depth, target hits, row by row.
-    let row_targets: Vec<RowTargets> = frame.depth[..n]
+/// Pass 2: centre rays, labels, depth, target hits, row by row.
+fn centre_rows(
+    camera: &Camera,
+    visible: &[Visible],
+    row_entries: &[Vec<Entry>],
+    corners: &[u32],
+    spec: &FrameSpec,
+    (rows, cols): (u32, u32),
+    frame: &mut CvsFrame,
+) -> Vec<RowTargets> {
+    let origin = camera.origin();
+    let n = rows as usize * cols as usize;
+    let corner_cols = cols as usize + 1;
+    frame.depth[..n]
         .par_chunks_mut(cols.max(1) as usize)
         .zip(frame.labels[..n].par_chunks_mut(cols.max(1) as usize))
         .enumerate()
@@ -107,9 +108,9 @@ pub(super) fn render(
                 let ci = c as usize;
                 let touching = || entries.iter().filter(move |e| e.c0 <= c && c <= e.c1);
                 let dir = camera.centre_ray(r, c);
-                let (centre, range) = cast(&origin, &dir, touching(), &visible);
+                let (centre, range) = cast(&origin, &dir, touching(), visible);
                 let codes = [top[ci], top[ci + 1], bottom[ci + 1], bottom[ci], centre];
-                let mut label = classify(&codes, touching(), &visible);
+                let mut label = classify(&codes, touching(), visible);
 
                 let px = noise.next_pixel();
                 // A zero range means the camera is inside a box (a UAV flown into a building
@@ -136,27 +137,7 @@ pub(super) fn render(
             }
             targets
         })
-        .collect();
-
-    let found: Vec<TargetBox> = boxes::identified(&row_targets, spec.min_pixels);
-    let h = &mut frame.header;
-    h.run_tag = spec.run_tag;
-    h.step = spec.step;
-    h.time_s = spec.time_s;
-    h.uav = spec.uav;
-    h.rows = rows;
-    h.cols = cols;
-    h.box_count = found.len().min(FRAME_MAX_BOXES) as u32;
-    h.camera_position = [origin.x, origin.y, origin.z];
-    h.camera_yaw = camera.pose.yaw;
-    h.camera_tilt = camera.model.tilt_rad;
-    h.camera_aperture = camera.model.aperture_rad;
-    h.depth_noise = spec.depth_noise;
-    frame.boxes = [TargetBox::default(); FRAME_MAX_BOXES];
-    for (slot, b) in frame.boxes.iter_mut().zip(&found) {
-        *slot = *b;
-    }
-    frame.header.checksum = frame.checksum();
+        .collect()
 }
 
 /// First hit of the unit ray `dir` from `origin` among the ground and the candidates:

@@ -25,6 +25,7 @@ use std::collections::BTreeMap;
 use protocol::camera::CameraPose;
 use protocol::flight::UavState;
 use protocol::raster::CellSet;
+use protocol::wire::PlannedView;
 
 use super::{nearest_visible_distance, seen_by_others};
 use crate::guidance::view::{self, same_pose};
@@ -75,26 +76,7 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
     let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
     // Every pose is predicted for the bounds, then again for the exact costs.
     let mut predictor = GroundPredictor::remembering_footprints(&grid);
-    // The ground the others' views can change in a period: where the sets can be by its end
-    // (the sets only grow by the dilation of each period, so every prediction stays inside
-    // the sets dilated once per period so far).
-    let mut reachable = sets.clone();
-    let others_seen = (0..params.horizon)
-        .map(|period| {
-            if input.others.is_empty() {
-                return CellSet::empty(&grid);
-            }
-            reachable = reachable.dilate(&grid, growth_m(params));
-            seen_by_others(
-                params,
-                input.others,
-                period,
-                obstacles,
-                &mut predictor,
-                &reachable,
-            )
-        })
-        .collect();
+    let others_seen = others_seen(params, input.others, &sets, obstacles, &mut predictor);
     let mut search = Search {
         params,
         obstacles,
@@ -105,79 +87,40 @@ pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decisi
     let bounded = [params.lambda, params.kappa]
         .iter()
         .all(|w| w.is_finite() && *w >= 0.0);
-    let mut leaves = Vec::new();
-    search.bound(
-        &mut Vec::new(),
-        input.state,
-        &mut Vec::new(),
-        0.0,
-        &sets,
-        &mut leaves,
-    );
+    let leaves = search.leaves(input.state, &sets, bounded);
     let sequences = leaves.len();
     let excluded = leaves.iter().filter(|l| l.stray_m > 0.0).count();
-    if bounded {
-        // Stable: equal keys keep the order of the increments.
-        leaves.sort_by(|a, b| {
-            a.stray_m
-                .total_cmp(&b.stray_m)
-                .then(a.bound.total_cmp(&b.bound))
+    let best = search
+        .best(&leaves, input.state, sets, bounded)
+        .map(|(cost, leaf)| {
+            let increments = leaf.path.iter().map(|&i| params.increments[i]).collect();
+            (increments, cost, leaf.poses.clone())
         });
-    }
-    let mut exact: BTreeMap<Vec<usize>, Exact> = BTreeMap::new();
-    exact.insert(
-        Vec::new(),
-        Exact {
-            state: input.state,
-            sets,
-            grown: None,
-            first_views: Vec::new(),
-        },
-    );
-    // The best so far: its key, its cost and its leaf.
-    let mut best: Option<(Key<'_>, Cost, &Leaf)> = None;
-    for leaf in &leaves {
-        let best_key = best.as_ref().map(|(key, ..)| key);
-        if bounded && !beats((leaf.stray_m, leaf.bound, &leaf.path), best_key) {
-            break;
-        }
-        // Once the true sets of its prefix are known, a sequence's bound tightens to its last
-        // period's views without shadows taken from them.
-        if bounded
-            && search
-                .tighter_bound(&mut exact, leaf)
-                .is_some_and(|bound| !beats((leaf.stray_m, bound, &leaf.path), best_key))
-        {
-            continue;
-        }
-        let Some(sets) = search.exact_sets(&mut exact, &leaf.path) else {
-            continue;
-        };
-        let optimistic = terms(params, sets, &search.hidden, 0.0);
-        if bounded && !beats((leaf.stray_m, optimistic.total, &leaf.path), best_key) {
-            continue;
-        }
-        let distance_m = match leaf.poses.last() {
-            Some(pose) => nearest_visible_distance(
-                params.planning_grid(),
-                sets,
-                &params.camera,
-                pose,
-                obstacles,
-            ),
-            None => 0.0,
-        };
-        let cost = terms(params, sets, &search.hidden, distance_m);
-        let key = (leaf.stray_m, cost.total, &leaf.path[..]);
-        if beats(key, best.as_ref().map(|(key, ..)| key)) {
-            best = Some((key, cost, leaf));
-        }
-    }
-    let best = best.map(|(_, cost, leaf)| {
-        let increments = leaf.path.iter().map(|&i| params.increments[i]).collect();
-        (increments, cost, leaf.poses.clone())
-    });
     decision(input, best, sequences, excluded)
+}
+
+/// The ground the UAVs ahead in the token will see in each period of the horizon, where it
+/// can change the predicted sets: where the sets can be by the period's end (the sets only
+/// grow by the dilation of each period, so every prediction stays inside the sets dilated
+/// once per period so far).
+fn others_seen(
+    params: &GuidanceParams,
+    others: &[PlannedView],
+    sets: &CellSet,
+    obstacles: &[ObstacleCell],
+    predictor: &mut GroundPredictor,
+) -> Vec<CellSet> {
+    let grid = *params.planning_grid();
+    let mut reachable = sets.clone();
+    (0..params.horizon)
+        .map(|period| {
+            if others.is_empty() {
+                return CellSet::empty(&grid);
+            }
+            reachable = reachable.dilate(&grid, growth_m(params));
+            seen_by_others(params, others, period, obstacles, predictor, &reachable)
+        })
+        .collect()
 }
 
 /// A sequence's rank: how far it strays out of the RoI, `J` (or a bound of it), and the
@@ -208,6 +151,94 @@ fn terms(params: &GuidanceParams, sets: &CellSet, hidden: &CellWeights, distance
 }
 
 impl Search<'_> {
+    /// Step 1 of the module docs: every sequence simulated from `start` (whose sets are
+    /// `sets`) and bounded, in the order of the increments, then, when the bounds hold
+    /// (`bounded`), sorted by (stray, bound); the sort is stable, so equal keys keep the
+    /// order of the increments.
+    fn leaves(&mut self, start: UavState, sets: &CellSet, bounded: bool) -> Vec<Leaf> {
+        let mut leaves = Vec::new();
+        self.bound(
+            &mut Vec::new(),
+            start,
+            &mut Vec::new(),
+            0.0,
+            sets,
+            &mut leaves,
+        );
+        if bounded {
+            leaves.sort_by(|a, b| {
+                a.stray_m
+                    .total_cmp(&b.stray_m)
+                    .then(a.bound.total_cmp(&b.bound))
+            });
+        }
+        leaves
+    }
+
+    /// Step 2 of the module docs: the sequences of `leaves` costed exactly in their order,
+    /// from `start` and its sets `sets`, skipping those whose bound cannot win and stopping at
+    /// the first whose bound cannot beat the best cost (every sequence is costed when the
+    /// bounds do not hold); the least (stray, `J`, order) sequence and its cost.
+    fn best<'l>(
+        &mut self,
+        leaves: &'l [Leaf],
+        start: UavState,
+        sets: CellSet,
+        bounded: bool,
+    ) -> Option<(Cost, &'l Leaf)> {
+        let params = self.params;
+        let mut exact: BTreeMap<Vec<usize>, Exact> = BTreeMap::new();
+        exact.insert(
+            Vec::new(),
+            Exact {
+                state: start,
+                sets,
+                grown: None,
+                first_views: Vec::new(),
+            },
+        );
+        // The best so far: its key, its cost and its leaf.
+        let mut best: Option<(Key<'_>, Cost, &Leaf)> = None;
+        for leaf in leaves {
+            let best_key = best.as_ref().map(|(key, ..)| key);
+            if bounded && !beats((leaf.stray_m, leaf.bound, &leaf.path), best_key) {
+                break;
+            }
+            // Once the true sets of its prefix are known, a sequence's bound tightens to its
+            // last period's views without shadows taken from them.
+            if bounded
+                && self
+                    .tighter_bound(&mut exact, leaf)
+                    .is_some_and(|bound| !beats((leaf.stray_m, bound, &leaf.path), best_key))
+            {
+                continue;
+            }
+            let Some(sets) = self.exact_sets(&mut exact, &leaf.path) else {
+                continue;
+            };
+            let optimistic = terms(params, sets, &self.hidden, 0.0);
+            if bounded && !beats((leaf.stray_m, optimistic.total, &leaf.path), best_key) {
+                continue;
+            }
+            let distance_m = match leaf.poses.last() {
+                Some(pose) => nearest_visible_distance(
+                    params.planning_grid(),
+                    sets,
+                    &params.camera,
+                    pose,
+                    self.obstacles,
+                ),
+                None => 0.0,
+            };
+            let cost = terms(params, sets, &self.hidden, distance_m);
+            let key = (leaf.stray_m, cost.total, &leaf.path[..]);
+            if beats(key, best.as_ref().map(|(key, ..)| key)) {
+                best = Some((key, cost, leaf));
+            }
+        }
+        best.map(|(_, cost, leaf)| (cost, leaf))
+    }
+
     /// Simulates the period after `state` with increment `u`: the new state, how far it
     /// strayed, and the poses appended to `poses`.
     fn fly(
