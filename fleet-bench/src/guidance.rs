@@ -187,6 +187,27 @@ fn time_decisions(
 pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
     let load_start = load_average();
     let mut report = BenchReport::new("guidance");
+    let (timed, one_thread) = fly_twice(config)?;
+    let overall = Stats::from_samples(&all_samples(&timed.paper)).ok_or_else(|| {
+        anyhow::anyhow!(
+            "no decision was timed: no guidance step in steps {}..{}",
+            config.warm_up,
+            config.steps
+        )
+    })?;
+    push_decision_cases(&mut report, "", &timed.paper, &overall);
+    let setfleet_overall = Stats::from_samples(&all_samples(&timed.setfleet))
+        .ok_or_else(|| anyhow::anyhow!("no setfleet decision was timed"))?;
+    push_decision_cases(&mut report, "setfleet ", &timed.setfleet, &setfleet_overall);
+    summarise(&mut report.summary, &timed, &overall, &setfleet_overall);
+    push_one_thread(&mut report, &one_thread);
+    insert_load(&mut report.summary, load_start);
+    Ok(report)
+}
+
+/// Flies the fleet timing both planners, then again with the setfleet planner on the
+/// calling thread only; fails if the two flights' setfleet decisions differ.
+fn fly_twice(config: &BenchGuidanceConfig) -> anyhow::Result<(Timings, Timings)> {
     let setfleet = GuidanceParams::from_scenario(&config.setfleet);
     let timed = time_decisions(config, &setfleet, true)?;
     // The same flight again with the setfleet planner on the calling thread only (a flight of
@@ -208,54 +229,47 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
             timed.decisions.get(k)
         );
     }
-    let Timings {
-        paper: by_others,
-        setfleet: setfleet_by_others,
-        obstacle_cells,
-        sequences,
-        setfleet_sequences,
-        rounds,
-        ..
-    } = timed;
-    let all: Vec<f64> = by_others.iter().flatten().copied().collect();
-    let overall = Stats::from_samples(&all).ok_or_else(|| {
-        anyhow::anyhow!(
-            "no decision was timed: no guidance step in steps {}..{}",
-            config.warm_up,
-            config.steps
-        )
-    })?;
+    Ok((timed, one_thread))
+}
+
+/// Every timing of `by_others`, whatever the number of plans in the token.
+fn all_samples(by_others: &[Vec<f64>]) -> Vec<f64> {
+    by_others.iter().flatten().copied().collect()
+}
+
+/// Adds a case per number of plans in the token and the case of them all (`overall`), named
+/// after `prefix`.
+fn push_decision_cases(
+    report: &mut BenchReport,
+    prefix: &str,
+    by_others: &[Vec<f64>],
+    overall: &Stats,
+) {
     for (count, times) in by_others.iter().enumerate() {
         if let Some(s) = Stats::from_samples(times) {
             report
                 .cases
-                .push(decision_case(&format!("others={count}"), count, &s));
+                .push(decision_case(&format!("{prefix}others={count}"), count, &s));
         }
     }
     report
         .cases
-        .push(decision_case("all", MAX_OTHERS, &overall));
-    let setfleet_all: Vec<f64> = setfleet_by_others.iter().flatten().copied().collect();
-    let setfleet_overall = Stats::from_samples(&setfleet_all)
-        .ok_or_else(|| anyhow::anyhow!("no setfleet decision was timed"))?;
-    for (count, times) in setfleet_by_others.iter().enumerate() {
-        if let Some(s) = Stats::from_samples(times) {
-            report.cases.push(decision_case(
-                &format!("setfleet others={count}"),
-                count,
-                &s,
-            ));
-        }
-    }
-    report
-        .cases
-        .push(decision_case("setfleet all", MAX_OTHERS, &setfleet_overall));
-    let sum = &mut report.summary;
+        .push(decision_case(&format!("{prefix}all"), MAX_OTHERS, overall));
+}
+
+/// The headline figures of the timed flight: both planners' decisions, the rounds, the
+/// sequences per decision, the threads, the obstacle cells and the goal.
+fn summarise(
+    sum: &mut BTreeMap<String, serde_json::Value>,
+    timed: &Timings,
+    overall: &Stats,
+    setfleet_overall: &Stats,
+) {
     sum.insert("decision_ms_median".into(), overall.median.into());
     sum.insert("decision_ms_p99".into(), overall.p99.into());
     sum.insert("decisions".into(), overall.n.into());
-    sum.insert("rounds".into(), rounds.into());
-    sum.insert("sequences_per_decision".into(), sequences.into());
+    sum.insert("rounds".into(), timed.rounds.into());
+    sum.insert("sequences_per_decision".into(), timed.sequences.into());
     sum.insert(
         "setfleet_decision_ms_median".into(),
         setfleet_overall.median.into(),
@@ -266,15 +280,22 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
     );
     sum.insert(
         "setfleet_sequences_per_decision".into(),
-        setfleet_sequences.into(),
+        timed.setfleet_sequences.into(),
     );
     sum.insert(
         "setfleet_threads".into(),
         (rayon::current_num_threads() as u64).into(),
     );
-    let one_thread: Vec<f64> = one_thread.setfleet.iter().flatten().copied().collect();
-    if let Some(s) = Stats::from_samples(&one_thread) {
-        sum.insert(
+    if let Some(s) = Stats::from_samples(&timed.obstacle_cells) {
+        sum.insert("obstacle_cells_median".into(), s.median.into());
+    }
+    sum.insert("goal_decision_ms_median".into(), 5.0.into());
+}
+
+/// The one-thread flight's setfleet decisions: their median and their case.
+fn push_one_thread(report: &mut BenchReport, one_thread: &Timings) {
+    if let Some(s) = Stats::from_samples(&all_samples(&one_thread.setfleet)) {
+        report.summary.insert(
             "setfleet_one_thread_decision_ms_median".into(),
             s.median.into(),
         );
@@ -282,11 +303,11 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
             .cases
             .push(decision_case("setfleet one thread", MAX_OTHERS, &s));
     }
-    if let Some(s) = Stats::from_samples(&obstacle_cells) {
-        sum.insert("obstacle_cells_median".into(), s.median.into());
-    }
-    sum.insert("goal_decision_ms_median".into(), 5.0.into());
-    // How busy the machine was: the timings are wall-clock times.
+}
+
+/// How busy the machine was at the start (`load_start`) and now: the timings are
+/// wall-clock times.
+fn insert_load(sum: &mut BTreeMap<String, serde_json::Value>, load_start: Option<f64>) {
     for (key, load) in [
         ("load_average_1m_start", load_start),
         ("load_average_1m_end", load_average()),
@@ -295,7 +316,6 @@ pub fn run(config: &BenchGuidanceConfig) -> anyhow::Result<BenchReport> {
             sum.insert(key.into(), load.into());
         }
     }
-    Ok(report)
 }
 
 /// The 1-minute load average (`/proc/loadavg`; `None` where there is none).

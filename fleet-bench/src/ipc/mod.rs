@@ -60,7 +60,7 @@ mod zenoh_link;
 
 use protocol::frame::CvsFrame;
 
-use super::BenchReport;
+use super::{BenchReport, Stats};
 use bench_run::{RunFiles, remove_stale_runs};
 use handshake::{Role, ZenohTransport};
 use measure::{CaseSpec, Shared, latency_us, rate, run_case, typical_estimate};
@@ -99,6 +99,37 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
     let frame_bytes = std::mem::size_of::<CvsFrame>();
     let n = config.iterations;
 
+    let frame_cases = iceoryx_frame_cases(&shared, &mut report, frame_bytes)?;
+    let (base_lat, base_fps) = socket_case(&shared, &mut report, frame_bytes)?;
+    let mut zenoh = ZenohHeadline::default();
+    zenoh_cases(&shared, &mut report, Payload::Frame, &mut zenoh)?;
+    let (est_lat, est_mps) = estimates_case(&shared, &mut report, estimate.len())?;
+    zenoh_cases(&shared, &mut report, Payload::Estimate, &mut zenoh)?;
+    let token_lat = token_case(&shared, &mut report)?;
+
+    let (frame_1sub, frame_4sub) = (frame_cases[0], frame_cases[1]);
+    report.summary = Headline {
+        frame_1sub,
+        frame_4sub,
+        baseline: (base_lat, base_fps),
+        estimates: (est_lat, est_mps),
+        estimate_bytes: estimate.len(),
+        token_round: token_lat,
+        zenoh,
+        frame_bytes,
+        iterations: n,
+    }
+    .summary();
+    Ok(report)
+}
+
+/// Runs the frame over iceoryx2 to one subscriber, then to [`FLEET`], adds their rows to
+/// `report` and returns their latency and frame rate, in that order.
+fn iceoryx_frame_cases(
+    shared: &Shared<'_>,
+    report: &mut BenchReport,
+    frame_bytes: usize,
+) -> anyhow::Result<Vec<(Stats, f64)>> {
     let mut frame_cases = Vec::new();
     for subs in [1u32, FLEET] {
         let mut children: Vec<(String, Role, u32)> = (0..subs)
@@ -107,7 +138,7 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         children.push(("frame-pub".to_owned(), Role::FramePublisher, 0));
         let name = format!("iox-{subs}sub");
         let reports = run_case(
-            &shared,
+            shared,
             &CaseSpec {
                 name: &name,
                 children,
@@ -131,9 +162,17 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         ));
         frame_cases.push((lat, fps));
     }
+    Ok(frame_cases)
+}
 
+/// Runs the socket baseline, adds its row to `report` and returns its latency and frame rate.
+fn socket_case(
+    shared: &Shared<'_>,
+    report: &mut BenchReport,
+    frame_bytes: usize,
+) -> anyhow::Result<(Stats, f64)> {
     let reports = run_case(
-        &shared,
+        shared,
         &CaseSpec {
             name: "socket-1sub",
             children: vec![
@@ -157,19 +196,40 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         base_bps,
         frame_bytes,
     ));
-    let mut zenoh = ZenohHeadline::default();
-    for transport in ZenohTransport::ALL {
-        let figures = zenoh_case(&shared, &mut report, Payload::Frame, transport)?;
-        zenoh.cases.push(("frame", transport, figures));
-    }
+    Ok((base_lat, base_fps))
+}
 
-    let fleet_children = |prefix: &str, role: Role| -> Vec<(String, Role, u32)> {
-        (0..FLEET)
-            .map(|i| (format!("{prefix}-{i}"), role, i))
-            .collect()
-    };
+/// Runs the Zenoh cases of `payload` over every transport and adds their figures to `zenoh`.
+fn zenoh_cases(
+    shared: &Shared<'_>,
+    report: &mut BenchReport,
+    payload: Payload,
+    zenoh: &mut ZenohHeadline,
+) -> anyhow::Result<()> {
+    let what = payload_name(payload);
+    for transport in ZenohTransport::ALL {
+        let figures = zenoh_case(shared, report, payload, transport)?;
+        zenoh.cases.push((what, transport, figures));
+    }
+    Ok(())
+}
+
+/// The children of a [`FLEET`]-process case: `{prefix}-{i}` in `role`.
+fn fleet_children(prefix: &str, role: Role) -> Vec<(String, Role, u32)> {
+    (0..FLEET)
+        .map(|i| (format!("{prefix}-{i}"), role, i))
+        .collect()
+}
+
+/// Runs the estimates all-to-all, adds its row to `report` and returns its latency and
+/// message rate.
+fn estimates_case(
+    shared: &Shared<'_>,
+    report: &mut BenchReport,
+    estimate_bytes: usize,
+) -> anyhow::Result<(Stats, f64)> {
     let reports = run_case(
-        &shared,
+        shared,
         &CaseSpec {
             name: "estimates",
             children: fleet_children("estimates", Role::Estimates),
@@ -188,15 +248,16 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         &est_lat,
         est_mps,
         est_bps,
-        estimate.len(),
+        estimate_bytes,
     ));
-    for transport in ZenohTransport::ALL {
-        let figures = zenoh_case(&shared, &mut report, Payload::Estimate, transport)?;
-        zenoh.cases.push(("estimate", transport, figures));
-    }
+    Ok((est_lat, est_mps))
+}
 
+/// Runs the token around the fleet, adds its row to `report` and returns the latency of a
+/// whole round.
+fn token_case(shared: &Shared<'_>, report: &mut BenchReport) -> anyhow::Result<Stats> {
     let reports = run_case(
-        &shared,
+        shared,
         &CaseSpec {
             name: "token",
             children: fleet_children("token", Role::Token),
@@ -219,21 +280,7 @@ pub fn run(config: &BenchIpcConfig) -> anyhow::Result<BenchReport> {
         token_bps,
         token_bytes as usize,
     ));
-
-    let (frame_1sub, frame_4sub) = (frame_cases[0], frame_cases[1]);
-    report.summary = Headline {
-        frame_1sub,
-        frame_4sub,
-        baseline: (base_lat, base_fps),
-        estimates: (est_lat, est_mps),
-        estimate_bytes: estimate.len(),
-        token_round: token_lat,
-        zenoh,
-        frame_bytes,
-        iterations: n,
-    }
-    .summary();
-    Ok(report)
+    Ok(token_lat)
 }
 
 /// Runs the Zenoh case of `payload` over `transport` (a router publishing to a client), adds
@@ -244,19 +291,11 @@ fn zenoh_case(
     payload: Payload,
     transport: ZenohTransport,
 ) -> anyhow::Result<ZenohFigures> {
-    let (what, publisher, subscriber) = match payload {
-        Payload::Frame => (
-            "frame",
-            Role::ZenohFramePublisher,
-            Role::ZenohFrameSubscriber,
-        ),
-        Payload::Estimate => (
-            "estimate",
-            Role::ZenohEstimatePublisher,
-            Role::ZenohEstimateSubscriber,
-        ),
+    let (publisher, subscriber) = match payload {
+        Payload::Frame => (Role::ZenohFramePublisher, Role::ZenohFrameSubscriber),
+        Payload::Estimate => (Role::ZenohEstimatePublisher, Role::ZenohEstimateSubscriber),
     };
-    let name = format!("zenoh-{what}-{}", transport.as_arg());
+    let name = format!("zenoh-{}-{}", payload_name(payload), transport.as_arg());
     let reports = run_case(
         shared,
         &CaseSpec {
@@ -299,4 +338,12 @@ fn zenoh_case(
         rate: mps,
         resent,
     })
+}
+
+/// The name of `payload` in the Zenoh cases' names and figures.
+fn payload_name(payload: Payload) -> &'static str {
+    match payload {
+        Payload::Frame => "frame",
+        Payload::Estimate => "estimate",
+    }
 }

@@ -805,11 +805,36 @@ impl Observer<'_> {
         Ok(())
     }
 
+    /// Measures step `truth.step`: checks and fuses the agents' estimates, counts the step's
+    /// traffic, shows the step to the sinks and returns its metrics.
     fn measure(&mut self, truth: &TruthState, live_agents: u32) -> StepMetrics {
         let k = truth.step;
-        let grid = self.estimator.grid;
-        let estimates: Vec<ObservedEstimate> = self
-            .store
+        let estimates = self.take_estimates(k);
+        let violation_count = self.check_guarantee(truth, &estimates);
+        let (all_fused, agents) = self.fuse_and_measure(truth, &estimates);
+        let spread = AgentSpread::over(agents.values());
+        let estimate_count = estimates.len() as u32;
+        let identified_any = identified_ids(&estimates).len() as u32;
+        self.keep_sent(k, estimates);
+        self.record_fleet(truth, live_agents);
+        let step = StepMetrics {
+            step: k,
+            time_s: truth.time_s,
+            live_agents,
+            estimates: estimate_count,
+            identified_any,
+            mean: spread.map(|s| s.mean),
+            worst: spread.map(|s| s.worst),
+            agents,
+            violations: violation_count,
+        };
+        self.show_fused(truth, all_fused, &step);
+        step
+    }
+
+    /// Takes every agent's estimate of step `k` out of the store, dropping older ones.
+    fn take_estimates(&mut self, k: u64) -> Vec<ObservedEstimate> {
+        self.store
             .values_mut()
             .filter_map(|steps| {
                 let e = steps.remove(&k);
@@ -817,9 +842,15 @@ impl Observer<'_> {
                 steps.retain(|&s, _| s > k);
                 e
             })
-            .collect();
+            .collect()
+    }
+
+    /// Checks every estimate against the truth, logs each violation and returns their count.
+    fn check_guarantee(&self, truth: &TruthState, estimates: &[ObservedEstimate]) -> u32 {
+        let k = truth.step;
+        let grid = self.estimator.grid;
         let mut violation_count = 0;
-        for e in &estimates {
+        for e in estimates {
             for v in violations(e, truth.targets(), &grid) {
                 violation_count += 1;
                 tracing::error!(
@@ -832,16 +863,28 @@ impl Observer<'_> {
                 );
             }
         }
+        violation_count
+    }
+
+    /// Fuses each agent's sets as the agent did (with the estimates its links delivered),
+    /// keeps its `X̄` as its last, and measures them against the truth.
+    fn fuse_and_measure(
+        &mut self,
+        truth: &TruthState,
+        estimates: &[ObservedEstimate],
+    ) -> (Vec<(u32, FusedSets)>, BTreeMap<u32, SetMetrics>) {
+        let k = truth.step;
+        let grid = self.estimator.grid;
         let mut agents = BTreeMap::new();
         let d = self.radio.latency_steps();
         let sent: &[ObservedEstimate] = if d == 0 {
-            &estimates
+            estimates
         } else {
             k.checked_sub(d)
                 .and_then(|from| self.sent.get(&from))
                 .map_or(&[], Vec::as_slice)
         };
-        let all_fused = FusedSets::of_agents(&estimates, sent, &self.estimator, &self.radio);
+        let all_fused = FusedSets::of_agents(estimates, sent, &self.estimator, &self.radio);
         let all_fused: Vec<(u32, FusedSets)> = estimates
             .iter()
             .map(ObservedEstimate::uav)
@@ -853,15 +896,22 @@ impl Observer<'_> {
                 .insert(*uav, (k, fused.undetected.clone()));
             agents.insert(*uav, SetMetrics::measure(fused, truth.targets(), &grid));
         }
+        (all_fused, agents)
+    }
 
-        let spread = AgentSpread::over(agents.values());
-        let estimate_count = estimates.len() as u32;
-        let identified_any = identified_ids(&estimates).len() as u32;
+    /// With a link latency, keeps step `k`'s estimates for the steps that fuse them.
+    fn keep_sent(&mut self, k: u64, estimates: Vec<ObservedEstimate>) {
+        let d = self.radio.latency_steps();
         if d > 0 {
             // Kept for the steps `k + 1 ..= k + d`, which fuse them.
             self.sent.insert(k, estimates);
             self.sent = self.sent.split_off(&k.saturating_add(1).saturating_sub(d));
         }
+    }
+
+    /// Records the UAVs' tracks and geofence overrides and counts the step's frames and
+    /// commands of the `live_agents`.
+    fn record_fleet(&mut self, truth: &TruthState, live_agents: u32) {
         for u in truth.uavs() {
             if let Some(track) = self.report.tracks.get_mut(u.id as usize) {
                 track.push([u.position[0], u.position[1]]);
@@ -880,17 +930,16 @@ impl Observer<'_> {
             u64::from(live_agents),
             u64::from(live_agents) * std::mem::size_of::<UavCommand>() as u64,
         );
-        let step = StepMetrics {
-            step: k,
-            time_s: truth.time_s,
-            live_agents,
-            estimates: estimate_count,
-            identified_any,
-            mean: spread.map(|s| s.mean),
-            worst: spread.map(|s| s.worst),
-            agents,
-            violations: violation_count,
-        };
+    }
+
+    /// Shows the step with the shown UAV's sets and keeps the lowest id's as the final state.
+    fn show_fused(
+        &mut self,
+        truth: &TruthState,
+        all_fused: Vec<(u32, FusedSets)>,
+        step: &StepMetrics,
+    ) {
+        let k = truth.step;
         // The shown UAV's sets are shown (the lowest id's when its estimate did not arrive);
         // the lowest id comes first, and its sets are the ones drawn in `sets.png`.
         let shown = all_fused
@@ -898,7 +947,7 @@ impl Observer<'_> {
             .find(|(uav, _)| *uav == self.config.shown_uav)
             .or(all_fused.first())
             .map(|(uav, fused)| (*uav, fused));
-        self.show(truth, shown, &step);
+        self.show(truth, shown, step);
         if let Some((uav, sets)) = all_fused.into_iter().next() {
             self.report.final_state = Some(FinalState {
                 step: k,
@@ -908,7 +957,6 @@ impl Observer<'_> {
                 targets: truth.targets().to_vec(),
             });
         }
-        step
     }
 
     /// Lets the orchestrator apply the faults due by this step's time before the step is

@@ -325,90 +325,22 @@ impl Summary {
         let scenario = record.scenario;
         let series = record.series;
         let all = scenario.targets.count;
-        let mean = MetricFinals::of(
-            series
-                .iter()
-                .filter_map(|m| m.mean.as_ref().map(|s| (m.time_s, s))),
-            all,
-        );
-        let worst = MetricFinals::of(
-            series
-                .iter()
-                .filter_map(|m| m.worst.as_ref().map(|s| (m.time_s, s))),
-            all,
-        );
-        let per_agent: BTreeMap<u32, MetricFinals> = (0..scenario.uavs.count)
-            .map(|uav| (uav, MetricFinals::of_agent(series, uav, all)))
-            .collect();
-        let last = series.iter().rev().find(|m| m.mean.is_some());
-        // The agents of the end of the run, each at its own first time.
-        let times: Vec<Option<f64>> = last
-            .map(|m| {
-                m.agents
-                    .keys()
-                    .map(|uav| per_agent.get(uav).and_then(|f| f.time_all_identified_s))
-                    .collect()
-            })
-            .unwrap_or_default();
-        let (time_all_identified_s, time_all_identified_s_worst) = mean_and_max(&times);
-        let time_all_identified_any_s = series
-            .iter()
-            .find(|m| all > 0 && m.identified_any >= all)
-            .map(|m| m.time_s);
+        let finals = FleetFinals::of(series, scenario.uavs.count, all);
         let (resync_steps_max, resync_steps_mean) = faults::resync_max_mean(record.faults);
         let steps = series.len() as u64;
         let sim_s = steps as f64 * scenario.timing.cvs_period_s;
         let observer = record.observer;
-        let agents: Vec<AgentSummary> = (0..scenario.uavs.count)
-            .map(|uav| {
-                let t = observer.and_then(|o| o.agents.get(&uav));
-                let last = observer.and_then(|o| o.final_undetected.get(&uav));
-                AgentSummary {
-                    uav,
-                    steps_processed: t.map_or(0, |t| t.steps_processed()),
-                    estimates_sent: t.map_or(0, |t| t.estimates_sent()),
-                    estimates_received: t.map_or(0, |t| t.estimates_received()),
-                    estimates_observed: t.map_or(0, |t| t.estimates_seen),
-                    messages_dropped: t.map_or(0, |t| t.messages_dropped()),
-                    decisions: t.map_or(0, |t| t.decisions()),
-                    token_timeouts: t.map_or(0, |t| t.token_timeouts()),
-                    estimates_lost: t.map_or(0, |t| t.estimates_lost()),
-                    tokens_lost: t.map_or(0, |t| t.tokens_lost()),
-                    final_undetected_digest: last.map(|(_, set)| set.digest()),
-                    final_measured_step: last.map(|(step, _)| *step),
-                    restarts: faults::restarts(record.faults, uav),
-                    geofence_overrides: observer
-                        .and_then(|o| o.geofence_overrides.get(uav as usize))
-                        .copied()
-                        .unwrap_or(0),
-                    metrics: per_agent.get(&uav).cloned().unwrap_or_default(),
-                }
-            })
-            .collect();
-        let comms = observer
-            .map(|o| {
-                o.comms
-                    .by_kind
-                    .iter()
-                    .map(|(kind, t)| {
-                        let timing = (matches!(kind, ServiceKind::Estimates | ServiceKind::Tokens))
-                            .then(|| Stats::from_samples(&t.latencies_ms))
-                            .flatten()
-                            .map(|s| LatencySummary {
-                                latency_p50_ms: s.median,
-                                latency_p90_ms: s.p90,
-                                latency_p99_ms: s.p99,
-                            });
-                        let summary = CommsSummary {
-                            messages: t.messages,
-                            bytes: t.bytes,
-                            timing,
-                        };
-                        (kind.key().to_owned(), summary)
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
+        let agents = agent_summaries(record, &finals.per_agent);
+        let comms = comms_summaries(observer);
+        let FleetFinals {
+            mean,
+            worst,
+            last,
+            time_all_identified_s,
+            time_all_identified_s_worst,
+            time_all_identified_any_s,
+            ..
+        } = finals;
         Summary {
             seed: scenario.seed,
             variant: record.variant.to_owned(),
@@ -474,6 +406,21 @@ impl Summary {
 
     /// Prints the summary as a table.
     pub fn print_table(&self, out: &mut impl Write) -> std::io::Result<()> {
+        let rows = self.table_rows();
+        let width = rows.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
+        for (k, v) in &rows {
+            writeln!(out, "  {k:<width$}  {v}")?;
+        }
+        if !self.agents.is_empty() {
+            writeln!(out)?;
+            print_agents(&self.agents, out)?;
+        }
+        print_resources(&self.resources, out)
+    }
+
+    /// The rows of the table's first part: the run, the set metrics and, when there were
+    /// any, the faults.
+    fn table_rows(&self) -> Vec<(&'static str, String)> {
         let opt = |v: Option<f64>, digits: usize| {
             v.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"))
         };
@@ -550,46 +497,168 @@ impl Summary {
                 ),
             ));
         }
-        let width = rows.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
-        for (k, v) in &rows {
-            writeln!(out, "  {k:<width$}  {v}")?;
-        }
-        if !self.agents.is_empty() {
-            writeln!(out)?;
-            // Lossy links (`comms.loss`): what the radio lost on the way to each agent.
-            let lossy = self
-                .agents
-                .iter()
-                .any(|a| a.estimates_lost + a.tokens_lost > 0);
-            write!(
-                out,
-                "  {:>3}  {:>6}  {:>6}  {:>8}  {:>9}  {:>8}",
-                "UAV", "steps", "sent", "received", "decisions", "restarts"
-            )?;
-            if lossy {
-                write!(out, "  {:>15}", "lost est./tok.")?;
-            }
-            writeln!(out)?;
-            for a in &self.agents {
-                write!(
-                    out,
-                    "  {:>3}  {:>6}  {:>6}  {:>8}  {:>9}  {:>8}",
-                    a.uav,
-                    a.steps_processed,
-                    a.estimates_sent,
-                    a.estimates_received,
-                    a.decisions,
-                    a.restarts
-                )?;
-                if lossy {
-                    let lost = format!("{}/{}", a.estimates_lost, a.tokens_lost);
-                    write!(out, "  {lost:>15}")?;
-                }
-                writeln!(out)?;
-            }
-        }
-        print_resources(&self.resources, out)
+        rows
     }
+}
+
+/// The set metrics of the fleet over the run: the mean over agents, the worst agent, each
+/// agent's own, and when all targets were first identified.
+struct FleetFinals<'a> {
+    /// The per-step mean over agents.
+    mean: MetricFinals,
+    /// The per-step worst agent.
+    worst: MetricFinals,
+    /// Each agent's own, by UAV.
+    per_agent: BTreeMap<u32, MetricFinals>,
+    /// The last measured step.
+    last: Option<&'a StepMetrics>,
+    /// Mean over the agents of the last measured step of the time each first held every
+    /// target.
+    time_all_identified_s: Option<f64>,
+    /// The slowest of those agents' times.
+    time_all_identified_s_worst: Option<f64>,
+    /// First time every target was identified by some agent.
+    time_all_identified_any_s: Option<f64>,
+}
+
+impl<'a> FleetFinals<'a> {
+    /// The finals of `series`, in a fleet of `uavs` and a world of `targets`.
+    fn of(series: &'a [StepMetrics], uavs: u32, targets: u32) -> FleetFinals<'a> {
+        let mean = MetricFinals::of(
+            series
+                .iter()
+                .filter_map(|m| m.mean.as_ref().map(|s| (m.time_s, s))),
+            targets,
+        );
+        let worst = MetricFinals::of(
+            series
+                .iter()
+                .filter_map(|m| m.worst.as_ref().map(|s| (m.time_s, s))),
+            targets,
+        );
+        let per_agent: BTreeMap<u32, MetricFinals> = (0..uavs)
+            .map(|uav| (uav, MetricFinals::of_agent(series, uav, targets)))
+            .collect();
+        let last = series.iter().rev().find(|m| m.mean.is_some());
+        // The agents of the end of the run, each at its own first time.
+        let times: Vec<Option<f64>> = last
+            .map(|m| {
+                m.agents
+                    .keys()
+                    .map(|uav| per_agent.get(uav).and_then(|f| f.time_all_identified_s))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let (time_all_identified_s, time_all_identified_s_worst) = mean_and_max(&times);
+        let time_all_identified_any_s = series
+            .iter()
+            .find(|m| targets > 0 && m.identified_any >= targets)
+            .map(|m| m.time_s);
+        FleetFinals {
+            mean,
+            worst,
+            per_agent,
+            last,
+            time_all_identified_s,
+            time_all_identified_s_worst,
+            time_all_identified_any_s,
+        }
+    }
+}
+
+/// One summary per UAV of the scenario, from what the observer counted and the faults.
+fn agent_summaries(
+    record: &RunFacts<'_>,
+    per_agent: &BTreeMap<u32, MetricFinals>,
+) -> Vec<AgentSummary> {
+    let observer = record.observer;
+    (0..record.scenario.uavs.count)
+        .map(|uav| {
+            let t = observer.and_then(|o| o.agents.get(&uav));
+            let last = observer.and_then(|o| o.final_undetected.get(&uav));
+            AgentSummary {
+                uav,
+                steps_processed: t.map_or(0, |t| t.steps_processed()),
+                estimates_sent: t.map_or(0, |t| t.estimates_sent()),
+                estimates_received: t.map_or(0, |t| t.estimates_received()),
+                estimates_observed: t.map_or(0, |t| t.estimates_seen),
+                messages_dropped: t.map_or(0, |t| t.messages_dropped()),
+                decisions: t.map_or(0, |t| t.decisions()),
+                token_timeouts: t.map_or(0, |t| t.token_timeouts()),
+                estimates_lost: t.map_or(0, |t| t.estimates_lost()),
+                tokens_lost: t.map_or(0, |t| t.tokens_lost()),
+                final_undetected_digest: last.map(|(_, set)| set.digest()),
+                final_measured_step: last.map(|(step, _)| *step),
+                restarts: faults::restarts(record.faults, uav),
+                geofence_overrides: observer
+                    .and_then(|o| o.geofence_overrides.get(uav as usize))
+                    .copied()
+                    .unwrap_or(0),
+                metrics: per_agent.get(&uav).cloned().unwrap_or_default(),
+            }
+        })
+        .collect()
+}
+
+/// The traffic per service kind, with the latency of the kinds that carry a send time.
+fn comms_summaries(observer: Option<&ObserverReport>) -> BTreeMap<String, CommsSummary> {
+    observer
+        .map(|o| {
+            o.comms
+                .by_kind
+                .iter()
+                .map(|(kind, t)| {
+                    let timing = (matches!(kind, ServiceKind::Estimates | ServiceKind::Tokens))
+                        .then(|| Stats::from_samples(&t.latencies_ms))
+                        .flatten()
+                        .map(|s| LatencySummary {
+                            latency_p50_ms: s.median,
+                            latency_p90_ms: s.p90,
+                            latency_p99_ms: s.p99,
+                        });
+                    let summary = CommsSummary {
+                        messages: t.messages,
+                        bytes: t.bytes,
+                        timing,
+                    };
+                    (kind.key().to_owned(), summary)
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// The agents' table: one line per agent, with what the radio lost when a link was lossy.
+fn print_agents(agents: &[AgentSummary], out: &mut impl Write) -> std::io::Result<()> {
+    // Lossy links (`comms.loss`): what the radio lost on the way to each agent.
+    let lossy = agents.iter().any(|a| a.estimates_lost + a.tokens_lost > 0);
+    write!(
+        out,
+        "  {:>3}  {:>6}  {:>6}  {:>8}  {:>9}  {:>8}",
+        "UAV", "steps", "sent", "received", "decisions", "restarts"
+    )?;
+    if lossy {
+        write!(out, "  {:>15}", "lost est./tok.")?;
+    }
+    writeln!(out)?;
+    for a in agents {
+        write!(
+            out,
+            "  {:>3}  {:>6}  {:>6}  {:>8}  {:>9}  {:>8}",
+            a.uav,
+            a.steps_processed,
+            a.estimates_sent,
+            a.estimates_received,
+            a.decisions,
+            a.restarts
+        )?;
+        if lossy {
+            let lost = format!("{}/{}", a.estimates_lost, a.tokens_lost);
+            write!(out, "  {lost:>15}")?;
+        }
+        writeln!(out)?;
+    }
+    Ok(())
 }
 
 /// The resources table: one line per process (CPU, peak memory, phases by CPU time, the

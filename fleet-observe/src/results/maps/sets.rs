@@ -8,18 +8,20 @@ use std::path::Path;
 
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
+use protocol::grid::GroundGrid;
 use protocol::math::Point2;
 use protocol::raster::CellSet;
 use protocol::scenario::Scenario;
 use world_server::scene::Building;
 
 use super::chart::{
-    Area, OPEN, OUTSIDE, PANEL, TITLE_PX, build_chart, draw_axes, draw_frame, draw_outlines,
+    Area, Chart, OPEN, OUTSIDE, PANEL, TITLE_PX, build_chart, draw_axes, draw_frame, draw_outlines,
     draw_title, percent, write_picture,
 };
 use super::legend::{Hatch, Legend, Swatch, Symbol, target_marker, thick_path, uav_marker};
 use super::raster::{Pixels, PlotRaster, blend, blend_rgb, is_edge, mask, rgb};
 use crate::observe::FinalState;
+use crate::observe::metrics::FusedSets;
 use crate::pictures::topview::building_shade;
 use crate::pictures::{FONT, palette};
 
@@ -65,27 +67,47 @@ pub(super) fn paint_sets(
     buildings: &[Building],
 ) -> anyhow::Result<PlotRaster> {
     let grid = scenario.grid();
-    let sets = &state.sets;
     root.fill(&WHITE)?;
-    let cells = grid.cell_count() as u64;
+    let (title_area, body) = root.split_vertically(TITLE_PX);
+    draw_title(&title_area, &sets_title(state))?;
+    let (panel, legend) = body.split_horizontally(PANEL.0);
+
+    let half = view_half_extent(state, tracks, scenario);
+    let mut chart = build_chart(&panel, half)?;
+    let raster = PlotRaster::of(&chart, half)?;
+
+    let mut pixels = paint_ground(&raster, scenario, buildings);
+    paint_layers(&mut pixels, &raster, &state.sets, &grid);
+    raster.blit(root, pixels)?;
+    draw_axes(&mut chart)?;
+    draw_outlines(&mut chart, buildings)?;
+    draw_markers(root, &chart, state, tracks)?;
+    draw_frame(&mut chart, half)?;
+
+    draw_legend(&legend, &state.sets, tracks.len(), scenario)?;
+    Ok(raster)
+}
+
+/// The picture's title: whose sets, when, and how many targets they identify.
+fn sets_title(state: &FinalState) -> String {
+    let sets = &state.sets;
     let truth_ids: Vec<u32> = state.targets.iter().map(|t| t.id).collect();
     let found = truth_ids
         .iter()
         .filter(|id| sets.targets.contains_key(id))
         .count();
-    let title = format!(
+    format!(
         "UAV {}'s final sets at t = {:.1} s (step {}): {found} of {} targets identified, \
          areas in % of the region",
         state.uav,
         state.time_s,
         state.step,
         truth_ids.len()
-    );
-    let (title_area, body) = root.split_vertically(TITLE_PX);
-    draw_title(&title_area, &title)?;
-    let (panel, legend) = body.split_horizontally(PANEL.0);
+    )
+}
 
-    // The view holds the region and anything drawn outside it.
+/// Half the side of the view: it holds the region and anything drawn outside it.
+fn view_half_extent(state: &FinalState, tracks: &[Vec<[f64; 2]>], scenario: &Scenario) -> f64 {
     let reach = tracks
         .iter()
         .flatten()
@@ -95,13 +117,15 @@ pub(super) fn paint_sets(
         .filter(|v| v.is_finite())
         .fold(0.0_f64, f64::max);
     let h = scenario.region.half_extent_m;
-    let half = if reach > h { reach * 1.03 } else { h };
-    let mut chart = build_chart(&panel, half)?;
-    let raster = PlotRaster::of(&chart, half)?;
+    if reach > h { reach * 1.03 } else { h }
+}
 
+/// The ground under the sets: open inside the grid, the view past it, and the buildings
+/// shaded by height.
+fn paint_ground(raster: &PlotRaster, scenario: &Scenario, buildings: &[Building]) -> Pixels {
     let [lo, hi] = scenario.region.building_height_m;
-    let mut pixels = Pixels::new(&raster);
-    let bounds = grid.bounds();
+    let mut pixels = Pixels::new(raster);
+    let bounds = scenario.grid().bounds();
     for py in 0..raster.height {
         let y = raster.y_centre(py);
         for px in 0..raster.width {
@@ -111,11 +135,16 @@ pub(super) fn paint_sets(
         }
     }
     for b in buildings {
-        pixels.fill_rect(&raster, b, rgb(building_shade(b.height, lo, hi)));
+        pixels.fill_rect(raster, b, rgb(building_shade(b.height, lo, hi)));
     }
+    pixels
+}
 
-    let cols = raster.cell_columns(&grid);
-    let rows = raster.cell_rows(&grid);
+/// Blends the set layers over the ground: explored ground, `S^o`, `X̄`, each `X_j` (edged in
+/// its colour), then the hatch of `H̄`.
+fn paint_layers(pixels: &mut Pixels, raster: &PlotRaster, sets: &FusedSets, grid: &GroundGrid) {
+    let cols = raster.cell_columns(grid);
+    let rows = raster.cell_rows(grid);
     let explored = mask(&sets.explored, &cols, &rows);
     let neighbourhood = mask(&sets.obstacle_free, &cols, &rows);
     let undetected = mask(&sets.undetected, &cols, &rows);
@@ -154,10 +183,15 @@ pub(super) fn paint_sets(
             pixels.put(px as u32, py as u32, c);
         }
     }
-    raster.blit(root, pixels)?;
-    draw_axes(&mut chart)?;
-    draw_outlines(&mut chart, buildings)?;
+}
 
+/// Each UAV's track with its last position, then the true targets, each labelled.
+fn draw_markers(
+    root: &Area<'_>,
+    chart: &Chart<'_, '_>,
+    state: &FinalState,
+    tracks: &[Vec<[f64; 2]>],
+) -> anyhow::Result<()> {
     let label = |text: String, at: (i32, i32), pos: Pos| {
         let style = (FONT, 14).into_font().color(&BLACK).pos(pos);
         root.draw(&Text::new(text, at, style))
@@ -193,10 +227,21 @@ pub(super) fn paint_sets(
             Pos::new(HPos::Left, VPos::Bottom),
         )?;
     }
-    draw_frame(&mut chart, half)?;
+    Ok(())
+}
 
+/// The legend: the layers with their areas, the target sets and the `uavs` UAVs.
+fn draw_legend(
+    area: &Area<'_>,
+    sets: &FusedSets,
+    uavs: usize,
+    scenario: &Scenario,
+) -> anyhow::Result<()> {
+    let grid = scenario.grid();
+    let cells = grid.cell_count() as u64;
+    let [lo, hi] = scenario.region.building_height_m;
     let share = |set: &CellSet| format!("{:.1} %", percent(set.count(), cells));
-    let mut keys = Legend::new(&legend);
+    let mut keys = Legend::new(area);
     keys.heading("Layers")?;
     keys.entry(
         &Swatch::Building(building_shade(0.5 * (lo + hi), lo, hi)),
@@ -250,17 +295,17 @@ pub(super) fn paint_sets(
     keys.entry(&Swatch::Target, None, "true target T<id>")?;
     keys.gap();
     keys.heading("UAVs")?;
-    for i in 0..tracks.len().min(LEGEND_MAX_ROWS) {
+    for i in 0..uavs.min(LEGEND_MAX_ROWS) {
         keys.entry(
             &Swatch::Track(palette(i)),
             None,
             &format!("UAV {i}: track, last position"),
         )?;
     }
-    if tracks.len() > LEGEND_MAX_ROWS {
-        keys.text(&format!("and {} more", tracks.len() - LEGEND_MAX_ROWS))?;
+    if uavs > LEGEND_MAX_ROWS {
+        keys.text(&format!("and {} more", uavs - LEGEND_MAX_ROWS))?;
     }
-    Ok(raster)
+    Ok(())
 }
 
 /// Fails unless every set of `state` lives on the scenario's grid.
