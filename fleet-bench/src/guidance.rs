@@ -349,7 +349,7 @@ fn decision_case(name: &str, others: usize, s: &Stats) -> BenchCase {
 mod tests {
     use super::*;
     use protocol::camera::CameraPose;
-    use protocol::math::Point3;
+    use sets::math::Point3;
 
     fn view(uav: u32) -> PlannedView {
         PlannedView {

@@ -11,7 +11,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::math::{Point2, Point3, Real, Rotation3, Vector3, convex_hull};
+use sets::math::{Point2, Point3, Real, Rotation3, Vector3, convex_hull};
 
 /// Relative inflation applied to depth intervals, covering the `f32` rounding of the depth on
 /// the wire (2^-24) with a wide margin.

@@ -9,7 +9,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::math::{Point3, Real, wrap_angle};
+use sets::math::{Point3, Real, wrap_angle};
 
 /// Where a UAV is and where it points.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -37,7 +37,7 @@ pub struct UavState {
 ///
 /// ```
 /// use protocol::flight::{UavState, advance};
-/// use protocol::math::Point3;
+/// use sets::math::Point3;
 ///
 /// let s = UavState { position: Point3::new(0.0, 0.0, 80.0), yaw: 0.0 };
 /// let next = advance(s, 0.0, 0.5, 10.0, 1.0);

@@ -9,7 +9,7 @@ use std::mem::MaybeUninit;
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::camera::{Camera, CameraModel, CameraPose};
-use crate::math::Point3;
+use sets::math::Point3;
 
 /// Pixels a frame can hold: the default camera, 360 x 480.
 pub const FRAME_MAX_PIXELS: usize = 360 * 480;

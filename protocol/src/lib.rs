@@ -1,10 +1,9 @@
 //! # protocol
 //!
-//! The shared vocabulary of setfleet: everything two processes must agree on.
+//! The shared vocabulary of setfleet: everything two processes must agree on. The geometry,
+//! the ground grid and the sets are the `sets` crate's.
 //!
 //! - [`camera`]: the pinhole camera used by both the renderer and the estimator.
-//! - [`math`], [`grid`] and [`raster`]: the `sets` crate's geometry, ground grid and
-//!   bit-raster sets, re-exported while the crates that use them move to `sets` itself.
 //! - [`scenario`]: the TOML scenario with the paper's defaults built in.
 //! - [`frame`]: the fixed-size CVS frame rendered in place into shared memory.
 //! - [`wire`]: commands, truth, estimates and the guidance token.
@@ -24,8 +23,6 @@
 //! - [`variant`]: the guidance variants, named sets of scenario settings.
 
 #![warn(missing_docs)]
-
-pub use sets::{grid, math, raster};
 
 pub mod camera;
 pub mod codec;

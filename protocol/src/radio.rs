@@ -270,7 +270,7 @@ mod tests {
     use proptest::prelude::*;
 
     use super::*;
-    use crate::math::Point3;
+    use sets::math::Point3;
 
     fn lossy(seed: u64, loss: f64) -> Radio {
         Radio::perfect().with_loss(seed, loss)

@@ -44,7 +44,7 @@ use serde::{Deserialize, Serialize};
 use toml::{Table, Value};
 
 use crate::camera::CameraModel;
-use crate::grid::GroundGrid;
+use sets::grid::GroundGrid;
 
 mod overrides;
 mod validate;
@@ -265,11 +265,11 @@ pub enum SetGrowth {
     /// is rounded out to whole cells at every step.
     Cells,
     /// Each cell remembers how far the set's targets are from it, so sets grow by exactly the
-    /// motion (`protocol::raster::reach`).
+    /// motion (`sets::raster::reach`).
     #[default]
     Reach,
     /// As `reach`, and the distances go around the ground proven to be within `r_s` of an
-    /// obstacle, which no car can cross (`protocol::raster::geodesic`).
+    /// obstacle, which no car can cross (`sets::raster::geodesic`).
     Geodesic,
 }
 

@@ -9,7 +9,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::CameraPose;
-use crate::raster::delta::SetCode;
+use sets::raster::delta::SetCode;
 
 /// Version of every message layout in this module and in [`crate::frame`]. 6: estimates carry
 /// the sender's `P^g` ([`EstimateMsg::free_ground`]).
@@ -378,7 +378,7 @@ pub struct EstimateMsg {
     /// Outer sets `X_j` of identified targets.
     pub targets: Vec<TargetSetMsg>,
     /// Inner set `S^o` of ground near obstacles, accumulated.
-    pub obstacle_free: SetCode,
+    pub obstacle_neighbourhood: SetCode,
     /// Ground proven free at some frame so far (union of `P^g`), for the explored metric.
     pub explored: SetCode,
     /// Ground hidden in this frame, `H^CVS`.

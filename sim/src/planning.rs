@@ -1,8 +1,8 @@
 //! What one UAV's planner looks at, gathered from its estimator.
 
 use protocol::flight::UavState;
-use protocol::raster::CellSet;
 use protocol::wire::PlannedView;
+use sets::raster::CellSet;
 use uav_agent::estimator::Estimator;
 use uav_agent::guidance::{ObstacleCell, PlanningInput};
 

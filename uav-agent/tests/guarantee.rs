@@ -3,10 +3,10 @@
 //! identified target is in its `X_j`, and no proven-free cell (`P^g`, `S^o`) holds a target.
 
 use protocol::frame::CvsFrame;
-use protocol::grid::GroundGrid;
-use protocol::math::Point2;
 use protocol::scenario::Scenario;
 use protocol::wire::TruthState;
+use sets::grid::GroundGrid;
+use sets::math::Point2;
 use sim::{Fleet, FleetOptions};
 use uav_agent::estimator::measure::{self, FrameView};
 use uav_agent::estimator::{EstimatorConfig, EstimatorState};
@@ -45,7 +45,7 @@ fn check_state(
             t.id
         );
         assert!(
-            !state.obstacle_free.contains(cell),
+            !state.obstacle_neighbourhood.contains(cell),
             "{context}: target {} at {p:?} inside S^o",
             t.id
         );
@@ -66,7 +66,7 @@ fn check_frame(config: &EstimatorConfig, frame: &CvsFrame, truth: &TruthState, c
     let view = FrameView::new(frame, config.depth_noise);
     let grid = &config.grid;
     let free = measure::free_ground(&view, grid);
-    let so = measure::obstacle_free(&view, grid, config.safety_distance_m, 1);
+    let so = measure::obstacle_neighbourhood(&view, grid, config.safety_distance_m, 1);
     for t in truth.targets() {
         let p = Point2::new(t.ground[0], t.ground[1]);
         if let Some(cell) = grid.cell_of(&p) {

@@ -1,7 +1,7 @@
 //! The occupancy elevation map built from real frames, compared with the world's buildings.
 
-use protocol::grid::Rect;
 use protocol::scenario::Scenario;
+use sets::grid::Rect;
 use sim::{Fleet, FleetOptions};
 use uav_agent::occupancy::OemStatus;
 

@@ -7,8 +7,8 @@
 //! `SETFLEET_PRINT_DIGESTS=1 cargo test -p uav-agent --test pinned -- --nocapture` prints the
 //! digests a run computes (to record them after a deliberate change of the results).
 
-use protocol::raster::{CellSet, ReachSet};
 use protocol::scenario::{Scenario, SetGrowth};
+use sets::raster::{CellSet, ReachSet};
 use sim::{Fleet, FleetOptions};
 use uav_agent::estimator::EstimatorState;
 use uav_agent::occupancy::OccupancyMap;
@@ -59,7 +59,7 @@ fn state_digest(state: &EstimatorState) -> u64 {
         h.word(u64::from(*id));
         fold_reach(&mut h, set);
     }
-    fold_cells(&mut h, &state.obstacle_free);
+    fold_cells(&mut h, &state.obstacle_neighbourhood);
     fold_map(&mut h, &state.oem);
     h.0
 }

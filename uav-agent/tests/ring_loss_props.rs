@@ -16,9 +16,9 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
 use proptest::prelude::*;
 use protocol::camera::CameraPose;
-use protocol::math::Point3;
 use protocol::radio::{LinkKind, Radio};
 use protocol::wire::{GuidanceToken, PlannedView};
+use sets::math::Point3;
 use uav_agent::guidance::{TokenRing, Turn};
 
 /// Steps per guidance period.

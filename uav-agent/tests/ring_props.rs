@@ -21,8 +21,8 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use proptest::prelude::*;
 use protocol::camera::CameraPose;
-use protocol::math::Point3;
 use protocol::wire::{GuidanceToken, PlannedView};
+use sets::math::Point3;
 use uav_agent::guidance::{TokenRing, Turn};
 
 /// The bounded wait for one holder, in ticks.

@@ -4,8 +4,8 @@
 use std::f64::consts::{FRAC_PI_4, PI, TAU};
 
 use protocol::flight::{UavState, advance};
-use protocol::math::{Point3, Real};
 use protocol::scenario::Scenario;
+use sets::math::{Point3, Real};
 
 use crate::error::WorldBuildError;
 
@@ -57,7 +57,7 @@ impl Fleet {
                     u.altitudes_m[i]
                 };
                 let bearing = FRAC_PI_4 + TAU * i as Real / n as Real;
-                let yaw = protocol::math::wrap_angle(bearing + PI);
+                let yaw = sets::math::wrap_angle(bearing + PI);
                 Uav {
                     state: UavState {
                         position: Point3::new(radius * bearing.cos(), radius * bearing.sin(), z),
@@ -87,7 +87,7 @@ impl Fleet {
         if let Some(u) = self.uavs.get_mut(i)
             && yaw_ref.is_finite()
         {
-            u.commanded_yaw_ref = protocol::math::wrap_angle(yaw_ref);
+            u.commanded_yaw_ref = sets::math::wrap_angle(yaw_ref);
         }
     }
 

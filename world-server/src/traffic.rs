@@ -16,10 +16,10 @@
 
 use std::collections::VecDeque;
 
-use protocol::math::{Point2, Real};
 use protocol::scenario::Scenario;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+use sets::math::{Point2, Real};
 
 use crate::error::WorldBuildError;
 use crate::scene::{Axis, Lane, RoadGrid, RoadProfile};

@@ -5,11 +5,11 @@ use std::sync::Arc;
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, TargetBox};
-use protocol::math::{Point3, Real};
 use protocol::scenario::Scenario;
 use protocol::wire::{MAX_UAVS, TRUTH_MAX_TARGETS, TargetTruth, TruthState, UavTruth};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use sets::math::{Point3, Real};
 
 use crate::error::WorldBuildError;
 use crate::fleet::{Fleet, Uav};

@@ -7,10 +7,10 @@ use parry3d_f64::query::{Ray, RayCast};
 use protocol::camera::{Camera, range_interval};
 use protocol::flight::UavState;
 use protocol::frame::{CvsFrame, Label};
-use protocol::math::{Point2, Point3, Real, Vector3};
 use protocol::scenario::Scenario;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use sets::math::{Point2, Point3, Real, Vector3};
 use world_server::World;
 use world_server::render::{ObjectKind, SceneObject};
 

@@ -2,10 +2,10 @@
 //! `v_max`, for whole runs; and the world is deterministic, bit for bit.
 
 use protocol::frame::CvsFrame;
-use protocol::math::{Point2, Real};
 use protocol::scenario::Scenario;
 use protocol::wire::TruthState;
 use rayon::ThreadPoolBuilder;
+use sets::math::{Point2, Real};
 use world_server::{World, WorldBuildError};
 
 /// Runs `steps` steps, steering the UAVs with a fixed pattern, and checks every car at every

@@ -19,9 +19,9 @@ use protocol::camera::CameraPose;
 use protocol::codec;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, RunNode, WakeEvent};
-use protocol::math::Point3;
 use protocol::service::RunId;
 use protocol::wire::{GuidanceToken, PlannedView, WireHeader, WireKind, unix_now_ns};
+use sets::math::Point3;
 use uav_agent::guidance::ring::ROUND_COMPLETE;
 use uav_agent::guidance::{TokenRing, Turn};
 

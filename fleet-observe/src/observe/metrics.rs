@@ -35,11 +35,11 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use protocol::grid::{CellIndex, GroundGrid};
-use protocol::math::Point2;
 use protocol::radio::Radio;
-use protocol::raster::CellSet;
 use protocol::wire::{AgentStats, TargetTruth};
+use sets::grid::{CellIndex, GroundGrid};
+use sets::math::Point2;
+use sets::raster::CellSet;
 use uav_agent::estimator::fusion::SharedSet;
 use uav_agent::estimator::message::{self, EstimateInbox};
 use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate, Unseen};
@@ -119,7 +119,7 @@ pub struct FusedSets {
     /// `X_j` per identified id.
     pub targets: BTreeMap<u32, SharedSet>,
     /// `S^o`.
-    pub obstacle_free: SharedSet,
+    pub obstacle_neighbourhood: SharedSet,
     /// Explored ground.
     pub explored: SharedSet,
     /// `H̄`.
@@ -161,7 +161,7 @@ impl FusedSets {
         FusedSets {
             undetected: fused.undetected,
             targets: fused.targets,
-            obstacle_free: fused.obstacle_free,
+            obstacle_neighbourhood: fused.obstacle_neighbourhood,
             explored: fused.explored,
             unseen: unseen.into_cells(),
         }
@@ -457,10 +457,10 @@ pub(crate) mod tests {
     use std::sync::Arc;
 
     use protocol::camera::CameraPose;
-    use protocol::math::Point3;
     use protocol::radio::LinkKind;
-    use protocol::raster::ReachSet;
     use protocol::scenario::Scenario;
+    use sets::math::Point3;
+    use sets::raster::ReachSet;
     use uav_agent::estimator::EstimatorState;
 
     use super::*;
@@ -509,7 +509,7 @@ pub(crate) mod tests {
                 pose: None,
                 undetected: CellSet::full(grid).into(),
                 targets: BTreeMap::new(),
-                obstacle_free: CellSet::empty(grid).into(),
+                obstacle_neighbourhood: CellSet::empty(grid).into(),
                 explored: CellSet::empty(grid).into(),
                 hidden: CellSet::empty(grid).into(),
                 free_ground: CellSet::empty(grid).into(),
@@ -587,7 +587,7 @@ pub(crate) mod tests {
                         .targets
                         .insert(3, scattered(seed + 4, 0.6).into());
                 }
-                e.estimate.obstacle_free = scattered(seed + 5, 0.1).into();
+                e.estimate.obstacle_neighbourhood = scattered(seed + 5, 0.1).into();
                 e.estimate.explored = scattered(seed + 6, 0.3).into();
                 e.estimate.hidden = scattered(seed + 7, 0.2).into();
                 e.estimate.free_ground = scattered(seed + 9, 0.2).into();
@@ -619,7 +619,10 @@ pub(crate) mod tests {
                 .map(|(id, s)| (*id, Arc::new(s.cells().clone())))
                 .collect();
             assert_eq!(observed.targets, cells, "X_j of {}", own.uav());
-            assert_eq!(*observed.obstacle_free, state.obstacle_free);
+            assert_eq!(
+                *observed.obstacle_neighbourhood,
+                state.obstacle_neighbourhood
+            );
             assert_eq!(*observed.explored, state.explored);
             assert_eq!(&observed.unseen, state.hidden_history.unseen());
             assert_eq!(
@@ -791,7 +794,7 @@ pub(crate) mod tests {
             .iter()
             .map(|(id, s)| (*id, ReachSet::with_cells((**s).clone())))
             .collect();
-        state.obstacle_free = (*e.obstacle_free).clone();
+        state.obstacle_neighbourhood = (*e.obstacle_neighbourhood).clone();
         state.explored = (*e.explored).clone();
         state.hidden = (*e.hidden).clone();
         state.free_ground = (*e.free_ground).clone();

@@ -171,7 +171,7 @@ impl AgentTally {
 
 #[cfg(test)]
 mod tests {
-    use protocol::grid::GroundGrid;
+    use sets::grid::GroundGrid;
 
     use super::*;
 

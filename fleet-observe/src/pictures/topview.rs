@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use plotters::prelude::*;
-use protocol::math::Point2;
+use sets::math::Point2;
 use world_server::World;
 
 use super::{FONT, palette};

@@ -152,7 +152,7 @@ pub struct AgentSummary {
     pub estimates_lost: u64,
     /// Tokens the simulated radio lost on their way to the agent.
     pub tokens_lost: u64,
-    /// Fingerprint ([`protocol::raster::CellSet::digest`]) of the agent's `X̄` after its last
+    /// Fingerprint ([`sets::raster::CellSet::digest`]) of the agent's `X̄` after its last
     /// measured step's fusion, as the observer rebuilt it: the agent's own report
     /// (`final_undetected_digest` in its log) holds the same value when the observer
     /// reproduced its fusions exactly and the run ended at that step.

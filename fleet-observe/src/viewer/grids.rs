@@ -10,9 +10,9 @@ use foxglove::messages::{
     Grid, PackedElementField, Pose, Quaternion, Timestamp, Vector2, Vector3,
     packed_element_field::NumericType,
 };
-use protocol::grid::GroundGrid;
-use protocol::math::Point2;
-use protocol::raster::{CellBox, CellSet};
+use sets::grid::GroundGrid;
+use sets::math::Point2;
+use sets::raster::{CellBox, CellSet};
 use uav_agent::occupancy::OccupancyMap;
 
 use super::topics::WORLD_FRAME;

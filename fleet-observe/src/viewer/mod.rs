@@ -44,8 +44,8 @@ use foxglove::{
 };
 use protocol::camera::CameraModel;
 use protocol::frame::CvsFrame;
-use protocol::grid::GroundGrid;
 use protocol::scenario::Scenario;
+use sets::grid::GroundGrid;
 use world_server::scene::Building;
 
 use crate::observe::StepMetrics;
@@ -290,7 +290,7 @@ impl Viewer {
         let c = &mut self.channels;
         for (channel, set) in [
             (&c.undetected, &*sets.undetected),
-            (&c.obstacle_neighbourhood, &*sets.obstacle_free),
+            (&c.obstacle_neighbourhood, &*sets.obstacle_neighbourhood),
             (&c.unseen, &sets.unseen),
             (&c.explored, &*sets.explored),
         ] {

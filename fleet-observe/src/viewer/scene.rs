@@ -274,7 +274,7 @@ fn camera_mount(tilt: f64) -> Quaternion {
 
 fn camera_pose(position: [f64; 3], yaw: f64) -> CameraPose {
     CameraPose {
-        position: protocol::math::Point3::new(position[0], position[1], position[2]),
+        position: sets::math::Point3::new(position[0], position[1], position[2]),
         yaw,
     }
 }

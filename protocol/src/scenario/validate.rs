@@ -13,8 +13,8 @@ use toml::{Table, Value};
 
 use super::{Scenario, ScenarioError};
 use crate::frame::{FRAME_MAX_BOXES, FRAME_MAX_PIXELS};
-use crate::grid::GroundGrid;
 use crate::wire::{MAX_UAVS, TRUTH_MAX_TARGETS};
+use sets::grid::GroundGrid;
 
 /// Arrays whose length the user chooses; every other array has the length of its default.
 const VARIABLE_LENGTH_ARRAYS: &[&str] = &["uavs.altitudes_m", "guidance.yaw_increments_rad"];

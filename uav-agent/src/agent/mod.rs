@@ -222,7 +222,7 @@ pub struct AgentReport {
     pub peer_timeouts: u64,
     /// Cells of `X̄` after the last fusion.
     pub final_undetected_cells: u64,
-    /// Fingerprint of `X̄` after the last fusion ([`protocol::raster::CellSet::digest`]):
+    /// Fingerprint of `X̄` after the last fusion ([`sets::raster::CellSet::digest`]):
     /// agents that fused the same estimates hold the same set.
     pub final_undetected_digest: u64,
     /// Step of the last frame.
@@ -1029,7 +1029,7 @@ impl Agent<'_> {
         let Some(pose) = state.pose else {
             return Err(AgentError::NoPose(k));
         };
-        let sets: Vec<&protocol::raster::CellSet> = state.target_sets().collect();
+        let sets: Vec<&sets::raster::CellSet> = state.target_sets().collect();
         let hidden = state.hidden_history.recently_hidden();
         let obstacles = ObstacleCell::known(&state.oem);
         let decision = guidance::decide(

@@ -23,10 +23,10 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 use protocol::camera::CameraPose;
-use protocol::grid::GroundGrid;
 use protocol::radio::Endpoint;
-use protocol::raster::{CellSet, ReachSet};
 use protocol::scenario::SetGrowth;
+use sets::grid::GroundGrid;
+use sets::raster::{CellSet, ReachSet};
 
 use super::predict;
 use super::{EstimatorConfig, EstimatorState};
@@ -58,7 +58,7 @@ pub struct PeerEstimate {
     /// `X_j`, outer, per identified id.
     pub targets: BTreeMap<u32, SharedSet>,
     /// `S^o`, inner.
-    pub obstacle_free: SharedSet,
+    pub obstacle_neighbourhood: SharedSet,
     /// Explored ground.
     pub explored: SharedSet,
     /// `H^CVS`.
@@ -140,7 +140,7 @@ struct Lattice<'a, S: FusedSet> {
     step: u64,
     undetected: &'a mut S,
     targets: &'a mut BTreeMap<u32, S>,
-    obstacle_free: &'a mut CellSet,
+    obstacle_neighbourhood: &'a mut CellSet,
     explored: &'a mut CellSet,
     hidden: &'a mut CellSet,
     free_ground: &'a mut CellSet,
@@ -164,7 +164,7 @@ fn fuse_into<S: FusedSet>(
     };
     let shapes_ok = [
         &src.undetected,
-        &src.obstacle_free,
+        &src.obstacle_neighbourhood,
         &src.explored,
         &src.hidden,
         &src.free_ground,
@@ -209,7 +209,8 @@ fn fuse_into<S: FusedSet>(
         }
     }
     dst.undetected.meet(&src_undetected);
-    dst.obstacle_free.or_assign(&src.obstacle_free);
+    dst.obstacle_neighbourhood
+        .or_assign(&src.obstacle_neighbourhood);
     dst.explored.or_assign(&src.explored);
     dst.hidden.or_assign(&src.hidden);
     dst.free_ground.or_assign(&src.free_ground);
@@ -226,7 +227,7 @@ impl EstimatorState {
                 step,
                 undetected: &mut self.undetected,
                 targets: &mut self.targets,
-                obstacle_free: &mut self.obstacle_free,
+                obstacle_neighbourhood: &mut self.obstacle_neighbourhood,
                 explored: &mut self.explored,
                 hidden: &mut self.hidden,
                 free_ground: &mut self.free_ground,
@@ -275,7 +276,7 @@ impl EstimatorState {
                 .iter()
                 .map(|(id, s)| (*id, Arc::new(s.cells().clone())))
                 .collect(),
-            obstacle_free: Arc::new(self.obstacle_free.clone()),
+            obstacle_neighbourhood: Arc::new(self.obstacle_neighbourhood.clone()),
             explored: Arc::new(self.explored.clone()),
             hidden: Arc::new(self.hidden.clone()),
             free_ground: Arc::new(self.free_ground.clone()),
@@ -304,7 +305,7 @@ impl PeerEstimate {
                 step: self.step,
                 undetected: &mut self.undetected,
                 targets: &mut self.targets,
-                obstacle_free: Arc::make_mut(&mut self.obstacle_free),
+                obstacle_neighbourhood: Arc::make_mut(&mut self.obstacle_neighbourhood),
                 explored: Arc::make_mut(&mut self.explored),
                 hidden: Arc::make_mut(&mut self.hidden),
                 free_ground: Arc::make_mut(&mut self.free_ground),
@@ -337,8 +338,8 @@ fn learned_set(undetected: &ReachSet, theirs: &CellSet, config: &EstimatorConfig
 pub(crate) mod tests {
     use proptest::prelude::*;
     use proptest::strategy::ValueTree;
-    use protocol::grid::CellIndex;
-    use protocol::math::Point2;
+    use sets::grid::CellIndex;
+    use sets::math::Point2;
 
     use super::*;
     use crate::occupancy::OemCell;
@@ -394,7 +395,7 @@ pub(crate) mod tests {
                         pose: None,
                         undetected: undetected.into(),
                         targets: targets.into_iter().map(|(id, s)| (id, s.into())).collect(),
-                        obstacle_free: so.into(),
+                        obstacle_neighbourhood: so.into(),
                         explored: explored.into(),
                         hidden: hidden.into(),
                         free_ground: free_ground.into(),
@@ -420,7 +421,7 @@ pub(crate) mod tests {
         (
             p.undetected.clone(),
             p.targets.clone(),
-            p.obstacle_free.clone(),
+            p.obstacle_neighbourhood.clone(),
             p.explored.clone(),
             p.hidden.clone(),
             p.free_ground.clone(),
@@ -517,7 +518,7 @@ pub(crate) mod tests {
             .iter()
             .map(|(k, v)| (*k, ReachSet::with_cells((**v).clone())))
             .collect();
-        state.obstacle_free = (*a.obstacle_free).clone();
+        state.obstacle_neighbourhood = (*a.obstacle_neighbourhood).clone();
         state.explored = (*a.explored).clone();
         state.hidden = (*a.hidden).clone();
         state.free_ground = (*a.free_ground).clone();

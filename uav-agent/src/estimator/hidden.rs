@@ -18,9 +18,9 @@
 
 use std::collections::BTreeMap;
 
-use protocol::grid::GroundGrid;
-use protocol::raster::CellSet;
 use serde::{Deserialize, Serialize};
+use sets::grid::GroundGrid;
+use sets::raster::CellSet;
 
 use super::snapshot::{cell_set, cell_set_map};
 

@@ -14,7 +14,7 @@
 //!   target pixel's depth frustum in the box ([`Camera::pixel_frustum_ground_hull`]), grown by
 //!   a polygon circumscribing the disc of radius `r_t`. The hull contains the union, the
 //!   circumscribed polygon contains the disc, so the result contains the union dilated by `r_t`.
-//! - [`obstacle_free`] (`S^o`, inner): the depth is the range of a pixel's *centre* ray, so an
+//! - [`obstacle_neighbourhood`] (`S^o`, inner): the depth is the range of a pixel's *centre* ray, so an
 //!   obstacle pixel proves an obstacle point on that ray within `[lo, hi]`; its horizontal
 //!   position is within `e = (hi - lo) / 2 * |ray_xy|` of the interval's midpoint, and the disc
 //!   of radius `r_s - e` around the midpoint is within `r_s` of the obstacle point. This is
@@ -30,9 +30,9 @@
 
 use protocol::camera::{Camera, range_interval};
 use protocol::frame::{CvsFrame, Label, TargetBox};
-use protocol::grid::GroundGrid;
-use protocol::math::{Point2, Real, Vector3, convex_hull, floor_fast};
-use protocol::raster::{CellSet, Coverage};
+use sets::grid::GroundGrid;
+use sets::math::{Point2, Real, Vector3, convex_hull, floor_fast};
+use sets::raster::{CellSet, Coverage};
 
 use crate::occupancy::OccupancyMap;
 
@@ -539,21 +539,21 @@ pub fn target_measurement(
 }
 
 /// `S^o` of this frame, inner (see the module docs for the rule and the pixel subset).
-pub fn obstacle_free(
+pub fn obstacle_neighbourhood(
     view: &FrameView<'_>,
     grid: &GroundGrid,
     safety_distance_m: Real,
     stride: u32,
 ) -> CellSet {
     let mut out = CellSet::empty(grid);
-    add_obstacle_free(view, grid, safety_distance_m, stride, &mut out);
+    add_obstacle_neighbourhood(view, grid, safety_distance_m, stride, &mut out);
     out
 }
 
-/// `out ∪=` [`obstacle_free`] of this frame. Folding a frame into the `S^o` accumulated so
+/// `out ∪=` [`obstacle_neighbourhood`] of this frame. Folding a frame into the `S^o` accumulated so
 /// far costs less than building the frame's own and joining it: a disc whose cells the set
 /// already holds is skipped before it is rasterised, and most obstacles were seen before.
-pub fn add_obstacle_free(
+pub fn add_obstacle_neighbourhood(
     view: &FrameView<'_>,
     grid: &GroundGrid,
     safety_distance_m: Real,
@@ -639,7 +639,7 @@ pub fn observe_map(view: &FrameView<'_>, map: &mut OccupancyMap) -> usize {
 #[cfg(test)]
 mod tests {
     use protocol::camera::{CameraModel, CameraPose};
-    use protocol::math::Point3;
+    use sets::math::Point3;
 
     use super::*;
 
@@ -841,7 +841,7 @@ mod tests {
         let view = FrameView::new(&f, [-0.01, 0.01]);
         let grid = GroundGrid::new(100.0, 0.5);
         let rs = 3.0;
-        let so = obstacle_free(&view, &grid, rs, 1);
+        let so = obstacle_neighbourhood(&view, &grid, rs, 1);
         assert!(so.count() > 0);
         let cam = view.camera();
         // Every S^o cell must be within r_s of the obstacle point of some obstacle pixel, at

@@ -44,11 +44,11 @@ use std::sync::Arc;
 
 use protocol::camera::CameraPose;
 use protocol::codec::{self, DecodeError, EncodeError};
-use protocol::grid::GroundGrid;
-use protocol::math::Point3;
-use protocol::raster::CellSet;
-use protocol::raster::delta::{DeltaError, SetCode};
 use protocol::wire::{DropReason, EstimateMsg, TargetSetMsg, uav_bit};
+use sets::grid::GroundGrid;
+use sets::math::Point3;
+use sets::raster::CellSet;
+use sets::raster::delta::{DeltaError, SetCode};
 
 use super::fusion::SharedSet;
 use super::{EstimatorConfig, EstimatorState, PeerEstimate};
@@ -63,7 +63,7 @@ pub struct EstimateSets {
     /// `X_j` per identified id.
     pub targets: BTreeMap<u32, SharedSet>,
     /// `S^o`.
-    pub obstacle_free: SharedSet,
+    pub obstacle_neighbourhood: SharedSet,
     /// The explored ground.
     pub explored: SharedSet,
     /// `H^CVS`.
@@ -85,7 +85,7 @@ impl EstimateSets {
                 .iter()
                 .map(|(&id, set)| (id, share(set.cells())))
                 .collect(),
-            obstacle_free: share(&state.obstacle_free),
+            obstacle_neighbourhood: share(&state.obstacle_neighbourhood),
             explored: share(&state.explored),
             hidden: share(&state.hidden),
             free_ground: share(&state.free_ground),
@@ -163,14 +163,17 @@ impl EstimateOutbox {
                 set: code(set, base.and_then(|b| b.targets.get(&id))),
             })
             .collect();
-        let obstacle_free = code(&sets.obstacle_free, base.map(|b| &b.obstacle_free));
+        let obstacle_neighbourhood = code(
+            &sets.obstacle_neighbourhood,
+            base.map(|b| &b.obstacle_neighbourhood),
+        );
         let explored = code(&sets.explored, base.map(|b| &b.explored));
         let hidden = code(&sets.hidden, base.map(|b| &b.hidden));
         let free_ground = code(&sets.free_ground, base.map(|b| &b.free_ground));
         let unseen = code(&sets.unseen, base.map(|b| &b.unseen));
         let any_delta = [
             &undetected,
-            &obstacle_free,
+            &obstacle_neighbourhood,
             &explored,
             &hidden,
             &free_ground,
@@ -194,7 +197,7 @@ impl EstimateOutbox {
             }),
             undetected,
             targets,
-            obstacle_free,
+            obstacle_neighbourhood,
             explored,
             hidden,
             free_ground,
@@ -219,7 +222,7 @@ pub enum SetRole {
     /// `X_j` of this id.
     Target(u32),
     /// `S^o`.
-    ObstacleFree,
+    ObstacleNeighbourhood,
     /// The explored ground.
     Explored,
     /// `H^CVS`.
@@ -334,11 +337,11 @@ fn rebuild(
             base.map(|b| &b.undetected),
         )?,
         targets,
-        obstacle_free: decode_set(
+        obstacle_neighbourhood: decode_set(
             grid,
-            SetRole::ObstacleFree,
-            &msg.obstacle_free,
-            base.map(|b| &b.obstacle_free),
+            SetRole::ObstacleNeighbourhood,
+            &msg.obstacle_neighbourhood,
+            base.map(|b| &b.obstacle_neighbourhood),
         )?,
         explored: decode_set(
             grid,
@@ -365,7 +368,7 @@ fn rebuild(
         pose: pose_ok.then_some(msg.pose),
         undetected: sets.undetected.clone(),
         targets: sets.targets.clone(),
-        obstacle_free: sets.obstacle_free.clone(),
+        obstacle_neighbourhood: sets.obstacle_neighbourhood.clone(),
         explored: sets.explored.clone(),
         hidden: sets.hidden.clone(),
         free_ground: sets.free_ground.clone(),
@@ -476,8 +479,8 @@ impl PeerEstimate {
 mod tests {
     use proptest::prelude::*;
     use proptest::strategy::ValueTree;
-    use protocol::raster::{EncodedSet, ReachSet};
     use protocol::wire::OemCellUpdate;
+    use sets::raster::{EncodedSet, ReachSet};
 
     use super::*;
     use crate::estimator::fusion::tests::{config, peer_strategy};
@@ -493,7 +496,7 @@ mod tests {
             .iter()
             .map(|(id, set)| (*id, ReachSet::with_cells((**set).clone())))
             .collect();
-        s.obstacle_free = (*p.obstacle_free).clone();
+        s.obstacle_neighbourhood = (*p.obstacle_neighbourhood).clone();
         s.explored = (*p.explored).clone();
         s.hidden = (*p.hidden).clone();
         s.free_ground = (*p.free_ground).clone();
@@ -528,7 +531,7 @@ mod tests {
             prop_assert_eq!((back.uav, back.step, back.incarnation), (2, 5, 9));
             prop_assert_eq!(&back.undetected, &p.undetected);
             prop_assert_eq!(&back.targets, &p.targets);
-            prop_assert_eq!(&back.obstacle_free, &p.obstacle_free);
+            prop_assert_eq!(&back.obstacle_neighbourhood, &p.obstacle_neighbourhood);
             prop_assert_eq!(&back.explored, &p.explored);
             prop_assert_eq!(&back.hidden, &p.hidden);
             prop_assert_eq!(&back.free_ground, &p.free_ground);
@@ -553,7 +556,7 @@ mod tests {
                 let back = inbox.read_bytes(&bytes, &cfg).unwrap();
                 prop_assert_eq!(&back.undetected, &p.undetected);
                 prop_assert_eq!(&back.targets, &p.targets);
-                prop_assert_eq!(&back.obstacle_free, &p.obstacle_free);
+                prop_assert_eq!(&back.obstacle_neighbourhood, &p.obstacle_neighbourhood);
                 prop_assert_eq!(&back.explored, &p.explored);
                 prop_assert_eq!(&back.hidden, &p.hidden);
                 prop_assert_eq!(&back.free_ground, &p.free_ground);
@@ -593,11 +596,11 @@ mod tests {
         let mut s = EstimatorState::new(&cfg);
         let mut outbox = EstimateOutbox::new(0, 1, 3);
         s.oem
-            .observe_obstacle(&protocol::math::Point2::new(1.0, 1.0), 20.0);
+            .observe_obstacle(&sets::math::Point2::new(1.0, 1.0), 20.0);
         assert_eq!(outbox.compose(&mut s).oem.len(), 1); // first message: full
         assert!(outbox.compose(&mut s).oem.is_empty()); // nothing changed
         s.oem
-            .observe_obstacle(&protocol::math::Point2::new(-5.0, 1.0), 10.0);
+            .observe_obstacle(&sets::math::Point2::new(-5.0, 1.0), 10.0);
         let m = outbox.compose(&mut s);
         assert!(!m.oem_full && m.oem.len() == 1);
         let m = outbox.compose(&mut s); // seq 3: periodic full map
@@ -751,7 +754,7 @@ mod tests {
             ),
             "{refused:?}"
         );
-        m.free_ground = SetCode::Delta(protocol::raster::delta::SetDelta {
+        m.free_ground = SetCode::Delta(sets::raster::delta::SetDelta {
             flips: e.clone(),
             digest: 1,
         });

@@ -14,7 +14,7 @@
 //!
 //! `X̄` and every `X_j` are [`ReachSet`]s: besides their cells they keep, per cell, a lower
 //! bound of how far their targets are, so they grow by exactly `v_max dt` per step instead of
-//! rounding the growth out to whole cells at every step ([`protocol::raster::reach`] argues
+//! rounding the growth out to whole cells at every step ([`sets::raster::reach`] argues
 //! the guarantee). Removing proven-free ground raises those bounds to the exact gap between
 //! each freed cell and the nearest cell that is not free, over the frame's window; a
 //! measurement raises them around the measured target ([`TARGET_REACH_MARGIN_M`]).
@@ -32,11 +32,11 @@ use std::time::{Duration, Instant};
 
 use protocol::camera::CameraPose;
 use protocol::frame::CvsFrame;
-use protocol::grid::GroundGrid;
-use protocol::math::Real;
-use protocol::raster::{CellBox, CellSet, ReachSet};
 use protocol::scenario::{HiddenWindow, Scenario, SetGrowth};
 use serde::{Deserialize, Serialize};
+use sets::grid::GroundGrid;
+use sets::math::Real;
+use sets::raster::{CellBox, CellSet, ReachSet};
 
 pub use fusion::{FuseReport, PeerEstimate};
 pub use hidden::{HiddenHistory, Unseen};
@@ -130,7 +130,7 @@ pub struct EstimatorState {
     pub targets: BTreeMap<u32, ReachSet>,
     /// `S^o`, inner, accumulated: ground within `r_s` of an obstacle, never a target's.
     #[serde(with = "cell_set")]
-    pub obstacle_free: CellSet,
+    pub obstacle_neighbourhood: CellSet,
     /// Union of `P^g` over time: ground proven free at some frame (the explored metric).
     #[serde(with = "cell_set")]
     pub explored: CellSet,
@@ -158,7 +158,7 @@ impl EstimatorState {
             pose: None,
             undetected: ReachSet::full(g),
             targets: BTreeMap::new(),
-            obstacle_free: CellSet::empty(g),
+            obstacle_neighbourhood: CellSet::empty(g),
             explored: CellSet::empty(g),
             hidden: CellSet::empty(g),
             free_ground: CellSet::empty(g),
@@ -182,7 +182,7 @@ impl EstimatorState {
         let probe = CellSet::empty(&config.grid);
         [
             self.undetected.cells(),
-            &self.obstacle_free,
+            &self.obstacle_neighbourhood,
             &self.explored,
             &self.hidden,
             &self.free_ground,
@@ -256,7 +256,7 @@ pub struct StepReport {
     /// Area of this frame's `P^g`, m².
     pub free_ground_area_m2: Real,
     /// Area of the accumulated `S^o`, m².
-    pub obstacle_free_area_m2: Real,
+    pub obstacle_neighbourhood_area_m2: Real,
     /// Area of the explored ground, m².
     pub explored_area_m2: Real,
     /// Area of `H^CVS`, m².
@@ -425,12 +425,12 @@ fn measure_frame(
     report.timings.measurement_sets = t.elapsed();
 
     let t = Instant::now();
-    measure::add_obstacle_free(
+    measure::add_obstacle_neighbourhood(
         view,
         grid,
         cfg.safety_distance_m,
         cfg.obstacle_pixel_stride,
-        &mut st.obstacle_free,
+        &mut st.obstacle_neighbourhood,
     );
     report.timings.obstacle_sets = t.elapsed();
 
@@ -464,13 +464,13 @@ fn correct_sets(
         targets,
     } = measured;
     let mut free = free_ground.clone();
-    free.or_assign(&st.obstacle_free);
+    free.or_assign(&st.obstacle_neighbourhood);
     let window = free_ground.bounding_box();
     let clearing = Clearing {
         grid,
         growth: cfg.sets,
         free: &free,
-        blocked: &st.obstacle_free,
+        blocked: &st.obstacle_neighbourhood,
     };
     clearing.clear(&mut st.undetected, window.as_ref());
     let measured_ids = restrict_measured(
@@ -511,7 +511,7 @@ fn correct_sets(
         .collect();
     report.free_ground_area_m2 = free_ground.area(grid);
     st.free_ground = free_ground;
-    report.obstacle_free_area_m2 = st.obstacle_free.area(grid);
+    report.obstacle_neighbourhood_area_m2 = st.obstacle_neighbourhood.area(grid);
     report.explored_area_m2 = st.explored.area(grid);
     report.hidden_area_m2 = st.hidden.area(grid);
     report.timings.correction = t.elapsed();
@@ -764,10 +764,7 @@ mod tests {
             let gap = gap_to_kept(c);
             if grown.contains(c) {
                 regrown += 1;
-                assert!(
-                    gap <= reach + protocol::raster::REACH_UNIT_M + 1e-9,
-                    "{c:?}"
-                );
+                assert!(gap <= reach + sets::raster::REACH_UNIT_M + 1e-9, "{c:?}");
             } else {
                 assert!(gap > reach - 1e-9, "{c:?} should be reachable");
             }

@@ -6,9 +6,9 @@
 
 use std::borrow::Cow;
 
-use protocol::grid::GroundGrid;
-use protocol::math::Real;
-use protocol::raster::{CellSet, ReachSet};
+use sets::grid::GroundGrid;
+use sets::math::Real;
+use sets::raster::{CellSet, ReachSet};
 
 /// Moves `set` to the motion clock `clock_m` (`v_max` times the time of the frame) and keeps
 /// it inside the whole-cell dilation of its previous cells by `radius_m`, the motion since
@@ -17,7 +17,7 @@ use protocol::raster::{CellSet, ReachSet};
 /// back faster than the targets can move.
 ///
 /// The dilation is read only in the words the clock adds cells to ([`ReachSet::advance_within`]
-/// with a [`protocol::raster::WordDilation`]): the same sets as dilating the whole grid, at the
+/// with a [`sets::raster::WordDilation`]): the same sets as dilating the whole grid, at the
 /// cost of the few words where the set grows; words no cell of the set is near are not read.
 pub fn advance(set: &mut ReachSet, grid: &GroundGrid, clock_m: Real, radius_m: Real) {
     // The cases of `grow`: its result, word by word.

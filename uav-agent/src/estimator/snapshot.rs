@@ -5,11 +5,11 @@
 
 use std::collections::BTreeMap;
 
-use protocol::grid::GroundGrid;
-use protocol::math::Point2;
-use protocol::raster::{CellSet, EncodedSet, ReachSet};
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use sets::grid::GroundGrid;
+use sets::math::Point2;
+use sets::raster::{CellSet, EncodedSet, ReachSet};
 
 /// Decodes an encoded set on a grid of the size it declares: the set type only needs the
 /// dimensions, which the caller checks against its configuration.

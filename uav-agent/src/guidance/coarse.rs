@@ -6,8 +6,8 @@
 //! cell ([`CoarseGrid::weights`]): [`CellWeights`] holds how many fine cells of each coarse cell
 //! a set has, so the area of that set inside any coarse set is measured at the fine resolution.
 
-use protocol::grid::GroundGrid;
-use protocol::raster::{CellBox, CellSet};
+use sets::grid::GroundGrid;
+use sets::raster::{CellBox, CellSet};
 
 /// Side the planning cells aim for, metres.
 pub const PLANNING_CELL_M: f64 = 2.5;

@@ -19,11 +19,11 @@ pub mod view;
 
 use protocol::camera::{CameraModel, CameraPose};
 use protocol::flight::{self, UavState};
-use protocol::grid::{GroundGrid, Rect};
-use protocol::math::{Point2, Point3};
-use protocol::raster::CellSet;
 use protocol::scenario::{HiddenResolution, PlanBorder, Planner, PredictedViews, Scenario};
 use protocol::wire::PlannedView;
+use sets::grid::{GroundGrid, Rect};
+use sets::math::{Point2, Point3};
+use sets::raster::CellSet;
 
 pub use coarse::{CellWeights, CoarseGrid};
 pub use ring::{TokenRing, Turn};
@@ -227,7 +227,7 @@ mod tests {
     use super::paper::plan as paper_plan;
     use super::*;
     use protocol::flight;
-    use protocol::raster::Coverage;
+    use sets::raster::Coverage;
 
     /// The default scenario over a 300 m square.
     pub(super) fn scenario() -> Scenario {

@@ -39,10 +39,10 @@
 mod search;
 
 use protocol::camera::{CameraModel, CameraPose};
-use protocol::grid::GroundGrid;
-use protocol::raster::CellSet;
 use protocol::scenario::{HiddenResolution, PredictedViews};
 use protocol::wire::PlannedView;
+use sets::grid::GroundGrid;
+use sets::raster::CellSet;
 
 use super::view::{self, GroundPredictor, ObstacleCell};
 use super::{CellWeights, Decision, GuidanceParams, PlanningInput};
@@ -188,10 +188,10 @@ mod tests {
     use crate::guidance::tests::{Xorshift, fingerprint, scenario, turning, watching_the_south};
     use crate::guidance::{Cost, decision, fly_step, stray};
     use protocol::flight::UavState;
-    use protocol::grid::Rect;
-    use protocol::math::{Point2, Point3};
-    use protocol::raster::Coverage;
     use protocol::scenario::{PlanBorder, Scenario};
+    use sets::grid::Rect;
+    use sets::math::{Point2, Point3};
+    use sets::raster::Coverage;
 
     fn blob(params: &GuidanceParams, centre: Point2, radius: f64) -> CellSet {
         let mut s = CellSet::empty(&params.grids.fine);

@@ -58,11 +58,11 @@
 
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
-use protocol::grid::GroundGrid;
-use protocol::math::Point2;
-use protocol::raster::CellSet;
 use protocol::wire::PlannedView;
 use rayon::prelude::*;
+use sets::grid::GroundGrid;
+use sets::math::Point2;
+use sets::raster::CellSet;
 
 use super::view::same_pose;
 use super::{
@@ -878,9 +878,9 @@ mod tests {
     use super::*;
     use crate::guidance::GuidanceParams;
     use crate::guidance::paper::plan as paper_plan;
-    use protocol::math::Point3;
-    use protocol::raster::Coverage;
     use protocol::scenario::{Planner, Scenario};
+    use sets::math::Point3;
+    use sets::raster::Coverage;
 
     fn params() -> GuidanceParams {
         let mut s = Scenario::default();
@@ -1105,7 +1105,7 @@ mod tests {
             for j in 0..4 {
                 let (x, y) = (20.0 + 5.0 * f64::from(i), 20.0 + 5.0 * f64::from(j));
                 obstacles.push(ObstacleCell {
-                    rect: protocol::grid::Rect {
+                    rect: sets::grid::Rect {
                         min: Point2::new(x, y),
                         max: Point2::new(x + 5.0, y + 5.0),
                     },
@@ -1114,7 +1114,7 @@ mod tests {
             }
         }
         obstacles.push(ObstacleCell {
-            rect: protocol::grid::Rect {
+            rect: sets::grid::Rect {
                 min: Point2::new(-40.0, -40.0),
                 max: Point2::new(-35.0, -35.0),
             },

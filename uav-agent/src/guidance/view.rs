@@ -4,9 +4,9 @@
 use std::collections::BTreeMap;
 
 use protocol::camera::{Camera, CameraModel, CameraPose};
-use protocol::grid::{GroundGrid, Rect};
-use protocol::math::{Point2, Point3, convex_hull_into};
-use protocol::raster::{CellSet, Coverage};
+use sets::grid::{GroundGrid, Rect};
+use sets::math::{Point2, Point3, convex_hull_into};
+use sets::raster::{CellSet, Coverage};
 
 use crate::occupancy::{OccupancyMap, OemStatus};
 

@@ -12,10 +12,10 @@ mod visibility;
 
 use std::collections::BTreeSet;
 
-use protocol::grid::{CellIndex, GroundGrid};
-use protocol::math::Point2;
 use protocol::wire::OemCellUpdate;
 use serde::{Deserialize, Serialize};
+use sets::grid::{CellIndex, GroundGrid};
+use sets::math::Point2;
 
 /// What is known about one OEM cell.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -1,6 +1,6 @@
 //! Line-of-sight tests through the map, for predicting what buildings will hide.
 
-use protocol::math::{Point2, Point3, Real};
+use sets::math::{Point2, Point3, Real};
 
 use super::{OccupancyMap, OemStatus};
 
@@ -69,7 +69,7 @@ impl OccupancyMap {
 
 #[cfg(test)]
 mod tests {
-    use protocol::grid::GroundGrid;
+    use sets::grid::GroundGrid;
 
     use super::*;
 

@@ -7,7 +7,7 @@
 //! [`TOUCH_EPS_PX`] so that rounding can only add pixels, never lose one.
 
 use protocol::camera::Camera;
-use protocol::math::{Point2, Point3, Real, convex_hull};
+use sets::math::{Point2, Point3, Real, convex_hull};
 
 use super::objects::SceneObject;
 

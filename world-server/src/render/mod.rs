@@ -32,8 +32,8 @@ mod reference;
 
 use protocol::camera::{Camera, CameraModel};
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, Label, TargetBox};
-use protocol::math::{Point3, Real, Vector3};
 use rayon::prelude::*;
+use sets::math::{Point3, Real, Vector3};
 
 use boxes::RowTargets;
 use footprint::Footprint;

@@ -7,7 +7,7 @@
 
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::Cuboid;
-use protocol::math::{Isometry3, Point3, Real, Vector3};
+use sets::math::{Isometry3, Point3, Real, Vector3};
 
 /// What an object is, for labelling.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

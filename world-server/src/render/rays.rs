@@ -19,7 +19,7 @@
 use std::ops::Range;
 
 use protocol::camera::Camera;
-use protocol::math::{Real, Vector3};
+use sets::math::{Real, Vector3};
 
 /// The rays of one posed camera.
 #[derive(Clone, Debug)]
@@ -255,9 +255,9 @@ pub fn unit_z(v: &Vector3) -> Real {
 #[cfg(test)]
 mod tests {
     use protocol::camera::{CameraModel, CameraPose};
-    use protocol::math::Point3;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+    use sets::math::Point3;
 
     use super::*;
 

@@ -7,8 +7,8 @@
 
 use protocol::camera::Camera;
 use protocol::frame::{CvsFrame, Label, TargetBox};
-use protocol::math::{Point3, Real, Vector3};
 use rayon::prelude::*;
+use sets::math::{Point3, Real, Vector3};
 
 use super::boxes::{self, RowTargets};
 use super::noise::RowNoise;

@@ -1,9 +1,9 @@
 //! Buildings: axis-aligned prisms standing on the ground inside the blocks of the road grid.
 
-use protocol::math::{Point2, Point3, Real};
 use rand::Rng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
+use sets::math::{Point2, Point3, Real};
 
 use super::roads::RoadGrid;
 use crate::error::WorldBuildError;

@@ -10,9 +10,9 @@
 pub mod buildings;
 pub mod roads;
 
-use protocol::math::Real;
 use protocol::scenario::Scenario;
 use rand_chacha::ChaCha8Rng;
+use sets::math::Real;
 
 pub use buildings::Building;
 pub use roads::{Axis, Lane, RoadGrid, RoadProfile};

@@ -1,10 +1,10 @@
 //! The road grid: straight two-lane roads along x and y, crossing at every intersection, with
 //! an outer ring road inside the RoI border so that a car never has to leave the RoI.
 
-use protocol::math::{Point2, Real, Vector2};
 use protocol::scenario::Scenario;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+use sets::math::{Point2, Real, Vector2};
 
 use crate::error::WorldBuildError;
 

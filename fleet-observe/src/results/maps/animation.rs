@@ -15,10 +15,10 @@ use std::borrow::Cow;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use protocol::camera::{Camera, CameraModel, CameraPose};
-use protocol::math::Point3;
-use protocol::raster::CellSet;
 use protocol::scenario::Scenario;
 use protocol::wire::TruthState;
+use sets::math::Point3;
+use sets::raster::CellSet;
 use world_server::scene::Building;
 
 use super::chart::{OPEN, OUTSIDE};
@@ -184,7 +184,7 @@ impl Animation {
         };
         for (set, bit) in [
             (&*sets.explored, EXPLORED_BIT),
-            (&*sets.obstacle_free, FREE_BIT),
+            (&*sets.obstacle_neighbourhood, FREE_BIT),
             (&*sets.undetected, UNDETECTED_BIT),
             (&sets.unseen, UNSEEN_BIT),
         ] {

@@ -7,10 +7,10 @@ use plotters::prelude::*;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use protocol::math::Point2;
-use protocol::raster::{CellSet, Coverage};
 use protocol::scenario::Scenario;
 use protocol::wire::TargetTruth;
+use sets::math::Point2;
+use sets::raster::{CellSet, Coverage};
 use world_server::World;
 
 use super::chart::{Area, SIZE};
@@ -137,7 +137,7 @@ pub(super) fn truth_of(world: &World) -> Vec<TargetTruth> {
 pub(super) fn synthetic_state(scenario: &Scenario, world: &World) -> FinalState {
     let grid = scenario.grid();
     let targets = truth_of(world);
-    let mut obstacle_free = CellSet::empty(&grid);
+    let mut obstacle_neighbourhood = CellSet::empty(&grid);
     for b in &world.scene().buildings {
         let r = scenario.targets.safety_distance_m;
         for iy in 0..grid.ny {
@@ -145,17 +145,17 @@ pub(super) fn synthetic_state(scenario: &Scenario, world: &World) -> FinalState 
                 let c = grid.cell_centre((ix, iy));
                 if c.x > b.min.x - r && c.x < b.max.x + r && c.y > b.min.y - r && c.y < b.max.y + r
                 {
-                    obstacle_free.set((ix, iy), true);
+                    obstacle_neighbourhood.set((ix, iy), true);
                 }
             }
         }
     }
     let mut explored = CellSet::empty(&grid);
     explored.fill_disc(&grid, Point2::new(-15.0, -15.0), 18.0, Coverage::Inner);
-    explored.and_not_assign(&obstacle_free);
+    explored.and_not_assign(&obstacle_neighbourhood);
     let mut undetected = CellSet::full(&grid);
     undetected.and_not_assign(&explored);
-    undetected.and_not_assign(&obstacle_free);
+    undetected.and_not_assign(&obstacle_neighbourhood);
     let mut unseen = CellSet::empty(&grid);
     unseen.fill_disc(&grid, Point2::new(20.0, 20.0), 10.0, Coverage::Outer);
     let mut sets = BTreeMap::new();
@@ -176,7 +176,7 @@ pub(super) fn synthetic_state(scenario: &Scenario, world: &World) -> FinalState 
         sets: FusedSets {
             undetected: Arc::new(undetected),
             targets: sets,
-            obstacle_free: Arc::new(obstacle_free),
+            obstacle_neighbourhood: Arc::new(obstacle_neighbourhood),
             explored: Arc::new(explored),
             unseen,
         },

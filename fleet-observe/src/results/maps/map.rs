@@ -5,8 +5,8 @@
 use std::path::Path;
 
 use plotters::prelude::*;
-use protocol::math::Point2;
 use protocol::scenario::Scenario;
+use sets::math::Point2;
 use uav_agent::occupancy::{OccupancyMap, OemStatus};
 use world_server::scene::Building;
 

@@ -3,8 +3,8 @@
 
 use anyhow::Context as _;
 use plotters::prelude::*;
-use protocol::grid::GroundGrid;
-use protocol::raster::CellSet;
+use sets::grid::GroundGrid;
+use sets::raster::CellSet;
 use world_server::scene::Building;
 
 use super::chart::{Area, Chart};

@@ -8,10 +8,10 @@ use std::path::Path;
 
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
-use protocol::grid::GroundGrid;
-use protocol::math::Point2;
-use protocol::raster::CellSet;
 use protocol::scenario::Scenario;
+use sets::grid::GroundGrid;
+use sets::math::Point2;
+use sets::raster::CellSet;
 use world_server::scene::Building;
 
 use super::chart::{
@@ -146,7 +146,7 @@ fn paint_layers(pixels: &mut Pixels, raster: &PlotRaster, sets: &FusedSets, grid
     let cols = raster.cell_columns(grid);
     let rows = raster.cell_rows(grid);
     let explored = mask(&sets.explored, &cols, &rows);
-    let neighbourhood = mask(&sets.obstacle_free, &cols, &rows);
+    let neighbourhood = mask(&sets.obstacle_neighbourhood, &cols, &rows);
     let undetected = mask(&sets.undetected, &cols, &rows);
     let unseen = mask(&sets.unseen, &cols, &rows);
     let targets: Vec<(RGBColor, Vec<bool>)> = sets
@@ -260,7 +260,10 @@ fn draw_legend(
             OBSTACLE_NEIGHBOURHOOD.1,
         )),
         Some(Symbol::Sup("S", "o")),
-        &format!("obstacle neighbourhoods, {}", share(&sets.obstacle_free)),
+        &format!(
+            "obstacle neighbourhoods, {}",
+            share(&sets.obstacle_neighbourhood)
+        ),
     )?;
     keys.entry(
         &Swatch::Hatch(UNSEEN_HATCH),
@@ -314,7 +317,7 @@ fn check_grid(state: &FinalState, scenario: &Scenario) -> anyhow::Result<()> {
     let sets = &state.sets;
     let named: [(&str, &CellSet); 4] = [
         ("X\u{304}", &sets.undetected),
-        ("S^o", &sets.obstacle_free),
+        ("S^o", &sets.obstacle_neighbourhood),
         ("explored", &sets.explored),
         ("H\u{304}", &sets.unseen),
     ];

@@ -24,8 +24,8 @@ use std::collections::BTreeMap;
 
 use protocol::camera::CameraPose;
 use protocol::flight::UavState;
-use protocol::raster::CellSet;
 use protocol::wire::PlannedView;
+use sets::raster::CellSet;
 
 use super::{nearest_visible_distance, seen_by_others};
 use crate::guidance::view::{self, same_pose};
