@@ -101,13 +101,7 @@ fn stats_of(name: &str, samples: &[f64]) -> anyhow::Result<Stats> {
 
 /// A case of the report from a sample of milliseconds.
 fn timing_case(name: &str, unit: &str, s: &Stats) -> BenchCase {
-    let mut metrics = Metrics::default();
-    metrics.push("median", s.median);
-    metrics.push("p10", s.p10);
-    metrics.push("p90", s.p90);
-    metrics.push("p99", s.p99);
-    metrics.push("max", s.max);
-    metrics.push("n", s.n as f64);
+    let metrics = Metrics::of_stats(s, "");
     let mut params = BTreeMap::new();
     params.insert("unit".to_owned(), unit.into());
     BenchCase {

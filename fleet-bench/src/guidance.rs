@@ -329,13 +329,7 @@ fn load_average() -> Option<f64> {
 }
 
 fn decision_case(name: &str, others: usize, s: &Stats) -> BenchCase {
-    let mut metrics = Metrics::default();
-    metrics.push("median_ms", s.median);
-    metrics.push("p10_ms", s.p10);
-    metrics.push("p90_ms", s.p90);
-    metrics.push("p99_ms", s.p99);
-    metrics.push("max_ms", s.max);
-    metrics.push("n", s.n as f64);
+    let metrics = Metrics::of_stats(s, "_ms");
     let mut params = BTreeMap::new();
     params.insert("others_max".to_owned(), others.into());
     BenchCase {

@@ -65,6 +65,23 @@ impl Metrics {
         self.0.push((name.to_owned(), value));
     }
 
+    /// The order statistics of `s` (median, p10, p90, p99, max, each followed by `suffix`,
+    /// e.g. `_ms`), and the sample size `n`.
+    pub fn of_stats(s: &Stats, suffix: &str) -> Metrics {
+        let mut m = Metrics::default();
+        for (name, value) in [
+            ("median", s.median),
+            ("p10", s.p10),
+            ("p90", s.p90),
+            ("p99", s.p99),
+            ("max", s.max),
+        ] {
+            m.push(&format!("{name}{suffix}"), value);
+        }
+        m.push("n", s.n as f64);
+        m
+    }
+
     /// A measure by name.
     pub fn get(&self, name: &str) -> Option<f64> {
         self.0.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
