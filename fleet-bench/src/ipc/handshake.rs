@@ -14,7 +14,7 @@ use clap::{Parser, ValueEnum};
 pub const READY: &str = "ready";
 /// The line that starts the children.
 pub const GO: &str = "go";
-/// The prefix of a child's last line, followed by its [`ChildReport`] as JSON.
+/// The prefix of a child's last line, followed by its [`ChildReport`](super::message::ChildReport) as JSON.
 pub const RESULT: &str = "result ";
 
 /// Longest wait for a peer's message, an ack or the parent's `go`.

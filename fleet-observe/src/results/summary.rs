@@ -15,7 +15,7 @@
 //! step of the time each first held every target, `null` if one of them never did.
 //!
 //! `resources` holds where the run's time and memory went: CPU time, peak resident memory
-//! and the phases of every process, and the totals ([`crate::run::resources`]).
+//! and the phases of every process, and the totals ([`super::resources`]).
 //!
 //! Two runs of the same scenario and seed in lockstep give byte-identical summaries except
 //! for what depends on the wall clock or the machine's load, which lives only under keys
@@ -107,7 +107,7 @@ pub struct Summary {
     /// Hosts the processes were spread over (`fleet run --hosts`; 1: one host, no bridge).
     pub hosts: u16,
     /// The largest resync of a restarted or resumed agent, steps (`null` when none was
-    /// measured; see [`crate::run::faults`]).
+    /// measured; see [`crate::faults`]).
     pub resync_steps_max: Option<u64>,
     /// The mean resync over the restarts and pauses that have one, steps.
     pub resync_steps_mean: Option<f64>,

@@ -16,7 +16,7 @@
 //! for its real-time factor to mean anything. A run that fails is a row with its status, the
 //! next sizes still run (a signal stops the bench), and the exit code is 1.
 //!
-//! [`BenchReport`]: super::BenchReport
+//! [`BenchReport`]: fleet_bench::BenchReport
 
 pub mod plot;
 pub mod report;

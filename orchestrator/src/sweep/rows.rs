@@ -1,7 +1,7 @@
-//! The metrics a sweep reports of each run: the rows of its table ([`ROWS`], read from a run's
+//! The metrics a sweep reports of each run: the rows of its table (`ROWS`, read from a run's
 //! `summary.json` and `timeseries.csv`), the steady window of the window rows
-//! ([`STEADY_WINDOW_S`]), the metrics two variants are compared on ([`COMPARED`]) and the
-//! radio's rows of an axis over the radio ([`RADIO_ROWS`]).
+//! ([`STEADY_WINDOW_S`]), the metrics two variants are compared on (`COMPARED`) and the
+//! radio's rows of an axis over the radio (`RADIO_ROWS`).
 
 use std::borrow::Cow;
 
