@@ -1,6 +1,7 @@
 //! # sim
 //!
-//! The fleet of a run in one process, for tests, benchmarks and `fleet bench`: the world
+//! The fleet of a run in one process, for tests (`sim/tests/`: the guarantee on every frame,
+//! the pinned sets, the occupancy map), benchmarks (`sim/benches/`) and `fleet bench`: the world
 //! renders each UAV's frame, each UAV's estimator folds it, every UAV's estimate is encoded as
 //! on the wire and decoded and fused by every other, and every guidance period the UAVs decide
 //! in token order and fly their decisions. It is the loop the processes of a lockstep run go

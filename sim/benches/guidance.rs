@@ -2,7 +2,7 @@
 //! and the `setfleet` variant's beam search) on a run's sets and maps, for each UAV of a round
 //! with the plans of the UAVs before it in the token, and the predicted view of one pose.
 //!
-//! `cargo bench -p uav-agent --bench guidance`
+//! `cargo bench -p sim --bench guidance`
 
 use std::sync::OnceLock;
 

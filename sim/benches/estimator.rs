@@ -1,7 +1,7 @@
 //! Estimator benchmarks on the default scenario (360 x 480 camera, 0.5 m cells):
 //! one step on a real frame, its phases, fusion, and the estimate message size after ~100 steps.
 //!
-//! `cargo bench -p uav-agent --bench estimator`
+//! `cargo bench -p sim --bench estimator`
 
 use std::sync::OnceLock;
 use std::time::Duration;
