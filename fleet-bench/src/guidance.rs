@@ -157,12 +157,13 @@ fn time_decisions(
                 .into_iter()
                 .map(|d| d.view)
                 .collect();
+            let fleet: Vec<u32> = (0..sim.uav_count() as u32).collect();
             for (i, estimator) in sim.estimators().iter().enumerate() {
                 let state = PlanningState::of(i, estimator)?;
                 t.obstacle_cells.push(state.obstacle_count() as f64);
                 for count in 0..=MAX_OTHERS {
                     let others = token_for(i, &round, count);
-                    let input = state.input(i as u32, &others);
+                    let input = state.input(i as u32, &others, &fleet);
                     for _ in 0..config.repeats {
                         if paper {
                             let start = Instant::now();

@@ -307,6 +307,18 @@ pub struct GuidanceConfig {
     /// `setfleet`: distance between view centres below which this UAV's plan is charged for
     /// overlapping the plans already in the token, metres (0: no charge).
     pub spread_m: f64,
+    /// `setfleet`: how the fleet shares the search: `"lanes"` (the fleet's sweep plan) or
+    /// `"none"` (the default: every UAV values all ground alike) ([`SweepPlan`]).
+    pub sweep: SweepPlan,
+    /// `setfleet`: the revisit period of the tracking schedule, seconds: an identified car
+    /// whose set has grown past the area its targets' speed covers in this time (a disc of
+    /// radius `max_speed_mps * track_revisit_s`) is revisited first by the UAV whose lane holds
+    /// it (0: no schedule).
+    pub track_revisit_s: f64,
+    /// `setfleet`: whether a UAV plans a second viewpoint for the largest pocket of `X̄`
+    /// hidden from where the UAVs flew in its own ground, and flies there when worth the
+    /// detour (`uav_agent::guidance::viewpoint`).
+    pub second_viewpoints: bool,
     /// The paper's MPC: how `Φ_h` measures the predicted sets inside recently hidden ground:
     /// `"estimator"` (the default) or `"planning"` ([`HiddenResolution`]).
     pub hidden_resolution: HiddenResolution,
@@ -395,6 +407,24 @@ pub enum PlanBorder {
 impl PlanBorder {
     /// Every choice's name, as written in a scenario.
     pub const NAMES: [&'static str; 2] = ["geofence", "region"];
+}
+
+/// How the `setfleet` planner shares the search among the fleet (`guidance.sweep`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SweepPlan {
+    /// Every UAV values all ground alike; the token only spreads the plans.
+    #[default]
+    None,
+    /// Lanes of one front: the round's fleet splits the region into one lane per UAV, each
+    /// cleared from its south edge northwards, ground behind the front first
+    /// (`uav_agent::guidance::sweep`).
+    Lanes,
+}
+
+impl SweepPlan {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["none", "lanes"];
 }
 
 /// The guidance planner (`guidance.planner`).
@@ -540,6 +570,9 @@ impl Default for GuidanceConfig {
             target_weight: 4.0,
             growth_horizon_s: 10.0,
             spread_m: 60.0,
+            sweep: SweepPlan::None,
+            track_revisit_s: 0.0,
+            second_viewpoints: false,
             hidden_resolution: HiddenResolution::Estimator,
             hidden_window: HiddenWindow::Frames,
             predicted_views: PredictedViews::PeriodEnd,

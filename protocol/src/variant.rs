@@ -94,6 +94,8 @@ impl Variant {
                 "guidance.target_weight=1",
                 "guidance.growth_horizon_s=10",
                 "guidance.spread_m=60",
+                "guidance.sweep=lanes",
+                "guidance.track_revisit_s=10",
                 "guidance.hidden_window=periods",
                 "guidance.border=region",
             ],

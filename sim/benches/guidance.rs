@@ -9,7 +9,8 @@ use std::sync::OnceLock;
 use divan::Bencher;
 use protocol::camera::CameraPose;
 use protocol::flight::UavState;
-use protocol::scenario::{Planner, Scenario};
+use protocol::scenario::Scenario;
+use protocol::variant::Variant;
 use protocol::wire::PlannedView;
 use sets::raster::CellSet;
 use sim::{Fleet, FleetOptions, Steering};
@@ -21,27 +22,34 @@ const WARMUP_STEPS: u64 = 60;
 
 /// What one UAV plans from, owned.
 struct Inputs {
+    uav: u32,
     state: UavState,
     sets: Vec<CellSet>,
     hidden: CellSet,
+    unseen: CellSet,
     obstacles: Vec<ObstacleCell>,
     /// The plans of the UAVs before it in the round.
     others: Vec<PlannedView>,
+    /// The round's fleet.
+    fleet: Vec<u32>,
 }
 
 impl Inputs {
-    fn of(estimator: &Estimator, others: Vec<PlannedView>) -> Self {
+    fn of(uav: u32, estimator: &Estimator, others: Vec<PlannedView>, fleet: Vec<u32>) -> Self {
         let st = estimator.state();
         let pose = st.pose.expect("a pose after the warm-up");
         Self {
+            uav,
             state: UavState {
                 position: pose.position,
                 yaw: pose.yaw,
             },
             sets: st.target_sets().cloned().collect(),
             hidden: st.hidden_history.recently_hidden(),
+            unseen: st.hidden_history.unseen().clone(),
             obstacles: ObstacleCell::known(&st.oem),
             others,
+            fleet,
         }
     }
 
@@ -50,12 +58,14 @@ impl Inputs {
         guidance::decide(
             params,
             &PlanningInput {
-                uav: 0,
+                uav: self.uav,
                 state: self.state,
                 sets: &sets,
                 recently_hidden: &self.hidden,
+                unseen: &self.unseen,
                 obstacles: &self.obstacles,
                 others: &self.others,
+                fleet: &self.fleet,
             },
         )
     }
@@ -73,13 +83,9 @@ fn fixture() -> &'static Fixture {
     FIXTURE.get_or_init(|| {
         let scenario = Scenario::default();
         let paper = GuidanceParams::from_scenario(&scenario);
-        let mut variant = scenario.clone();
         // The `setfleet` variant's settings (`fleet --variant setfleet`).
-        variant.guidance.planner = Planner::Setfleet;
-        variant.timing.guidance_period_s = 1.0;
-        variant.guidance.lambda = 10.0;
-        variant.guidance.target_weight = 1.0;
-        variant.guidance.spread_m = 60.0;
+        let variant = Scenario::load(None, &Variant::Setfleet.with_user_overrides(&[]))
+            .expect("the setfleet variant");
         let setfleet = GuidanceParams::from_scenario(&variant);
         // The fleet flies the paper's MPC in token order, as in a run.
         let options = FleetOptions {
@@ -95,11 +101,12 @@ fn fixture() -> &'static Fixture {
         };
         // Each UAV's inputs of that round: its estimator's state, the plans of those before it.
         let views: Vec<PlannedView> = decisions.into_iter().map(|d| d.view).collect();
+        let ids: Vec<u32> = (0..fleet.estimators().len() as u32).collect();
         let round: Vec<Inputs> = fleet
             .estimators()
             .iter()
-            .enumerate()
-            .map(|(i, e)| Inputs::of(e, views[..i].to_vec()))
+            .zip(&ids)
+            .map(|(e, &i)| Inputs::of(i, e, views[..i as usize].to_vec(), ids.clone()))
             .collect();
         let obstacles: Vec<usize> = round.iter().map(|r| r.obstacles.len()).collect();
         eprintln!("obstacle cells known per UAV: {obstacles:?}");

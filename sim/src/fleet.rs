@@ -305,9 +305,11 @@ impl Fleet {
     ) -> Result<Vec<Decision>, FleetStepError> {
         let mut token: Vec<PlannedView> = extra.to_vec();
         let mut decisions = Vec::with_capacity(self.uav_count());
+        // Every UAV is live in process: the round's fleet is all of them.
+        let fleet: Vec<u32> = (0..self.uav_count() as u32).collect();
         for (uav, estimator) in self.estimators.iter().enumerate() {
             let state = PlanningState::of(uav, estimator)?;
-            let decision = guidance::decide(params, &state.input(uav as u32, &token));
+            let decision = guidance::decide(params, &state.input(uav as u32, &token, &fleet));
             token.push(decision.view.clone());
             decisions.push(decision);
         }

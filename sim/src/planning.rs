@@ -9,12 +9,13 @@ use uav_agent::guidance::{ObstacleCell, PlanningInput};
 use crate::FleetStepError;
 
 /// What the planner of one UAV looks at, gathered from its estimator as the agent gathers it
-/// (`uav_agent::agent`, when it takes its turn): its pose, `X̄` and every `X_j` (borrowed
-/// from the estimator), the ground hidden recently and the obstacle cells of its map.
+/// (`uav_agent::agent`, when it takes its turn): its pose, `X̄` and every `X_j` and `H̄`
+/// (borrowed from the estimator), the ground hidden recently and the obstacle cells of its map.
 pub struct PlanningState<'a> {
     state: UavState,
     sets: Vec<&'a CellSet>,
     hidden: CellSet,
+    unseen: &'a CellSet,
     obstacles: Vec<ObstacleCell>,
 }
 
@@ -32,19 +33,28 @@ impl<'a> PlanningState<'a> {
             },
             sets: st.target_sets().collect(),
             hidden: st.hidden_history.recently_hidden(),
+            unseen: st.hidden_history.unseen(),
             obstacles: ObstacleCell::known(&st.oem),
         })
     }
 
-    /// The planning input of UAV `uav` with the token's plans `others`.
-    pub fn input<'b>(&'b self, uav: u32, others: &'b [PlannedView]) -> PlanningInput<'b> {
+    /// The planning input of UAV `uav` with the token's plans `others` and the round's
+    /// `fleet`.
+    pub fn input<'b>(
+        &'b self,
+        uav: u32,
+        others: &'b [PlannedView],
+        fleet: &'b [u32],
+    ) -> PlanningInput<'b> {
         PlanningInput {
             uav,
             state: self.state,
             sets: &self.sets,
             recently_hidden: &self.hidden,
+            unseen: self.unseen,
             obstacles: &self.obstacles,
             others,
+            fleet,
         }
     }
 

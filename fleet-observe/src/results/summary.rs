@@ -82,6 +82,12 @@ pub struct Summary {
     /// First time an agent held every target, seconds, mean over agents (`null` if one
     /// never did).
     pub time_all_identified_s: Option<f64>,
+    /// First time the mean over agents of UA fell below 25 %, seconds (`null` if it never
+    /// did).
+    pub time_ua_below_25_s: Option<f64>,
+    /// First time the mean over agents of UA fell below 15 %, seconds (`null` if it never
+    /// did).
+    pub time_ua_below_15_s: Option<f64>,
     /// `explored_final` of the worst agent (least explored).
     pub explored_final_worst: Option<f64>,
     /// `ua_final` of the worst agent.
@@ -319,6 +325,14 @@ pub struct RunFacts<'a> {
     pub resources: &'a Resources,
 }
 
+/// The first time the step's mean over agents of UA was below `fraction`, seconds.
+fn first_ua_below(series: &[StepMetrics], fraction: f64) -> Option<f64> {
+    series
+        .iter()
+        .find(|m| m.mean.is_some_and(|s| s.ua < fraction))
+        .map(|m| m.time_s)
+}
+
 impl Summary {
     /// Summarises a run.
     pub fn build(record: &RunFacts<'_>) -> Summary {
@@ -365,6 +379,8 @@ impl Summary {
             loc_error_mean_m: mean.loc_error_mean_m,
             identified_final: mean.identified_final.unwrap_or_default(),
             time_all_identified_s,
+            time_ua_below_25_s: first_ua_below(series, 0.25),
+            time_ua_below_15_s: first_ua_below(series, 0.15),
             explored_final_worst: worst.explored_final,
             ua_final_worst: worst.ua_final,
             oa_final_worst: worst.oa_final,
@@ -719,4 +735,33 @@ fn print_resources(r: &Resources, out: &mut impl Write) -> std::io::Result<()> {
         opt(t.cpu_ms_per_uav_step, 1),
         opt(t.wall_s_per_sim_s, 3),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::observe::metrics::SetMetrics;
+
+    #[test]
+    fn ua_falls_below_a_fraction_at_the_first_step_whose_mean_is_below() {
+        let step = |time_s: f64, ua: Option<f64>| StepMetrics {
+            time_s,
+            mean: ua.map(|ua| SetMetrics {
+                ua,
+                ..SetMetrics::default()
+            }),
+            ..StepMetrics::default()
+        };
+        let series = [
+            step(0.5, Some(0.9)),
+            step(1.0, None),
+            step(1.5, Some(0.2)),
+            step(2.0, Some(0.1)),
+            step(2.5, Some(0.3)),
+        ];
+        assert_eq!(first_ua_below(&series, 0.25), Some(1.5));
+        assert_eq!(first_ua_below(&series, 0.15), Some(2.0));
+        assert_eq!(first_ua_below(&series, 0.05), None);
+        assert_eq!(first_ua_below(&[], 0.25), None);
+    }
 }

@@ -45,6 +45,7 @@ pub mod paired;
 pub mod rows;
 pub mod seeds;
 pub mod shard;
+pub mod suite;
 pub mod table;
 
 use std::path::PathBuf;
@@ -66,6 +67,7 @@ pub use protocol::variant::Variant;
 pub use rows::STEADY_WINDOW_S;
 pub use seeds::{MAX_SEEDS, SeedSet};
 pub use shard::Shard;
+pub use suite::Suite;
 pub use table::{Cell, Table};
 
 /// `fleet sweep --merge`: the table and picture of the runs under the sources (one table), or
@@ -148,6 +150,8 @@ pub struct SweepConfig {
     pub runs: Vec<PlannedRun>,
     /// The key and values swept (`--axis`).
     pub axis: Option<Axis>,
+    /// The scenarios swept (`--scenario DIR`).
+    pub suite: Option<Suite>,
     /// Variants in column order.
     pub variants: Vec<Variant>,
     /// Runs at once.
@@ -188,7 +192,17 @@ impl SweepArgs {
             .unwrap_or_else(|| crate::run::config::default_out_dir("sweep-"));
         // Bars of several runs at once would overwrite each other: log lines then.
         let progress_bar = self.jobs == 1 && std::io::IsTerminal::is_terminal(&std::io::stderr());
-        let levels = self.axis.as_ref().map_or(1, |a| a.values.len());
+        let suite = match &self.scenario.scenario {
+            Some(dir) if dir.is_dir() => Some(Suite::read(dir)?),
+            _ => None,
+        };
+        if suite.is_some() && self.axis.is_some() {
+            return Err(UsageError(
+                "--axis with a suite (--scenario DIR): sweep the axis on one scenario at a time"
+                    .into(),
+            ));
+        }
+        let levels = level_count(suite.as_ref(), self.axis.as_ref());
         let mut all = Vec::new();
         for level in 0..levels {
             for &variant in &variants {
@@ -216,6 +230,7 @@ impl SweepArgs {
             };
             runs.push(self.planned_run(
                 (index, level, variant, seed),
+                suite.as_ref(),
                 &out,
                 progress_bar,
                 label_of,
@@ -224,6 +239,7 @@ impl SweepArgs {
         Ok(SweepConfig {
             runs,
             axis: self.axis.clone(),
+            suite,
             variants,
             jobs: self.jobs as usize,
             shard: self.shard,
@@ -232,34 +248,45 @@ impl SweepArgs {
         })
     }
 
-    /// Run `index` of the whole sweep: `variant` on `seed` at the axis's `level`, into its
-    /// directory under `out`, labelled by `label_of` (given the axis setting and a space, or
-    /// nothing).
+    /// Run `index` of the whole sweep: `variant` on `seed` at `level` (the axis's value, or
+    /// the scenario of `suite`), into its directory under `out`, labelled by `label_of` (given
+    /// the level's directory and a space, or nothing).
     fn planned_run(
         &self,
         (index, level, variant, seed): (usize, usize, Variant, u64),
+        suite: Option<&Suite>,
         out: &std::path::Path,
         progress_bar: bool,
         label_of: impl Fn(&str) -> String,
     ) -> Result<PlannedRun, UsageError> {
+        // What the level changes: the scenario file (a suite's), or one override (an axis's);
+        // and the directory of its runs under `out`.
+        let (file, setting, dir) = match (suite, &self.axis) {
+            (Some(suite), _) => {
+                let (name, file) = &suite.scenarios[level];
+                (Some(file.clone()), None, Some(name.clone()))
+            }
+            (None, Some(axis)) => {
+                let setting = axis.setting(level);
+                (self.scenario.scenario.clone(), Some(setting.clone()), Some(setting))
+            }
+            (None, None) => (self.scenario.scenario.clone(), None, None),
+        };
         let mut overrides = variant.with_user_overrides(&self.scenario.overrides);
-        let setting = self.axis.as_ref().map(|a| a.setting(level));
-        overrides.extend(setting.clone());
+        overrides.extend(setting);
         overrides.push(format!("seed={seed}"));
         if let Some(d) = self.duration {
             overrides.push(format!("duration_s={d:?}"));
         }
         let scenario = ScenarioArgs {
-            scenario: self.scenario.scenario.clone(),
+            scenario: file,
             overrides,
         }
         .load()?;
         // The run's place in the whole sweep: distinct across shards too.
         let sequence = u32::try_from(index).unwrap_or(u32::MAX);
-        let base = setting
-            .as_ref()
-            .map_or_else(|| out.to_owned(), |s| out.join(s));
-        let at = setting.map(|s| format!("{s} ")).unwrap_or_default();
+        let base = dir.as_ref().map_or_else(|| out.to_owned(), |d| out.join(d));
+        let at = dir.map(|d| format!("{d} ")).unwrap_or_default();
         Ok(PlannedRun {
             variant,
             seed,
@@ -312,7 +339,7 @@ pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
             config.total_runs
         );
     }
-    let levels = config.axis.as_ref().map_or(1, |a| a.values.len());
+    let levels = level_count(config.suite.as_ref(), config.axis.as_ref());
     let mut found: Vec<FoundRuns> = (0..levels).map(|_| FoundRuns::new()).collect();
     let mut failed: Vec<(usize, String)> = Vec::new();
     let interrupted = runtime()?.block_on(jobs::run_all(&config.runs, config.jobs, |i, end| {
@@ -359,14 +386,6 @@ pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
     } else {
         Outcome::Failed
     };
-    let Some(axis) = &config.axis else {
-        let failed = failed.into_iter().map(|f| f.1).collect();
-        let found = found.pop().unwrap_or_default();
-        let (mut table, curves) = assemble(found, &config.variants, failed, false);
-        table.shard = config.shard.map(|s| s.to_string());
-        write_table(&table, &curves, &config.out)?;
-        return Ok(code);
-    };
     let failed_at: Vec<Vec<String>> = (0..levels)
         .map(|level| {
             failed
@@ -376,6 +395,26 @@ pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
                 .collect()
         })
         .collect();
+    if let Some(suite) = &config.suite {
+        let mut tables = Vec::with_capacity(levels);
+        for ((found, failed), (name, _)) in found.into_iter().zip(failed_at).zip(&suite.scenarios)
+        {
+            let (mut table, curves) = assemble(found, &config.variants, failed, false);
+            table.shard = config.shard.map(|s| s.to_string());
+            write_table(&table, &curves, &config.out.join(name))?;
+            tables.push(table);
+        }
+        suite::write(suite, &tables, &config.out)?;
+        return Ok(code);
+    }
+    let Some(axis) = &config.axis else {
+        let failed = failed_at.into_iter().next().unwrap_or_default();
+        let found = found.pop().unwrap_or_default();
+        let (mut table, curves) = assemble(found, &config.variants, failed, false);
+        table.shard = config.shard.map(|s| s.to_string());
+        write_table(&table, &curves, &config.out)?;
+        return Ok(code);
+    };
     let levels = axis::Levels {
         axis,
         variants: &config.variants,
@@ -384,6 +423,16 @@ pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
     };
     levels.write(found, failed_at, &config.out)?;
     Ok(code)
+}
+
+/// How many sets of runs a sweep has: one per scenario of a suite, or per value of an axis,
+/// else one.
+fn level_count(suite: Option<&Suite>, axis: Option<&Axis>) -> usize {
+    match (suite, axis) {
+        (Some(suite), _) => suite.scenarios.len(),
+        (None, Some(axis)) => axis.values.len(),
+        (None, None) => 1,
+    }
 }
 
 fn percent(v: Option<f64>) -> String {

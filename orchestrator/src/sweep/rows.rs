@@ -61,7 +61,7 @@ impl Row {
 pub(super) const ROW_COUNT: usize = ROWS.len();
 
 /// The metrics of the table, in row order.
-pub(super) const ROWS: [Row; 15] = [
+pub(super) const ROWS: [Row; 17] = [
     Row {
         key: "ua_final",
         label: "UA, undetected-set area (%)",
@@ -157,6 +157,18 @@ pub(super) const ROWS: [Row; 15] = [
         label: "all identified at (s)",
         scale: 1.0,
         source: Source::Summary(|s| s.time_all_identified_s),
+    },
+    Row {
+        key: "time_ua_below_25_s",
+        label: "UA below 25 % at (s)",
+        scale: 1.0,
+        source: Source::Summary(|s| s.time_ua_below_25_s),
+    },
+    Row {
+        key: "time_ua_below_15_s",
+        label: "UA below 15 % at (s)",
+        scale: 1.0,
+        source: Source::Summary(|s| s.time_ua_below_15_s),
     },
     Row {
         key: "real_time_factor",
@@ -315,6 +327,8 @@ mod tests {
             identified_final: 7.5,
             violations: 2,
             time_all_identified_s: Some(42.0),
+            time_ua_below_25_s: Some(61.5),
+            time_ua_below_15_s: Some(140.0),
             real_time_factor: 4.0,
             ..Summary::default()
         };

@@ -35,7 +35,8 @@ const MAX_CONTROL_SEQUENCES: usize = 10_000;
 const MAX_LOOKAHEAD_PERIODS: u32 = 16;
 /// Widest beam of the `setfleet` planner.
 const MAX_BEAM_WIDTH: u32 = 64;
-/// Longest future growth the `setfleet` planner charges, seconds.
+/// Longest future growth the `setfleet` planner charges, and longest revisit period of its
+/// tracking schedule, seconds.
 const MAX_GROWTH_HORIZON_S: f64 = 600.0;
 /// Smallest image side, pixels.
 const MIN_IMAGE_SIDE: u32 = 8;
@@ -61,6 +62,7 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
         "guidance.hidden_window" => Some(&super::HiddenWindow::NAMES),
         "guidance.predicted_views" => Some(&super::PredictedViews::NAMES),
         "guidance.border" => Some(&super::PlanBorder::NAMES),
+        "guidance.sweep" => Some(&super::SweepPlan::NAMES),
         _ => None,
     }
 }
@@ -585,7 +587,9 @@ impl Scenario {
         Interval::NON_NEGATIVE.check("guidance.target_weight", guidance.target_weight)?;
         Interval::closed(0.0, MAX_GROWTH_HORIZON_S)
             .check("guidance.growth_horizon_s", guidance.growth_horizon_s)?;
-        Interval::closed(0.0, 1e4).check("guidance.spread_m", guidance.spread_m)
+        Interval::closed(0.0, 1e4).check("guidance.spread_m", guidance.spread_m)?;
+        Interval::closed(0.0, MAX_GROWTH_HORIZON_S)
+            .check("guidance.track_revisit_s", guidance.track_revisit_s)
     }
 }
 
@@ -768,6 +772,12 @@ mod tests {
                 s.guidance.growth_horizon_s = 601.0
             }),
             ("guidance.spread_m", |s| s.guidance.spread_m = f64::NAN),
+            ("guidance.track_revisit_s", |s| {
+                s.guidance.track_revisit_s = -1.0
+            }),
+            ("guidance.track_revisit_s", |s| {
+                s.guidance.track_revisit_s = f64::INFINITY
+            }),
             ("comms.range_m", |s| s.comms.range_m = 0.0),
             ("comms.range_m", |s| s.comms.range_m = f64::NAN),
             ("comms.loss", |s| s.comms.loss = f64::NAN),

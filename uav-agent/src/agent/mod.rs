@@ -1032,6 +1032,7 @@ impl Agent<'_> {
         let sets: Vec<&sets::raster::CellSet> = state.target_sets().collect();
         let hidden = state.hidden_history.recently_hidden();
         let obstacles = ObstacleCell::known(&state.oem);
+        let fleet = self.ring.fleet(round, live);
         let decision = guidance::decide(
             &self.guidance,
             &PlanningInput {
@@ -1042,8 +1043,10 @@ impl Agent<'_> {
                 },
                 sets: &sets,
                 recently_hidden: &hidden,
+                unseen: state.hidden_history.unseen(),
                 obstacles: &obstacles,
                 others,
+                fleet: &fleet,
             },
         );
         self.report.decisions += 1;

@@ -15,7 +15,9 @@ pub mod coarse;
 pub mod paper;
 pub mod ring;
 pub mod setfleet;
+pub mod sweep;
 pub mod view;
+pub mod viewpoint;
 
 use protocol::camera::{CameraModel, CameraPose};
 use protocol::flight::{self, UavState};
@@ -107,6 +109,9 @@ impl GuidanceParams {
                 target_weight: s.guidance.target_weight,
                 growth_horizon_s: s.guidance.growth_horizon_s,
                 spread_m: s.guidance.spread_m,
+                sweep: s.guidance.sweep,
+                track_revisit_s: s.guidance.track_revisit_s,
+                second_viewpoints: s.guidance.second_viewpoints,
             },
             parallel: true,
         }
@@ -129,10 +134,16 @@ pub struct PlanningInput<'a> {
     pub sets: &'a [&'a CellSet],
     /// Ground occluded in the last periods, on the estimator's grid.
     pub recently_hidden: &'a CellSet,
+    /// `H̄`: ground hidden earlier and not proven free since, by the fleet as the agent knows
+    /// it, on the estimator's grid.
+    pub unseen: &'a CellSet,
     /// Known buildings (ignored unless `use_map`).
     pub obstacles: &'a [ObstacleCell],
     /// Plans of the UAVs that decided before this one in the round.
     pub others: &'a [PlannedView],
+    /// The round's fleet, which the `setfleet` sweep's lanes are shared among
+    /// ([`TokenRing::fleet`]).
+    pub fleet: &'a [u32],
 }
 
 /// The terms of the cost of a sequence.
@@ -389,8 +400,10 @@ mod tests {
                 },
                 sets: &sets,
                 recently_hidden: &hidden,
+                unseen: &hidden,
                 obstacles: &obstacles,
                 others: &others,
+                fleet: &[],
             };
             fingerprints.push(fingerprint(&paper_plan(&paper, &input)));
             fingerprints.push(fingerprint(&setfleet::plan(&setfleet, &input)));

@@ -231,8 +231,10 @@ mod tests {
                 state,
                 sets,
                 recently_hidden: &hidden,
+                unseen: &hidden,
                 obstacles,
                 others,
+                fleet: &[],
             },
         )
     }
@@ -405,8 +407,10 @@ mod tests {
                     },
                     sets: &[&set],
                     recently_hidden: &hidden,
+                    unseen: &hidden,
                     obstacles: &[],
                     others: &[],
+                    fleet: &[],
                 },
             );
             (d.cost.hidden_m2, overlap)
@@ -591,8 +595,10 @@ mod tests {
                 state: situation.state,
                 sets: &sets,
                 recently_hidden: &situation.hidden,
+                unseen: &situation.hidden,
                 obstacles: &situation.obstacles,
                 others: &situation.others,
+                fleet: &[],
             };
             let fast = plan(&params, &input);
             let reference = plan_exhaustive(&params, &input);

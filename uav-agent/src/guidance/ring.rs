@@ -136,6 +136,21 @@ impl RoundState {
         order
     }
 
+    /// The order `me` publishes with its plan: the merged order with `me` appended if
+    /// missing, or, when no token named an order yet (`me` is the round's first holder), the
+    /// live UAVs and `me`, ascending.
+    fn order_to_publish(&self, me: u32, live: &BTreeSet<u32>) -> Vec<u32> {
+        let mut order = self.order();
+        if order.is_empty() {
+            let first: BTreeSet<u32> = live.iter().copied().chain([me]).collect();
+            return first.into_iter().collect();
+        }
+        if !order.contains(&me) {
+            order.push(me);
+        }
+        order
+    }
+
     /// The plans, in the round's order (UAVs outside it last, ascending).
     fn plans(&self) -> Vec<PlannedView> {
         let order = self.order();
@@ -280,6 +295,20 @@ impl TokenRing {
         }
     }
 
+    /// The fleet of `round` as this agent decides in it, given the UAVs it believes live: the
+    /// order its token will carry ([`TokenRing::pass`]), ascending. A function of the round's
+    /// tokens (of the live UAVs for the round's first holder, whose token sets the order), so
+    /// the UAVs of a round agree on it, and a UAV that died is left out from the first round
+    /// whose first holder knew it (the `setfleet` sweep shares the lanes among this fleet).
+    pub fn fleet(&self, round: u64, live: &BTreeSet<u32>) -> Vec<u32> {
+        let mut fleet = match self.current.as_ref().filter(|s| s.round == round) {
+            Some(state) => state.order_to_publish(self.me, live),
+            None => RoundState::new(round).order_to_publish(self.me, live),
+        };
+        fleet.sort_unstable();
+        fleet
+    }
+
     /// Records this agent's decision for `round` (started at `step`) and returns the token to
     /// publish: every plan of the round merged so far plus `view`, the round's order (this
     /// agent appended if missing) and as holder the next one by the ring's rule
@@ -299,18 +328,7 @@ impl TokenRing {
             Some(s) => s,
             None => &mut past,
         };
-        let mut order = state.order();
-        if order.is_empty() {
-            order = live
-                .iter()
-                .copied()
-                .chain([me])
-                .collect::<BTreeSet<_>>()
-                .into_iter()
-                .collect();
-        } else if !order.contains(&me) {
-            order.push(me);
-        }
+        let order = state.order_to_publish(me, live);
         let issued_by = state.issuers.get(&me).copied().unwrap_or(me);
         let step = state.step.unwrap_or(step);
         state.plans.insert(me, view);
@@ -571,5 +589,30 @@ mod tests {
         let mut again = TokenRing::new(0);
         again.observe(t);
         assert_eq!(again.turn(3, &all), Turn::Done);
+    }
+
+    /// The sweep's lanes are shared among the round's fleet: the order of the round's first
+    /// token, which a UAV that died before the round starts is not in.
+    #[test]
+    fn the_fleet_is_the_rounds_order_and_leaves_a_dead_uav_out_of_the_next_round() {
+        let all = live(&[0, 1, 2, 3]);
+        let without_2 = live(&[0, 1, 3]);
+        let mut first = TokenRing::new(0);
+        assert_eq!(first.fleet(1, &all), vec![0, 1, 2, 3]);
+        let token = first.pass(1, 10, &all, view(0));
+        // UAV 3 learns of 2's death during round 1: the round's fleet is still the token's.
+        let mut later = TokenRing::new(3);
+        later.observe(token);
+        assert_eq!(later.fleet(1, &without_2), vec![0, 1, 2, 3]);
+        // Round 2's first holder knows: the fleet, and the order it passes on, leave 2 out.
+        assert_eq!(first.fleet(2, &without_2), vec![0, 1, 3]);
+        let token = first.pass(2, 12, &without_2, view(0));
+        assert_eq!(token.order, vec![0, 1, 3]);
+        later.observe(token.clone());
+        assert_eq!(later.fleet(2, &without_2), vec![0, 1, 3]);
+        // UAV 2 back in round 2, missing from the order: it plans as one of the fleet.
+        let mut back = TokenRing::new(2);
+        back.observe(token);
+        assert_eq!(back.fleet(2, &without_2), vec![0, 1, 2, 3]);
     }
 }

@@ -58,12 +58,15 @@
 
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
+use protocol::scenario::SweepPlan;
 use protocol::wire::PlannedView;
 use rayon::prelude::*;
 use sets::grid::GroundGrid;
 use sets::math::Point2;
 use sets::raster::CellSet;
 
+use super::sweep::Sweep;
+use super::viewpoint::SecondViewpoint;
 use super::view::same_pose;
 use super::{
     Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
@@ -83,6 +86,12 @@ pub struct SetfleetParams {
     pub growth_horizon_s: f64,
     /// Distance between view centres under which a plan overlapping the token's is charged, m.
     pub spread_m: f64,
+    /// How the fleet shares the search ([`super::sweep`]).
+    pub sweep: SweepPlan,
+    /// The tracking schedule's revisit period, seconds (0: none).
+    pub track_revisit_s: f64,
+    /// Whether second viewpoints are planned for pockets ([`super::viewpoint`]).
+    pub second_viewpoints: bool,
 }
 
 /// A partial sequence of the beam.
@@ -130,10 +139,10 @@ impl Node {
     }
 
     /// Sets the ranking key: the mean value (`cost.area_m2`), plus `lambda` per metre from the
-    /// view centre to the sets on `distance`, the crowding charge and `kappa` per m² of sets
-    /// in occluded ground.
-    fn rank_by(&mut self, distance: &DistanceMap, params: &GuidanceParams) {
-        let distance_m = distance.at(&self.centre);
+    /// view centre to where `pull` pulls, the crowding charge and `kappa` per m² of sets in
+    /// occluded ground.
+    fn rank_by(&mut self, pull: &Pull, params: &GuidanceParams) {
+        let distance_m = pull.distance_m(&self.centre, self.state.yaw);
         self.rank = self.cost.area_m2
             + params.lambda * distance_m
             + self.crowding
@@ -162,12 +171,10 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         &mut predictor,
     );
     let others_centres = view_centres(params, input.others);
-    // The distance map: to the nearest cell of the sets nobody ahead will see.
-    let mut attractive = undetected.clone();
-    attractive.or_assign(&targets);
-    for seen in &others_seen {
-        attractive.and_not_assign(seen);
-    }
+    let lookahead_s = depth as f64 * params.steps_per_period as f64 * params.dt;
+    let footprint_depth = footprint_depth(params, &input.state);
+    let sweep = Sweep::of(params, input, &grid, lookahead_s, footprint_depth);
+    let attractive = sweep.attractive(&undetected, &targets, &others_seen);
     let fov_area = footprint_area(params, &input.state);
     let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
     let root = Node::root(input.state, undetected, targets);
@@ -183,9 +190,27 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         others_centres: &others_centres,
         fov_area,
         growth_m2_per_cell,
+        sweep: &sweep,
     };
-    let (best, sequences, excluded) =
-        beam_search(params, root, depth, &attractive, period, &mut predictor);
+    // A second viewpoint for a pocket of the UAV's own ground, unless cars are overdue.
+    let viewpoint = (sp.second_viewpoints && sweep.overdue.is_empty())
+        .then(|| {
+            let mut pockets = input.sets.first().copied()?.clone();
+            pockets.and_assign(input.unseen);
+            let mut pockets = params.grids.downsample(&pockets);
+            pockets.and_assign(&sweep.own);
+            let at = (input.state.position, input.state.yaw);
+            SecondViewpoint::choose(params, &grid, &pockets, at, obstacles, &mut predictor)
+        })
+        .flatten();
+    let (best, sequences, excluded) = beam_search(
+        params,
+        root,
+        depth,
+        (&attractive, viewpoint),
+        period,
+        &mut predictor,
+    );
     decision(input, best, sequences, excluded)
 }
 
@@ -289,23 +314,26 @@ fn view_centres(params: &GuidanceParams, others: &[PlannedView]) -> Vec<Vec<Poin
 type Best = (Vec<f64>, Cost, Vec<CameraPose>);
 
 /// The beam search of the module docs from `root` over `depth` periods (`period(d)` values
-/// the children of period `d`): each period's children ranked, with the distance map to
-/// `attractive` (made while the first period's children are expanded), and the best
-/// `beam_width` kept. Returns the best sequence, the sequences of the last period and those
-/// of them that leave the region.
+/// the children of period `d`): each period's children ranked, pulled to the viewpoint if
+/// there is one, else by the distance map to `attractive` (made while the first period's
+/// children are expanded), and the best `beam_width` kept. Returns the best sequence, the
+/// sequences of the last period and those of them that leave the region.
 fn beam_search<'p>(
     params: &GuidanceParams,
     root: Node,
     depth: usize,
-    attractive: &CellSet,
+    (attractive, viewpoint): (&CellSet, Option<SecondViewpoint>),
     period: impl Fn(usize) -> Period<'p> + Sync,
     predictor: &mut GroundPredictor,
 ) -> (Option<Best>, usize, usize) {
     let grid = params.grids.coarse;
-    // The distance map ranks the children only: made while the first period's are expanded.
-    let (distance, first) = join_if(
+    // The pull ranks the children only: made while the first period's are expanded.
+    let (pull, first) = join_if(
         params.parallel,
-        || DistanceMap::new(&grid, attractive),
+        || match viewpoint {
+            Some(v) => Pull::Viewpoint(v),
+            None => Pull::Map(DistanceMap::new(&grid, attractive)),
+        },
         || period(0).expand_beam(std::slice::from_ref(&root), params.parallel, predictor),
     );
     let mut first = Some(first);
@@ -318,7 +346,7 @@ fn beam_search<'p>(
             None => period(d).expand_beam(&beam, params.parallel, predictor),
         };
         for child in &mut children {
-            child.rank_by(&distance, params);
+            child.rank_by(&pull, params);
         }
         if d + 1 == depth {
             sequences = children.len();
@@ -339,6 +367,24 @@ fn beam_search<'p>(
         .next()
         .map(|node| (node.increments, node.cost, node.poses));
     (best, sequences, excluded)
+}
+
+/// Where the planner's distance term pulls a sequence's view.
+enum Pull {
+    /// To the nearest cell of the attractive sets.
+    Map(DistanceMap),
+    /// To a second viewpoint of a pocket.
+    Viewpoint(SecondViewpoint),
+}
+
+impl Pull {
+    /// How far a sequence ending with its view centre at `centre` and heading `yaw` is, m.
+    fn distance_m(&self, centre: &Point2, yaw: f64) -> f64 {
+        match self {
+            Pull::Map(map) => map.at(centre),
+            Pull::Viewpoint(v) => v.distance_m(centre, yaw),
+        }
+    }
 }
 
 /// One period of the beam search: what every child of the beam's nodes is valued against.
@@ -362,13 +408,17 @@ struct Period<'a> {
     fov_area: f64,
     /// The future growth charged per boundary cell, m².
     growth_m2_per_cell: f64,
+    /// How the fleet's sweep weighs the sets.
+    sweep: &'a Sweep,
 }
 
 impl Period<'_> {
-    /// The value of sets of `area` cells (`X̄`'s, the targets') with `edge` boundary cells.
-    fn value(&self, area: (u64, u64), edge: (u64, u64)) -> f64 {
+    /// The value of predicted sets `undetected` (`X̄`) and `targets` (the cars') with `edge`
+    /// boundary cells (`X̄`'s, the cars'): their cells weighed by the sweep, plus the growth
+    /// charged on their boundaries.
+    fn value(&self, undetected: &CellSet, targets: &CellSet, edge: (u64, u64)) -> f64 {
         let w = self.params.setfleet.target_weight;
-        let area = area.0 as f64 + w * area.1 as f64;
+        let area = self.sweep.weigh(undetected, targets, w);
         let edge = edge.0 as f64 + w * edge.1 as f64;
         area * self.grid.cell_area() + edge * self.growth_m2_per_cell
     }
@@ -538,7 +588,7 @@ impl Period<'_> {
             recount_boundary(grown.edges.0, u0, &u, changed),
             recount_boundary(grown.edges.1, t0, &t, changed),
         );
-        let value_sum = node.value_sum + self.value((u.count(), t.count()), edges);
+        let value_sum = node.value_sum + self.value(&u, &t, edges);
         let centre = poses.last().map_or(Point2::new(0.0, 0.0), |p| {
             view::view_centre(&params.camera, p)
         });
@@ -686,8 +736,8 @@ fn spread_charge(
         .sum()
 }
 
-/// Area of the ground footprint of the camera at `state`, m² (0 if it misses the ground).
-fn footprint_area(params: &GuidanceParams, state: &UavState) -> f64 {
+/// The ground footprint of the camera at `state` (`None` if it misses the ground).
+fn footprint(params: &GuidanceParams, state: &UavState) -> Option<[Point2; 4]> {
     let camera = Camera::new(
         params.camera,
         CameraPose {
@@ -695,13 +745,31 @@ fn footprint_area(params: &GuidanceParams, state: &UavState) -> f64 {
             yaw: state.yaw,
         },
     );
-    camera.image_ground_footprint().map_or(0.0, |p| {
+    camera.image_ground_footprint()
+}
+
+/// Area of the ground footprint of the camera at `state`, m² (0 if it misses the ground).
+fn footprint_area(params: &GuidanceParams, state: &UavState) -> f64 {
+    footprint(params, state).map_or(0.0, |p| {
         let mut twice = 0.0;
         for i in 0..p.len() {
             let (a, b) = (p[i], p[(i + 1) % p.len()]);
             twice += a.x * b.y - b.x * a.y;
         }
         twice.abs() / 2.0
+    })
+}
+
+/// Depth of the ground footprint of the camera at `state` along its heading, m (0 if it
+/// misses the ground).
+fn footprint_depth(params: &GuidanceParams, state: &UavState) -> f64 {
+    let heading = Point2::new(state.yaw.cos(), state.yaw.sin());
+    footprint(params, state).map_or(0.0, |p| {
+        let along = p.iter().map(|q| q.coords.dot(&heading.coords));
+        let (lo, hi) = along.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
+            (lo.min(a), hi.max(a))
+        });
+        (hi - lo).max(0.0)
     })
 }
 
@@ -909,8 +977,10 @@ mod tests {
                 },
                 sets,
                 recently_hidden: &hidden,
+                unseen: &hidden,
                 obstacles: &[],
                 others,
+                fleet: &[0, 1],
             },
         )
     }
@@ -1130,8 +1200,10 @@ mod tests {
                 },
                 sets: &sets,
                 recently_hidden: &hidden,
+                unseen: &hidden,
                 obstacles: &obstacles,
                 others,
+                fleet: &[0, 1],
             };
             assert_eq!(plan(&parallel, &input), plan(&serial, &input));
         }
@@ -1155,8 +1227,10 @@ mod tests {
             },
             sets: &[&everything],
             recently_hidden: &hidden,
+            unseen: &hidden,
             obstacles: &[],
             others: &[],
+            fleet: &[0, 1],
         };
         assert_eq!(
             crate::guidance::decide(&paper, &input),

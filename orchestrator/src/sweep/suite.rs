@@ -1,0 +1,261 @@
+//! `fleet sweep --scenario DIR`: the same sweep on every scenario of a suite (every `*.toml`
+//! file of `DIR`, in the order of their names), and the variants compared scenario by
+//! scenario.
+//!
+//! The runs of scenario `NAME.toml` go under `NAME/<variant>/seed-<n>/`, so each `NAME/`
+//! directory is a sweep directory of its own, with its `table.json`, `table.md` and
+//! `metrics.png` (and `fleet sweep --merge` reads it like any sweep). Beside them the sweep
+//! writes `suite.json` and `suite.md`:
+//!
+//! - per scenario and variant, UA (final and over the steady window) and the localisation
+//!   error (mean over the run), mean ± sample standard deviation over the seeds;
+//! - per scenario, every two variants compared seed by seed as `table.md` compares them
+//!   ([`super::paired`]): the mean difference `a − b` on UA, OA, target-set area and
+//!   localisation error, its 95 % confidence interval and who was lower how often.
+//!
+//! The suite the project keeps is `scenarios/suite/` (`scenarios/README.md` says what each
+//! scenario stresses): `fleet sweep --scenario scenarios/suite --variants paper,setfleet
+//! --seeds 10 --jobs 2`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use serde::Serialize;
+
+use super::paired::{self, Comparison, Paired, PairedMetric, Sides};
+use super::table::{Cell, Table, format_cell};
+use protocol::usage::UsageError;
+use protocol::variant::Variant;
+
+/// Most scenarios a suite holds.
+pub const MAX_SUITE_SCENARIOS: usize = 64;
+
+/// The scenarios of a suite directory.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Suite {
+    /// Each scenario's name (its file's stem) and file, in the order of the names.
+    pub scenarios: Vec<(String, PathBuf)>,
+}
+
+impl Suite {
+    /// The `*.toml` files of `dir`, by name: at least one, at most [`MAX_SUITE_SCENARIOS`].
+    pub fn read(dir: &Path) -> Result<Suite, UsageError> {
+        let fail = |why: String| UsageError(format!("--scenario {}: {why}", dir.display()));
+        let entries = std::fs::read_dir(dir).map_err(|e| fail(format!("cannot list: {e}")))?;
+        let mut scenarios = Vec::new();
+        for entry in entries {
+            let path = entry.map_err(|e| fail(format!("cannot list: {e}")))?.path();
+            if path.extension().is_none_or(|e| e != "toml") || !path.is_file() {
+                continue;
+            }
+            let name = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .filter(|s| {
+                    s.chars()
+                        .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+                })
+                .ok_or_else(|| {
+                    fail(format!(
+                        "{}: a scenario's file name must be letters, digits, - _ and .",
+                        path.display()
+                    ))
+                })?
+                .to_owned();
+            scenarios.push((name, path));
+        }
+        scenarios.sort();
+        if scenarios.is_empty() {
+            return Err(fail("no *.toml scenario in the directory".into()));
+        }
+        if scenarios.len() > MAX_SUITE_SCENARIOS {
+            return Err(fail(format!(
+                "at most {MAX_SUITE_SCENARIOS} scenarios in a suite"
+            )));
+        }
+        Ok(Suite { scenarios })
+    }
+}
+
+/// One scenario's variants in `suite.json`.
+#[derive(Debug, Serialize)]
+struct ScenarioResults<'a> {
+    /// The scenario's name.
+    name: &'a str,
+    /// Its file.
+    file: String,
+    /// The seeds its runs had.
+    seeds: &'a [u64],
+    /// Per variant, the suite's rows (`ua_final`, `ua_window`, `loc_error_mean_m`).
+    variants: Vec<(Variant, Vec<(&'static str, &'a Cell)>)>,
+    /// Runs that failed or were interrupted.
+    failed_runs: &'a [String],
+}
+
+/// Two variants compared on one scenario: an object of `paired` in `suite.json`.
+#[derive(Debug, Serialize)]
+struct ScenarioPaired<'a> {
+    /// The scenario's name.
+    scenario: &'a str,
+    /// The comparison.
+    #[serde(flatten)]
+    paired: &'a Paired,
+}
+
+impl Comparison for ScenarioPaired<'_> {
+    fn sides(&self) -> String {
+        format!("{} | {}", self.scenario, self.paired.sides())
+    }
+
+    fn compared(&self) -> &PairedMetric {
+        &self.paired.compared
+    }
+}
+
+/// The rows of `table.json` the suite's first table shows: key, heading, scale.
+const SUITE_ROWS: [(&str, &str, f64); 3] = [
+    ("ua_final", "UA final (%)", 100.0),
+    ("ua_window", "UA 100-300 s (%)", 100.0),
+    ("loc_error_mean_m", "loc. error (m)", 1.0),
+];
+
+/// Writes `suite.json` and `suite.md` into `out` from each scenario's table (in the suite's
+/// order) and prints `suite.md`.
+pub fn write(suite: &Suite, tables: &[Table], out: &Path) -> anyhow::Result<()> {
+    let results: Vec<ScenarioResults<'_>> = suite
+        .scenarios
+        .iter()
+        .zip(tables)
+        .map(|((name, file), table)| ScenarioResults {
+            name,
+            file: file.display().to_string(),
+            seeds: &table.seeds,
+            variants: table
+                .variants
+                .iter()
+                .map(|v| {
+                    let cells = SUITE_ROWS
+                        .iter()
+                        .filter_map(|(key, _, _)| {
+                            let cell = table.metrics.get(v.name())?.get(key)?;
+                            Some((*key, cell))
+                        })
+                        .collect();
+                    (*v, cells)
+                })
+                .collect(),
+            failed_runs: &table.failed_runs,
+        })
+        .collect();
+    let paired: Vec<ScenarioPaired<'_>> = suite
+        .scenarios
+        .iter()
+        .zip(tables)
+        .flat_map(|((name, _), table)| {
+            table.paired.iter().map(move |paired| ScenarioPaired {
+                scenario: name,
+                paired,
+            })
+        })
+        .collect();
+    #[derive(Serialize)]
+    struct SuiteJson<'a> {
+        scenarios: &'a [ScenarioResults<'a>],
+        paired: &'a [ScenarioPaired<'a>],
+    }
+    let json = serde_json::to_string_pretty(&SuiteJson {
+        scenarios: &results,
+        paired: &paired,
+    })? + "\n";
+    std::fs::write(out.join("suite.json"), json).context("cannot write suite.json")?;
+    let md = to_markdown(&results, &paired);
+    std::fs::write(out.join("suite.md"), &md).context("cannot write suite.md")?;
+    println!("{md}\nresults in {}", out.display());
+    Ok(())
+}
+
+/// `suite.md`: the variants per scenario, then their paired differences per scenario.
+fn to_markdown(results: &[ScenarioResults<'_>], paired: &[ScenarioPaired<'_>]) -> String {
+    let mut md = String::from(
+        "Every scenario of the suite: mean ± standard deviation over the seeds, per variant.\n\n",
+    );
+    let _ = write!(md, "| scenario | seeds | variant |");
+    for (_, head, _) in SUITE_ROWS {
+        let _ = write!(md, " {head} |");
+    }
+    let _ = writeln!(md, "\n|---|---:|---|{}", "---:|".repeat(SUITE_ROWS.len()));
+    for scenario in results {
+        for (variant, cells) in &scenario.variants {
+            let _ = write!(
+                md,
+                "| {} | {} | {} |",
+                scenario.name,
+                scenario.seeds.len(),
+                variant.name()
+            );
+            for (key, _, scale) in SUITE_ROWS {
+                let cell = cells.iter().find(|(k, _)| *k == key).map(|(_, c)| *c);
+                let text = cell.map_or_else(|| "-".into(), |c| format_cell(c, scale));
+                let _ = write!(md, " {text} |");
+            }
+            md.push('\n');
+        }
+    }
+    let failed: Vec<String> = results
+        .iter()
+        .flat_map(|s| s.failed_runs.iter().map(move |r| format!("{}/{r}", s.name)))
+        .collect();
+    if !failed.is_empty() {
+        let _ = writeln!(md, "\nFailed or interrupted runs: {}.", failed.join(", "));
+    }
+    let sides = Sides {
+        title: "Paired differences a − b per scenario",
+        a: "a",
+        b: "b",
+        heads: "scenario | a − b",
+    };
+    paired::write_section(&sides, paired, &mut md);
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_suite_is_the_toml_files_of_a_directory_by_name() {
+        let root = std::env::temp_dir().join(format!("setfleet-suite-{}", std::process::id()));
+        let (dir, empty) = (root.join("suite"), root.join("empty"));
+        std::fs::create_dir_all(&empty).unwrap();
+        std::fs::create_dir_all(dir.join("c.toml")).unwrap();
+        for name in ["b.toml", "a.toml", "notes.md"] {
+            std::fs::write(dir.join(name), "").unwrap();
+        }
+        let suite = Suite::read(&dir).unwrap();
+        let names: Vec<&str> = suite.scenarios.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["a", "b"]);
+        let e = Suite::read(&empty).unwrap_err();
+        assert!(e.0.contains("no *.toml scenario"), "{e}");
+        assert!(Suite::read(&root.join("missing")).is_err());
+        std::fs::write(dir.join("a b.toml"), "").unwrap();
+        let e = Suite::read(&dir).unwrap_err();
+        assert!(e.0.contains("file name"), "{e}");
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    /// The project's suite reads and every scenario of it loads with every variant.
+    #[test]
+    fn the_projects_suite_loads_with_every_variant() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/suite");
+        let suite = Suite::read(&dir).unwrap();
+        assert!(suite.scenarios.len() >= 6, "{suite:?}");
+        for (name, file) in &suite.scenarios {
+            for variant in Variant::ALL {
+                let overrides = variant.with_user_overrides(&[]);
+                protocol::scenario::Scenario::load(Some(file), &overrides)
+                    .unwrap_or_else(|e| panic!("{name} with {}: {e}", variant.name()));
+            }
+        }
+    }
+}
