@@ -307,8 +307,9 @@ pub struct GuidanceConfig {
     /// `setfleet`: distance between view centres below which this UAV's plan is charged for
     /// overlapping the plans already in the token, metres (0: no charge).
     pub spread_m: f64,
-    /// `setfleet`: how the fleet shares the search: `"lanes"` (the fleet's sweep plan) or
-    /// `"none"` (the default: every UAV values all ground alike) ([`SweepPlan`]).
+    /// `setfleet`: how the fleet shares the search: `"none"` (the default: every UAV values
+    /// all ground alike), `"sectors"` (a lane each) or `"lanes"` (lanes of one front)
+    /// ([`SweepPlan`]).
     pub sweep: SweepPlan,
     /// `setfleet`: the revisit period of the tracking schedule, seconds: an identified car
     /// whose set has grown past the area its targets' speed covers in this time (a disc of
@@ -416,6 +417,9 @@ pub enum SweepPlan {
     /// Every UAV values all ground alike; the token only spreads the plans.
     #[default]
     None,
+    /// A lane each: the round's fleet splits the region into one lane per UAV, whose ground
+    /// the UAV values most (`uav_agent::guidance::sweep`).
+    Sectors,
     /// Lanes of one front: the round's fleet splits the region into one lane per UAV, each
     /// cleared from its south edge northwards, ground behind the front first
     /// (`uav_agent::guidance::sweep`).
@@ -424,7 +428,7 @@ pub enum SweepPlan {
 
 impl SweepPlan {
     /// Every choice's name, as written in a scenario.
-    pub const NAMES: [&'static str; 2] = ["none", "lanes"];
+    pub const NAMES: [&'static str; 3] = ["none", "sectors", "lanes"];
 }
 
 /// The guidance planner (`guidance.planner`).

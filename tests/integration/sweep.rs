@@ -1,6 +1,7 @@
 //! `fleet sweep` end to end: a sweep, the same sweep split into shards and merged, and the
 //! same sweep with `--jobs 2` give the same table and the same runs; an interrupted
-//! `--jobs` sweep stops every run and leaves nothing.
+//! `--jobs` sweep stops every run and leaves nothing; an axis sweep and a suite sweep compare
+//! the values of a key and the variants on each scenario.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -35,10 +36,16 @@ fn sweep(t: &TestRun, out: &Path, extra: &[&str]) -> Output {
 /// `fleet sweep` of the test scenario into `out` with `args`, run to its end; no process of it
 /// is left after.
 fn sweep_with(t: &TestRun, out: &Path, args: &[&str]) -> Output {
+    sweep_of(t, &t.dir.join("scenario.toml"), out, args)
+}
+
+/// `fleet sweep --scenario scenario` (a file or a suite's directory) into `out` with `args`,
+/// run to its end; no process of it is left after.
+fn sweep_of(t: &TestRun, scenario: &Path, out: &Path, args: &[&str]) -> Output {
     let mut cmd = Command::new(binary("fleet"));
     cmd.arg("sweep")
         .arg("--scenario")
-        .arg(t.dir.join("scenario.toml"))
+        .arg(scenario)
         .args(args)
         .arg("--out")
         .arg(out);
@@ -301,6 +308,73 @@ fn an_axis_sweep_compares_the_values_of_a_key() {
     let paired = |md: &str| md.find("\nPaired differences").map(|i| md[i..].to_owned());
     assert!(paired(&md).is_some(), "{md}");
     assert_eq!(paired(&merged_md), paired(&md));
+}
+
+#[test]
+fn a_suite_sweep_compares_the_variants_on_every_scenario() {
+    let t = TestRun::new("sweep-suite");
+    let suite = t.dir.join("suite");
+    std::fs::create_dir_all(&suite).expect("suite directory");
+    std::fs::write(
+        suite.join("b-three-cars.toml"),
+        SCENARIO.replace("count = 4", "count = 3"),
+    )
+    .expect("scenario b");
+    std::fs::write(suite.join("a-small.toml"), SCENARIO).expect("scenario a");
+    std::fs::write(suite.join("notes.md"), "not a scenario").expect("notes");
+    let out_dir = t.dir.join("out");
+    let out = sweep_of(
+        &t,
+        &suite,
+        &out_dir,
+        &[SWEEP.as_slice(), &["--jobs", "2"]].concat(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    // Each scenario is a sweep directory of its own, whose runs are of that scenario.
+    for (name, cars) in [("a-small", 4), ("b-three-cars", 3)] {
+        let dir = out_dir.join(name);
+        let table = json(&dir.join("table.json"));
+        assert_eq!(table["seeds"], serde_json::json!([1, 2]), "{table}");
+        assert_two_seed_comparisons(&table, |p| {
+            assert_eq!([&p["a"], &p["b"]], ["paper", "setfleet"], "{p}");
+        });
+        for (variant, seed) in RUNS {
+            let s = json(&dir.join(format!("{variant}/seed-{seed}/summary.json")));
+            assert_eq!(s["violations"], 0, "{s}");
+            assert_eq!(s["targets"], cars, "{s}");
+        }
+    }
+    let suite_json = json(&out_dir.join("suite.json"));
+    let names: Vec<&str> = suite_json["scenarios"]
+        .as_array()
+        .expect("scenarios")
+        .iter()
+        .filter_map(|s| s["name"].as_str())
+        .collect();
+    assert_eq!(names, ["a-small", "b-three-cars"], "{suite_json}");
+    let paired = suite_json["paired"].as_array().expect("paired");
+    assert_eq!(paired.len(), 2 * 4 * 2, "{suite_json}");
+    assert_eq!(paired[0]["scenario"], "a-small", "{suite_json}");
+    assert_eq!(paired[8]["scenario"], "b-three-cars", "{suite_json}");
+    let md = std::fs::read_to_string(out_dir.join("suite.md")).expect("suite.md");
+    assert!(md.contains("| a-small | 2 | setfleet |"), "{md}");
+    assert!(
+        md.contains("| b-three-cars | paper − setfleet | UA (pp) |"),
+        "{md}"
+    );
+    // A suite and an axis do not combine.
+    let refused = sweep_of(
+        &t,
+        &suite,
+        &t.dir.join("refused"),
+        &["--seeds", "1", "--axis", "comms.loss=0,0.5"],
+    );
+    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
+    assert!(
+        stderr(&refused).contains("--axis with a suite"),
+        "{}",
+        stderr(&refused)
+    );
 }
 
 /// The axis's second value compared with its first seed by seed, for the one variant: on both

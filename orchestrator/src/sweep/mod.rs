@@ -268,7 +268,11 @@ impl SweepArgs {
             }
             (None, Some(axis)) => {
                 let setting = axis.setting(level);
-                (self.scenario.scenario.clone(), Some(setting.clone()), Some(setting))
+                (
+                    self.scenario.scenario.clone(),
+                    Some(setting.clone()),
+                    Some(setting),
+                )
             }
             (None, None) => (self.scenario.scenario.clone(), None, None),
         };
@@ -397,8 +401,7 @@ pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
         .collect();
     if let Some(suite) = &config.suite {
         let mut tables = Vec::with_capacity(levels);
-        for ((found, failed), (name, _)) in found.into_iter().zip(failed_at).zip(&suite.scenarios)
-        {
+        for ((found, failed), (name, _)) in found.into_iter().zip(failed_at).zip(&suite.scenarios) {
             let (mut table, curves) = assemble(found, &config.variants, failed, false);
             table.shard = config.shard.map(|s| s.to_string());
             write_table(&table, &curves, &config.out.join(name))?;

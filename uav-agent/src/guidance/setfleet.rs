@@ -32,6 +32,14 @@
 //!   one another beyond the others' horizon.
 //! - `kappa` keeps the paper's meaning: the area of the final sets inside ground occluded in
 //!   the last periods is charged `kappa` m² per m².
+//! - **The fleet's share of the search** ([`super::sweep`]): the round's fleet (the token's
+//!   order) splits the region into lanes. With `guidance.sweep = "sectors"` or `"lanes"` the
+//!   cells of `X̄` weigh by where they lie (the UAV's lane, behind or past its front, other
+//!   lanes) and the distance term pulls to the UAV's own clearable ground; with a tracking
+//!   schedule (`guidance.track_revisit_s`) a car's set grown past the bound pulls the UAV whose
+//!   lane holds it, and its cells weigh more; with `guidance.second_viewpoints` the distance
+//!   term pulls to a viewpoint predicted to see into the largest pocket of `X̄` hidden from
+//!   where the UAVs flew ([`super::viewpoint`]), when worth the detour.
 //!
 //! The planning grid has [`super::coarse::PLANNING_CELL_M`] cells like the paper's; the sets
 //! grow by whole cells (8-neighbour rings) when the targets' accumulated reach crosses a cell,
@@ -66,8 +74,8 @@ use sets::math::Point2;
 use sets::raster::CellSet;
 
 use super::sweep::Sweep;
-use super::viewpoint::SecondViewpoint;
 use super::view::same_pose;
+use super::viewpoint::SecondViewpoint;
 use super::{
     Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
     fly_step, stray, view,
@@ -200,7 +208,15 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
             let mut pockets = params.grids.downsample(&pockets);
             pockets.and_assign(&sweep.own);
             let at = (input.state.position, input.state.yaw);
-            SecondViewpoint::choose(params, &grid, &pockets, at, obstacles, &mut predictor)
+            SecondViewpoint::choose(
+                params,
+                &grid,
+                &pockets,
+                at,
+                footprint_depth,
+                obstacles,
+                &mut predictor,
+            )
         })
         .flatten();
     let (best, sequences, excluded) = beam_search(
@@ -1158,10 +1174,6 @@ mod tests {
     fn the_pool_decides_as_one_thread() {
         let parallel = params();
         assert!(parallel.parallel);
-        let serial = GuidanceParams {
-            parallel: false,
-            ..parallel.clone()
-        };
         let sets = [
             blob(&parallel, Point2::new(40.0, 60.0), 25.0),
             blob(&parallel, Point2::new(-70.0, -20.0), 10.0),
@@ -1191,21 +1203,36 @@ mod tests {
             height_m: 45.0,
         });
         let others = [super::super::tests::watching_the_south()];
-        for (yaw, others) in [(0.0, &others[..0]), (2.0, &others[..]), (-1.0, &others[..])] {
-            let input = PlanningInput {
-                uav: 1,
-                state: UavState {
-                    position: Point3::new(-10.0, 5.0, 60.0),
-                    yaw,
-                },
-                sets: &sets,
-                recently_hidden: &hidden,
-                unseen: &hidden,
-                obstacles: &obstacles,
-                others,
-                fleet: &[0, 1],
+        // Every way of sharing the search, with the schedule and the second viewpoints.
+        let mut shared = Vec::new();
+        for sweep in [SweepPlan::None, SweepPlan::Sectors, SweepPlan::Lanes] {
+            let mut p = parallel.clone();
+            p.setfleet.sweep = sweep;
+            p.setfleet.track_revisit_s = 2.0;
+            p.setfleet.second_viewpoints = true;
+            shared.push(p);
+        }
+        for parallel in std::iter::once(&parallel).chain(&shared) {
+            let serial = GuidanceParams {
+                parallel: false,
+                ..parallel.clone()
             };
-            assert_eq!(plan(&parallel, &input), plan(&serial, &input));
+            for (yaw, others) in [(0.0, &others[..0]), (2.0, &others[..]), (-1.0, &others[..])] {
+                let input = PlanningInput {
+                    uav: 1,
+                    state: UavState {
+                        position: Point3::new(-10.0, 5.0, 60.0),
+                        yaw,
+                    },
+                    sets: &sets,
+                    recently_hidden: &hidden,
+                    unseen: &hidden,
+                    obstacles: &obstacles,
+                    others,
+                    fleet: &[0, 1],
+                };
+                assert_eq!(plan(parallel, &input), plan(&serial, &input));
+            }
         }
     }
 

@@ -18,6 +18,8 @@
 //! cameras cannot see into (shadows: the occlusion floor).
 //!
 //! ## The plan
+//! `guidance.sweep = "sectors"` keeps the lanes only (each UAV values its lane's ground 1 and
+//! the others' [`OTHER_LANES_WEIGHT`], and is pulled to its lane); `"lanes"` adds the fronts:
 //! - **Lanes** ([`Lanes`]). The round's fleet (the token's order, [`super::TokenRing::fleet`])
 //!   splits the region's columns into one lane per UAV, in ascending order of UAV id: a pure
 //!   function of the token's contents, so every UAV of a round computes the same lanes. A UAV
@@ -117,25 +119,26 @@ impl Sweep {
                 .dilate(grid, params.target_max_speed * lookahead_s)
         };
         let overdue_extra = (OVERDUE_WEIGHT - params.setfleet.target_weight).max(0.0);
-        let (priority, clearable, front) = match input.sets.first() {
-            Some(&undetected) if params.setfleet.sweep == SweepPlan::Lanes => {
-                // The fronts and the pull read the ground the cameras can clear: `X̄` less
-                // `H̄` (the pockets hidden from where the UAVs flew, which a pass in the
-                // lane's direction does not clear either).
+        // The pull, and the fronts, read the ground the cameras can clear: `X̄` less `H̄` (the
+        // pockets hidden from where the UAVs flew, which a pass in the lane's direction does
+        // not clear either).
+        let sweep = params.setfleet.sweep;
+        let clearable = match input.sets.first() {
+            Some(&undetected) if sweep != SweepPlan::None => {
                 let mut clearable = undetected.clone();
                 clearable.and_not_assign(input.unseen);
-                let clearable = params.grids.downsample(&clearable);
-                let band_rows = (footprint_depth_m / grid.cell_m).ceil().max(1.0) as u32;
-                let exp = std::env::var("SWEEP_EXP").unwrap_or_default();
-                let priority = if exp == "nofront" {
-                    Priority::of_lane(grid, &lanes, input.uav, &CellSet::full(grid), grid.ny)
-                } else {
-                    Priority::of_lane(grid, &lanes, input.uav, &clearable, band_rows)
-                };
-                let front = lanes.front(input.uav, &clearable);
-                (priority, Some(clearable), front)
+                Some(params.grids.downsample(&clearable))
             }
-            _ => (Priority::Uniform, None, None),
+            _ => None,
+        };
+        let (priority, front) = match (&clearable, sweep) {
+            (Some(clearable), SweepPlan::Lanes) => {
+                let band_rows = (footprint_depth_m / grid.cell_m).ceil().max(1.0) as u32;
+                let priority = Priority::of_lane(grid, &lanes, input.uav, clearable, band_rows);
+                (priority, lanes.front(input.uav, clearable))
+            }
+            (Some(_), SweepPlan::Sectors) => (Priority::of_sector(grid, &lanes, input.uav), None),
+            _ => (Priority::Uniform, None),
         };
         let own = match lanes.columns(input.uav) {
             Some((x0, x1)) => {
@@ -187,7 +190,10 @@ impl Sweep {
         if !overdue.is_empty() {
             return overdue;
         }
-        let pulling = self.clearable.as_ref().and_then(|c| self.priority.pulling(c));
+        let pulling = self
+            .clearable
+            .as_ref()
+            .and_then(|c| self.priority.pulling(c));
         if let Some(pulling) = pulling.map(less_seen)
             && !pulling.is_empty()
         {
@@ -321,6 +327,21 @@ impl Priority {
             (ahead, AHEAD_WEIGHT),
             (others, OTHER_LANES_WEIGHT),
         ])
+    }
+
+    /// The priorities of `uav`'s sector on `grid`: its lane's ground weighs 1, the other
+    /// lanes' [`OTHER_LANES_WEIGHT`]. Uniform when `uav` has no lane.
+    pub fn of_sector(grid: &GroundGrid, lanes: &Lanes, uav: u32) -> Priority {
+        let Some((x0, x1)) = lanes.columns(uav) else {
+            return Priority::Uniform;
+        };
+        let mut lane = CellSet::empty(grid);
+        for iy in 0..grid.ny {
+            lane.fill_row_span(iy, x0, x1);
+        }
+        let mut others = CellSet::full(grid);
+        others.and_not_assign(&lane);
+        Priority::Classes(vec![(lane, 1.0), (others, OTHER_LANES_WEIGHT)])
     }
 
     /// The weighted cell count of `set`: its cells' weights summed.
@@ -483,18 +504,30 @@ mod tests {
         // Every cell is in one class.
         assert_eq!(
             p.weigh(&CellSet::full(&g)),
-            f64::from(x1 - x0 + 1)
-                * (20.0 * BEHIND_WEIGHT + 10.0 + 50.0 * AHEAD_WEIGHT)
+            f64::from(x1 - x0 + 1) * (20.0 * BEHIND_WEIGHT + 10.0 + 50.0 * AHEAD_WEIGHT)
                 + f64::from(g.nx - (x1 - x0 + 1)) * 80.0 * OTHER_LANES_WEIGHT
         );
         // What pulls: the lane's X̄ in the band (nothing is left behind the front).
         let pulling = p.pulling(&undetected).unwrap();
         assert_eq!(pulling.count(), u64::from(x1 - x0 + 1) * 10);
-        assert_eq!(Priority::Uniform.weigh(&undetected), undetected.count() as f64);
+        assert_eq!(
+            Priority::Uniform.weigh(&undetected),
+            undetected.count() as f64
+        );
         assert!(Priority::Uniform.pulling(&undetected).is_none());
         // No lane, no sweep.
         assert!(matches!(
             Priority::of_lane(&g, &lanes, 5, &undetected, 10),
+            Priority::Uniform
+        ));
+        // A sector: the whole lane weighs 1, and all of it pulls.
+        let sector = Priority::of_sector(&g, &lanes, 0);
+        assert_eq!(sector.weigh(&cell(x0, 10)), 1.0);
+        assert_eq!(sector.weigh(&cell(x1 + 1, 10)), OTHER_LANES_WEIGHT);
+        let pulling = sector.pulling(&undetected).unwrap();
+        assert_eq!(pulling.count(), u64::from(x1 - x0 + 1) * 60);
+        assert!(matches!(
+            Priority::of_sector(&g, &lanes, 5),
             Priority::Uniform
         ));
     }

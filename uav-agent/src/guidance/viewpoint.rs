@@ -7,9 +7,11 @@
 //! side.
 //!
 //! At each decision ([`SecondViewpoint::choose`]):
-//! 1. **The pocket.** The pockets are the connected groups (8-neighbours) of planning cells of
-//!    `X̄ ∩ H̄` in the deciding UAV's *own ground* (its lane, behind its front with lanes); the
-//!    largest is chosen (ties: the first in row order), if it has at least [`MIN_POCKET_CELLS`].
+//! 1. **The pocket.** The pockets are the planning cells of `X̄ ∩ H̄` in the deciding UAV's
+//!    *own ground* (its lane, behind its front with lanes). The ground is cut into square
+//!    blocks half the camera's footprint deep, about what one view takes in; the block holding
+//!    most pocket cells is chosen (ties: the first in row order), if it holds at least
+//!    [`MIN_POCKET_CELLS`].
 //! 2. **The viewpoint.** For [`HEADINGS`] headings `θ` evenly spread, the camera at the UAV's
 //!    altitude is placed so that its optical axis meets the ground at the pocket's barycentre,
 //!    looking along `θ`; the predicted view (with the map's buildings) tells how many of the
@@ -31,10 +33,10 @@
 use protocol::camera::CameraPose;
 use sets::grid::GroundGrid;
 use sets::math::{Point2, Point3};
-use sets::raster::CellSet;
+use sets::raster::{CellBox, CellSet};
 
-use super::view::{self, GroundPredictor, ObstacleCell};
 use super::GuidanceParams;
+use super::view::{self, GroundPredictor, ObstacleCell};
 
 /// Smallest pocket a viewpoint is planned for, planning cells.
 pub const MIN_POCKET_CELLS: u64 = 8;
@@ -57,18 +59,21 @@ pub struct SecondViewpoint {
 }
 
 impl SecondViewpoint {
-    /// The viewpoint for the largest pocket of `pockets` (planning cells of `X̄ ∩ H̄` in the
-    /// deciding UAV's own ground, on `grid`) seen from a camera at `state_position` and
-    /// `yaw`, if one is predicted to see enough of it and is worth the detour (module docs).
+    /// The viewpoint for the densest block of `pockets` (planning cells of `X̄ ∩ H̄` in the
+    /// deciding UAV's own ground, on `grid`), for the camera at `position` and `yaw` whose
+    /// footprint is `footprint_depth_m` deep, if one is predicted to see enough of it and is
+    /// worth the detour (module docs).
     pub fn choose(
         params: &GuidanceParams,
         grid: &GroundGrid,
         pockets: &CellSet,
         (position, yaw): (Point3, f64),
+        footprint_depth_m: f64,
         obstacles: &[ObstacleCell],
         predictor: &mut GroundPredictor,
     ) -> Option<SecondViewpoint> {
-        let pocket = largest_component(grid, pockets)?;
+        let side = (footprint_depth_m / 2.0 / grid.cell_m).ceil() as u32;
+        let pocket = densest_block(grid, pockets, side)?;
         let cells = pocket.count();
         if cells < MIN_POCKET_CELLS {
             return None;
@@ -76,8 +81,8 @@ impl SecondViewpoint {
         let target = pocket.barycentre(grid)?;
         let mut best: Option<SecondViewpoint> = None;
         for k in 0..HEADINGS {
-            let heading = -std::f64::consts::PI
-                + 2.0 * std::f64::consts::PI * k as f64 / HEADINGS as f64;
+            let heading =
+                -std::f64::consts::PI + 2.0 * std::f64::consts::PI * k as f64 / HEADINGS as f64;
             let Some(pose) = looking_at(params, target, position.z, heading) else {
                 continue;
             };
@@ -110,13 +115,7 @@ impl SecondViewpoint {
             * params.target_max_speed
             * params.setfleet.growth_horizon_s;
         let gain_m2 = best.visible_cells as f64 * grid.cell_area() + growth_m2;
-        let here = view::view_centre(
-            &params.camera,
-            &CameraPose {
-                position,
-                yaw,
-            },
-        );
+        let here = view::view_centre(&params.camera, &CameraPose { position, yaw });
         let detour_m = (target - here).norm();
         (gain_m2 > params.lambda * detour_m).then_some(best)
     }
@@ -131,12 +130,7 @@ impl SecondViewpoint {
 
 /// The camera pose at altitude `z` looking along `heading` whose optical axis meets the
 /// ground at `target` (`None` if the camera's axis does not reach the ground).
-fn looking_at(
-    params: &GuidanceParams,
-    target: Point2,
-    z: f64,
-    heading: f64,
-) -> Option<CameraPose> {
+fn looking_at(params: &GuidanceParams, target: Point2, z: f64, heading: f64) -> Option<CameraPose> {
     let at_origin = CameraPose {
         position: Point3::new(0.0, 0.0, z),
         yaw: heading,
@@ -153,50 +147,30 @@ fn looking_at(
     })
 }
 
-/// The largest 8-connected group of cells of `set` (ties: the one whose first cell comes
-/// first in row-major order), or `None` when `set` is empty.
-fn largest_component(grid: &GroundGrid, set: &CellSet) -> Option<CellSet> {
-    let (nx, ny) = (grid.nx as usize, grid.ny as usize);
-    let mut label = vec![0u32; nx * ny];
-    let mut best: Option<(u64, u32)> = None;
-    let mut next = 0u32;
-    let mut stack = Vec::new();
-    for (ix, iy) in set.iter() {
-        let start = iy as usize * nx + ix as usize;
-        if label[start] != 0 {
-            continue;
-        }
-        next += 1;
-        label[start] = next;
-        stack.push((ix, iy));
-        let mut size = 0u64;
-        while let Some((x, y)) = stack.pop() {
-            size += 1;
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let (qx, qy) = (i64::from(x) + dx, i64::from(y) + dy);
-                    if qx < 0 || qy < 0 || qx >= nx as i64 || qy >= ny as i64 {
-                        continue;
-                    }
-                    let (qx, qy) = (qx as u32, qy as u32);
-                    let at = qy as usize * nx + qx as usize;
-                    if label[at] == 0 && set.contains((qx, qy)) {
-                        label[at] = next;
-                        stack.push((qx, qy));
-                    }
-                }
+/// The cells of `set` in the square block of `side` cells (blocks laid from the grid's first
+/// cell) that holds most of them (ties: the first block in row-major order), or `None` when
+/// `set` is empty.
+fn densest_block(grid: &GroundGrid, set: &CellSet, side: u32) -> Option<CellSet> {
+    let side = side.max(1);
+    let mut best: Option<(u64, CellBox)> = None;
+    for by in (0..grid.ny).step_by(side as usize) {
+        for bx in (0..grid.nx).step_by(side as usize) {
+            let block = CellBox {
+                x0: bx,
+                y0: by,
+                x1: (bx + side - 1).min(grid.nx - 1),
+                y1: (by + side - 1).min(grid.ny - 1),
+            };
+            let count = set.count_in_box(&block);
+            if count > 0 && best.is_none_or(|(c, _)| count > c) {
+                best = Some((count, block));
             }
         }
-        if best.is_none_or(|(s, _)| size > s) {
-            best = Some((size, next));
-        }
     }
-    let (_, chosen) = best?;
-    Some(CellSet::from_cells(
-        grid,
-        set.iter()
-            .filter(|&(ix, iy)| label[iy as usize * nx + ix as usize] == chosen),
-    ))
+    let (_, block) = best?;
+    let mut pocket = set.clone();
+    pocket.crop(&block);
+    Some(pocket)
 }
 
 #[cfg(test)]
@@ -222,21 +196,21 @@ mod tests {
     }
 
     #[test]
-    fn the_largest_group_is_chosen_first_in_row_order_on_ties() {
-        let grid = GroundGrid::new(50.0, 2.5); // 40 x 40
-        let small = block(&grid, (1, 1), (2, 2));
-        let large = block(&grid, (20, 20), (24, 23));
+    fn the_densest_block_is_chosen_first_in_row_order_on_ties() {
+        let grid = GroundGrid::new(50.0, 2.5); // 40 x 40, blocks of 10: 4 x 4
+        let sparse = block(&grid, (1, 1), (2, 2));
+        let dense = block(&grid, (20, 20), (24, 23));
         let twin = block(&grid, (30, 1), (34, 4));
-        let mut all = small.clone();
-        all.or_assign(&large);
-        assert_eq!(largest_component(&grid, &all), Some(large.clone()));
-        // Equal groups: the one met first in row-major order.
+        let mut all = sparse.clone();
+        all.or_assign(&dense);
+        assert_eq!(densest_block(&grid, &all, 10), Some(dense.clone()));
+        // Equal blocks: the first in row-major order.
         all.or_assign(&twin);
-        assert_eq!(largest_component(&grid, &all), Some(twin));
-        // Diagonal neighbours are one group.
-        let diagonal = CellSet::from_cells(&grid, [(5, 5), (6, 6), (7, 7)]);
-        assert_eq!(largest_component(&grid, &diagonal).unwrap().count(), 3);
-        assert_eq!(largest_component(&grid, &CellSet::empty(&grid)), None);
+        assert_eq!(densest_block(&grid, &all, 10), Some(twin));
+        // A group across blocks is cut at the block's edges.
+        let across = block(&grid, (8, 0), (13, 0));
+        assert_eq!(densest_block(&grid, &across, 10).unwrap().count(), 4);
+        assert_eq!(densest_block(&grid, &CellSet::empty(&grid), 10), None);
     }
 
     /// A pocket north of a tall building is hidden from a camera looking north from the south
@@ -270,12 +244,18 @@ mod tests {
             &[tower],
             &pocket,
         );
-        assert!(seen.count() < pocket.count() / 2, "{} of {}", seen.count(), pocket.count());
+        assert!(
+            seen.count() < pocket.count() / 2,
+            "{} of {}",
+            seen.count(),
+            pocket.count()
+        );
         let v = SecondViewpoint::choose(
             &p,
             &grid,
             &pocket,
             (Point3::new(0.0, -100.0, 80.0), north),
+            120.0,
             &[tower],
             &mut predictor,
         )
@@ -292,6 +272,7 @@ mod tests {
             &grid,
             &pocket,
             (Point3::new(0.0, -100.0, 80.0), north),
+            120.0,
             &[tower],
             &mut predictor,
         );
