@@ -35,6 +35,10 @@
 //! radio's `comms.loss=0,0.1,0.3,0.5`) and compares the values ([`axis`]): each value's runs
 //! and table under `KEY=V/`, the comparison in `axis.md`, `axis.json` and `axis.png`.
 //!
+//! `--scenario DIR` runs the whole sweep on every scenario of a directory (a suite) and
+//! compares the variants per scenario ([`suite`]). `--fault F` injects the fault into every
+//! run, as `fleet run --fault` does.
+//!
 //! The variants are those of [`protocol::variant`]: `nomap`, `kappa0`, `paper` (the paper's
 //! Table I columns) and `setfleet` (the project's planner).
 
@@ -54,12 +58,13 @@ use anyhow::Context as _;
 use clap::Args;
 
 use crate::Outcome;
-use crate::run::config::{RunConfig, new_run_id};
+use crate::run::config::{RunConfig, check_faults, new_run_id};
 use crate::run::hosts::HostLayout;
 use crate::run::runtime;
 pub use axis::Axis;
 pub use collect::MergeConfig;
 use collect::{FoundRuns, assemble, read_run, write_table};
+use fleet_observe::faults::Fault;
 use jobs::RunEnd;
 pub use paired::{Differences, Paired, t_quantile};
 use protocol::usage::{ScenarioArgs, UsageError};
@@ -103,6 +108,10 @@ pub struct SweepArgs {
     /// Overrides the scenario's `duration_s`, seconds of simulated time.
     #[arg(long)]
     pub duration: Option<f64>,
+    /// A fault to inject into every run (repeatable), as `fleet run --fault` takes it:
+    /// `kill:UAV@S`, `restart:UAV@S` or `pause:UAV@S+D`, e.g. `kill:2@60`.
+    #[arg(long = "fault", value_name = "KIND:UAV@S[+D]")]
+    pub faults: Vec<Fault>,
     /// Runs this many runs at once (each with its own processes, run id and shared memory).
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub jobs: u32,
@@ -121,7 +130,7 @@ pub struct SweepArgs {
     pub axis: Option<Axis>,
     /// Runs nothing: builds the table and picture from the runs of these sweep directories.
     /// With `--axis KEY=V1,...`, each value's runs are read under `DIR/KEY=V/`.
-    #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration", "variants", "scenario", "overrides", "jobs", "shard"])]
+    #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration", "variants", "scenario", "overrides", "jobs", "shard", "faults"])]
     pub merge: Vec<PathBuf>,
 }
 
@@ -287,6 +296,7 @@ impl SweepArgs {
             overrides,
         }
         .load()?;
+        let faults = check_faults(&self.faults, &scenario)?;
         // The run's place in the whole sweep: distinct across shards too.
         let sequence = u32::try_from(index).unwrap_or(u32::MAX);
         let base = dir.as_ref().map_or_else(|| out.to_owned(), |d| out.join(d));
@@ -301,7 +311,7 @@ impl SweepArgs {
                 layout: HostLayout::single(scenario.uavs.count),
                 scenario,
                 mode: StepMode::Lockstep,
-                faults: Vec::new(),
+                faults,
                 out: base.join(variant.name()).join(format!("seed-{seed}")),
                 strict: false,
                 run_id: new_run_id(sequence),
@@ -482,12 +492,25 @@ mod tests {
             ["--set", "seed=3"],
             ["--jobs", "2"],
             ["--shard", "0/2"],
+            ["--fault", "kill:1@5"],
         ] {
             let args = ["x", "--merge", "a", extra[0], extra[1]];
             assert!(Wrap::try_parse_from(args).is_err(), "{extra:?}");
         }
         let w = Wrap::try_parse_from(["x", "--merge", "a", "b"]).unwrap();
         assert_eq!(w.sweep.merge_config().unwrap().sources.len(), 2);
+        // Every run gets the faults, checked against its scenario.
+        let with_fault = |fault: &str| {
+            let args = ["x", "--seeds", "2", "--variants", "paper", "--fault", fault];
+            Wrap::try_parse_from(args).unwrap().sweep.validate()
+        };
+        let c = with_fault("kill:2@60").unwrap();
+        assert!(c.runs.iter().all(|r| r.config.faults.len() == 1));
+        assert_eq!(c.runs[1].config.faults[0].to_string(), "kill:2@60");
+        assert!(
+            with_fault("kill:9@60").is_err(),
+            "no UAV 9 in the default fleet"
+        );
         for bad in ["0", "5..2", "a..b", "1001"] {
             let e = Wrap::try_parse_from(["x", "--seeds", bad]).err().unwrap();
             assert!(e.to_string().contains("--seeds"), "{bad}: {e}");
