@@ -1093,6 +1093,26 @@ mod tests {
         assert!(d.increments[0] > 0.0, "{d:?}");
     }
 
+    /// A car whose set outgrew the schedule's bound, in the deciding UAV's lane, draws it
+    /// away from a larger `X̄`; the same set under the bound does not.
+    #[test]
+    fn an_overdue_car_in_the_uavs_lane_is_revisited_first() {
+        let mut p = params();
+        p.setfleet.target_weight = 1.0;
+        let undetected = blob(&p, Point2::new(0.0, 80.0), 25.0);
+        // UAV 1's lane is the east half; the car's set lies there, south.
+        let car = blob(&p, Point2::new(60.0, -80.0), 12.0);
+        p.setfleet.track_revisit_s = 60.0;
+        let d = decide(&p, &[&undetected, &car], &[]);
+        assert!(
+            d.increments[0] > 0.0,
+            "under the bound it searches north: {d:?}"
+        );
+        p.setfleet.track_revisit_s = 1.0;
+        let d = decide(&p, &[&undetected, &car], &[]);
+        assert!(d.increments[0] < 0.0, "overdue, it revisits the car: {d:?}");
+    }
+
     /// The chamfer distance computed cell by cell, each pass in scan order (the map's
     /// definition).
     fn reference_distances(grid: &GroundGrid, set: &CellSet) -> Vec<f32> {
