@@ -4,7 +4,7 @@
 //! when the test was written. A change that makes any set differ by one cell or one reach unit
 //! at any step fails here; speed work must keep these constants.
 //!
-//! `SETFLEET_PRINT_DIGESTS=1 cargo test -p uav-agent --test pinned -- --nocapture` prints the
+//! `SETFLEET_PRINT_DIGESTS=1 cargo test -p sim --test pinned -- --nocapture` prints the
 //! digests a run computes (to record them after a deliberate change of the results).
 
 use protocol::scenario::{Scenario, SetGrowth};
