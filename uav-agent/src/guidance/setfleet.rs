@@ -38,7 +38,7 @@
 //!   lanes) and the distance term pulls to the UAV's own clearable ground; with a tracking
 //!   schedule (`guidance.track_revisit_s`) a car's set grown past the bound pulls the UAV whose
 //!   lane holds it, and its cells weigh more; with `guidance.second_viewpoints` the distance
-//!   term pulls to a viewpoint predicted to see into the largest pocket of `X̄` hidden from
+//!   term pulls to a viewpoint predicted to see into the densest block of `X̄` hidden from
 //!   where the UAVs flew ([`super::viewpoint`]), when worth the detour.
 //!
 //! The planning grid has [`super::coarse::PLANNING_CELL_M`] cells like the paper's; the sets
@@ -200,23 +200,10 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         growth_m2_per_cell,
         sweep: &sweep,
     };
-    // A second viewpoint for a pocket of the UAV's own ground, unless cars are overdue.
     let viewpoint = (sp.second_viewpoints && sweep.overdue.is_empty())
         .then(|| {
-            let mut pockets = input.sets.first().copied()?.clone();
-            pockets.and_assign(input.unseen);
-            let mut pockets = params.grids.downsample(&pockets);
-            pockets.and_assign(&sweep.own);
-            let at = (input.state.position, input.state.yaw);
-            SecondViewpoint::choose(
-                params,
-                &grid,
-                &pockets,
-                at,
-                footprint_depth,
-                obstacles,
-                &mut predictor,
-            )
+            let at = (&obstacles[..], footprint_depth);
+            second_viewpoint(params, input, &sweep, at, &mut predictor)
         })
         .flatten();
     let (best, sequences, excluded) = beam_search(
@@ -228,6 +215,34 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         &mut predictor,
     );
     decision(input, best, sequences, excluded)
+}
+
+/// The second viewpoint of the decision of `input` ([`super::viewpoint`]), for the pockets
+/// of `X̄ ∩ H̄` in the UAV's own ground (`sweep.own`), among the planner's `obstacles`, with
+/// the camera's footprint `footprint_depth` m deep. (The planner asks for one only when no
+/// car is overdue.)
+fn second_viewpoint(
+    params: &GuidanceParams,
+    input: &PlanningInput<'_>,
+    sweep: &Sweep,
+    (obstacles, footprint_depth): (&[ObstacleCell], f64),
+    predictor: &mut GroundPredictor,
+) -> Option<SecondViewpoint> {
+    let grid = params.grids.coarse;
+    let mut pockets = input.sets.first().copied()?.clone();
+    pockets.and_assign(input.unseen);
+    let mut pockets = params.grids.downsample(&pockets);
+    pockets.and_assign(&sweep.own);
+    let at = (input.state.position, input.state.yaw);
+    SecondViewpoint::choose(
+        params,
+        &grid,
+        &pockets,
+        at,
+        footprint_depth,
+        obstacles,
+        predictor,
+    )
 }
 
 /// The inputs on the planning grid `grid`: `X̄` (`sets[0]`), the union of the identified

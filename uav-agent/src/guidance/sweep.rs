@@ -140,16 +140,9 @@ impl Sweep {
             (Some(_), SweepPlan::Sectors) => (Priority::of_sector(grid, &lanes, input.uav), None),
             _ => (Priority::Uniform, None),
         };
-        let own = match lanes.columns(input.uav) {
-            Some((x0, x1)) => {
-                let mut own = CellSet::empty(grid);
-                for iy in 0..front.unwrap_or(grid.ny) {
-                    own.fill_row_span(iy, x0, x1);
-                }
-                own
-            }
-            None => CellSet::full(grid),
-        };
+        let own = lanes
+            .ground(grid, input.uav, 0..front.unwrap_or(grid.ny))
+            .unwrap_or_else(|| CellSet::full(grid));
         Sweep {
             priority,
             overdue,
@@ -249,6 +242,21 @@ impl Lanes {
         (end > start).then(|| (start, end - 1))
     }
 
+    /// The cells of `uav`'s lane on `grid` in the rows `rows` (`None` without a lane).
+    pub fn ground(
+        &self,
+        grid: &GroundGrid,
+        uav: u32,
+        rows: std::ops::Range<u32>,
+    ) -> Option<CellSet> {
+        let (x0, x1) = self.columns(uav)?;
+        let mut set = CellSet::empty(grid);
+        for iy in rows.start..rows.end.min(grid.ny) {
+            set.fill_row_span(iy, x0, x1);
+        }
+        Some(set)
+    }
+
     /// The UAV whose lane holds column `ix`.
     pub fn owner_of_column(&self, ix: u32) -> Option<u32> {
         let r = self.starts.partition_point(|&s| s <= ix).checked_sub(1)?;
@@ -302,17 +310,14 @@ impl Priority {
         undetected: &CellSet,
         band_rows: u32,
     ) -> Priority {
-        let (Some((x0, x1)), Some(front)) = (lanes.columns(uav), lanes.front(uav, undetected))
-        else {
+        let Some(front) = lanes.front(uav, undetected) else {
             return Priority::Uniform;
         };
         let band_end = front.saturating_add(band_rows).min(grid.ny);
-        let rows = |range: std::ops::Range<u32>| {
-            let mut set = CellSet::empty(grid);
-            for iy in range {
-                set.fill_row_span(iy, x0, x1);
-            }
-            set
+        let rows = |range| {
+            lanes
+                .ground(grid, uav, range)
+                .unwrap_or_else(|| CellSet::empty(grid))
         };
         let behind = rows(0..front);
         let band = rows(front..band_end);
@@ -332,13 +337,9 @@ impl Priority {
     /// The priorities of `uav`'s sector on `grid`: its lane's ground weighs 1, the other
     /// lanes' [`OTHER_LANES_WEIGHT`]. Uniform when `uav` has no lane.
     pub fn of_sector(grid: &GroundGrid, lanes: &Lanes, uav: u32) -> Priority {
-        let Some((x0, x1)) = lanes.columns(uav) else {
+        let Some(lane) = lanes.ground(grid, uav, 0..grid.ny) else {
             return Priority::Uniform;
         };
-        let mut lane = CellSet::empty(grid);
-        for iy in 0..grid.ny {
-            lane.fill_row_span(iy, x0, x1);
-        }
         let mut others = CellSet::full(grid);
         others.and_not_assign(&lane);
         Priority::Classes(vec![(lane, 1.0), (others, OTHER_LANES_WEIGHT)])
