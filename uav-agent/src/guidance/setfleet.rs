@@ -973,7 +973,7 @@ impl DistanceMap {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::guidance::GuidanceParams;
     use crate::guidance::paper::plan as paper_plan;
@@ -981,7 +981,8 @@ mod tests {
     use sets::math::Point3;
     use sets::raster::Coverage;
 
-    fn params() -> GuidanceParams {
+    /// The `setfleet` planner over a 300 m region, deciding every 1 s, `λ` = 10.
+    pub(crate) fn params() -> GuidanceParams {
         let mut s = Scenario::default();
         s.region.half_extent_m = 150.0;
         s.guidance.planner = Planner::Setfleet;

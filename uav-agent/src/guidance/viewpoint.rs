@@ -176,16 +176,8 @@ fn densest_block(grid: &GroundGrid, set: &CellSet, side: u32) -> Option<CellSet>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::scenario::{Planner, Scenario};
+    use crate::guidance::setfleet::tests::params;
     use sets::grid::Rect;
-
-    fn params() -> GuidanceParams {
-        let mut s = Scenario::default();
-        s.region.half_extent_m = 150.0;
-        s.guidance.planner = Planner::Setfleet;
-        s.guidance.lambda = 10.0;
-        GuidanceParams::from_scenario(&s)
-    }
 
     fn block(grid: &GroundGrid, (x0, y0): (u32, u32), (x1, y1): (u32, u32)) -> CellSet {
         let mut s = CellSet::empty(grid);
@@ -250,16 +242,11 @@ mod tests {
             seen.count(),
             pocket.count()
         );
-        let v = SecondViewpoint::choose(
-            &p,
-            &grid,
-            &pocket,
-            (Point3::new(0.0, -100.0, 80.0), north),
-            120.0,
-            &[tower],
-            &mut predictor,
-        )
-        .expect("a viewpoint");
+        let choose = |params: &GuidanceParams, predictor: &mut GroundPredictor| {
+            let at = (Point3::new(0.0, -100.0, 80.0), north);
+            SecondViewpoint::choose(params, &grid, &pocket, at, 120.0, &[tower], predictor)
+        };
+        let v = choose(&p, &mut predictor).expect("a viewpoint");
         assert!(v.visible_cells as f64 >= MIN_VISIBLE_FRACTION * pocket.count() as f64);
         assert!((v.heading - north).abs() > 1.0, "{v:?}");
         assert!(v.distance_m(&v.target, v.heading) < 1e-9);
@@ -267,15 +254,7 @@ mod tests {
         // Too far to be worth it with a prohibitive distance weight.
         let mut costly = p.clone();
         costly.lambda = 1e9;
-        let far = SecondViewpoint::choose(
-            &costly,
-            &grid,
-            &pocket,
-            (Point3::new(0.0, -100.0, 80.0), north),
-            120.0,
-            &[tower],
-            &mut predictor,
-        );
+        let far = choose(&costly, &mut predictor);
         assert_eq!(far, None);
     }
 }
