@@ -51,6 +51,11 @@ mod validate;
 
 pub use validate::MAX_LATENCY_MS;
 
+/// Height above the tallest building of the lowest UAV when the scenario gives no altitudes, m.
+pub const CLEARANCE_ABOVE_BUILDINGS_M: f64 = 20.0;
+/// Altitude step between consecutive UAVs when the scenario gives no altitudes, m.
+pub const ALTITUDE_STEP_M: f64 = 10.0;
+
 use overrides::Override;
 
 /// Why a scenario could not be read, parsed or accepted.
@@ -320,6 +325,10 @@ pub struct GuidanceConfig {
     /// hidden from where the UAVs flew in its own ground, and flies there when worth the
     /// detour (`uav_agent::guidance::viewpoint`).
     pub second_viewpoints: bool,
+    /// `setfleet`: whether the weights above (and `lambda`) are those of the default scenario,
+    /// scaled to this one by its footprint, the fleet's revisit time and the targets' speed
+    /// (`uav_agent::guidance::scale`), instead of taken as they are.
+    pub adapt_weights: bool,
     /// The paper's MPC: how `Φ_h` measures the predicted sets inside recently hidden ground:
     /// `"estimator"` (the default) or `"planning"` ([`HiddenResolution`]).
     pub hidden_resolution: HiddenResolution,
@@ -577,6 +586,7 @@ impl Default for GuidanceConfig {
             sweep: SweepPlan::None,
             track_revisit_s: 0.0,
             second_viewpoints: false,
+            adapt_weights: false,
             hidden_resolution: HiddenResolution::Estimator,
             hidden_window: HiddenWindow::Frames,
             predicted_views: PredictedViews::PeriodEnd,
@@ -636,6 +646,25 @@ impl Scenario {
             f64::INFINITY
         };
         (h - buffer).max(0.5 * h)
+    }
+
+    /// Altitude of UAV `i` at launch: `uavs.altitudes_m[i]`, or, when the scenario gives
+    /// none, [`CLEARANCE_ABOVE_BUILDINGS_M`] above the tallest building of the city plus
+    /// [`ALTITUDE_STEP_M`] per UAV before it.
+    pub fn uav_altitude(&self, i: usize, tallest_building: f64) -> f64 {
+        match self.uavs.altitudes_m.get(i) {
+            Some(&z) => z,
+            None => tallest_building + CLEARANCE_ABOVE_BUILDINGS_M + ALTITUDE_STEP_M * i as f64,
+        }
+    }
+
+    /// The fleet's mean altitude before the city is drawn: [`Scenario::uav_altitude`] with the
+    /// tallest building at the top of `region.building_height_m` (what a planner can know from
+    /// the scenario alone).
+    pub fn nominal_altitude(&self) -> f64 {
+        let n = self.uavs.count.max(1) as usize;
+        let tallest = self.region.building_height_m[1];
+        (0..n).map(|i| self.uav_altitude(i, tallest)).sum::<f64>() / n as f64
     }
 
     /// CVS periods per guidance period.

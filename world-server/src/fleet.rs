@@ -9,11 +9,6 @@ use sets::math::{Point3, Real};
 
 use crate::error::WorldBuildError;
 
-/// Height above the tallest building of the lowest UAV when the scenario gives no altitudes.
-const CLEARANCE_ABOVE_BUILDINGS_M: Real = 20.0;
-/// Altitude step between consecutive UAVs when the scenario gives no altitudes.
-const ALTITUDE_STEP_M: Real = 10.0;
-
 /// One UAV.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Uav {
@@ -36,8 +31,8 @@ pub struct Fleet {
 
 impl Fleet {
     /// The fleet at its start: UAV `i` evenly spaced on a circle inside the geofence, heading
-    /// to the centre of the RoI, at altitude `altitudes_m[i]` or, when the scenario gives none,
-    /// `tallest + 20 + 10 i` m.
+    /// to the centre of the RoI, at [`Scenario::uav_altitude`] (`altitudes_m[i]` or, when the
+    /// scenario gives none, `tallest + 20 + 10 i` m).
     pub fn launch(scenario: &Scenario, tallest_building: Real) -> Result<Fleet, WorldBuildError> {
         let u = &scenario.uavs;
         let n = u.count as usize;
@@ -51,11 +46,7 @@ impl Fleet {
         let radius = 0.9 * fence;
         let uavs = (0..n)
             .map(|i| {
-                let z = if u.altitudes_m.is_empty() {
-                    tallest_building + CLEARANCE_ABOVE_BUILDINGS_M + ALTITUDE_STEP_M * i as Real
-                } else {
-                    u.altitudes_m[i]
-                };
+                let z = scenario.uav_altitude(i, tallest_building);
                 let bearing = FRAC_PI_4 + TAU * i as Real / n as Real;
                 let yaw = sets::math::wrap_angle(bearing + PI);
                 Uav {

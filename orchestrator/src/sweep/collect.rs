@@ -110,20 +110,26 @@ pub(super) fn write_table(table: &Table, curves: &Curves, out: &Path) -> anyhow:
 /// for one variant but present for another is listed as missing; the sources' failed runs
 /// are carried over.
 pub(super) fn merge(config: &MergeConfig) -> anyhow::Result<Outcome> {
-    let (runs, failed, listed) = gather(&config.sources)?;
+    let table = merge_into(&config.sources, &config.out)?;
+    Ok(if table.failed_runs.is_empty() {
+        Outcome::Success
+    } else {
+        Outcome::Failed
+    })
+}
+
+/// The table of the runs under `sources` (as [`merge`] reads them), written with its picture
+/// into `out`.
+pub(super) fn merge_into(sources: &[PathBuf], out: &Path) -> anyhow::Result<Table> {
+    let (runs, failed, listed) = gather(sources)?;
     anyhow::ensure!(
         !runs.is_empty(),
         "no run found under the merged directories (expected <variant>/seed-<n>/summary.json)"
     );
     let variants = columns(&runs, listed);
     let (table, curves) = assemble(runs, &variants, failed, true);
-    let code = if table.failed_runs.is_empty() {
-        Outcome::Success
-    } else {
-        Outcome::Failed
-    };
-    write_table(&table, &curves, &config.out)?;
-    Ok(code)
+    write_table(&table, &curves, out)?;
+    Ok(table)
 }
 
 /// The runs under `<variant>/seed-<n>/` of every directory of `dirs`, the failed runs their
@@ -221,11 +227,11 @@ pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Resul
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     /// Writes a fake run of `variant` and `seed` under `dir` as a sweep would.
-    fn fake_run(dir: &Path, variant: Variant, seed: u64, ua: f64) {
+    pub(in crate::sweep) fn fake_run(dir: &Path, variant: Variant, seed: u64, ua: f64) {
         let run = dir.join(variant.name()).join(format!("seed-{seed}"));
         std::fs::create_dir_all(&run).unwrap();
         let summary = Summary {

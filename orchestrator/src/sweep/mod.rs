@@ -75,14 +75,18 @@ pub use shard::Shard;
 pub use suite::Suite;
 pub use table::{Cell, Table};
 
-/// `fleet sweep --merge`: the table and picture of the runs under the sources (one table), or
-/// of each value of `--axis` and the values compared ([`axis::merge`]).
+/// `fleet sweep --merge`: the table and picture of the runs under the sources (one table), of
+/// each value of `--axis` and the values compared ([`axis::merge`]), or, when every source is
+/// a suite's sweep, of each scenario and the suite's comparison ([`suite::merge`]).
 pub fn merge(config: &MergeConfig) -> anyhow::Result<Outcome> {
     for dir in &config.sources {
         anyhow::ensure!(dir.is_dir(), "{} is not a sweep directory", dir.display());
     }
     match &config.axis {
         Some(axis) => axis::merge(config, axis),
+        None if config.sources.iter().all(|d| suite::is_suite_sweep(d)) => {
+            suite::merge(&config.sources, &config.out)
+        }
         None => collect::merge(config),
     }
 }
@@ -129,7 +133,8 @@ pub struct SweepArgs {
     #[arg(long, value_name = "KEY=V1,V2,...")]
     pub axis: Option<Axis>,
     /// Runs nothing: builds the table and picture from the runs of these sweep directories.
-    /// With `--axis KEY=V1,...`, each value's runs are read under `DIR/KEY=V/`.
+    /// With `--axis KEY=V1,...`, each value's runs are read under `DIR/KEY=V/`; suite sweeps
+    /// (`--scenario DIR`, each with its `suite.json`) merge scenario by scenario.
     #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration", "variants", "scenario", "overrides", "jobs", "shard", "faults"])]
     pub merge: Vec<PathBuf>,
 }

@@ -13,6 +13,10 @@
 //!   ([`super::paired`]): the mean difference `a − b` on UA, OA, target-set area and
 //!   localisation error, its 95 % confidence interval and who was lower how often.
 //!
+//! `fleet sweep --merge A B --out C` of suite sweeps merges them scenario by scenario
+//! ([`merge`]), so a suite swept in parts (seeds, variants or scenarios at a time) makes one
+//! `suite.md`.
+//!
 //! The suite the project keeps is `scenarios/suite/` (`scenarios/README.md` says what each
 //! scenario stresses): `fleet sweep --scenario scenarios/suite --variants paper,setfleet
 //! --seeds 10 --jobs 2`.
@@ -25,6 +29,7 @@ use serde::Serialize;
 
 use super::paired::{self, Comparison, Paired, PairedMetric, Sides};
 use super::table::{Cell, Table, format_cell};
+use crate::Outcome;
 use protocol::usage::UsageError;
 use protocol::variant::Variant;
 
@@ -76,6 +81,52 @@ impl Suite {
         }
         Ok(Suite { scenarios })
     }
+}
+
+/// Whether `dir` holds a suite's sweep (its `suite.json`).
+pub(super) fn is_suite_sweep(dir: &Path) -> bool {
+    dir.join("suite.json").is_file()
+}
+
+/// `fleet sweep --merge` of suite sweeps (every source holds `suite.json`): each scenario's
+/// runs, from every source that has them, merged under `out/NAME/` as a plain merge merges
+/// one sweep, then `suite.md` and `suite.json` over the scenarios found, by name. Suites swept
+/// in parts (other seeds, other variants, one scenario at a time) thus make one suite table.
+pub(super) fn merge(sources: &[PathBuf], out: &Path) -> anyhow::Result<Outcome> {
+    let mut names = std::collections::BTreeSet::new();
+    for dir in sources {
+        for entry in
+            std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))?
+        {
+            let path = entry?.path();
+            if path.join("table.json").is_file()
+                && let Some(name) = path.file_name().and_then(|n| n.to_str())
+            {
+                names.insert(name.to_owned());
+            }
+        }
+    }
+    anyhow::ensure!(
+        !names.is_empty(),
+        "no scenario's sweep (NAME/table.json) under the merged suites"
+    );
+    let mut scenarios = Vec::with_capacity(names.len());
+    let mut tables = Vec::with_capacity(names.len());
+    for name in names {
+        let parts: Vec<PathBuf> = sources
+            .iter()
+            .map(|dir| dir.join(&name))
+            .filter(|dir| dir.is_dir())
+            .collect();
+        tables.push(super::collect::merge_into(&parts, &out.join(&name))?);
+        scenarios.push((name, parts[0].clone()));
+    }
+    write(&Suite { scenarios }, &tables, out)?;
+    Ok(if tables.iter().all(|t| t.failed_runs.is_empty()) {
+        Outcome::Success
+    } else {
+        Outcome::Failed
+    })
 }
 
 /// One scenario's variants in `suite.json`.
@@ -241,6 +292,50 @@ mod tests {
         std::fs::write(dir.join("a b.toml"), "").unwrap();
         let e = Suite::read(&dir).unwrap_err();
         assert!(e.0.contains("file name"), "{e}");
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    /// Suites swept in parts (one variant each, one with a scenario the other lacks) merge
+    /// into one suite table, scenario by scenario.
+    #[test]
+    fn suites_swept_in_parts_merge_scenario_by_scenario() {
+        use super::super::collect::tests::fake_run;
+        fleet_observe::pictures::register_fonts().unwrap();
+        let root =
+            std::env::temp_dir().join(format!("setfleet-suite-merge-{}", std::process::id()));
+        let (a, b, out) = (root.join("a"), root.join("b"), root.join("out"));
+        for (dir, variant, ua) in [(&a, Variant::Paper, 0.5), (&b, Variant::Setfleet, 0.3)] {
+            for seed in [1, 2] {
+                fake_run(&dir.join("city"), variant, seed, ua);
+            }
+            std::fs::write(dir.join("city/table.json"), "{}").unwrap();
+            std::fs::write(dir.join("suite.json"), "{}").unwrap();
+        }
+        fake_run(&a.join("suburb"), Variant::Paper, 1, 0.7);
+        std::fs::write(a.join("suburb/table.json"), "{}").unwrap();
+        assert!(is_suite_sweep(&a) && !is_suite_sweep(&a.join("city")));
+        assert_eq!(merge(&[a, b], &out).unwrap(), Outcome::Success);
+        let suite: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("suite.json")).unwrap())
+                .unwrap();
+        let names: Vec<&str> = suite["scenarios"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|s| s["name"].as_str())
+            .collect();
+        assert_eq!(names, ["city", "suburb"]);
+        let city: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("city/table.json")).unwrap())
+                .unwrap();
+        assert_eq!(city["variants"], serde_json::json!(["paper", "setfleet"]));
+        assert_eq!(city["metrics"]["setfleet"]["ua_final"]["mean"], 0.3);
+        let paired = suite["paired"].as_array().unwrap();
+        // paper − setfleet on the city only (the suburb has one variant): 4 metrics, 2 windows.
+        assert_eq!(paired.len(), 8, "{suite}");
+        assert!(paired.iter().all(|p| p["scenario"] == "city"), "{suite}");
+        let ua = paired[0]["mean"].as_f64().unwrap();
+        assert!((ua - 0.2).abs() < 1e-12, "{suite}");
         std::fs::remove_dir_all(&root).unwrap();
     }
 

@@ -14,6 +14,7 @@
 pub mod coarse;
 pub mod paper;
 pub mod ring;
+pub mod scale;
 pub mod setfleet;
 pub mod sweep;
 pub mod view;
@@ -29,6 +30,7 @@ use sets::raster::CellSet;
 
 pub use coarse::{CellWeights, CoarseGrid};
 pub use ring::{TokenRing, Turn};
+use scale::Scale;
 pub use setfleet::SetfleetParams;
 pub use view::{GroundPredictor, ObstacleCell};
 
@@ -83,7 +85,7 @@ impl GuidanceParams {
             PlanBorder::Geofence => s.geofence_half_extent(),
             PlanBorder::Region => s.region.half_extent_m,
         };
-        Self {
+        let mut params = Self {
             grids: CoarseGrid::new(s.grid()),
             camera: s.camera_model(),
             region: Rect {
@@ -114,7 +116,17 @@ impl GuidanceParams {
                 second_viewpoints: s.guidance.second_viewpoints,
             },
             parallel: true,
+        };
+        if s.guidance.adapt_weights && s.guidance.planner == Planner::Setfleet {
+            if let Some(scale) = Scale::of(s) {
+                scale.adapt(
+                    &Scale::reference(),
+                    &mut params.lambda,
+                    &mut params.setfleet,
+                );
+            }
         }
+        params
     }
 
     /// The grid the planners predict the sets on.

@@ -40,6 +40,10 @@
 //!   lane holds it, and its cells weigh more; with `guidance.second_viewpoints` the distance
 //!   term pulls to a viewpoint predicted to see into the densest block of `X̄` hidden from
 //!   where the UAVs flew ([`super::viewpoint`]), when worth the detour.
+//! - **Weights read against the default scenario** ([`super::scale`]): with
+//!   `guidance.adapt_weights`, `lambda`, `spread_m` and `track_revisit_s` are scaled by the
+//!   ratios of the footprint's width and the targets' speed to the default scenario's, where
+//!   they were tuned.
 //!
 //! The planning grid has [`super::coarse::PLANNING_CELL_M`] cells like the paper's; the sets
 //! grow by whole cells (8-neighbour rings) when the targets' accumulated reach crosses a cell,
@@ -64,7 +68,7 @@
 //! node and increment only and the jobs' results are put back in their order, so the decision
 //! is the same on any number of threads (tested, and checked by `fleet bench guidance`).
 
-use protocol::camera::{Camera, CameraPose};
+use protocol::camera::CameraPose;
 use protocol::flight::UavState;
 use protocol::scenario::SweepPlan;
 use protocol::wire::PlannedView;
@@ -73,6 +77,7 @@ use sets::grid::GroundGrid;
 use sets::math::Point2;
 use sets::raster::CellSet;
 
+use super::scale::{footprint_area, footprint_depth};
 use super::sweep::Sweep;
 use super::view::same_pose;
 use super::viewpoint::SecondViewpoint;
@@ -180,10 +185,10 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     );
     let others_centres = view_centres(params, input.others);
     let lookahead_s = depth as f64 * params.steps_per_period as f64 * params.dt;
-    let footprint_depth = footprint_depth(params, &input.state);
+    let footprint_depth = footprint_depth(&params.camera, &input.state);
     let sweep = Sweep::of(params, input, &grid, lookahead_s, footprint_depth);
     let attractive = sweep.attractive(&undetected, &targets, &others_seen);
-    let fov_area = footprint_area(params, &input.state);
+    let fov_area = footprint_area(&params.camera, &input.state);
     let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
     let root = Node::root(input.state, undetected, targets);
     let period = |d: usize| Period {
@@ -765,43 +770,6 @@ fn spread_charge(
         .filter_map(|c| c.get(step.saturating_sub(1)).or(c.last()))
         .map(|q| fov_area * (1.0 - (q - centre).norm() / spread_m).max(0.0))
         .sum()
-}
-
-/// The ground footprint of the camera at `state` (`None` if it misses the ground).
-fn footprint(params: &GuidanceParams, state: &UavState) -> Option<[Point2; 4]> {
-    let camera = Camera::new(
-        params.camera,
-        CameraPose {
-            position: state.position,
-            yaw: state.yaw,
-        },
-    );
-    camera.image_ground_footprint()
-}
-
-/// Area of the ground footprint of the camera at `state`, m² (0 if it misses the ground).
-fn footprint_area(params: &GuidanceParams, state: &UavState) -> f64 {
-    footprint(params, state).map_or(0.0, |p| {
-        let mut twice = 0.0;
-        for i in 0..p.len() {
-            let (a, b) = (p[i], p[(i + 1) % p.len()]);
-            twice += a.x * b.y - b.x * a.y;
-        }
-        twice.abs() / 2.0
-    })
-}
-
-/// Depth of the ground footprint of the camera at `state` along its heading, m (0 if it
-/// misses the ground).
-fn footprint_depth(params: &GuidanceParams, state: &UavState) -> f64 {
-    let heading = Point2::new(state.yaw.cos(), state.yaw.sin());
-    footprint(params, state).map_or(0.0, |p| {
-        let along = p.iter().map(|q| q.coords.dot(&heading.coords));
-        let (lo, hi) = along.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
-            (lo.min(a), hi.max(a))
-        });
-        (hi - lo).max(0.0)
-    })
 }
 
 /// Cells of `set` with a 4-neighbour outside it (the RoI's edge does not count: nothing

@@ -1,0 +1,171 @@
+//! Weights that follow the scenario (`guidance.adapt_weights`, the `setfleet` planner).
+//!
+//! The `setfleet` weights were chosen on the default scenario (`docs/results/setfleet.md`).
+//! Each of them has units, and the quantity it trades against changes with the scenario: the
+//! camera's footprint, the fleet's speed and size, the region, the targets' speed. With
+//! `guidance.adapt_weights = true` the weights given are read as the default scenario's, and
+//! each is multiplied by the ratio of the quantity it stands for, this scenario's over the
+//! default's. On the default scenario every ratio is 1, so the planner is exactly the tuned
+//! one; elsewhere nothing is tuned, only scaled:
+//!
+//! | weight | stands for | scaled by |
+//! |---|---|---|
+//! | `lambda`, m² per m | the ground one metre of flight sweeps: the footprint's width | `W / W₀` |
+//! | `spread_m`, m | two footprints overlapping: the footprint's width | `W / W₀` |
+//! | `track_revisit_s`, s | the radius `v T` a car's set may reach before it is revisited: the localisation error allowed | `v₀ / v` |
+//!
+//! `growth_horizon_s` stays as given: it charges the growth a pocket left behind adds within
+//! a couple of the planner's lookaheads, seconds of the UAV's own flight in every scenario.
+//! Scaling it too, by the time the fleet takes to sweep the region once (`A / (n W V)`, 1.65
+//! times the default's on `scenarios/suite/large-region.toml`), was measured there: with it,
+//! seeds 1-2 ended at 47.6 % UA and 25.3 m of error; without it, at 37.4 % and 9.6 m.
+//!
+//! `W` is the mean width (area over depth) of the footprint of the camera in level flight at
+//! the fleet's nominal altitude ([`Scenario::nominal_altitude`]: the tallest building the
+//! scenario allows, plus the clearance and steps), and `v` the targets' speed bound. The
+//! dimensionless weights (`target_weight`, the beam, the lookahead) stay as given. Only decisions change, so the guarantee does not
+//! depend on any of this.
+
+use protocol::camera::{Camera, CameraModel, CameraPose};
+use protocol::flight::UavState;
+use protocol::scenario::Scenario;
+use sets::math::{Point2, Point3};
+
+use super::setfleet::SetfleetParams;
+
+/// The quantities the `setfleet` weights trade against, for one scenario.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scale {
+    /// Mean width of the camera's footprint in level flight at the nominal altitude, m.
+    pub footprint_width_m: f64,
+    /// The targets' speed bound, m/s.
+    pub target_speed_mps: f64,
+}
+
+impl Scale {
+    /// The quantities of `scenario`, or `None` when its camera misses the ground in level
+    /// flight (no footprint to scale by).
+    pub fn of(scenario: &Scenario) -> Option<Scale> {
+        let state = UavState {
+            position: Point3::new(0.0, 0.0, scenario.nominal_altitude()),
+            yaw: 0.0,
+        };
+        let camera = scenario.camera_model();
+        let (area, depth) = (
+            footprint_area(&camera, &state),
+            footprint_depth(&camera, &state),
+        );
+        if area <= 0.0 || depth <= 0.0 {
+            return None;
+        }
+        Some(Scale {
+            footprint_width_m: area / depth,
+            target_speed_mps: scenario.targets.max_speed_mps,
+        })
+    }
+
+    /// The default scenario's, which the weights given are read against.
+    pub fn reference() -> Scale {
+        Scale::of(&Scenario::default()).expect("the default camera sees the ground")
+    }
+
+    /// `lambda` and the `setfleet` weights, given for `reference`, scaled to `self` (the
+    /// module's table). A ratio that is not finite and positive (a zero speed) leaves its
+    /// weights as given.
+    pub fn adapt(&self, reference: &Scale, lambda: &mut f64, weights: &mut SetfleetParams) {
+        let ratio = |num: f64, den: f64| {
+            let r = num / den;
+            if r.is_finite() && r > 0.0 { r } else { 1.0 }
+        };
+        let width = ratio(self.footprint_width_m, reference.footprint_width_m);
+        *lambda *= width;
+        weights.spread_m *= width;
+        weights.track_revisit_s *= ratio(reference.target_speed_mps, self.target_speed_mps);
+    }
+}
+
+/// The ground footprint of `camera` at `state` (`None` if it misses the ground).
+fn footprint(camera: &CameraModel, state: &UavState) -> Option<[Point2; 4]> {
+    let pose = CameraPose {
+        position: state.position,
+        yaw: state.yaw,
+    };
+    Camera::new(*camera, pose).image_ground_footprint()
+}
+
+/// Area of the ground footprint of `camera` at `state`, m² (0 if it misses the ground).
+pub fn footprint_area(camera: &CameraModel, state: &UavState) -> f64 {
+    footprint(camera, state).map_or(0.0, |p| {
+        let mut twice = 0.0;
+        for i in 0..p.len() {
+            let (a, b) = (p[i], p[(i + 1) % p.len()]);
+            twice += a.x * b.y - b.x * a.y;
+        }
+        twice.abs() / 2.0
+    })
+}
+
+/// Depth of the ground footprint of `camera` at `state` along its heading, m (0 if it misses
+/// the ground).
+pub fn footprint_depth(camera: &CameraModel, state: &UavState) -> f64 {
+    let heading = Point2::new(state.yaw.cos(), state.yaw.sin());
+    footprint(camera, state).map_or(0.0, |p| {
+        let along = p.iter().map(|q| q.coords.dot(&heading.coords));
+        let (lo, hi) = along.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
+            (lo.min(a), hi.max(a))
+        });
+        (hi - lo).max(0.0)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(overrides: &[&str]) -> Scenario {
+        let o: Vec<String> = overrides.iter().map(|s| (*s).to_owned()).collect();
+        Scenario::load(None, &o).unwrap()
+    }
+
+    fn adapted(s: &Scenario) -> (f64, SetfleetParams) {
+        let mut lambda = 10.0;
+        let mut w = crate::guidance::setfleet::tests::params().setfleet;
+        w.track_revisit_s = 10.0;
+        Scale::of(s)
+            .unwrap()
+            .adapt(&Scale::reference(), &mut lambda, &mut w);
+        (lambda, w)
+    }
+
+    #[test]
+    fn the_default_scenario_keeps_the_weights_given() {
+        let (lambda, w) = adapted(&Scenario::default());
+        let given = crate::guidance::setfleet::tests::params().setfleet;
+        assert_eq!(lambda, 10.0);
+        assert_eq!(w.spread_m, given.spread_m);
+        assert_eq!(w.growth_horizon_s, given.growth_horizon_s);
+        assert_eq!(w.track_revisit_s, 10.0);
+    }
+
+    #[test]
+    fn the_default_footprint_is_the_documented_trapezoid() {
+        // docs/design.md: about 14,000 m², 85-160 m wide, at 80-110 m.
+        let s = Scale::reference();
+        assert!((85.0..160.0).contains(&s.footprint_width_m), "{s:?}");
+    }
+
+    #[test]
+    fn weights_follow_the_footprint_the_fleet_and_the_targets() {
+        let reference = adapted(&Scenario::default());
+        // A steeper camera sees a narrower footprint: less ground per metre, closer spread.
+        let (lambda, w) = adapted(&load(&["camera.tilt_rad=1.0471975511965976"]));
+        assert!(lambda < reference.0 && w.spread_m < reference.1.spread_m);
+        // Twice the UAVs fly higher on average, so with a wider footprint.
+        let (lambda, w) = adapted(&load(&["uavs.count=8"]));
+        assert!(lambda > reference.0 && w.spread_m > reference.1.spread_m);
+        assert_eq!(w.growth_horizon_s, reference.1.growth_horizon_s);
+        // Cars 1.5 times faster: revisited 1.5 times sooner, the same radius allowed.
+        let (_, w) = adapted(&load(&["targets.max_speed_mps=3"]));
+        assert!((w.track_revisit_s - 10.0 / 1.5).abs() < 1e-9);
+    }
+}
