@@ -117,14 +117,14 @@ impl GuidanceParams {
             },
             parallel: true,
         };
-        if s.guidance.adapt_weights && s.guidance.planner == Planner::Setfleet {
-            if let Some(scale) = Scale::of(s) {
-                scale.adapt(
-                    &Scale::reference(),
-                    &mut params.lambda,
-                    &mut params.setfleet,
-                );
-            }
+        // `setfleet`'s weights read against the default scenario ([`scale`]).
+        let adapt = s.guidance.adapt_weights && s.guidance.planner == Planner::Setfleet;
+        if let Some(scale) = Scale::of(s).filter(|_| adapt) {
+            scale.adapt(
+                &Scale::reference(),
+                &mut params.lambda,
+                &mut params.setfleet,
+            );
         }
         params
     }
@@ -257,6 +257,29 @@ mod tests {
         let mut s = Scenario::default();
         s.region.half_extent_m = 150.0;
         s
+    }
+
+    /// The `setfleet` variant's weights are its own on the default scenario and scaled on
+    /// another; the paper's planner ignores `guidance.adapt_weights`.
+    #[test]
+    fn the_setfleet_variant_scales_its_weights_to_the_scenario_only() {
+        use protocol::variant::Variant;
+        let params = |variant: Variant, user: &[&str]| {
+            let user: Vec<String> = user.iter().map(|s| (*s).to_owned()).collect();
+            let s = Scenario::load(None, &variant.with_user_overrides(&user)).unwrap();
+            GuidanceParams::from_scenario(&s)
+        };
+        let default = params(Variant::Setfleet, &[]);
+        assert_eq!(default.lambda, 10.0);
+        assert_eq!(default.setfleet.spread_m, 60.0);
+        assert_eq!(default.setfleet.track_revisit_s, 10.0);
+        let faster = params(Variant::Setfleet, &["targets.max_speed_mps=4"]);
+        assert_eq!(faster.setfleet.track_revisit_s, 5.0);
+        let steep = params(Variant::Setfleet, &["camera.tilt_rad=1.0"]);
+        assert!(steep.lambda < 10.0 && steep.setfleet.spread_m < 60.0);
+        let paper = |user: &[&str]| params(Variant::Paper, user).lambda;
+        let adapt = ["camera.tilt_rad=1.0", "guidance.adapt_weights=true"];
+        assert_eq!(paper(&adapt), paper(&adapt[..1]));
     }
 
     /// A fixed xorshift stream, for test situations that stay the same on every machine.
