@@ -325,8 +325,8 @@ pub struct GuidanceConfig {
     /// hidden from where the UAVs flew in its own ground, and flies there when worth the
     /// detour (`uav_agent::guidance::viewpoint`).
     pub second_viewpoints: bool,
-    /// `setfleet`: whether the weights above (and `lambda`) are those of the default scenario,
-    /// scaled to this one by its footprint, the fleet's revisit time and the targets' speed
+    /// `setfleet`: whether `lambda`, `spread_m` and `track_revisit_s` are those of the default
+    /// scenario, scaled to this one by the camera footprint's width and the targets' speed
     /// (`uav_agent::guidance::scale`), instead of taken as they are.
     pub adapt_weights: bool,
     /// The paper's MPC: how `Φ_h` measures the predicted sets inside recently hidden ground:

@@ -118,13 +118,11 @@ impl GuidanceParams {
             parallel: true,
         };
         // `setfleet`'s weights read against the default scenario ([`scale`]).
-        let adapt = s.guidance.adapt_weights && s.guidance.planner == Planner::Setfleet;
-        if let Some(scale) = Scale::of(s).filter(|_| adapt) {
-            scale.adapt(
-                &Scale::reference(),
-                &mut params.lambda,
-                &mut params.setfleet,
-            );
+        if s.guidance.adapt_weights
+            && s.guidance.planner == Planner::Setfleet
+            && let (Some(scale), Some(reference)) = (Scale::of(s), Scale::reference())
+        {
+            scale.adapt(&reference, &mut params.lambda, &mut params.setfleet);
         }
         params
     }
