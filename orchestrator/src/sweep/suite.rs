@@ -84,7 +84,7 @@ impl Suite {
 }
 
 /// Whether `dir` holds a suite's sweep (its `suite.json`).
-pub(super) fn is_suite_sweep(dir: &Path) -> bool {
+pub fn is_suite_sweep(dir: &Path) -> bool {
     dir.join("suite.json").is_file()
 }
 
@@ -92,7 +92,7 @@ pub(super) fn is_suite_sweep(dir: &Path) -> bool {
 /// runs, from every source that has them, merged under `out/NAME/` as a plain merge merges
 /// one sweep, then `suite.md` and `suite.json` over the scenarios found, by name. Suites swept
 /// in parts (other seeds, other variants, one scenario at a time) thus make one suite table.
-pub(super) fn merge(sources: &[PathBuf], out: &Path) -> anyhow::Result<Outcome> {
+pub fn merge(sources: &[PathBuf], out: &Path) -> anyhow::Result<Outcome> {
     let mut names = std::collections::BTreeSet::new();
     for dir in sources {
         for entry in
