@@ -181,6 +181,31 @@ impl Camera {
         ])
     }
 
+    /// Area of [`Camera::image_ground_footprint`], m² (0 if it misses the ground).
+    pub fn ground_footprint_area(&self) -> Real {
+        self.image_ground_footprint().map_or(0.0, |p| {
+            let mut twice = 0.0;
+            for i in 0..p.len() {
+                let (a, b) = (p[i], p[(i + 1) % p.len()]);
+                twice += a.x * b.y - b.x * a.y;
+            }
+            twice.abs() / 2.0
+        })
+    }
+
+    /// Depth of [`Camera::image_ground_footprint`] along the camera's heading (its yaw), m (0
+    /// if it misses the ground).
+    pub fn ground_footprint_depth(&self) -> Real {
+        let heading = Point2::new(self.pose.yaw.cos(), self.pose.yaw.sin());
+        self.image_ground_footprint().map_or(0.0, |p| {
+            let along = p.iter().map(|q| q.coords.dot(&heading.coords));
+            let (lo, hi) = along.fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), a| {
+                (lo.min(a), hi.max(a))
+            });
+            (hi - lo).max(0.0)
+        })
+    }
+
     /// Corners of a convex polytope that contains every point lit by pixel `(r, c)` whose range
     /// (distance from the optical centre) lies in `[range_lo, range_hi]`.
     ///

@@ -119,7 +119,11 @@ pub fn merge(sources: &[PathBuf], out: &Path) -> anyhow::Result<Outcome> {
             .filter(|dir| dir.is_dir())
             .collect();
         tables.push(super::collect::merge_into(&parts, &out.join(&name))?);
-        scenarios.push((name, parts[0].clone()));
+        let file = sources
+            .iter()
+            .find_map(|dir| scenario_file(dir, &name))
+            .unwrap_or_else(|| parts[0].clone());
+        scenarios.push((name, file));
     }
     write(&Suite { scenarios }, &tables, out)?;
     Ok(if tables.iter().all(|t| t.failed_runs.is_empty()) {
@@ -127,6 +131,17 @@ pub fn merge(sources: &[PathBuf], out: &Path) -> anyhow::Result<Outcome> {
     } else {
         Outcome::Failed
     })
+}
+
+/// The file of scenario `name` as the suite sweep in `dir` recorded it in its `suite.json`.
+fn scenario_file(dir: &Path, name: &str) -> Option<PathBuf> {
+    let text = std::fs::read_to_string(dir.join("suite.json")).ok()?;
+    let suite: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let scenario = suite["scenarios"]
+        .as_array()?
+        .iter()
+        .find(|s| s["name"] == name)?;
+    scenario["file"].as_str().map(PathBuf::from)
 }
 
 /// One scenario's variants in `suite.json`.
@@ -311,6 +326,8 @@ mod tests {
             std::fs::write(dir.join("city/table.json"), "{}").unwrap();
             std::fs::write(dir.join("suite.json"), "{}").unwrap();
         }
+        let recorded = r#"{"scenarios": [{"name": "city", "file": "suite/city.toml"}]}"#;
+        std::fs::write(a.join("suite.json"), recorded).unwrap();
         fake_run(&a.join("suburb"), Variant::Paper, 1, 0.7);
         std::fs::write(a.join("suburb/table.json"), "{}").unwrap();
         assert!(is_suite_sweep(&a) && !is_suite_sweep(&a.join("city")));
@@ -325,6 +342,10 @@ mod tests {
             .filter_map(|s| s["name"].as_str())
             .collect();
         assert_eq!(names, ["city", "suburb"]);
+        // The file a source recorded, else the scenario's directory.
+        assert_eq!(suite["scenarios"][0]["file"], "suite/city.toml");
+        let suburb = suite["scenarios"][1]["file"].as_str().unwrap();
+        assert!(suburb.ends_with("a/suburb"), "{suburb}");
         let city: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("city/table.json")).unwrap())
                 .unwrap();

@@ -18,8 +18,9 @@
 //! `growth_horizon_s` stays as given: it charges the growth a pocket left behind adds within
 //! a couple of the planner's lookaheads, seconds of the UAV's own flight in every scenario.
 //! Scaling it too, by the time the fleet takes to sweep the region once (`A / (n W V)`, 1.65
-//! times the default's on `scenarios/suite/large-region.toml`), was measured there: with it,
-//! seeds 1-2 ended at 47.6 % UA and 25.3 m of error; without it, at 41.2 % and 10.9 m.
+//! times the default's on `scenarios/suite/large-region.toml`), did not help there: seeds
+//! 1-2 ended at 47.6 % UA and 25.3 m of error against 41.2 % and 10.9 m without it, a
+//! difference two seeds cannot measure (`docs/results/setfleet.md`).
 //!
 //! `W` is the mean width (area over depth) of the footprint of the camera in level flight at
 //! the fleet's nominal altitude ([`Scenario::nominal_altitude`]: the tallest building the
@@ -27,10 +28,9 @@
 //! dimensionless weights (`target_weight`, the beam, the lookahead) stay as given. Only
 //! decisions change, so the guarantee does not depend on any of this.
 
-use protocol::camera::{Camera, CameraModel, CameraPose};
-use protocol::flight::UavState;
+use protocol::camera::{Camera, CameraPose};
 use protocol::scenario::Scenario;
-use sets::math::{Point2, Point3};
+use sets::math::Point3;
 
 use super::setfleet::SetfleetParams;
 
@@ -47,14 +47,14 @@ impl Scale {
     /// The quantities of `scenario`, or `None` when its camera misses the ground in level
     /// flight (no footprint to scale by).
     pub fn of(scenario: &Scenario) -> Option<Scale> {
-        let state = UavState {
+        let level = CameraPose {
             position: Point3::new(0.0, 0.0, scenario.nominal_altitude()),
             yaw: 0.0,
         };
-        let camera = scenario.camera_model();
+        let camera = Camera::new(scenario.camera_model(), level);
         let (area, depth) = (
-            footprint_area(&camera, &state),
-            footprint_depth(&camera, &state),
+            camera.ground_footprint_area(),
+            camera.ground_footprint_depth(),
         );
         if area <= 0.0 || depth <= 0.0 {
             return None;
@@ -83,40 +83,6 @@ impl Scale {
         weights.spread_m *= width;
         weights.track_revisit_s *= ratio(reference.target_speed_mps, self.target_speed_mps);
     }
-}
-
-/// The ground footprint of `camera` at `state` (`None` if it misses the ground).
-fn footprint(camera: &CameraModel, state: &UavState) -> Option<[Point2; 4]> {
-    let pose = CameraPose {
-        position: state.position,
-        yaw: state.yaw,
-    };
-    Camera::new(*camera, pose).image_ground_footprint()
-}
-
-/// Area of the ground footprint of `camera` at `state`, m² (0 if it misses the ground).
-pub fn footprint_area(camera: &CameraModel, state: &UavState) -> f64 {
-    footprint(camera, state).map_or(0.0, |p| {
-        let mut twice = 0.0;
-        for i in 0..p.len() {
-            let (a, b) = (p[i], p[(i + 1) % p.len()]);
-            twice += a.x * b.y - b.x * a.y;
-        }
-        twice.abs() / 2.0
-    })
-}
-
-/// Depth of the ground footprint of `camera` at `state` along its heading, m (0 if it misses
-/// the ground).
-pub fn footprint_depth(camera: &CameraModel, state: &UavState) -> f64 {
-    let heading = Point2::new(state.yaw.cos(), state.yaw.sin());
-    footprint(camera, state).map_or(0.0, |p| {
-        let along = p.iter().map(|q| q.coords.dot(&heading.coords));
-        let (lo, hi) = along.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
-            (lo.min(a), hi.max(a))
-        });
-        (hi - lo).max(0.0)
-    })
 }
 
 #[cfg(test)]

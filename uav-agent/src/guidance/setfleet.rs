@@ -68,7 +68,7 @@
 //! node and increment only and the jobs' results are put back in their order, so the decision
 //! is the same on any number of threads (tested, and checked by `fleet bench guidance`).
 
-use protocol::camera::CameraPose;
+use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
 use protocol::scenario::SweepPlan;
 use protocol::wire::PlannedView;
@@ -77,7 +77,6 @@ use sets::grid::GroundGrid;
 use sets::math::Point2;
 use sets::raster::CellSet;
 
-use super::scale::{footprint_area, footprint_depth};
 use super::sweep::Sweep;
 use super::view::same_pose;
 use super::viewpoint::SecondViewpoint;
@@ -185,10 +184,17 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     );
     let others_centres = view_centres(params, input.others);
     let lookahead_s = depth as f64 * params.steps_per_period as f64 * params.dt;
-    let footprint_depth = footprint_depth(&params.camera, &input.state);
+    let camera = Camera::new(
+        params.camera,
+        CameraPose {
+            position: input.state.position,
+            yaw: input.state.yaw,
+        },
+    );
+    let footprint_depth = camera.ground_footprint_depth();
     let sweep = Sweep::of(params, input, &grid, lookahead_s, footprint_depth);
     let attractive = sweep.attractive(&undetected, &targets, &others_seen);
-    let fov_area = footprint_area(&params.camera, &input.state);
+    let fov_area = camera.ground_footprint_area();
     let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
     let root = Node::root(input.state, undetected, targets);
     let period = |d: usize| Period {
