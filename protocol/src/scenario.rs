@@ -306,8 +306,8 @@ pub struct GuidanceConfig {
     pub beam_width: u32,
     /// `setfleet`: weight of the identified targets' set area against `X̄`'s (per m²).
     pub target_weight: f64,
-    /// `setfleet`: seconds of future growth charged on the boundary of every set left
-    /// unobserved (0: only today's area counts).
+    /// `setfleet`: seconds of future growth charged on every set left unobserved: a set is
+    /// valued by its area grown by `max_speed_mps` times this (0: only today's area counts).
     pub growth_horizon_s: f64,
     /// `setfleet`: distance between view centres below which this UAV's plan is charged for
     /// overlapping the plans already in the token, metres (0: no charge).

@@ -11,7 +11,7 @@
 //! | `paper` | the paper's MPC as written: the map and previously occluded ground (`kappa = 1`); the built-in defaults, so `fleet run` with no variant is the paper's scenario. Where the paper's text can be read two ways, the literal reading: `Φ_h` measured at the estimator's resolution, the window of eq. (28) in frames, the predicted views at the end of each period (eqs. 29-30), plans kept inside the world's geofence |
 //! | `kappa0` | the paper's MPC, previously occluded ground not rewarded (`kappa = 0`) |
 //! | `nomap` | the paper's MPC without the map (the paper's reference \[3\], `kappa = 0`) |
-//! | `setfleet` | the project's planner (`guidance.planner = "setfleet"`, `uav_agent::guidance::setfleet`): a decision every 1 s, a beam search 6 s ahead, sets valued with their future growth, targets weighted, UAVs spread, a car whose set outgrew 10 s of travel revisited by the UAV whose lane holds it (`guidance.track_revisit_s = 10`), its weights those of the default scenario scaled to the scenario's camera footprint and cars' speed (`guidance.adapt_weights = true`, `uav_agent::guidance::scale`); it keeps the readings it was tuned with (recently hidden ground over whole guidance periods, plans inside the RoI; `predicted_views` and `hidden_resolution` are the paper's MPC's only) |
+//! | `setfleet` | the project's planner (`guidance.planner = "setfleet"`, `uav_agent::guidance::setfleet`): a decision every 1 s, a beam search 6 s ahead valuing the sets by their area (`guidance.growth_horizon_s = 0`), targets weighted, UAVs spread (among those in radio range), a car whose set outgrew 10 s of travel revisited by the UAV whose lane holds it (`guidance.track_revisit_s = 10`), its weights those of the default scenario scaled to the scenario's camera footprint and cars' speed (`guidance.adapt_weights = true`, `uav_agent::guidance::scale`); it keeps the readings it was tuned with (recently hidden ground over whole guidance periods, plans inside the RoI; `predicted_views` and `hidden_resolution` are the paper's MPC's only) |
 
 use clap::ValueEnum;
 use serde::Serialize;
@@ -93,7 +93,7 @@ impl Variant {
                 "guidance.lookahead_periods=6",
                 "guidance.beam_width=4",
                 "guidance.target_weight=1",
-                "guidance.growth_horizon_s=10",
+                "guidance.growth_horizon_s=0",
                 "guidance.spread_m=60",
                 "guidance.track_revisit_s=10",
                 "guidance.adapt_weights=true",

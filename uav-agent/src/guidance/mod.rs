@@ -12,6 +12,7 @@
 //! that orders the decisions of a round ([`ring`]).
 
 pub mod coarse;
+pub mod growth;
 pub mod paper;
 pub mod ring;
 pub mod scale;
@@ -67,6 +68,9 @@ pub struct GuidanceParams {
     pub max_yaw_rate: f64,
     /// Targets' speed bound, m/s.
     pub target_max_speed: f64,
+    /// The radio's range (`comms.range_m`), m: the `setfleet` planner counts the plans of the
+    /// UAVs within it only.
+    pub comms_range_m: f64,
     /// Which planner [`decide`] runs.
     pub planner: Planner,
     /// The `setfleet` planner's settings (unused by the paper's MPC).
@@ -104,6 +108,7 @@ impl GuidanceParams {
             speed: s.uavs.speed_mps,
             max_yaw_rate: s.uavs.max_yaw_rate_rps,
             target_max_speed: s.targets.max_speed_mps,
+            comms_range_m: s.comms.range_m,
             planner: s.guidance.planner,
             setfleet: SetfleetParams {
                 lookahead_periods: s.guidance.lookahead_periods,
@@ -445,17 +450,17 @@ mod tests {
         // Paper, setfleet, for each case.
         let recorded: [u64; 12] = [
             0x0e04_f031_d77b_ae59,
-            0xd4ce_cd2e_8a90_0c71,
+            0x3026_0942_ef9b_d0e3,
             0x24c4_c384_cf18_d850,
-            0xc627_d2a4_05fb_0103,
+            0xc841_93de_8796_0afb,
             0xc695_76a1_33c5_855f,
-            0xc3fb_a2f7_098f_2d0c,
+            0xe915_4a4a_bac0_f2e9,
             0x878d_2e04_628e_0aab,
-            0x0b6a_403d_cb36_9ef1,
+            0x98b6_d2e5_cfce_f79c,
             0xb3a3_a5ac_2c01_ba91,
-            0xb1ea_e9f9_a44f_ab05,
+            0x158d_d6de_cab6_0dda,
             0x72e9_7fc7_4d93_b48d,
-            0x4ee4_5686_6ce9_29ac,
+            0xe7ee_a741_f6fc_dff3,
         ];
         assert_eq!(fingerprints, recorded, "{fingerprints:#x?}");
         // The paper's literal reading (the defaults), for each case.

@@ -14,12 +14,13 @@
 //!   sets' value, not by the value at the end only, so clearing ground early beats clearing it
 //!   late.
 //! - **What a pocket left unobserved will cost later.** A set left alone grows at the targets'
-//!   speed `v` from its whole boundary: in `G` seconds a boundary of length `L` adds about
-//!   `L v G` m² (and the area keeps growing with the square of time). The value of a set is
-//!   therefore its area plus `L v G` (`G = growth_horizon_s`), which makes the planner clear
-//!   pockets whole rather than shave them (shaving keeps the boundary), and revisit identified
-//!   cars before their sets grow: the identified targets' sets count `target_weight` times
-//!   their area, since every square metre of them is localisation error.
+//!   speed `v` from its whole boundary: in `G` seconds (`G = growth_horizon_s`) it becomes the
+//!   set grown by `v G`. The value of a set is its area plus that growth ([`super::growth`]),
+//!   which makes the planner clear pockets whole rather than shave them (shaving keeps the
+//!   boundary), and revisit identified cars before their sets grow: the identified targets'
+//!   sets count `target_weight` times their area, since every square metre of them is
+//!   localisation error. Pockets closer than `v G` to each other grow into the same ground
+//!   once, so clearing ground between shadows is never charged more than it clears.
 //! - **Somewhere to go when nothing is in reach.** The distance from the predicted view
 //!   centre to the nearest set cell is charged `lambda` m² per metre, as the paper's `Φ_d`,
 //!   but read from a distance map of the sets computed once per decision (and given real
@@ -29,7 +30,8 @@
 //!   the predicted sets period by period and from the distance map, as in the paper; in
 //!   addition a view centre within `spread_m` of another UAV's planned view centre is charged
 //!   up to one field of view's area, linearly in how close it is, so the UAVs do not follow
-//!   one another beyond the others' horizon.
+//!   one another beyond the others' horizon. With a finite radio range (`comms.range_m`) only
+//!   the plans of UAVs in range count: this agent never learns what the others see.
 //! - `kappa` keeps the paper's meaning: the area of the final sets inside ground occluded in
 //!   the last periods is charged `kappa` m² per m².
 //! - **The fleet's share of the search** ([`super::sweep`]): the round's fleet (the token's
@@ -54,11 +56,10 @@
 //!
 //! Cost: the predicted views (shadows of known buildings) are most of it. The children of a
 //! beam node that turn hard to the same side fly the same first step, whose view is computed
-//! once; a child's boundary is its node's, counted again only on the rows its views changed.
-//! The beam has no bound: the value's boundary term can grow when cells leave the sets, and
-//! the bound from views without shadows (area, and the boundary cells next to ground outside
-//! the sets) is too loose to skip children (it would have spared about a fifth of them on the
-//! benchmark's decisions, for the price of a footprint per pose).
+//! once; a child's grown sets are its node's, counted again only on the rows its views can
+//! reach. The beam has no bound: a bound from views without shadows is too loose to skip
+//! children (it would have spared about a fifth of them on the benchmark's decisions, for the
+//! price of a footprint per pose).
 //!
 //! Threads: while one UAV plans, the others of a lockstep round wait for the token, so the
 //! planner shares its work with rayon's pool ([`GuidanceParams::parallel`]; the pool has
@@ -68,8 +69,11 @@
 //! node and increment only and the jobs' results are put back in their order, so the decision
 //! is the same on any number of threads (tested, and checked by `fleet bench guidance`).
 
+use std::borrow::Cow;
+
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
+use protocol::radio::in_comms_range;
 use protocol::scenario::SweepPlan;
 use protocol::wire::PlannedView;
 use rayon::prelude::*;
@@ -77,6 +81,7 @@ use sets::grid::GroundGrid;
 use sets::math::Point2;
 use sets::raster::CellSet;
 
+use super::growth::{self, Growth};
 use super::sweep::Sweep;
 use super::view::same_pose;
 use super::viewpoint::SecondViewpoint;
@@ -94,7 +99,7 @@ pub struct SetfleetParams {
     pub beam_width: u32,
     /// Weight of the identified targets' set area against `X̄`'s.
     pub target_weight: f64,
-    /// Seconds of future growth charged on the boundary of the sets.
+    /// Seconds of future growth charged on the sets ([`super::growth`]).
     pub growth_horizon_s: f64,
     /// Distance between view centres under which a plan overlapping the token's is charged, m.
     pub spread_m: f64,
@@ -173,16 +178,17 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
     let depth = sp.lookahead_periods.max(1) as usize;
     let sets = (&undetected, &targets);
+    let others = others_in_range(params, input);
     let others_seen = others_seen(
         params,
-        input.others,
+        &others,
         &grid,
         sets,
         obstacles,
         depth,
         &mut predictor,
     );
-    let others_centres = view_centres(params, input.others);
+    let others_centres = view_centres(params, &others);
     let lookahead_s = depth as f64 * params.steps_per_period as f64 * params.dt;
     let camera = Camera::new(
         params.camera,
@@ -195,7 +201,11 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let sweep = Sweep::of(params, input, &grid, lookahead_s, footprint_depth);
     let attractive = sweep.attractive(&undetected, &targets, &others_seen);
     let fov_area = camera.ground_footprint_area();
-    let growth_m2_per_cell = grid.cell_m * params.target_max_speed * sp.growth_horizon_s;
+    let growth_rings = growth::rings(
+        params.target_max_speed * sp.growth_horizon_s,
+        grid.cell_m,
+        grid.nx.max(grid.ny),
+    );
     let root = Node::root(input.state, undetected, targets);
     let period = |d: usize| Period {
         params,
@@ -208,7 +218,7 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         hidden: &hidden,
         others_centres: &others_centres,
         fov_area,
-        growth_m2_per_cell,
+        growth_rings,
         sweep: &sweep,
     };
     let viewpoint = (sp.second_viewpoints && sweep.overdue.is_empty())
@@ -226,6 +236,29 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         &mut predictor,
     );
     decision(input, best, sequences, excluded)
+}
+
+/// The plans of the token that can change this agent's sets: those of the UAVs within radio
+/// range of it (`comms.range_m`, judged between its pose and the first pose of each plan). An
+/// agent fuses estimates from senders in range only ([`protocol::radio::in_comms_range`]), so
+/// what an out-of-range UAV will see stays in this agent's sets, and flying where it looks
+/// costs this agent nothing.
+fn others_in_range<'a>(
+    params: &GuidanceParams,
+    input: &PlanningInput<'a>,
+) -> Cow<'a, [PlannedView]> {
+    if params.comms_range_m.is_infinite() {
+        return Cow::Borrowed(input.others);
+    }
+    let me = CameraPose {
+        position: input.state.position,
+        yaw: input.state.yaw,
+    };
+    let in_range = |v: &&PlannedView| {
+        let first = v.poses.first().copied();
+        in_comms_range(params.comms_range_m, Some(me), first)
+    };
+    Cow::Owned(input.others.iter().filter(in_range).cloned().collect())
 }
 
 /// The second viewpoint of the decision of `input` ([`super::viewpoint`]), for the pockets
@@ -448,21 +481,21 @@ struct Period<'a> {
     others_centres: &'a [Vec<Point2>],
     /// The area of the UAV's field of view, m² (the most a crowded view is charged).
     fov_area: f64,
-    /// The future growth charged per boundary cell, m².
-    growth_m2_per_cell: f64,
+    /// Rings of cells the sets grow by in the growth horizon ([`super::growth`]).
+    growth_rings: u32,
     /// How the fleet's sweep weighs the sets.
     sweep: &'a Sweep,
 }
 
 impl Period<'_> {
-    /// The value of predicted sets `undetected` (`X̄`) and `targets` (the cars') with `edge`
-    /// boundary cells (`X̄`'s, the cars'): their cells weighed by the sweep, plus the growth
-    /// charged on their boundaries.
-    fn value(&self, undetected: &CellSet, targets: &CellSet, edge: (u64, u64)) -> f64 {
+    /// The value of predicted sets `undetected` (`X̄`) and `targets` (the cars') whose grown
+    /// sets have `grown` cells (`X̄`'s, the cars'): their cells weighed by the sweep, plus
+    /// the cells they would grow by.
+    fn value(&self, undetected: &CellSet, targets: &CellSet, grown: (u64, u64)) -> f64 {
         let w = self.params.setfleet.target_weight;
         let area = self.sweep.weigh(undetected, targets, w);
-        let edge = edge.0 as f64 + w * edge.1 as f64;
-        area * self.grid.cell_area() + edge * self.growth_m2_per_cell
+        let growth = (grown.0 - undetected.count()) as f64 + w * (grown.1 - targets.count()) as f64;
+        (area + growth) * self.grid.cell_area()
     }
 
     /// The children of every node of `beam`, in the order of the nodes and then of the
@@ -538,13 +571,16 @@ impl Period<'_> {
         let mut relevant = u0.clone();
         relevant.or_assign(&t0);
         // A child's sets differ from these only on the rows its views meet, and their
-        // boundaries only there and on the rows next to them: counted again there only.
-        let edges = (boundary_count(&u0), boundary_count(&t0));
+        // grown sets only within the growth's rings of those: counted again there only.
+        let growth = (
+            Growth::of(&u0, self.growth_rings),
+            Growth::of(&t0, self.growth_rings),
+        );
         Grown {
             undetected: u0,
             targets: t0,
             relevant,
-            edges,
+            growth,
         }
     }
 
@@ -608,7 +644,7 @@ impl Period<'_> {
     }
 
     /// `node`'s child by `inc` after its `flight`: the `grown` sets less what it saw, their
-    /// value (with the boundaries counted again where the views changed them), its view
+    /// value (their growth counted again where the views changed them), its view
     /// centre, the charge for crowding the others and, in the last period, its sets in
     /// occluded ground.
     fn child(&self, node: &Node, inc: f64, grown: &Grown, flight: Flight) -> Node {
@@ -626,11 +662,11 @@ impl Period<'_> {
         let mut t = t0.clone();
         t.and_not_assign(&seen);
         let changed = occupied_rows(&seen);
-        let edges = (
-            recount_boundary(grown.edges.0, u0, &u, changed),
-            recount_boundary(grown.edges.1, t0, &t, changed),
+        let grown_cells = (
+            grown.growth.0.grown_cells_after(&u, changed),
+            grown.growth.1.grown_cells_after(&t, changed),
         );
-        let value_sum = node.value_sum + self.value(&u, &t, edges);
+        let value_sum = node.value_sum + self.value(&u, &t, grown_cells);
         let centre = poses.last().map_or(Point2::new(0.0, 0.0), |p| {
             view::view_centre(&params.camera, p)
         });
@@ -678,8 +714,8 @@ struct Grown {
     targets: CellSet,
     /// The ground that can change them: theirs.
     relevant: CellSet,
-    /// Their boundary cells (`X̄`'s, the targets').
-    edges: (u64, u64),
+    /// Their sets grown over the growth horizon (`X̄`'s, the targets').
+    growth: (Growth, Growth),
 }
 
 /// One period's flight of a child.
@@ -776,76 +812,6 @@ fn spread_charge(
         .filter_map(|c| c.get(step.saturating_sub(1)).or(c.last()))
         .map(|q| fov_area * (1.0 - (q - centre).norm() / spread_m).max(0.0))
         .sum()
-}
-
-/// Cells of `set` with a 4-neighbour outside it (the RoI's edge does not count: nothing
-/// grows in from outside), computed a word at a time.
-pub fn boundary_count(set: &CellSet) -> u64 {
-    match set.ny() {
-        0 => 0,
-        ny => boundary_count_rows(set, (0, ny - 1)),
-    }
-}
-
-/// [`boundary_count`] over the rows `first..=last` only (rows past the grid count nothing).
-fn boundary_count_rows(set: &CellSet, (first, last): (u32, u32)) -> u64 {
-    let wpr = set.words_per_row();
-    let (nx, ny) = (set.nx() as usize, set.ny());
-    if wpr == 0 || ny == 0 {
-        return 0;
-    }
-    let tail_bits = nx - (wpr - 1) * 64;
-    let pad_mask: u64 = if tail_bits >= 64 {
-        0
-    } else {
-        u64::MAX << tail_bits
-    };
-    let ones = vec![u64::MAX; wpr];
-    let mut total = 0u64;
-    for y in first..=last.min(ny - 1) {
-        let row = set.row(y);
-        if row.iter().all(|&w| w == 0) {
-            continue;
-        }
-        let above = if y + 1 < ny { set.row(y + 1) } else { &ones };
-        let below = if y > 0 { set.row(y - 1) } else { &ones };
-        for w in 0..wpr {
-            let cur = row[w];
-            if cur == 0 {
-                continue;
-            }
-            let pad = if w + 1 == wpr { pad_mask } else { 0 };
-            let low_in = if w == 0 { 1 } else { row[w - 1] >> 63 };
-            let high_in = if w + 1 < wpr {
-                row[w + 1] << 63
-            } else {
-                1 << 63
-            };
-            let left = (cur << 1) | low_in;
-            let right = ((cur | pad) >> 1) | high_in;
-            let interior = cur & left & right & (above[w] | pad) & (below[w] | pad);
-            total += u64::from((cur & !interior).count_ones());
-        }
-    }
-    total
-}
-
-/// [`boundary_count`] of `after`, a set that differs from `before` (whose count is `count`)
-/// only on the rows `changed`: a cell's boundary status depends on its row and the rows
-/// next to it, so only those are counted again.
-fn recount_boundary(
-    count: u64,
-    before: &CellSet,
-    after: &CellSet,
-    changed: Option<(u32, u32)>,
-) -> u64 {
-    match changed {
-        Some((a, b)) => {
-            let rows = (a.saturating_sub(1), b.saturating_add(1));
-            count - boundary_count_rows(before, rows) + boundary_count_rows(after, rows)
-        }
-        None => count,
-    }
 }
 
 /// The first and last rows holding a cell of `set`, if any.
@@ -991,51 +957,33 @@ pub(crate) mod tests {
         )
     }
 
+    /// A plan counts only from a UAV in radio range: this agent never fuses what one out of
+    /// range sees, so that UAV's views do not clear its predicted sets.
     #[test]
-    fn boundary_counts_cells_next_to_the_outside_but_not_the_edge() {
-        let grid = GroundGrid::new(50.0, 1.0); // 100 x 100
-        let full = CellSet::full(&grid);
-        assert_eq!(boundary_count(&full), 0);
-        let mut block = CellSet::empty(&grid);
-        for y in 10..20 {
-            block.fill_row_span(y, 60, 69); // crosses the word boundary at 64
-        }
-        let n = block.count();
-        assert_eq!(n, 100);
-        assert_eq!(boundary_count(&block), 36);
-        let mut single = CellSet::empty(&grid);
-        single.set((99, 0), true);
-        assert_eq!(boundary_count(&single), 1);
-    }
-
-    /// A child's boundary counted again only on the rows its views changed (and the rows
-    /// next to them) is the whole count, for sets and views anywhere (the grid's edges too).
-    #[test]
-    fn the_boundary_recounted_on_the_changed_rows_is_the_whole_count() {
-        let grid = GroundGrid::new(60.0, 1.0); // 120 x 120
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut uniform = |lo: f64, hi: f64| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            lo + (hi - lo) * (state >> 11) as f64 / (1u64 << 53) as f64
+    fn a_plan_from_out_of_radio_range_clears_nothing() {
+        use super::super::tests::watching_the_south;
+        let mut p = params();
+        let hidden = CellSet::empty(&p.grids.fine);
+        let others = [watching_the_south()];
+        let input = PlanningInput {
+            uav: 1,
+            state: UavState {
+                position: Point3::new(0.0, 0.0, 60.0),
+                yaw: 0.0,
+            },
+            sets: &[],
+            recently_hidden: &hidden,
+            unseen: &hidden,
+            obstacles: &[],
+            others: &others,
+            fleet: &[0, 1],
         };
-        for _ in 0..200 {
-            let mut before = CellSet::empty(&grid);
-            for _ in 0..4 {
-                let centre = Point2::new(uniform(-70.0, 70.0), uniform(-70.0, 70.0));
-                before.fill_disc(&grid, centre, uniform(0.0, 40.0), Coverage::Outer);
-            }
-            let mut seen = CellSet::empty(&grid);
-            let centre = Point2::new(uniform(-70.0, 70.0), uniform(-70.0, 70.0));
-            seen.fill_disc(&grid, centre, uniform(0.0, 30.0), Coverage::Inner);
-            let mut after = before.clone();
-            after.and_not_assign(&seen);
-            let whole = boundary_count(&after);
-            let changed = occupied_rows(&seen);
-            let recounted = recount_boundary(boundary_count(&before), &before, &after, changed);
-            assert_eq!(recounted, whole);
-        }
+        // The watcher flies 20 m away.
+        assert_eq!(others_in_range(&p, &input).len(), 1);
+        p.comms_range_m = 25.0;
+        assert_eq!(others_in_range(&p, &input).len(), 1);
+        p.comms_range_m = 15.0;
+        assert!(others_in_range(&p, &input).is_empty());
     }
 
     #[test]

@@ -19,8 +19,8 @@
 //!    heading), if it sees at least [`MIN_VISIBLE_FRACTION`] of the pocket.
 //! 3. **Worth the detour.** The planner charges `λ` m² per metre its view centre is from where
 //!    it pulls (the distance term). The viewpoint is flown to when what it clears, the visible
-//!    cells' area plus their growth over the planner's growth horizon (`L v G` on the pocket's
-//!    boundary cells), exceeds `λ` times the detour: the distance from the UAV's view centre to
+//!    cells' area plus the pocket's growth over the planner's growth horizon
+//!    ([`super::growth`]), exceeds `λ` times the detour: the distance from the UAV's view centre to
 //!    the pocket's barycentre.
 //! 4. **The pull.** While a viewpoint is flown to, the planner's distance term measures how far
 //!    a sequence ends from it ([`SecondViewpoint::distance_m`]): the distance from the view
@@ -36,6 +36,7 @@ use sets::math::{Point2, Point3};
 use sets::raster::{CellBox, CellSet};
 
 use super::GuidanceParams;
+use super::growth::{self, Growth};
 use super::view::{self, GroundPredictor, ObstacleCell};
 
 /// Smallest pocket a viewpoint is planned for, planning cells.
@@ -110,10 +111,13 @@ impl SecondViewpoint {
         if (best.visible_cells as f64) < MIN_VISIBLE_FRACTION * cells as f64 {
             return None;
         }
-        let growth_m2 = super::setfleet::boundary_count(&pocket) as f64
-            * grid.cell_m
-            * params.target_max_speed
-            * params.setfleet.growth_horizon_s;
+        let rings = growth::rings(
+            params.target_max_speed * params.setfleet.growth_horizon_s,
+            grid.cell_m,
+            grid.nx.max(grid.ny),
+        );
+        let growth_m2 =
+            (Growth::of(&pocket, rings).grown_cells() - pocket.count()) as f64 * grid.cell_area();
         let gain_m2 = best.visible_cells as f64 * grid.cell_area() + growth_m2;
         let here = view::view_centre(&params.camera, &CameraPose { position, yaw });
         let detour_m = (target - here).norm();
