@@ -32,6 +32,11 @@
 //!   up to one field of view's area, linearly in how close it is, so the UAVs do not follow
 //!   one another beyond the others' horizon. With a finite radio range (`comms.range_m`) only
 //!   the plans of UAVs in range count: this agent never learns what the others see.
+//! - **Staying in radio range** (a finite `comms.range_m`). An agent out of range of another
+//!   learns nothing of the ground that one sees, about `W V` m² per second (`W` the
+//!   footprint's width, `V` the speed), and `d` metres beyond range take `d / V` seconds to
+//!   close: a sequence is charged `W` m² per metre its UAV ends beyond range of each other UAV
+//!   (at the same CVS step of their plans), so the agents keep meeting and fusing.
 //! - `kappa` keeps the paper's meaning: the area of the final sets inside ground occluded in
 //!   the last periods is charged `kappa` m² per m².
 //! - **The fleet's share of the search** ([`super::sweep`]): the round's fleet (the token's
@@ -126,6 +131,8 @@ struct Node {
     centre: Point2,
     /// The charge for crowding the others' view centres, m².
     crowding: f64,
+    /// The charge for ending beyond radio range of the others, m².
+    apart: f64,
     /// Ranking key: the mean value plus the distance and spread charges, m² (set by
     /// [`Node::rank_by`]).
     rank: f64,
@@ -145,6 +152,7 @@ impl Node {
             stray_m: 0.0,
             centre: Point2::origin(),
             crowding: 0.0,
+            apart: 0.0,
             rank: 0.0,
             cost: Cost {
                 area_m2: 0.0,
@@ -156,13 +164,14 @@ impl Node {
     }
 
     /// Sets the ranking key: the mean value (`cost.area_m2`), plus `lambda` per metre from the
-    /// view centre to where `pull` pulls, the crowding charge and `kappa` per m² of sets in
-    /// occluded ground.
+    /// view centre to where `pull` pulls, the crowding and radio range charges and `kappa` per
+    /// m² of sets in occluded ground.
     fn rank_by(&mut self, pull: &Pull, params: &GuidanceParams) {
         let distance_m = pull.distance_m(&self.centre, self.state.yaw);
         self.rank = self.cost.area_m2
             + params.lambda * distance_m
             + self.crowding
+            + self.apart
             + params.kappa * self.cost.hidden_m2;
         self.cost.distance_m = distance_m;
         self.cost.total = self.rank;
@@ -189,6 +198,7 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         &mut predictor,
     );
     let others_centres = view_centres(params, &others);
+    let others_positions = positions(input.others);
     let lookahead_s = depth as f64 * params.steps_per_period as f64 * params.dt;
     let camera = Camera::new(
         params.camera,
@@ -201,6 +211,11 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let sweep = Sweep::of(params, input, &grid, lookahead_s, footprint_depth);
     let attractive = sweep.attractive(&undetected, &targets, &others_seen);
     let fov_area = camera.ground_footprint_area();
+    let footprint_width_m = if footprint_depth > 0.0 {
+        fov_area / footprint_depth
+    } else {
+        0.0
+    };
     let growth_rings = growth::rings(
         params.target_max_speed * sp.growth_horizon_s,
         grid.cell_m,
@@ -217,6 +232,8 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         last: d + 1 == depth,
         hidden: &hidden,
         others_centres: &others_centres,
+        others_positions: &others_positions,
+        footprint_width_m,
         fov_area,
         growth_rings,
         sweep: &sweep,
@@ -479,6 +496,10 @@ struct Period<'a> {
     hidden: &'a CellSet,
     /// The others' planned view centres, per CVS step.
     others_centres: &'a [Vec<Point2>],
+    /// Every other UAV's planned positions, per CVS step of this horizon.
+    others_positions: &'a [Vec<Point2>],
+    /// The footprint's mean width, m: the charge per metre beyond radio range of another.
+    footprint_width_m: f64,
     /// The area of the UAV's field of view, m² (the most a crowded view is charged).
     fov_area: f64,
     /// Rings of cells the sets grow by in the growth horizon ([`super::growth`]).
@@ -677,6 +698,13 @@ impl Period<'_> {
             self.others_centres,
             poses.len(),
         );
+        let apart = self.footprint_width_m
+            * beyond_range_m(
+                params.comms_range_m,
+                &state.position.xy(),
+                self.others_positions,
+                poses.len(),
+            );
         let hidden_m2 = if self.last {
             (u.intersection_count(self.hidden) + t.intersection_count(self.hidden)) as f64
                 * grid.cell_area()
@@ -695,6 +723,7 @@ impl Period<'_> {
             stray_m,
             centre,
             crowding,
+            apart,
             rank: 0.0,
             cost: Cost {
                 area_m2: value_sum / (self.index + 1) as f64,
@@ -793,6 +822,35 @@ fn seen_by_others(
         }
     }
     seen
+}
+
+/// Where the others' plans take them (horizontally), per CVS step of this horizon.
+fn positions(others: &[PlannedView]) -> Vec<Vec<Point2>> {
+    others
+        .iter()
+        .map(|v| {
+            v.poses
+                .iter()
+                .map(|p| p.position.xy())
+                .filter(|p| p.iter().all(|c| c.is_finite()))
+                .collect::<Vec<_>>()
+        })
+        .filter(|c| !c.is_empty())
+        .collect()
+}
+
+/// How far beyond radio range (`range_m`) a UAV at `at` is from each of the others at CVS
+/// step `step` (their planned positions then, or their last), summed, metres: 0 with an
+/// infinite range.
+fn beyond_range_m(range_m: f64, at: &Point2, others: &[Vec<Point2>], step: usize) -> f64 {
+    if range_m.is_infinite() {
+        return 0.0;
+    }
+    others
+        .iter()
+        .filter_map(|c| c.get(step.saturating_sub(1)).or(c.last()))
+        .map(|q| ((q - at).norm() - range_m).max(0.0))
+        .sum()
 }
 
 /// The charge for a view centre near the others' planned view centres at the same CVS step
@@ -984,6 +1042,45 @@ pub(crate) mod tests {
         assert_eq!(others_in_range(&p, &input).len(), 1);
         p.comms_range_m = 15.0;
         assert!(others_in_range(&p, &input).is_empty());
+    }
+
+    #[test]
+    fn beyond_range_is_summed_over_the_others_at_the_same_step() {
+        let others = vec![
+            vec![Point2::new(0.0, 100.0), Point2::new(0.0, 200.0)],
+            vec![Point2::new(0.0, -130.0)],
+        ];
+        let at = Point2::new(0.0, 0.0);
+        assert_eq!(beyond_range_m(50.0, &at, &others, 1), 50.0 + 80.0);
+        // Step 2: the first has flown on to 200 m, the second stays at its last, 130 m.
+        assert_eq!(beyond_range_m(50.0, &at, &others, 2), 150.0 + 80.0);
+        assert_eq!(beyond_range_m(150.0, &at, &others, 2), 50.0);
+        assert_eq!(beyond_range_m(f64::INFINITY, &at, &others, 2), 0.0);
+        assert_eq!(beyond_range_m(50.0, &at, &[], 2), 0.0);
+    }
+
+    /// Out of radio range of the others, a UAV is charged the footprint's width per metre
+    /// beyond it: with the same ground to clear on either side, it turns towards the side
+    /// where the other UAV flies.
+    #[test]
+    fn out_of_range_a_uav_turns_towards_the_others() {
+        let mut p = params();
+        p.comms_range_m = 60.0;
+        let mut both = blob(&p, Point2::new(0.0, 100.0), 20.0);
+        both.or_assign(&blob(&p, Point2::new(0.0, -100.0), 20.0));
+        let other_at = |y: f64| PlannedView {
+            uav: 0,
+            poses: (0..12)
+                .map(|_| CameraPose {
+                    position: Point3::new(0.0, y, 70.0),
+                    yaw: 0.0,
+                })
+                .collect(),
+        };
+        let d = decide(&p, &[&both], &[other_at(140.0)]);
+        assert!(d.increments[0] > 0.0, "{d:?}");
+        let d = decide(&p, &[&both], &[other_at(-140.0)]);
+        assert!(d.increments[0] < 0.0, "{d:?}");
     }
 
     #[test]
