@@ -26,7 +26,17 @@
 //! ([`Growth::grown_cells_after`]): rows `a..=b` widened again, and the grown rows
 //! `a - r..=b + r` recomputed.
 
+use sets::grid::GroundGrid;
 use sets::raster::CellSet;
+
+use super::GuidanceParams;
+
+/// The rings the `setfleet` planner's sets grow by over its growth horizon on `grid`: the
+/// targets' reach in `guidance.growth_horizon_s` seconds ([`rings`]).
+pub fn horizon_rings(params: &GuidanceParams, grid: &GroundGrid) -> u32 {
+    let reach_m = params.target_max_speed * params.setfleet.growth_horizon_s;
+    rings(reach_m, grid.cell_m, grid.nx.max(grid.ny))
+}
 
 /// The rings of planning cells `cell_m` wide a set grows by in reaching `reach_m` metres:
 /// `reach_m / cell_m` rounded (0 for a reach that is not positive), at most `limit` (a set
@@ -248,8 +258,9 @@ fn grown_counts<'a>(
     };
     for p in 0..padded {
         let fresh = p % block == 0;
+        let row = at(p);
         for w in 0..wpr {
-            let v = at(p).map_or(0, |row| row[w]);
+            let v = row.map_or(0, |row| row[w]);
             from_start[p * wpr + w] = if fresh {
                 v
             } else {
@@ -259,8 +270,9 @@ fn grown_counts<'a>(
     }
     for p in (0..padded).rev() {
         let fresh = p % block == block - 1 || p + 1 == padded;
+        let row = at(p);
         for w in 0..wpr {
-            let v = at(p).map_or(0, |row| row[w]);
+            let v = row.map_or(0, |row| row[w]);
             to_end[p * wpr + w] = if fresh {
                 v
             } else {
@@ -282,7 +294,6 @@ fn grown_counts<'a>(
 mod tests {
     use super::*;
     use proptest::prelude::*;
-    use sets::grid::GroundGrid;
 
     /// The grown set, cell by cell: every cell within `r` rows and columns of a set cell.
     fn reference(set: &CellSet, r: u32) -> u64 {

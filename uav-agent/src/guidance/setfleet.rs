@@ -20,7 +20,8 @@
 //!   boundary), and revisit identified cars before their sets grow: the identified targets'
 //!   sets count `target_weight` times their area, since every square metre of them is
 //!   localisation error. Pockets closer than `v G` to each other grow into the same ground
-//!   once, so clearing ground between shadows is never charged more than it clears.
+//!   once, so clearing ground between shadows is never charged more than it clears. (The
+//!   variant has `G = 0`, the sets' area alone, which searched better where measured.)
 //! - **Somewhere to go when nothing is in reach.** The distance from the predicted view
 //!   centre to the nearest set cell is charged `lambda` m² per metre, as the paper's `Φ_d`,
 //!   but read from a distance map of the sets computed once per decision (and given real
@@ -216,11 +217,7 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     } else {
         0.0
     };
-    let growth_rings = growth::rings(
-        params.target_max_speed * sp.growth_horizon_s,
-        grid.cell_m,
-        grid.nx.max(grid.ny),
-    );
+    let growth_rings = growth::horizon_rings(params, &grid);
     let root = Node::root(input.state, undetected, targets);
     let period = |d: usize| Period {
         params,
@@ -666,8 +663,8 @@ impl Period<'_> {
 
     /// `node`'s child by `inc` after its `flight`: the `grown` sets less what it saw, their
     /// value (their growth counted again where the views changed them), its view
-    /// centre, the charge for crowding the others and, in the last period, its sets in
-    /// occluded ground.
+    /// centre, the charges for crowding the others and for ending beyond radio range of them
+    /// and, in the last period, its sets in occluded ground.
     fn child(&self, node: &Node, inc: f64, grown: &Grown, flight: Flight) -> Node {
         let params = self.params;
         let grid = self.grid;

@@ -111,11 +111,7 @@ impl SecondViewpoint {
         if (best.visible_cells as f64) < MIN_VISIBLE_FRACTION * cells as f64 {
             return None;
         }
-        let rings = growth::rings(
-            params.target_max_speed * params.setfleet.growth_horizon_s,
-            grid.cell_m,
-            grid.nx.max(grid.ny),
-        );
+        let rings = growth::horizon_rings(params, grid);
         let growth_m2 =
             (Growth::of(&pocket, rings).grown_cells() - pocket.count()) as f64 * grid.cell_area();
         let gain_m2 = best.visible_cells as f64 * grid.cell_area() + growth_m2;
