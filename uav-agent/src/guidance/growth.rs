@@ -66,9 +66,11 @@ pub struct Growth {
 
 impl Growth {
     /// `set` grown by `rings` rings (8-neighbour; cells past the grid's edges are not added).
+    /// More rings than the grid is wide or long grow no further.
     pub fn of(set: &CellSet, rings: u32) -> Growth {
         let wpr = set.words_per_row();
         let ny = set.ny();
+        let rings = rings.min(set.nx().max(ny));
         if rings == 0 {
             // Nothing grows: the rows' own counts, and no rows to keep.
             let counts: Vec<u32> = (0..ny).map(|y| row_count(set.row(y))).collect();
@@ -342,6 +344,9 @@ mod tests {
             Growth::of(&CellSet::full(&grid), 5).grown_cells(),
             100 * 100
         );
+        let far = Growth::of(&half, u32::MAX);
+        assert_eq!(far.grown_cells(), 100 * 100);
+        assert_eq!(far.grown_cells_after(&half, Some((0, 99))), 100 * 100);
     }
 
     /// Pockets closer than `2 r` grow into the same ground once: clearing the ground between
