@@ -206,6 +206,17 @@ impl Camera {
         })
     }
 
+    /// Mean width of [`Camera::image_ground_footprint`] across the camera's heading: its area
+    /// over its depth, m (0 if it misses the ground).
+    pub fn ground_footprint_width(&self) -> Real {
+        let depth = self.ground_footprint_depth();
+        if depth > 0.0 {
+            self.ground_footprint_area() / depth
+        } else {
+            0.0
+        }
+    }
+
     /// Corners of a convex polytope that contains every point lit by pixel `(r, c)` whose range
     /// (distance from the optical centre) lies in `[range_lo, range_hi]`.
     ///
@@ -279,6 +290,28 @@ mod tests {
                 yaw,
             },
         )
+    }
+
+    /// The footprint's area, depth and width do not depend on the heading, and the width is
+    /// the area over the depth; a camera that misses the ground has none.
+    #[test]
+    fn the_footprint_measures_follow_the_camera_not_its_heading() {
+        let (a, b) = (cam(0.0), cam(2.1));
+        let area = a.ground_footprint_area();
+        let depth = a.ground_footprint_depth();
+        assert!(area > 0.0 && depth > 0.0);
+        assert!((b.ground_footprint_area() - area).abs() < 1e-6 * area);
+        assert!((b.ground_footprint_depth() - depth).abs() < 1e-6 * depth);
+        assert!((a.ground_footprint_width() * depth - area).abs() < 1e-6 * area);
+        // Tilted up past the horizon: no footprint.
+        let level = cam(0.0);
+        let model = CameraModel {
+            tilt_rad: -0.5,
+            ..level.model
+        };
+        let up = Camera::new(model, level.pose);
+        assert_eq!(up.ground_footprint_width(), 0.0);
+        assert_eq!(up.ground_footprint_area(), 0.0);
     }
 
     #[test]

@@ -41,7 +41,7 @@ pub fn horizon_rings(params: &GuidanceParams, grid: &GroundGrid) -> u32 {
 /// The rings of planning cells `cell_m` wide a set grows by in reaching `reach_m` metres:
 /// `reach_m / cell_m` rounded (0 for a reach that is not positive), at most `limit` (a set
 /// grown by the grid's size fills it).
-pub fn rings(reach_m: f64, cell_m: f64, limit: u32) -> u32 {
+fn rings(reach_m: f64, cell_m: f64, limit: u32) -> u32 {
     let r = (reach_m / cell_m).round();
     if r.is_nan() || r <= 0.0 {
         0

@@ -52,15 +52,12 @@ impl Scale {
             yaw: 0.0,
         };
         let camera = Camera::new(scenario.camera_model(), level);
-        let (area, depth) = (
-            camera.ground_footprint_area(),
-            camera.ground_footprint_depth(),
-        );
-        if area <= 0.0 || depth <= 0.0 {
+        let footprint_width_m = camera.ground_footprint_width();
+        if footprint_width_m <= 0.0 {
             return None;
         }
         Some(Scale {
-            footprint_width_m: area / depth,
+            footprint_width_m,
             target_speed_mps: scenario.targets.max_speed_mps,
         })
     }

@@ -199,7 +199,12 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
         &mut predictor,
     );
     let others_centres = view_centres(params, &others);
-    let others_positions = positions(input.others);
+    // Only a finite radio range charges the distance to the others.
+    let others_positions = if params.comms_range_m.is_finite() {
+        positions(input.others)
+    } else {
+        Vec::new()
+    };
     let lookahead_s = depth as f64 * params.steps_per_period as f64 * params.dt;
     let camera = Camera::new(
         params.camera,
@@ -212,11 +217,7 @@ pub fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     let sweep = Sweep::of(params, input, &grid, lookahead_s, footprint_depth);
     let attractive = sweep.attractive(&undetected, &targets, &others_seen);
     let fov_area = camera.ground_footprint_area();
-    let footprint_width_m = if footprint_depth > 0.0 {
-        fov_area / footprint_depth
-    } else {
-        0.0
-    };
+    let footprint_width_m = camera.ground_footprint_width();
     let growth_rings = growth::horizon_rings(params, &grid);
     let root = Node::root(input.state, undetected, targets);
     let period = |d: usize| Period {
