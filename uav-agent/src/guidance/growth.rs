@@ -32,7 +32,7 @@ use sets::raster::CellSet;
 use super::GuidanceParams;
 
 /// The rings the `setfleet` planner's sets grow by over its growth horizon on `grid`: the
-/// targets' reach in `guidance.growth_horizon_s` seconds ([`rings`]).
+/// targets' reach in `guidance.growth_horizon_s` seconds, in whole rings (rounded).
 pub fn horizon_rings(params: &GuidanceParams, grid: &GroundGrid) -> u32 {
     let reach_m = params.target_max_speed * params.setfleet.growth_horizon_s;
     rings(reach_m, grid.cell_m, grid.nx.max(grid.ny))
