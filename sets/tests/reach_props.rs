@@ -511,3 +511,216 @@ fn reach_survives_its_parts() {
     }
     assert!(ReachSet::from_parts(CellSet::empty(&g), 0, &[1, 2, 3], 0.0).is_none());
 }
+
+/// A fact learned late: at the clock before the last `lag` moves.
+#[derive(Clone, Debug)]
+enum LateEvent {
+    /// The targets move at most this far.
+    Move(f64),
+    /// A rectangle of cells is proven free `lag` moves ago ([`ReachSet::clear_since`]).
+    Free(CellBox, usize),
+    /// The target was measured inside a rectangle `lag` moves ago
+    /// ([`ReachSet::restrict_since`]).
+    Measure(CellBox, usize),
+    /// As `Measure`, on a copy first met with the measurement grown by the motion since (a
+    /// target first learned from a late measurement).
+    Learn(CellBox, usize),
+    /// The reach is bounded by the set's box.
+    Bound,
+}
+
+fn late_event(n: u32) -> impl Strategy<Value = LateEvent> {
+    let measured = move |b: CellBox| CellBox {
+        x1: (b.x1 + 6).min(n - 1),
+        y1: (b.y1 + 6).min(n - 1),
+        ..b
+    };
+    prop_oneof![
+        4 => (0.1f64..1.6).prop_map(LateEvent::Move),
+        4 => (cell_box(n, 11), 0usize..4).prop_map(|(b, lag)| LateEvent::Free(b, lag)),
+        1 => (cell_box(n, 11), 0usize..4)
+            .prop_map(move |(b, lag)| LateEvent::Measure(measured(b), lag)),
+        1 => (cell_box(n, 11), 0usize..4)
+            .prop_map(move |(b, lag)| LateEvent::Learn(measured(b), lag)),
+        1 => Just(LateEvent::Bound),
+    ]
+}
+
+/// What the reference knows, in the order of the targets' time.
+#[derive(Clone, Debug)]
+enum Fact {
+    Move(f64),
+    /// The targets were in none of these cells.
+    Free(CellSet),
+    /// The targets were in these cells.
+    In(CellSet),
+}
+
+/// The sampled possible positions after `facts`, from every position.
+fn possible_after(g: &GroundGrid, pts: &[(Point2, CellIndex)], facts: &[Fact]) -> Vec<bool> {
+    let mut possible = vec![true; pts.len()];
+    for f in facts {
+        match f {
+            Fact::Move(r) => {
+                // Samples by cell, so that a sample looks only at the cells within the motion.
+                let mut by_cell: Vec<Vec<Point2>> = vec![Vec::new(); (g.nx * g.ny) as usize];
+                for ((p, (ix, iy)), k) in pts.iter().zip(&possible) {
+                    if *k {
+                        by_cell[(iy * g.nx + ix) as usize].push(*p);
+                    }
+                }
+                let span = (r / g.cell_m).ceil() as i64 + 1;
+                for ((p, (ix, iy)), k) in pts.iter().zip(possible.iter_mut()) {
+                    *k = (-span..=span).any(|dy| {
+                        (-span..=span).any(|dx| {
+                            let (x, y) = (i64::from(*ix) + dx, i64::from(*iy) + dy);
+                            if x < 0 || y < 0 || x >= i64::from(g.nx) || y >= i64::from(g.ny) {
+                                return false;
+                            }
+                            by_cell[(y * i64::from(g.nx) + x) as usize]
+                                .iter()
+                                .any(|q| (p - q).norm() <= *r)
+                        })
+                    });
+                }
+            }
+            Fact::Free(free) => {
+                for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
+                    *k &= !free.contains(*c);
+                }
+            }
+            Fact::In(m) => {
+                for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
+                    *k &= m.contains(*c);
+                }
+            }
+        }
+    }
+    possible
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Facts applied late, at the clock they were true at ([`ReachSet::clear_since`],
+    /// [`ReachSet::restrict_since`]), never drop a position a target can really be at, for a
+    /// set stored over every row or over its rows only: the reference applies each fact at
+    /// its own time, among the moves. With no lag they are the current operations.
+    #[test]
+    fn late_facts_keep_every_possible_position(
+        events in proptest::collection::vec(late_event(24), 1..20),
+        margin in prop::option::of(0u32..6),
+    ) {
+        let g = grid();
+        let pts = samples(&g);
+        let stored_near = |set: ReachSet| match margin {
+            Some(m) => set.with_row_margin(m),
+            None => set,
+        };
+        let mut set = stored_near(ReachSet::full(&g));
+        let mut facts: Vec<Fact> = Vec::new();
+        // The clock after each move, with 0 first.
+        let mut clocks = vec![0.0];
+        for e in &events {
+            let clock = *clocks.last().expect("a clock");
+            // Where a fact `lag` moves old goes among the facts, and its clock.
+            let at = |lag: usize, facts: &[Fact]| {
+                let lag = lag.min(clocks.len() - 1);
+                let mut moves = 0;
+                let mut k = facts.len();
+                while moves < lag {
+                    k -= 1;
+                    if matches!(facts[k], Fact::Move(_)) {
+                        moves += 1;
+                    }
+                }
+                (k, clocks[clocks.len() - 1 - lag])
+            };
+            match e {
+                LateEvent::Move(r) => {
+                    let next = clock + r;
+                    let previous = set.cells().dilate(&g, *r);
+                    set.advance(next);
+                    set.intersect(&previous);
+                    clocks.push(next);
+                    facts.push(Fact::Move(*r));
+                }
+                LateEvent::Free(b, lag) => {
+                    let (k, then) = at(*lag, &facts);
+                    let free = box_set(&g, b);
+                    if *lag == 0 {
+                        let mut current = set.clone();
+                        current.clear(&g, &free, b);
+                        set.clear_since(&g, &free, b, then);
+                        prop_assert!(set == current, "no lag is the current clear");
+                    } else {
+                        set.clear_since(&g, &free, b, then);
+                    }
+                    facts.insert(k, Fact::Free(free));
+                }
+                LateEvent::Measure(b, lag) | LateEvent::Learn(b, lag) => {
+                    let (k, then) = at(*lag, &facts);
+                    let m = box_set(&g, b);
+                    if matches!(e, LateEvent::Learn(..)) {
+                        let grown = m.dilate(&g, clock - then);
+                        set = set.restricted_copy(&g, &grown, margin.unwrap_or(LEARN_MARGIN));
+                    }
+                    if *lag == 0 {
+                        let mut current = set.clone();
+                        current.restrict(&g, &m, 8);
+                        set.restrict_since(&g, &m, 8, then);
+                        prop_assert!(set == current, "no lag is the current restriction");
+                    } else {
+                        set.restrict_since(&g, &m, 8, then);
+                    }
+                    facts.insert(k, Fact::In(m));
+                }
+                LateEvent::Bound => set.bound_by_box(&g),
+            }
+            let possible = possible_after(&g, &pts, &facts);
+            for ((p, c), k) in pts.iter().zip(&possible) {
+                prop_assert!(
+                    !*k || set.contains(*c),
+                    "possible position {:?} outside the set (cell {:?}) after {:?}",
+                    p,
+                    c,
+                    e
+                );
+            }
+        }
+    }
+}
+
+/// A late clear removes the free cells deeper than the motion since, and keeps the others.
+#[test]
+fn a_late_clear_removes_what_its_clock_still_proves() {
+    let g = GroundGrid::new(10.0, 0.5); // 40 x 40 cells
+    let mut set = ReachSet::full(&g);
+    set.advance(1.0);
+    set.advance(3.0);
+    let b = CellBox {
+        x0: 10,
+        y0: 10,
+        x1: 29,
+        y1: 29,
+    };
+    // Free at the clock 1 m, learned at 3 m: the targets may have driven 2 m (4 cells) in.
+    set.clear_since(&g, &box_set(&g, &b), &b, 1.0);
+    for iy in 0..40u32 {
+        for ix in 0..40u32 {
+            let (x, y) = (i64::from(ix), i64::from(iy));
+            let depth = [x - 10, 29 - x, y - 10, 29 - y]
+                .into_iter()
+                .min()
+                .unwrap_or(0);
+            let inside = (10..=29).contains(&ix) && (10..=29).contains(&iy);
+            // Cells 5 whole cells or more inside are beyond 2 m of every cell outside; at 4
+            // the gap is exactly the motion.
+            let expected = !(inside && depth >= 5);
+            assert_eq!(set.contains((ix, iy)), expected, "{:?}", (ix, iy));
+        }
+    }
+    // From now on they regrow at the motion's pace.
+    set.advance(3.5);
+    assert!(set.contains((15, 20)) && !set.contains((16, 20)));
+}

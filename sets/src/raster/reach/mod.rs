@@ -261,7 +261,8 @@ impl ReachSet {
         };
         if set.cells.nx() > 0 && set.cells.ny() > 0 {
             let inside = set.cells.window_flags(&whole, false);
-            set.raise_outside(grid, &whole, &inside);
+            let clock = set.clock_m;
+            set.raise_outside(grid, &whole, &inside, clock);
         }
         set.rebuild_pending();
         set
@@ -467,9 +468,37 @@ impl ReachSet {
     pub fn clear(&mut self, grid: &GroundGrid, free: &CellSet, window: &CellBox) {
         debug_assert!(self.cells.same_shape(free));
         if let Some((w, seeds)) = self.window_seeds(free, window) {
-            self.raise_outside(grid, &w, &seeds);
+            self.raise_outside(grid, &w, &seeds, self.clock_m);
         }
         self.remove(free);
+    }
+
+    /// As [`ReachSet::clear`] for ground proven free at an earlier clock `then_m` (a late
+    /// measurement): the free cells inside `window` get the reach of their gap at `then_m`,
+    /// `τ ← max(τ, ⌊(gap + b_then) / unit⌋)`, which keeps (I1) at every later clock, and a
+    /// cell leaves the set only when its reach is then above the current clock: by (I1) no
+    /// target is in its closed square now. The other free cells stay, since a target may have
+    /// driven into them since. At the set's own clock this is [`ReachSet::clear`]; a clock
+    /// later than the set's (a fact from a step the set has not reached) or not a number
+    /// changes nothing.
+    pub fn clear_since(
+        &mut self,
+        grid: &GroundGrid,
+        free: &CellSet,
+        window: &CellBox,
+        then_m: Real,
+    ) {
+        match then_m.partial_cmp(&self.clock_m) {
+            Some(std::cmp::Ordering::Equal) => self.clear(grid, free, window),
+            Some(std::cmp::Ordering::Less) => {
+                debug_assert!(self.cells.same_shape(free));
+                if let Some((w, seeds)) = self.window_seeds(free, window) {
+                    self.raise_outside(grid, &w, &seeds, then_m);
+                    self.drop_unreached(&w);
+                }
+            }
+            _ => {}
+        }
     }
 
     /// As [`ReachSet::clear`], and the reach of the free cells inside `window` is also raised
@@ -487,7 +516,7 @@ impl ReachSet {
     ) {
         debug_assert!(self.cells.same_shape(free) && self.cells.same_shape(blocked));
         if let Some((w, seeds)) = self.window_seeds(free, window) {
-            self.raise_outside(grid, &w, &seeds);
+            self.raise_outside(grid, &w, &seeds, self.clock_m);
             let walls = blocked.window_flags(&w, false);
             if walls.contains(&true) {
                 let sources: Vec<bool> = seeds.iter().zip(&walls).map(|(s, b)| *s && !*b).collect();
@@ -576,10 +605,89 @@ impl ReachSet {
             .bounding_box()
             .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
         self.store_rows(window.y0, window.y1 + 1);
-        self.raise_outside(grid, &window, &outer.window_flags(&window, false));
+        self.raise_outside(
+            grid,
+            &window,
+            &outer.window_flags(&window, false),
+            self.clock_m,
+        );
         self.intersect(outer);
         if was_wider {
             self.bound_by_box(grid);
+        }
+    }
+
+    /// As [`ReachSet::restrict`] for a measurement at an earlier clock `then_m` (the targets
+    /// lay in `outer` then): the cells within `margin` cells of `outer`'s box get the reach of
+    /// their gap to `outer` at `then_m` ([`ReachSet::clear_since`] says why that holds), the
+    /// cells whose reach is then above the current clock leave the set, and so do the cells
+    /// farther from `outer` than the motion since (outside its dilation by `b_now - b_then`,
+    /// an outer raster of the targets now). At the set's own clock this is
+    /// [`ReachSet::restrict`]; a later clock or one that is not a number changes nothing, and
+    /// so does an empty `outer` (it would prove nothing but a broken measurement).
+    pub fn restrict_since(
+        &mut self,
+        grid: &GroundGrid,
+        outer: &CellSet,
+        margin: u32,
+        then_m: Real,
+    ) {
+        debug_assert!(self.cells.same_shape(outer));
+        match then_m.partial_cmp(&self.clock_m) {
+            Some(std::cmp::Ordering::Equal) => return self.restrict(grid, outer, margin),
+            Some(std::cmp::Ordering::Less) => {}
+            _ => return,
+        }
+        let Some(window) = outer
+            .bounding_box()
+            .and_then(|b| clamp_box(&b, margin, &self.cells))
+        else {
+            return;
+        };
+        let was_wider = self
+            .bounding_box()
+            .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
+        self.store_rows(window.y0, window.y1 + 1);
+        self.raise_outside(grid, &window, &outer.window_flags(&window, false), then_m);
+        self.drop_unreached(&window);
+        self.intersect(&outer.dilate(grid, self.clock_m - then_m));
+        if was_wider {
+            self.bound_by_box(grid);
+        }
+    }
+
+    /// Removes the cells of `window`'s rows whose reach is above the current clock: by (I1)
+    /// they hold no target now. (A cell joins the set only once the clock reaches it, so only
+    /// a reach raised since, by a late fact, puts a cell of the set beyond the clock.)
+    fn drop_unreached(&mut self, window: &CellBox) {
+        let reached = reached_units(self.clock_m);
+        let nx = self.cells.nx() as usize;
+        let last = window.y1.min(self.stored.1.saturating_sub(1));
+        let mut gone: Vec<(u32, usize, u64)> = Vec::new();
+        for iy in window.y0.max(self.stored.0)..=last {
+            if self.stored.0 >= self.stored.1 {
+                break;
+            }
+            let base = self.index(0, iy);
+            for w in window.x0 as usize / 64..=window.x1 as usize / 64 {
+                let word = self.cells.row(iy)[w];
+                if word == 0 {
+                    continue;
+                }
+                let x0 = w * 64;
+                let x1 = (x0 + 64).min(nx);
+                let (hits, _) = reached_bits(&self.reach[base + x0..base + x1], reached);
+                let out = word & !hits;
+                if out != 0 {
+                    gone.push((iy, w, out));
+                }
+            }
+        }
+        if !gone.is_empty() {
+            self.remove_where(|_, iy, w| {
+                gone.binary_search_by(|&(y, x, _)| (y, x).cmp(&(iy, w)))
+                    .map_or(0, |k| gone[k].2)
+            });
         }
     }
 
@@ -595,15 +703,22 @@ impl ReachSet {
         self.bound_by(FarField::new(grid, b, self.clock_m), &b);
     }
 
-    /// Raises `τ` of every cell of `window` outside the outer raster `inside` to the gap
-    /// between its square and the nearest square of `inside` within the window (the caller
-    /// makes sure no cell of `inside` outside the window is nearer).
-    fn raise_outside(&mut self, grid: &GroundGrid, window: &CellBox, inside: &[bool]) {
+    /// Raises `τ` of every cell of `window` outside the outer raster `inside` (of the targets
+    /// at the clock `clock_m`) to the gap between its square and the nearest square of
+    /// `inside` within the window, plus that clock (the caller makes sure no cell of `inside`
+    /// outside the window is nearer).
+    fn raise_outside(
+        &mut self,
+        grid: &GroundGrid,
+        window: &CellBox,
+        inside: &[bool],
+        clock_m: Real,
+    ) {
         self.forget_scans(window);
         GAPS.with_borrow_mut(|field| {
             let nx = self.cells.nx() as usize;
             let w = (window.x1 - window.x0 + 1) as usize;
-            let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
+            let (unit, clock) = (grid.cell_m / REACH_UNIT_M, clock_m / REACH_UNIT_M);
             field.compute_rows(window, inside, |y, gap_row| {
                 let seed_row = &inside[y * w..(y + 1) * w];
                 let start = (window.y0 - self.stored.0) as usize * nx + y * nx + window.x0 as usize;
