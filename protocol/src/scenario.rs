@@ -467,6 +467,9 @@ impl Planner {
 /// | `loss` | `0.0` | `0 <= value <= 1` | probability that the radio loses one message on one link (estimates and tokens alike), drawn from `seed`, the kind of message, the sender, the receiver and the step: the same seed loses the same messages |
 /// | `latency_ms` | `0.0` | `0 <= value <= 10000` | an estimate of step `k` is fused at the receiver's first step whose time is at least `t(k) + latency`, `ceil(latency / cvs_period_s)` steps later, dilated by that lag; tokens are not delayed (the ring's hops take no simulated time, like the planners' computing) |
 ///
+/// | `exchange` | `"sets"` | `"sets"`, `"measurements"` | what estimates carry ([`Exchange`]) |
+/// | `whole_sets_every` | `20` | `1 <= value <= 10000` | under `exchange = "measurements"`, an estimate also carries the sender's whole sets every this many steps (and after a peer (re)joined), which relay what a limited range or a lost message kept from a receiver |
+///
 /// `latency_ms` is bounded because every receiver, and the observer, holds the estimates in
 /// flight: 10 s is 20 steps of the default scenario's estimates.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -478,6 +481,30 @@ pub struct CommsConfig {
     pub loss: f64,
     /// Delay of an estimate on a link, milliseconds (rounded up to whole CVS periods).
     pub latency_ms: f64,
+    /// What estimates carry.
+    pub exchange: Exchange,
+    /// Under the measurement exchange, steps between two estimates with whole sets.
+    pub whole_sets_every: u32,
+}
+
+/// What the agents' estimates carry (`comms.exchange`); both keep the guarantee.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Exchange {
+    /// The sender's sets after correction, fused by intersection (the paper's exchange):
+    /// they hold what the whole fleet saw, so their size and their fusion grow with the fleet.
+    #[default]
+    Sets,
+    /// What the sender's frame proved (free ground, hidden ground, new obstacle ground, the
+    /// cars' measurements), applied by each receiver as its own correction; whole sets only
+    /// every `whole_sets_every` steps and for a peer that (re)joined. The size of a message
+    /// and the work of applying it follow one camera window, not the fleet.
+    Measurements,
+}
+
+impl Exchange {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["sets", "measurements"];
 }
 
 impl Default for Scenario {
@@ -601,6 +628,8 @@ impl Default for CommsConfig {
             range_m: f64::INFINITY,
             loss: 0.0,
             latency_ms: 0.0,
+            exchange: Exchange::Sets,
+            whole_sets_every: 20,
         }
     }
 }

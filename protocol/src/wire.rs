@@ -13,7 +13,7 @@ use sets::raster::delta::SetCode;
 
 /// Version of every message layout in this module and in [`crate::frame`]. 6: estimates carry
 /// the sender's `P^g` ([`EstimateMsg::free_ground`]).
-pub const PROTOCOL_VERSION: u32 = 6;
+pub const PROTOCOL_VERSION: u32 = 7;
 /// Targets a truth message can hold.
 pub const TRUTH_MAX_TARGETS: usize = 64;
 /// UAVs a truth message can hold, and the largest fleet.
@@ -174,6 +174,10 @@ pub enum WireKind {
     Estimate = 1,
     /// A [`GuidanceToken`].
     Token = 2,
+    /// An [`EstimateMsg`] for observers only, on the sender's estimate service: under the
+    /// measurement exchange, the sets the agent holds once it applied the step's measurements
+    /// (peers skip it unread).
+    State = 3,
 }
 
 /// User header of every variable-size message: who sent what, for which run, in which version.
@@ -347,7 +351,12 @@ pub struct AgentStats {
     pub tokens_lost: u64,
 }
 
-/// Agent -> peers and observers: the agent's sets after correction at a step.
+/// Agent -> peers and observers: the agent's estimate at a step.
+///
+/// Under the set exchange (`comms.exchange = "sets"`) it carries the agent's sets after
+/// correction ([`SetsMsg`]) in every message. Under the measurement exchange it carries what
+/// the agent's frame of the step proved ([`MeasurementMsg`]), and whole sets only now and
+/// then and when a peer (re)joins.
 ///
 /// Each set is whole or a delta ([`SetCode`]) against the set of the same role in the
 /// sender's message `base_seq` of the same incarnation; a receiver that does not hold that
@@ -373,6 +382,21 @@ pub struct EstimateMsg {
     pub want_whole: u32,
     /// The camera pose of the frame.
     pub pose: CameraPose,
+    /// The sender's sets, if the message carries them.
+    pub sets: Option<SetsMsg>,
+    /// What the sender's frame of `step` proved, under the measurement exchange.
+    pub measurement: Option<MeasurementMsg>,
+    /// The sender's counters, so observers see them even if the agent is killed.
+    pub stats: AgentStats,
+    /// OEM cells changed since the last message, or the whole known map when `oem_full`.
+    pub oem: Vec<OemCellUpdate>,
+    /// Whether `oem` holds every known cell rather than a delta.
+    pub oem_full: bool,
+}
+
+/// The sets of an estimate.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SetsMsg {
     /// Outer set `X̄` of targets not yet identified.
     pub undetected: SetCode,
     /// Outer sets `X_j` of identified targets.
@@ -389,12 +413,19 @@ pub struct EstimateMsg {
     /// `H̄`: ground hidden at some earlier frame and not proven free since, as the sender held
     /// it before fusing the step's estimates (for the OA metric).
     pub unseen: SetCode,
-    /// The sender's counters, so observers see them even if the agent is killed.
-    pub stats: AgentStats,
-    /// OEM cells changed since the last message, or the whole known map when `oem_full`.
-    pub oem: Vec<OemCellUpdate>,
-    /// Whether `oem` holds every known cell rather than a delta.
-    pub oem_full: bool,
+}
+
+/// What one frame proved (the measurement exchange): sets of one camera window, whole.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MeasurementMsg {
+    /// `P^g`: ground the frame proved free at its step.
+    pub free_ground: SetCode,
+    /// `H^CVS`: ground the frame's view held but did not show.
+    pub hidden: SetCode,
+    /// The cells of `S^o` the frame added.
+    pub obstacles: SetCode,
+    /// `X^m_j` of each car the frame measured.
+    pub targets: Vec<TargetSetMsg>,
 }
 
 /// One UAV's plan for the horizon, as the next UAVs in the token need it: its predicted camera

@@ -3,11 +3,11 @@
 use std::time::{Duration, Instant};
 
 use protocol::frame::CvsFrame;
-use protocol::scenario::Scenario;
+use protocol::scenario::{Exchange, Scenario};
 use protocol::wire::PlannedView;
-use uav_agent::estimator::message::{self, EstimateOutbox};
+use uav_agent::estimator::message::{self, EstimateOutbox, PeerMessage};
 use uav_agent::estimator::{
-    Estimator, EstimatorConfig, FuseReport, PeerEstimate, StepReport, StepTimings,
+    ApplyReport, Estimator, EstimatorConfig, FuseReport, Measurement, StepReport, StepTimings,
 };
 use uav_agent::guidance::{self, Decision, GuidanceParams};
 use world_server::World;
@@ -96,8 +96,10 @@ pub struct Fused<'a> {
     pub receiver: usize,
     /// The UAV that sent it.
     pub sender: usize,
-    /// What the fusion changed.
-    pub report: &'a FuseReport,
+    /// What the fusion of its sets changed (none when it carried no sets).
+    pub report: Option<&'a FuseReport>,
+    /// What applying its measurement changed (under the measurement exchange).
+    pub applied: Option<&'a ApplyReport>,
 }
 
 /// The world and one estimator per UAV, run in one process as a lockstep run runs them (see
@@ -105,8 +107,12 @@ pub struct Fused<'a> {
 pub struct Fleet {
     world: World,
     config: EstimatorConfig,
+    /// What the estimates carry (the scenario's `comms.exchange`).
+    exchange: Exchange,
     estimators: Vec<Estimator>,
     outboxes: Vec<EstimateOutbox>,
+    /// Each UAV's measurement of the step, under the measurement exchange.
+    measurements: Vec<Option<Measurement>>,
     options: FleetOptions,
     frame: Box<CvsFrame>,
     messages: Vec<Vec<u8>>,
@@ -118,12 +124,18 @@ impl Fleet {
         let world = World::new(scenario)?;
         let config = EstimatorConfig::from_scenario(scenario);
         let n = world.uav_count();
-        let full_every = options.oem_full_every.unwrap_or(config.oem_full_every);
+        let exchange = scenario.comms.exchange;
+        let full_every = match exchange {
+            Exchange::Sets => options.oem_full_every.unwrap_or(config.oem_full_every),
+            Exchange::Measurements => u64::from(scenario.comms.whole_sets_every),
+        };
         Ok(Fleet {
             estimators: (0..n).map(|_| Estimator::new(config.clone())).collect(),
             outboxes: (0..n)
                 .map(|i| EstimateOutbox::new(i as u32, 1, full_every))
                 .collect(),
+            measurements: vec![None; n],
+            exchange,
             messages: vec![Vec::new(); n],
             frame: CvsFrame::new_boxed(),
             world,
@@ -211,8 +223,16 @@ impl Fleet {
             self.world
                 .render(uav, self.options.run_tag, &mut self.frame);
             let start = Instant::now();
-            let report = estimator
-                .step(&self.frame)
+            let report =
+                match self.exchange {
+                    Exchange::Sets => estimator.step(&self.frame),
+                    Exchange::Measurements => estimator.step_sharing(&self.frame, uav as u32).map(
+                        |(report, measurement)| {
+                            self.measurements[uav] = Some(measurement);
+                            report
+                        },
+                    ),
+                }
                 .map_err(|source| FleetStepError::Frame { uav, source })?;
             sample.step_time.push(start.elapsed());
             sample.timings.push(report.timings);
@@ -227,10 +247,11 @@ impl Fleet {
     }
 
     /// Every UAV's estimate composed and encoded as on the wire ([`Fleet::messages`]), then
-    /// decoded and fused by every other UAV: receivers in the order of the UAVs, each fusing
-    /// its peers by ascending id (perfect links: what `protocol::radio::Radio::perfect`
-    /// delivers). `look` sees each fusion. The encoding, each decoding and each fusion are
-    /// timed into `sample`.
+    /// decoded by every other UAV, which applies its measurement (the measurement exchange)
+    /// and fuses its sets: receivers in the order of the UAVs, each taking its peers by
+    /// ascending id (perfect links: what `protocol::radio::Radio::perfect` delivers). `look`
+    /// sees each message taken in. The encoding, each decoding and each fusion or application
+    /// are timed into `sample`.
     pub fn share(
         &mut self,
         sample: &mut StepSample,
@@ -239,7 +260,12 @@ impl Fleet {
         let sending = self.estimators.iter_mut().zip(&mut self.outboxes);
         for (uav, (estimator, outbox)) in sending.enumerate() {
             let start = Instant::now();
-            let msg = outbox.compose(estimator.state_mut());
+            let msg = match &self.measurements[uav] {
+                Some(m) if self.exchange == Exchange::Measurements => {
+                    outbox.compose_measurement(estimator.state_mut(), m)
+                }
+                _ => outbox.compose(estimator.state_mut()),
+            };
             let bytes =
                 message::to_bytes(&msg).map_err(|source| FleetStepError::Encode { uav, source })?;
             sample.encode_time.push(start.elapsed());
@@ -253,7 +279,7 @@ impl Fleet {
                 }
                 let start = Instant::now();
                 let peer =
-                    PeerEstimate::from_bytes(bytes, estimator.config()).map_err(|source| {
+                    PeerMessage::from_bytes(bytes, estimator.config()).map_err(|source| {
                         FleetStepError::Decode {
                             uav: sender,
                             source,
@@ -261,12 +287,14 @@ impl Fleet {
                     })?;
                 sample.decode_time.push(start.elapsed());
                 let start = Instant::now();
-                let report = estimator.fuse(&peer);
+                let applied = peer.measurement.as_ref().map(|m| estimator.apply(m));
+                let report = peer.estimate.as_ref().map(|e| estimator.fuse(e));
                 sample.fuse_time.push(start.elapsed());
                 look(Fused {
                     receiver,
                     sender,
-                    report: &report,
+                    report: report.as_ref(),
+                    applied: applied.as_ref(),
                 });
             }
         }

@@ -132,7 +132,8 @@ fn run(scenario: &Scenario, steps: u64, fuse: bool) -> Outcome {
         if fuse {
             fleet
                 .share(&mut sample, |f| {
-                    assert!(f.report.empty_intersections.is_empty())
+                    assert!(f.report.is_none_or(|r| r.empty_intersections.is_empty()));
+                    assert!(f.applied.is_none_or(|r| r.empty_intersections.is_empty()));
                 })
                 .expect("estimates exchanged");
             for (i, est) in fleet.estimators().iter().enumerate() {
@@ -188,6 +189,18 @@ fn fused_estimates_keep_the_guarantee() {
         let out = run(&small_scenario(seed), 200, true);
         assert!(out.checks > 0);
         eprintln!("seed {seed} fused: {} identified", out.identified);
+    }
+}
+
+#[test]
+fn exchanged_measurements_keep_the_guarantee() {
+    for seed in [4, 6] {
+        let mut s = small_scenario(seed);
+        s.comms.exchange = protocol::scenario::Exchange::Measurements;
+        s.comms.whole_sets_every = 7;
+        let out = run(&s, 200, true);
+        assert!(out.checks > 0 && out.identified > 0);
+        eprintln!("seed {seed} measurements: {} identified", out.identified);
     }
 }
 

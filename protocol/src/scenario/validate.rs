@@ -63,6 +63,7 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
         "guidance.predicted_views" => Some(&super::PredictedViews::NAMES),
         "guidance.border" => Some(&super::PlanBorder::NAMES),
         "guidance.sweep" => Some(&super::SweepPlan::NAMES),
+        "comms.exchange" => Some(&super::Exchange::NAMES),
         _ => None,
     }
 }
@@ -86,6 +87,7 @@ pub(super) fn integer_range(key: &str) -> Option<(i128, i128)> {
         "guidance.horizon" => (1, 4),
         "guidance.lookahead_periods" => (1, MAX_LOOKAHEAD_PERIODS as i128),
         "guidance.beam_width" => (1, MAX_BEAM_WIDTH as i128),
+        "comms.whole_sets_every" => (1, 10_000),
         _ => return None,
     };
     Some(range)

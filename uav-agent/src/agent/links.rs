@@ -130,7 +130,8 @@ impl Links {
         Ok(())
     }
 
-    /// Publishes a variable-size message and wakes the peers and the observers.
+    /// Publishes a variable-size message and wakes those it concerns: the peers (estimates,
+    /// tokens) and the observers (estimates, states).
     pub fn send_wire(
         &self,
         kind: WireKind,
@@ -140,7 +141,7 @@ impl Links {
         bytes: &[u8],
     ) -> Result<(), LinkError> {
         let (publisher, event) = match kind {
-            WireKind::Estimate => (&self.estimate_out, WakeEvent::Estimate),
+            WireKind::Estimate | WireKind::State => (&self.estimate_out, WakeEvent::Estimate),
             WireKind::Token => (&self.token_out, WakeEvent::Token),
         };
         let mut sample = publisher.loan_slice_uninit(bytes.len())?;
@@ -148,10 +149,13 @@ impl Links {
         *sample.user_header_mut() =
             WireHeader::new(kind, run_tag, sender, step, len, unix_now_ns());
         sample.write_from_slice(bytes).send()?;
-        for peer in &self.peer_wakes {
-            notify(peer, event);
+        // The agents' copy of their sets for the observers concerns no peer.
+        if kind != WireKind::State {
+            for peer in &self.peer_wakes {
+                notify(peer, event);
+            }
         }
-        if kind == WireKind::Estimate {
+        if kind != WireKind::Token {
             notify(&self.observer_wake, event);
         }
         Ok(())

@@ -44,14 +44,16 @@ use std::sync::Arc;
 
 use protocol::camera::CameraPose;
 use protocol::codec::{self, DecodeError, EncodeError};
-use protocol::wire::{DropReason, EstimateMsg, TargetSetMsg, uav_bit};
+use protocol::wire::{
+    DropReason, EstimateMsg, MeasurementMsg, OemCellUpdate, SetsMsg, TargetSetMsg, uav_bit,
+};
 use sets::grid::GroundGrid;
 use sets::math::Point3;
 use sets::raster::CellSet;
 use sets::raster::delta::{DeltaError, SetCode};
 
 use super::fusion::SharedSet;
-use super::{EstimatorConfig, EstimatorState, PeerEstimate};
+use super::{EstimatorConfig, EstimatorState, Measurement, PeerEstimate};
 use crate::occupancy::{OccupancyMap, OemUpdateError};
 
 /// The sets of one estimate: what a sender keeps as the base of its next deltas and a
@@ -103,6 +105,8 @@ pub struct EstimateOutbox {
     full_every: u64,
     full_requested: bool,
     set_deltas: bool,
+    /// Whether messages carry the map.
+    map: bool,
     /// The sets of the last message, when sets go as deltas.
     last: Option<EstimateSets>,
 }
@@ -119,8 +123,16 @@ impl EstimateOutbox {
             full_every: full_every.max(1),
             full_requested: true,
             set_deltas: false,
+            map: true,
             last: None,
         }
+    }
+
+    /// Messages carry no map (the observers' copy of an agent's sets under the measurement
+    /// exchange: the map travels with the measurements), and leave the state's map alone.
+    pub fn without_map(mut self) -> Self {
+        self.map = false;
+        self
     }
 
     /// Sends sets as deltas against the previous message, except in whole messages (the
@@ -141,47 +153,82 @@ impl EstimateOutbox {
         self.seq
     }
 
-    /// The message for the current state. Drains the map's pending changes into it.
+    /// The message for the current state, with its sets (whole or as deltas). Drains the
+    /// map's pending changes into it.
     pub fn compose(&mut self, state: &mut EstimatorState) -> EstimateMsg {
+        let full = self.next_is_full();
+        let oem = self.take_map(state, full);
+        let sets = EstimateSets::of_state(state);
+        let base = if full { None } else { self.last.take() };
+        let (sets_msg, any_delta) = sets_msg(&sets, base.as_ref());
+        let msg = self.message(state, Some(sets_msg), None, any_delta, oem, full);
+        if self.set_deltas {
+            self.last = Some(sets);
+        }
+        msg
+    }
+
+    /// The measurement exchange's message of the current state: the frame's `measurement`,
+    /// with the whole sets and the whole map in a whole message (the first, every
+    /// `full_every`-th and the one after [`EstimateOutbox::request_full`]), else the map
+    /// cells the frame changed. Drains the map's pending changes.
+    pub fn compose_measurement(
+        &mut self,
+        state: &mut EstimatorState,
+        measurement: &Measurement,
+    ) -> EstimateMsg {
+        let full = self.next_is_full();
+        let pending = self.take_map(state, full);
+        let oem = if full {
+            pending
+        } else {
+            measurement.map_cells.clone()
+        };
+        let sets = full.then(|| sets_msg(&EstimateSets::of_state(state), None).0);
+        let whole = |set: &SharedSet| SetCode::Whole(set.encode());
+        let measured = MeasurementMsg {
+            free_ground: whole(&measurement.free_ground),
+            hidden: whole(&measurement.hidden),
+            obstacles: whole(&measurement.obstacles),
+            targets: measurement
+                .targets
+                .iter()
+                .map(|(&id, set)| TargetSetMsg {
+                    id,
+                    set: whole(set),
+                })
+                .collect(),
+        };
+        self.message(state, sets, Some(measured), false, oem, full)
+    }
+
+    /// Whether the next message is a whole one; clears a request.
+    fn next_is_full(&mut self) -> bool {
         let full = self.full_requested || self.seq.is_multiple_of(self.full_every);
         self.full_requested = false;
-        let oem = if full {
-            state.oem.take_full()
-        } else {
-            state.oem.take_changes()
-        };
-        let sets = EstimateSets::of_state(state);
-        let base = if full { None } else { self.last.as_ref() };
-        let code =
-            |set: &SharedSet, base: Option<&SharedSet>| SetCode::choose(set, base.map(|b| &**b));
-        let undetected = code(&sets.undetected, base.map(|b| &b.undetected));
-        let targets: Vec<TargetSetMsg> = sets
-            .targets
-            .iter()
-            .map(|(&id, set)| TargetSetMsg {
-                id,
-                set: code(set, base.and_then(|b| b.targets.get(&id))),
-            })
-            .collect();
-        let obstacle_neighbourhood = code(
-            &sets.obstacle_neighbourhood,
-            base.map(|b| &b.obstacle_neighbourhood),
-        );
-        let explored = code(&sets.explored, base.map(|b| &b.explored));
-        let hidden = code(&sets.hidden, base.map(|b| &b.hidden));
-        let free_ground = code(&sets.free_ground, base.map(|b| &b.free_ground));
-        let unseen = code(&sets.unseen, base.map(|b| &b.unseen));
-        let any_delta = [
-            &undetected,
-            &obstacle_neighbourhood,
-            &explored,
-            &hidden,
-            &free_ground,
-            &unseen,
-        ]
-        .into_iter()
-        .chain(targets.iter().map(|t| &t.set))
-        .any(SetCode::is_delta);
+        full
+    }
+
+    /// The map of the next message: the whole known map or the pending changes (none when
+    /// the outbox sends no map).
+    fn take_map(&self, state: &mut EstimatorState, full: bool) -> Vec<OemCellUpdate> {
+        match (self.map, full) {
+            (false, _) => Vec::new(),
+            (true, true) => state.oem.take_full(),
+            (true, false) => state.oem.take_changes(),
+        }
+    }
+
+    /// The next message, numbered.
+    fn message(
+        &mut self,
+        state: &EstimatorState,
+        sets: Option<SetsMsg>,
+        measurement: Option<MeasurementMsg>,
+        any_delta: bool,
+        oem: Vec<OemCellUpdate>,
+        full: bool,
+    ) -> EstimateMsg {
         let msg = EstimateMsg {
             uav: self.uav,
             step: state.step,
@@ -195,23 +242,51 @@ impl EstimateOutbox {
                 position: Point3::origin(),
                 yaw: 0.0,
             }),
-            undetected,
-            targets,
-            obstacle_neighbourhood,
-            explored,
-            hidden,
-            free_ground,
-            unseen,
+            sets,
+            measurement,
             stats: protocol::wire::AgentStats::default(),
             oem,
-            oem_full: full,
+            oem_full: full && self.map,
         };
-        if self.set_deltas {
-            self.last = Some(sets);
-        }
         self.seq += 1;
         msg
     }
+}
+
+/// The sets as a message, each a delta against `base` where that is smaller; whether any is.
+fn sets_msg(sets: &EstimateSets, base: Option<&EstimateSets>) -> (SetsMsg, bool) {
+    let code = |set: &SharedSet, base: Option<&SharedSet>| SetCode::choose(set, base.map(|b| &**b));
+    let msg = SetsMsg {
+        undetected: code(&sets.undetected, base.map(|b| &b.undetected)),
+        targets: sets
+            .targets
+            .iter()
+            .map(|(&id, set)| TargetSetMsg {
+                id,
+                set: code(set, base.and_then(|b| b.targets.get(&id))),
+            })
+            .collect(),
+        obstacle_neighbourhood: code(
+            &sets.obstacle_neighbourhood,
+            base.map(|b| &b.obstacle_neighbourhood),
+        ),
+        explored: code(&sets.explored, base.map(|b| &b.explored)),
+        hidden: code(&sets.hidden, base.map(|b| &b.hidden)),
+        free_ground: code(&sets.free_ground, base.map(|b| &b.free_ground)),
+        unseen: code(&sets.unseen, base.map(|b| &b.unseen)),
+    };
+    let any_delta = [
+        &msg.undetected,
+        &msg.obstacle_neighbourhood,
+        &msg.explored,
+        &msg.hidden,
+        &msg.free_ground,
+        &msg.unseen,
+    ]
+    .into_iter()
+    .chain(msg.targets.iter().map(|t| &t.set))
+    .any(SetCode::is_delta);
+    (msg, any_delta)
 }
 
 /// Which set of an estimate was bad.
@@ -231,6 +306,14 @@ pub enum SetRole {
     FreeGround,
     /// `H̄`.
     Unseen,
+    /// The measurement's `P^g`.
+    MeasuredFree,
+    /// The measurement's `H^CVS`.
+    MeasuredHidden,
+    /// The measurement's new `S^o` cells.
+    MeasuredObstacles,
+    /// The measurement `X^m_j` of this id.
+    Measured(u32),
 }
 
 /// Why a peer's estimate was refused.
@@ -265,6 +348,9 @@ pub enum EstimateReadError {
     /// The time stamp is not a finite number.
     #[error("time stamp {0} is not finite")]
     BadTime(f64),
+    /// The message carries no sets where sets were expected (a measurement alone).
+    #[error("the estimate of UAV {0} carries no sets")]
+    NoSets(u32),
 }
 
 impl EstimateReadError {
@@ -304,17 +390,129 @@ fn decode_set(
         .map_err(|source| EstimateReadError::Set { role, source })
 }
 
+/// A peer's message as received and validated: its sets (an estimate), its frame's
+/// measurement (the measurement exchange), or both.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerMessage {
+    /// Sender's UAV index.
+    pub uav: u32,
+    /// Step of the message.
+    pub step: u64,
+    /// Sender's message counter.
+    pub seq: u64,
+    /// Sender's incarnation.
+    pub incarnation: u64,
+    /// Sender's camera pose at that step (`None` when not finite).
+    pub pose: Option<CameraPose>,
+    /// Its sets, when it carries them (with the message's map).
+    pub estimate: Option<PeerEstimate>,
+    /// What its frame proved (with the message's map when it carries no sets).
+    pub measurement: Option<Measurement>,
+}
+
+impl PeerMessage {
+    /// Decodes and validates a received message that holds no deltas (a message with delta
+    /// sets needs an [`EstimateInbox`]: here it is [`EstimateReadError::MissingBase`]).
+    pub fn from_bytes(bytes: &[u8], config: &EstimatorConfig) -> Result<Self, EstimateReadError> {
+        rebuild(&from_bytes(bytes)?, config, None).map(|(message, _)| message)
+    }
+
+    /// Its sender, its step and the sender's pose then ([`protocol::radio::Radio::fuses`]).
+    pub fn endpoint(&self) -> protocol::radio::Endpoint {
+        protocol::radio::Endpoint {
+            uav: self.uav,
+            step: self.step,
+            pose: self.pose,
+        }
+    }
+}
+
 /// Validates a message and rebuilds its sets, its deltas against `base` (the sets of message
-/// `msg.base_seq`, or `None` when the receiver holds no base).
+/// `msg.base_seq`, or `None` when the receiver holds no base), and its measurement.
 fn rebuild(
     msg: &EstimateMsg,
     config: &EstimatorConfig,
     base: Option<&EstimateSets>,
-) -> Result<(PeerEstimate, EstimateSets), EstimateReadError> {
-    let grid = &config.grid;
+) -> Result<(PeerMessage, Option<EstimateSets>), EstimateReadError> {
     if !msg.time_s.is_finite() {
         return Err(EstimateReadError::BadTime(msg.time_s));
     }
+    let pose_ok = msg.pose.position.iter().all(|v| v.is_finite()) && msg.pose.yaw.is_finite();
+    let pose = pose_ok.then_some(msg.pose);
+    for u in &msg.oem {
+        OccupancyMap::cell_of_update(&config.oem_grid, u)?;
+    }
+    let sets = match &msg.sets {
+        Some(sets) => Some(rebuild_sets(msg, sets, config, base)?),
+        None => None,
+    };
+    let estimate = match &sets {
+        Some(sets) => Some(PeerEstimate {
+            uav: msg.uav,
+            step: msg.step,
+            time_s: msg.time_s,
+            seq: msg.seq,
+            incarnation: msg.incarnation,
+            pose,
+            undetected: sets.undetected.clone(),
+            targets: sets.targets.clone(),
+            obstacle_neighbourhood: sets.obstacle_neighbourhood.clone(),
+            explored: sets.explored.clone(),
+            hidden: sets.hidden.clone(),
+            free_ground: sets.free_ground.clone(),
+            oem: OccupancyMap::from_updates(config.oem_grid, &msg.oem)?,
+            oem_full: msg.oem_full,
+        }),
+        None => None,
+    };
+    let measurement = match &msg.measurement {
+        Some(m) => {
+            let grid = &config.grid;
+            let mut targets = BTreeMap::new();
+            for t in &m.targets {
+                let set = decode_set(grid, SetRole::Measured(t.id), &t.set, None)?;
+                if targets.insert(t.id, set).is_some() {
+                    return Err(EstimateReadError::DuplicateTarget(t.id));
+                }
+            }
+            Some(Measurement {
+                uav: msg.uav,
+                step: msg.step,
+                pose,
+                free_ground: decode_set(grid, SetRole::MeasuredFree, &m.free_ground, None)?,
+                hidden: decode_set(grid, SetRole::MeasuredHidden, &m.hidden, None)?,
+                obstacles: decode_set(grid, SetRole::MeasuredObstacles, &m.obstacles, None)?,
+                targets,
+                // The map goes with the sets when the message carries both.
+                map_cells: if sets.is_some() {
+                    Vec::new()
+                } else {
+                    msg.oem.clone()
+                },
+            })
+        }
+        None => None,
+    };
+    let message = PeerMessage {
+        uav: msg.uav,
+        step: msg.step,
+        seq: msg.seq,
+        incarnation: msg.incarnation,
+        pose,
+        estimate,
+        measurement,
+    };
+    Ok((message, sets))
+}
+
+/// Rebuilds the sets of a message, its deltas against `base`.
+fn rebuild_sets(
+    msg: &EstimateMsg,
+    sets: &SetsMsg,
+    config: &EstimatorConfig,
+    base: Option<&EstimateSets>,
+) -> Result<EstimateSets, EstimateReadError> {
+    let grid = &config.grid;
     if let (Some(base_seq), None) = (msg.base_seq, base) {
         return Err(EstimateReadError::MissingBase {
             uav: msg.uav,
@@ -322,60 +520,42 @@ fn rebuild(
         });
     }
     let mut targets = BTreeMap::new();
-    for t in &msg.targets {
+    for t in &sets.targets {
         let b = base.and_then(|b| b.targets.get(&t.id));
         let set = decode_set(grid, SetRole::Target(t.id), &t.set, b)?;
         if targets.insert(t.id, set).is_some() {
             return Err(EstimateReadError::DuplicateTarget(t.id));
         }
     }
-    let sets = EstimateSets {
+    Ok(EstimateSets {
         undetected: decode_set(
             grid,
             SetRole::Undetected,
-            &msg.undetected,
+            &sets.undetected,
             base.map(|b| &b.undetected),
         )?,
         targets,
         obstacle_neighbourhood: decode_set(
             grid,
             SetRole::ObstacleNeighbourhood,
-            &msg.obstacle_neighbourhood,
+            &sets.obstacle_neighbourhood,
             base.map(|b| &b.obstacle_neighbourhood),
         )?,
         explored: decode_set(
             grid,
             SetRole::Explored,
-            &msg.explored,
+            &sets.explored,
             base.map(|b| &b.explored),
         )?,
-        hidden: decode_set(grid, SetRole::Hidden, &msg.hidden, base.map(|b| &b.hidden))?,
+        hidden: decode_set(grid, SetRole::Hidden, &sets.hidden, base.map(|b| &b.hidden))?,
         free_ground: decode_set(
             grid,
             SetRole::FreeGround,
-            &msg.free_ground,
+            &sets.free_ground,
             base.map(|b| &b.free_ground),
         )?,
-        unseen: decode_set(grid, SetRole::Unseen, &msg.unseen, base.map(|b| &b.unseen))?,
-    };
-    let pose_ok = msg.pose.position.iter().all(|v| v.is_finite()) && msg.pose.yaw.is_finite();
-    let estimate = PeerEstimate {
-        uav: msg.uav,
-        step: msg.step,
-        time_s: msg.time_s,
-        seq: msg.seq,
-        incarnation: msg.incarnation,
-        pose: pose_ok.then_some(msg.pose),
-        undetected: sets.undetected.clone(),
-        targets: sets.targets.clone(),
-        obstacle_neighbourhood: sets.obstacle_neighbourhood.clone(),
-        explored: sets.explored.clone(),
-        hidden: sets.hidden.clone(),
-        free_ground: sets.free_ground.clone(),
-        oem: OccupancyMap::from_updates(config.oem_grid, &msg.oem)?,
-        oem_full: msg.oem_full,
-    };
-    Ok((estimate, sets))
+        unseen: decode_set(grid, SetRole::Unseen, &sets.unseen, base.map(|b| &b.unseen))?,
+    })
 }
 
 /// What a receiver holds of one sender: the sets of its last rebuilt message.
@@ -410,13 +590,27 @@ impl EstimateInbox {
         msg: &EstimateMsg,
         config: &EstimatorConfig,
     ) -> Result<PeerEstimate, EstimateReadError> {
+        self.read_message(msg, config)?
+            .estimate
+            .ok_or(EstimateReadError::NoSets(msg.uav))
+    }
+
+    /// As [`EstimateInbox::read`], for a message that may carry a measurement instead of
+    /// sets, or both.
+    pub fn read_message(
+        &mut self,
+        msg: &EstimateMsg,
+        config: &EstimatorConfig,
+    ) -> Result<PeerMessage, EstimateReadError> {
         let held = self.held.get(&msg.uav);
         let base = held
             .filter(|h| h.incarnation == msg.incarnation && Some(h.seq) == msg.base_seq)
             .map(|h| &h.sets);
         match rebuild(msg, config, base) {
-            Ok((estimate, sets)) => {
-                if held.is_none_or(|h| h.incarnation <= msg.incarnation) {
+            Ok((message, sets)) => {
+                if let Some(sets) = sets
+                    && held.is_none_or(|h| h.incarnation <= msg.incarnation)
+                {
                     self.held.insert(
                         msg.uav,
                         Held {
@@ -427,7 +621,7 @@ impl EstimateInbox {
                     );
                     self.wanted &= !uav_bit(msg.uav);
                 }
-                Ok(estimate)
+                Ok(message)
             }
             Err(e) => {
                 if e.drop_reason() == DropReason::NoBase {
@@ -466,7 +660,10 @@ impl PeerEstimate {
         msg: &EstimateMsg,
         config: &EstimatorConfig,
     ) -> Result<Self, EstimateReadError> {
-        rebuild(msg, config, None).map(|(estimate, _)| estimate)
+        rebuild(msg, config, None)?
+            .0
+            .estimate
+            .ok_or(EstimateReadError::NoSets(msg.uav))
     }
 
     /// Decodes and validates a received message ([`PeerEstimate::from_msg`]).
@@ -640,7 +837,7 @@ mod tests {
         inbox.read(&first, &cfg).unwrap();
         let second = outbox.compose(&mut moving_state(1));
         assert_eq!(second.base_seq, Some(0));
-        assert!(second.undetected.is_delta());
+        assert!(second.sets.as_ref().unwrap().undetected.is_delta());
         // The second message is lost: the third one's base is not held.
         let third = outbox.compose(&mut moving_state(2));
         let e = inbox.read(&third, &cfg).unwrap_err();
@@ -724,10 +921,10 @@ mod tests {
         assert!(PeerEstimate::from_msg(&good, &cfg).is_ok());
 
         let mut m = good.clone();
-        let SetCode::Whole(e) = &good.undetected else {
+        let SetCode::Whole(e) = &good.sets.as_ref().unwrap().undetected else {
             panic!("a first message is whole")
         };
-        m.undetected = SetCode::Whole(EncodedSet { nx: 7, ..e.clone() });
+        m.sets.as_mut().unwrap().undetected = SetCode::Whole(EncodedSet { nx: 7, ..e.clone() });
         assert!(matches!(
             PeerEstimate::from_msg(&m, &cfg),
             Err(EstimateReadError::Set {
@@ -739,10 +936,10 @@ mod tests {
         // P^g, which clears the receivers' H̄: on another grid, as a delta without a base, with
         // runs that overflow its box.
         let mut m = good.clone();
-        let SetCode::Whole(e) = &good.free_ground else {
+        let SetCode::Whole(e) = &good.sets.as_ref().unwrap().free_ground else {
             panic!("a first message is whole")
         };
-        m.free_ground = SetCode::Whole(EncodedSet { ny: 3, ..e.clone() });
+        m.sets.as_mut().unwrap().free_ground = SetCode::Whole(EncodedSet { ny: 3, ..e.clone() });
         let refused = PeerEstimate::from_msg(&m, &cfg);
         assert!(
             matches!(
@@ -754,7 +951,7 @@ mod tests {
             ),
             "{refused:?}"
         );
-        m.free_ground = SetCode::Delta(sets::raster::delta::SetDelta {
+        m.sets.as_mut().unwrap().free_ground = SetCode::Delta(sets::raster::delta::SetDelta {
             flips: e.clone(),
             digest: 1,
         });
@@ -769,7 +966,7 @@ mod tests {
         assert_eq!(refused.unwrap_err().drop_reason(), DropReason::NoBase);
         let mut runs = e.clone();
         runs.runs = vec![u32::MAX, 5];
-        m.free_ground = SetCode::Whole(runs);
+        m.sets.as_mut().unwrap().free_ground = SetCode::Whole(runs);
         assert!(matches!(
             PeerEstimate::from_msg(&m, &cfg),
             Err(EstimateReadError::Set {
@@ -781,9 +978,9 @@ mod tests {
         let mut m = good.clone();
         let t = TargetSetMsg {
             id: 3,
-            set: good.hidden.clone(),
+            set: good.sets.as_ref().unwrap().hidden.clone(),
         };
-        m.targets = vec![t.clone(), t];
+        m.sets.as_mut().unwrap().targets = vec![t.clone(), t];
         assert!(matches!(
             PeerEstimate::from_msg(&m, &cfg),
             Err(EstimateReadError::DuplicateTarget(3))

@@ -20,6 +20,7 @@
 //! measurement raises them around the measured target ([`TARGET_REACH_MARGIN_M`]).
 //! Fusion with peers is in [`fusion`], messages in [`message`].
 
+pub mod exchange;
 pub mod fusion;
 mod hidden;
 pub mod measure;
@@ -38,6 +39,7 @@ use sets::grid::GroundGrid;
 use sets::math::Real;
 use sets::raster::{CellBox, CellSet, ReachSet};
 
+pub use exchange::{ApplyReport, Measurement};
 pub use fusion::{FuseReport, PeerEstimate};
 pub use hidden::{HiddenHistory, Unseen};
 pub use message::{EstimateOutbox, EstimateReadError};
@@ -339,6 +341,26 @@ impl Estimator {
     /// proves, then correct the sets with it. A malformed or stale frame is refused and the
     /// state left as it was.
     pub fn step(&mut self, frame: &CvsFrame) -> Result<StepReport, EstimatorStepError> {
+        self.fold(frame, None).map(|(report, _)| report)
+    }
+
+    /// [`Estimator::step`], also returning what the frame proved as UAV `uav`'s
+    /// [`Measurement`], for its peers to apply ([`Estimator::apply`]).
+    pub fn step_sharing(
+        &mut self,
+        frame: &CvsFrame,
+        uav: u32,
+    ) -> Result<(StepReport, Measurement), EstimatorStepError> {
+        self.fold(frame, Some(uav))
+            .map(|(report, m)| (report, m.expect("a measurement was asked for")))
+    }
+
+    /// The step, with the frame's [`Measurement`] as UAV `share` when asked.
+    fn fold(
+        &mut self,
+        frame: &CvsFrame,
+        share: Option<u32>,
+    ) -> Result<(StepReport, Option<Measurement>), EstimatorStepError> {
         let started = Instant::now();
         let h = &frame.header;
         if !frame.is_well_formed() {
@@ -360,10 +382,16 @@ impl Estimator {
         let clock = predict_sets(cfg, st, &mut report);
         let view = FrameView::new(frame, cfg.depth_noise);
         report.invalid_depth_pixels = view.invalid_depth_pixels();
-        let measured = measure_frame(cfg, st, frame, &view, &mut report);
+        let measured = measure_frame(cfg, st, frame, &view, share.is_some(), &mut report);
+        let shared = share.map(|uav| Measurement::of_frame(uav, frame, &measured, &cfg.grid));
         correct_sets(cfg, st, frame, measured, clock, &mut report);
         report.timings.total = started.elapsed();
-        Ok(report)
+        Ok((report, shared))
+    }
+
+    /// Applies a peer's [`Measurement`] to the state (see [`exchange`]).
+    pub fn apply(&mut self, measurement: &Measurement) -> ApplyReport {
+        exchange::apply(&self.config, &mut self.state, measurement)
     }
 
     /// Fuses a peer's estimate into the state (see [`fusion`]).
@@ -396,6 +424,10 @@ struct Measurements {
     hidden: CellSet,
     /// `X^m_j` of each usable box, by id (none when no pixel of the box measured the ground).
     targets: Vec<(u32, Option<CellSet>)>,
+    /// The cells of `S^o` the frame added, when its measurement is shared.
+    obstacles_added: Option<CellSet>,
+    /// The map cells the frame changed, when its measurement is shared.
+    map_cells: Vec<protocol::wire::OemCellUpdate>,
 }
 
 /// Measurement: what `frame` proves (`P^g`, `H^CVS`, each usable box's `X^m_j`), and what it
@@ -405,6 +437,7 @@ fn measure_frame(
     st: &mut EstimatorState,
     frame: &CvsFrame,
     view: &FrameView<'_>,
+    share: bool,
     report: &mut StepReport,
 ) -> Measurements {
     let grid = &cfg.grid;
@@ -425,6 +458,7 @@ fn measure_frame(
     report.timings.measurement_sets = t.elapsed();
 
     let t = Instant::now();
+    let before = share.then(|| st.obstacle_neighbourhood.clone());
     measure::add_obstacle_neighbourhood(
         view,
         grid,
@@ -432,15 +466,29 @@ fn measure_frame(
         cfg.obstacle_pixel_stride,
         &mut st.obstacle_neighbourhood,
     );
+    let obstacles_added = before.map(|before| {
+        let mut added = st.obstacle_neighbourhood.clone();
+        added.and_not_assign(&before);
+        added
+    });
     report.timings.obstacle_sets = t.elapsed();
 
     let t = Instant::now();
-    report.oem_cells_changed = measure::observe_map(view, &mut st.oem);
+    let mut map_cells = Vec::new();
+    report.oem_cells_changed = if share {
+        let (changed, cells) = st.oem.tracked(|map| measure::observe_map(view, map));
+        map_cells = cells;
+        changed
+    } else {
+        measure::observe_map(view, &mut st.oem)
+    };
     report.timings.oem = t.elapsed();
     Measurements {
         free_ground,
         hidden,
         targets,
+        obstacles_added,
+        map_cells,
     }
 }
 
@@ -462,33 +510,13 @@ fn correct_sets(
         free_ground,
         hidden,
         targets,
+        ..
     } = measured;
-    let mut free = free_ground.clone();
-    free.or_assign(&st.obstacle_neighbourhood);
-    let window = free_ground.bounding_box();
-    let clearing = Clearing {
-        grid,
-        growth: cfg.sets,
-        free: &free,
-        blocked: &st.obstacle_neighbourhood,
-    };
-    clearing.clear(&mut st.undetected, window.as_ref());
-    let measured_ids = restrict_measured(
-        &clearing,
-        &mut st.targets,
-        &st.undetected,
-        targets,
-        clock,
-        report,
-    );
-    clear_unmeasured(
-        &clearing,
-        &mut st.targets,
-        &measured_ids,
-        &free_ground,
-        window.as_ref(),
-    );
-    report.measured = measured_ids;
+    let corrected = correct(cfg, st, &free_ground, targets, None, clock);
+    report.boxes_without_pixels += corrected.without_pixels;
+    report.newly_identified = corrected.newly_identified;
+    report.empty_intersections = corrected.empty_intersections;
+    report.measured = corrected.measured;
     st.explored.or_assign(&free_ground);
     st.hidden_history.record(report.step, &hidden, &free_ground);
     st.hidden = hidden;
@@ -517,50 +545,106 @@ fn correct_sets(
     report.timings.correction = t.elapsed();
 }
 
+/// What a correction did to the targets' sets.
+#[derive(Debug, Default)]
+struct Corrected {
+    /// Targets measured, in order.
+    measured: Vec<u32>,
+    /// Targets identified for the first time.
+    newly_identified: Vec<u32>,
+    /// Targets whose set missed their measurement (a bug signal; the measurement was kept).
+    empty_intersections: Vec<u32>,
+    /// Measurements without any cell (no pixel of the box measured the ground).
+    without_pixels: u32,
+}
+
+/// The correction by one frame's facts, the agent's own (`late` `None`: they hold at the
+/// state's clock) or a peer's of an earlier clock (`late`: that clock, m): the free ground
+/// (`free_ground ∪ S^o`) leaves `X̄`, each measured target's set is restricted to its
+/// measurement `X^m_j` less the free ground (a new target's taken from `X̄`), and the other
+/// targets' sets lose the free ground near them.
+fn correct(
+    cfg: &EstimatorConfig,
+    st: &mut EstimatorState,
+    free_ground: &CellSet,
+    targets: Vec<(u32, Option<CellSet>)>,
+    late: Option<Real>,
+    clock: Real,
+) -> Corrected {
+    let mut free = free_ground.clone();
+    free.or_assign(&st.obstacle_neighbourhood);
+    let window = free_ground.bounding_box();
+    let clearing = Clearing {
+        grid: &cfg.grid,
+        growth: cfg.sets,
+        free: &free,
+        blocked: &st.obstacle_neighbourhood,
+        late: late.map(|then| (then, clock)),
+    };
+    clearing.clear(&mut st.undetected, window.as_ref());
+    let mut corrected = Corrected::default();
+    restrict_measured(
+        &clearing,
+        &mut st.targets,
+        &st.undetected,
+        targets,
+        clock,
+        &mut corrected,
+    );
+    clear_unmeasured(
+        &clearing,
+        &mut st.targets,
+        &corrected.measured,
+        free_ground,
+        window.as_ref(),
+    );
+    corrected
+}
+
 /// Each measured target's set restricted to its measurement `X^m_j` less the free ground (a
 /// newly identified target's taken from `X̄`, `undetected`); a set that misses its
-/// measurement is a bug, reported, and replaced by the measurement alone. Returns the ids
-/// measured, in order.
+/// measurement is a bug, reported, and replaced by the measurement alone. The ids measured
+/// go to `out`, in order.
 fn restrict_measured(
     clearing: &Clearing<'_>,
     sets: &mut BTreeMap<u32, ReachSet>,
     undetected: &ReachSet,
     measurements: Vec<(u32, Option<CellSet>)>,
     clock: f64,
-    report: &mut StepReport,
-) -> Vec<u32> {
+    out: &mut Corrected,
+) {
     let margin = target_reach_margin(clearing.grid);
-    let mut measured_ids = Vec::new();
     for (id, measurement) in measurements {
         let Some(mut xm) = measurement else {
-            report.boxes_without_pixels += 1;
+            out.without_pixels += 1;
             continue;
         };
         xm.and_not_assign(clearing.free);
+        // Where the target can be now: the measurement, grown by the motion since when late.
+        let now = clearing.grown_to_now(&xm);
         let mut x = match sets.remove(&id) {
             Some(x) => x,
             None => {
-                report.newly_identified.push(id);
-                clearing.new_target(undetected, &xm, margin)
+                out.newly_identified.push(id);
+                clearing.new_target(undetected, &now, margin)
             }
         };
-        if x.intersects(&xm) {
+        if x.intersects(&now) {
             clearing.restrict(&mut x, &xm, margin);
         } else {
             tracing::error!(
                 target_id = id,
-                step = report.step,
+                clock_m = clock,
                 "empty target set after correction: keeping the measurement alone"
             );
-            report.empty_intersections.push(id);
+            out.empty_intersections.push(id);
             x = ReachSet::full(clearing.grid).with_row_margin(margin);
             x.advance(clock);
             clearing.restrict(&mut x, &xm, margin);
         }
         sets.insert(id, x);
-        measured_ids.push(id);
+        out.measured.push(id);
     }
-    measured_ids
 }
 
 /// The frame's free ground leaves the target sets it did not measure, each over the part of
@@ -595,39 +679,57 @@ struct Clearing<'a> {
     free: &'a CellSet,
     /// `S^o`: ground no target ever enters.
     blocked: &'a CellSet,
+    /// For a late frame's facts: the clock they hold at and the sets' clock, m.
+    late: Option<(Real, Real)>,
 }
 
 impl Clearing<'_> {
     /// Removes the free ground from `set`, raising its reach over `window` (none: the free
-    /// cells only leave the set).
+    /// cells only leave the set). Late facts raise the reach with their own clock and remove
+    /// only the cells that clock still proves empty ([`ReachSet::clear_since`]); whole-cell
+    /// sets keep no reach, and learn nothing from them.
     fn clear(&self, set: &mut ReachSet, window: Option<&CellBox>) {
-        match (self.growth, window) {
-            (SetGrowth::Cells, _) | (_, None) => set.remove(self.free),
-            (SetGrowth::Reach, Some(w)) => set.clear(self.grid, self.free, w),
-            (SetGrowth::Geodesic, Some(w)) => {
+        match (self.growth, window, self.late) {
+            (SetGrowth::Cells, _, Some(_)) | (_, None, Some(_)) => {}
+            (_, Some(w), Some((then, _))) => set.clear_since(self.grid, self.free, w, then),
+            (SetGrowth::Cells, _, None) | (_, None, None) => set.remove(self.free),
+            (SetGrowth::Reach, Some(w), None) => set.clear(self.grid, self.free, w),
+            (SetGrowth::Geodesic, Some(w), None) => {
                 set.clear_around(self.grid, self.free, self.blocked, w)
             }
         }
     }
 
-    /// The set of a target first measured in `xm`, from `X̄` (`undetected`), before it is
-    /// restricted to `xm`: with reach, a copy of `X̄ ∩ xm` stored over the rows within
-    /// `margin` of it ([`ReachSet::restricted_copy`]); whole-cell sets keep no reach, and
-    /// take `X̄` whole.
-    fn new_target(&self, undetected: &ReachSet, xm: &CellSet, margin: u32) -> ReachSet {
+    /// Where a target measured in `xm` can be at the sets' clock: `xm` itself, or for late
+    /// facts `xm` grown by the motion since.
+    fn grown_to_now<'x>(&self, xm: &'x CellSet) -> std::borrow::Cow<'x, CellSet> {
+        match self.late {
+            Some((then, now)) => predict::grow(xm, self.grid, now - then),
+            None => std::borrow::Cow::Borrowed(xm),
+        }
+    }
+
+    /// The set of a target first measured where `now` says it can be now, from `X̄`
+    /// (`undetected`), before it is restricted to its measurement: with reach, a copy of
+    /// `X̄ ∩ now` stored over the rows within `margin` of it ([`ReachSet::restricted_copy`]);
+    /// whole-cell sets keep no reach, and take `X̄` whole.
+    fn new_target(&self, undetected: &ReachSet, now: &CellSet, margin: u32) -> ReachSet {
         match self.growth {
             SetGrowth::Cells => undetected.clone(),
             SetGrowth::Reach | SetGrowth::Geodesic => {
-                undetected.restricted_copy(self.grid, xm, margin)
+                undetected.restricted_copy(self.grid, now, margin)
             }
         }
     }
 
-    /// Restricts `set` to the measurement `xm`, raising its reach within `margin` cells.
+    /// Restricts `set` to the measurement `xm`, raising its reach within `margin` cells (late:
+    /// [`ReachSet::restrict_since`]).
     fn restrict(&self, set: &mut ReachSet, xm: &CellSet, margin: u32) {
-        match self.growth {
-            SetGrowth::Cells => set.intersect(xm),
-            SetGrowth::Reach | SetGrowth::Geodesic => set.restrict(self.grid, xm, margin),
+        match (self.growth, self.late) {
+            (SetGrowth::Cells, None) => set.intersect(xm),
+            (SetGrowth::Cells, Some(_)) => set.intersect(&self.grown_to_now(xm)),
+            (_, None) => set.restrict(self.grid, xm, margin),
+            (_, Some((then, _))) => set.restrict_since(self.grid, xm, margin, then),
         }
     }
 }

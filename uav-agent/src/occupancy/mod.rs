@@ -269,33 +269,48 @@ impl OccupancyMap {
     ) -> Result<OccupancyMap, OemUpdateError> {
         let mut map = OccupancyMap::new(grid);
         for u in updates {
-            if u.ix as u32 >= grid.nx || u.iy as u32 >= grid.ny {
-                return Err(OemUpdateError::OutOfRange {
-                    ix: u.ix,
-                    iy: u.iy,
-                    nx: grid.nx,
-                    ny: grid.ny,
-                });
-            }
-            let status =
-                OemStatus::from_code(u.status).ok_or(OemUpdateError::BadStatus(u.status))?;
-            if !(u.height_m.is_finite() && u.height_m >= 0.0) {
-                return Err(OemUpdateError::BadHeight(u.height_m));
-            }
-            map.merge_cell(
-                (u.ix as u32, u.iy as u32),
-                OemCell {
-                    status,
-                    height_m: if status == OemStatus::Obstacle {
-                        u.height_m
-                    } else {
-                        0.0
-                    },
-                },
-            );
+            let (index, cell) = Self::cell_of_update(&grid, u)?;
+            map.merge_cell(index, cell);
         }
         map.changed.clear();
         Ok(map)
+    }
+
+    /// The cell a peer's update names on `grid`, validated: inside the grid, a defined status
+    /// and a finite non-negative height (0 unless an obstacle).
+    pub fn cell_of_update(
+        grid: &GroundGrid,
+        u: &OemCellUpdate,
+    ) -> Result<(CellIndex, OemCell), OemUpdateError> {
+        if u.ix as u32 >= grid.nx || u.iy as u32 >= grid.ny {
+            return Err(OemUpdateError::OutOfRange {
+                ix: u.ix,
+                iy: u.iy,
+                nx: grid.nx,
+                ny: grid.ny,
+            });
+        }
+        let status = OemStatus::from_code(u.status).ok_or(OemUpdateError::BadStatus(u.status))?;
+        if !(u.height_m.is_finite() && u.height_m >= 0.0) {
+            return Err(OemUpdateError::BadHeight(u.height_m));
+        }
+        let height_m = if status == OemStatus::Obstacle {
+            u.height_m
+        } else {
+            0.0
+        };
+        Ok(((u.ix as u32, u.iy as u32), OemCell { status, height_m }))
+    }
+
+    /// Runs `f` on the map and returns, with its result, the updates of the cells it changed;
+    /// the changes pending before stay pending, with these.
+    pub fn tracked<R>(&mut self, f: impl FnOnce(&mut Self) -> R) -> (R, Vec<OemCellUpdate>) {
+        let pending = std::mem::take(&mut self.changed);
+        let result = f(self);
+        let mine = std::mem::replace(&mut self.changed, pending);
+        let updates = mine.iter().map(|&i| self.update_of(i as usize)).collect();
+        self.changed.extend(mine);
+        (result, updates)
     }
 }
 
