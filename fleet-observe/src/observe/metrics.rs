@@ -167,6 +167,19 @@ impl FusedSets {
         }
     }
 
+    /// The sets of an estimate that holds an agent's sets after its step as they are (an
+    /// agent's state message under the measurement exchange): nothing is fused.
+    pub fn held(own: &ObservedEstimate) -> FusedSets {
+        let e = &own.estimate;
+        FusedSets {
+            undetected: e.undetected.clone(),
+            targets: e.targets.clone(),
+            obstacle_neighbourhood: e.obstacle_neighbourhood.clone(),
+            explored: e.explored.clone(),
+            unseen: own.unseen.clone(),
+        }
+    }
+
     /// Agent `own.uav()`'s sets after its fusion of its step, among `sent` the estimates sent
     /// `radio.latency_steps()` steps before it (see [`fused_peers`]).
     pub fn of_agent(

@@ -59,7 +59,7 @@ use protocol::ipc::{
 };
 use protocol::radio::Radio;
 use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
-use protocol::scenario::Scenario;
+use protocol::scenario::{Exchange, Scenario};
 use protocol::service::RunId;
 use protocol::wire::{
     DropReason, GuidanceToken, HELLO_STEP, ObserverAck, PlannedView, TargetTruth, TruthState,
@@ -68,7 +68,8 @@ use protocol::wire::{
 use tokio::sync::mpsc::UnboundedSender;
 use uav_agent::estimator::EstimatorConfig;
 use uav_agent::estimator::fusion::SharedSet;
-use uav_agent::estimator::message::EstimateInbox;
+use uav_agent::estimator::EstimateReadError;
+use uav_agent::estimator::message::{self, EstimateInbox, PeerMessage};
 use uav_agent::occupancy::OccupancyMap;
 
 use metrics::{
@@ -405,6 +406,7 @@ fn observe(
         truths: VecDeque::new(),
         store: BTreeMap::new(),
         inbox: EstimateInbox::new(),
+        exchange: config.scenario.comms.exchange,
         next_fault: 0,
         end_of_run: false,
         first_truth: None,
@@ -441,6 +443,8 @@ struct Observer<'a> {
     sent: BTreeMap<u64, Vec<ObservedEstimate>>,
     /// The agents' last sets, the bases of their deltas.
     inbox: EstimateInbox,
+    /// What the agents' estimates carry (`comms.exchange`).
+    exchange: Exchange,
     next_fault: usize,
     end_of_run: bool,
     first_truth: Option<Instant>,
@@ -610,15 +614,50 @@ impl Observer<'_> {
             };
             let header = *sample.user_header();
             let len = sample.payload().len();
+            // Under the measurement exchange the agents' sets come in state messages, for the
+            // observers only; their estimates carry measurements, for the traffic and the map.
+            let (kind, service) = match self.exchange {
+                Exchange::Measurements if header.kind == WireKind::State as u32 => {
+                    (WireKind::State, ServiceKind::States)
+                }
+                _ => (WireKind::Estimate, ServiceKind::Estimates),
+            };
             self.report.comms.count_timed(
-                ServiceKind::Estimates,
+                service,
                 (len + std::mem::size_of::<WireHeader>()) as u64,
                 header.sent_unix_ns,
                 unix_now_ns(),
             );
-            if let Err(reason) = header.check(len, WireKind::Estimate, self.run_tag, Some(sender)) {
+            if let Err(reason) = header.check(len, kind, self.run_tag, Some(sender)) {
                 drop(sample);
                 self.drop_estimate(sender, reason);
+                continue;
+            }
+            if self.exchange == Exchange::Measurements && kind == WireKind::Estimate {
+                let read = message::from_bytes(sample.payload())
+                    .map_err(EstimateReadError::from)
+                    .and_then(|msg| {
+                        PeerMessage::from_msg(&msg, &self.estimator).map(|_| msg)
+                    });
+                drop(sample);
+                match read {
+                    Ok(msg) if msg.uav == sender => {
+                        let tally = self.report.agents.entry(sender).or_default();
+                        tally.observe_message(msg.step, msg.incarnation, msg.seq, msg.stats);
+                        for u in &msg.oem {
+                            if let Ok((index, cell)) =
+                                OccupancyMap::cell_of_update(&self.estimator.oem_grid, u)
+                            {
+                                self.oem_changed |= self.report.oem.merge_cell(index, cell);
+                            }
+                        }
+                    }
+                    Ok(_) => self.drop_estimate(sender, DropReason::Sender),
+                    Err(err) => {
+                        tracing::warn!(uav = sender, error = %err, "unreadable estimate dropped");
+                        self.drop_estimate(sender, err.drop_reason());
+                    }
+                }
                 continue;
             }
             let decoded =
@@ -635,7 +674,9 @@ impl Observer<'_> {
                 }
                 Ok((e, map)) => {
                     self.oem_changed |= self.report.oem.merge(&map);
-                    self.report.agents.entry(sender).or_default().observe(&e);
+                    if self.exchange == Exchange::Sets {
+                        self.report.agents.entry(sender).or_default().observe(&e);
+                    }
                     let steps = self.store.entry(sender).or_default();
                     steps.insert(e.step(), e);
                     while steps.len() > MAX_STORED_STEPS {
@@ -884,7 +925,11 @@ impl Observer<'_> {
                 .and_then(|from| self.sent.get(&from))
                 .map_or(&[], Vec::as_slice)
         };
-        let all_fused = FusedSets::of_agents(estimates, sent, &self.estimator, &self.radio);
+        let all_fused = match self.exchange {
+            Exchange::Sets => FusedSets::of_agents(estimates, sent, &self.estimator, &self.radio),
+            // The agents' state messages hold their sets once they applied their peers'.
+            Exchange::Measurements => estimates.iter().map(FusedSets::held).collect(),
+        };
         let all_fused: Vec<(u32, FusedSets)> = estimates
             .iter()
             .map(ObservedEstimate::uav)

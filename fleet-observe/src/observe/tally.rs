@@ -20,6 +20,9 @@ pub enum ServiceKind {
     Tokens,
     /// Truth, world -> observer.
     Truth,
+    /// Under the measurement exchange, each agent's sets once it applied its peers'
+    /// measurements, agent -> observers only (no radio link carries them).
+    States,
 }
 
 impl ServiceKind {
@@ -31,6 +34,7 @@ impl ServiceKind {
             ServiceKind::Estimates => "estimates",
             ServiceKind::Tokens => "tokens",
             ServiceKind::Truth => "truth",
+            ServiceKind::States => "states",
         }
     }
 }
@@ -97,19 +101,25 @@ impl AgentTally {
     /// Folds in a decoded estimate.
     pub fn observe(&mut self, observed: &ObservedEstimate) {
         let e = &observed.estimate;
+        self.observe_message(e.step, e.incarnation, e.seq, observed.stats);
+    }
+
+    /// Folds in a decoded estimate's header: its step, its sender's incarnation and message
+    /// counter, and the counters it carries.
+    pub fn observe_message(&mut self, step: u64, incarnation: u64, seq: u64, stats: AgentStats) {
         self.estimates_seen += 1;
-        self.last_step = Some(self.last_step.map_or(e.step, |s| s.max(e.step)));
-        match self.incarnations.iter_mut().find(|i| i.id == e.incarnation) {
-            Some(i) if e.seq >= i.last_seq => {
-                i.last_seq = e.seq;
-                i.stats = observed.stats;
+        self.last_step = Some(self.last_step.map_or(step, |s| s.max(step)));
+        match self.incarnations.iter_mut().find(|i| i.id == incarnation) {
+            Some(i) if seq >= i.last_seq => {
+                i.last_seq = seq;
+                i.stats = stats;
             }
             Some(_) => {}
             None => self.incarnations.push(Incarnation {
-                id: e.incarnation,
-                first_step: e.step,
-                last_seq: e.seq,
-                stats: observed.stats,
+                id: incarnation,
+                first_step: step,
+                last_seq: seq,
+                stats,
             }),
         }
     }

@@ -2,9 +2,15 @@
 //!
 //! Per frame `k` (docs/design.md §3 "Estimator step" and §4):
 //! 1. the estimator folds the frame in (predict, correct);
-//! 2. the agent publishes its corrected sets on `{run}/uav/{i}/estimate`;
-//! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are fused when
-//!    they come, dilated by the steps they lag) and fuses them;
+//! 2. the agent publishes its estimate on `{run}/uav/{i}/estimate`: its corrected sets
+//!    (`comms.exchange = "sets"`), or its frame's measurement (`"measurements"`,
+//!    [`crate::estimator::exchange`]) with its whole sets every `comms.whole_sets_every` steps
+//!    and after a peer (re)joined;
+//! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are taken in
+//!    when they come) and, once the wait is over, takes them in by ascending peer: it applies
+//!    their measurements (late ones at their own clock) and fuses their sets (dilated by the
+//!    steps they lag). Under the measurement exchange it then sends the observers its sets
+//!    (a [`WireKind::State`] message on its estimate service, which peers skip unread);
 //! 4. on a guidance step it takes its turn in the token ring ([`crate::guidance::ring`]) and
 //!    runs the planner the scenario names ([`crate::guidance::decide`]: the paper's MPC or
 //!    `setfleet`);
@@ -62,7 +68,7 @@ use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_for_wake};
 use protocol::radio::{Endpoint, LinkKind, Radio};
 use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
-use protocol::scenario::Scenario;
+use protocol::scenario::{Exchange, Scenario};
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
 use protocol::wire::{
@@ -71,8 +77,9 @@ use protocol::wire::{
 };
 use serde::Serialize;
 
+use crate::estimator::message::PeerMessage;
 use crate::estimator::{
-    Estimator, EstimatorConfig, EstimatorStepError, PeerEstimate, StepReport, message,
+    Estimator, EstimatorConfig, EstimatorStepError, Measurement, StepReport, message,
 };
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use checkpoint::{CheckpointFile, CheckpointFlusher, Owner};
@@ -303,17 +310,44 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
     });
     let mut report = AgentReport::default();
     let estimator = restore(checkpoint.as_ref(), &estimator_config, &mut report);
-    let outbox =
-        message::EstimateOutbox::new(config.uav, incarnation, estimator_config.oem_full_every);
+    let exchange = config.scenario.comms.exchange;
+    let outbox = match exchange {
+        Exchange::Sets => {
+            let outbox = message::EstimateOutbox::new(
+                config.uav,
+                incarnation,
+                estimator_config.oem_full_every,
+            );
+            // A delta against a message the radio lost rebuilds nothing: whole sets under
+            // loss.
+            if radio.is_lossy() {
+                outbox
+            } else {
+                outbox.with_set_deltas()
+            }
+        }
+        Exchange::Measurements => message::EstimateOutbox::new(
+            config.uav,
+            incarnation,
+            u64::from(config.scenario.comms.whole_sets_every),
+        ),
+    };
     let mut agent = Agent {
         run_tag: config.run_id.tag(),
         incarnation,
-        // A delta against a message the radio lost rebuilds nothing: whole sets under loss.
-        outbox: if radio.is_lossy() {
-            outbox
-        } else {
-            outbox.with_set_deltas()
-        },
+        outbox,
+        exchange,
+        measurement: None,
+        // The observers' copy of this agent's sets, over the local IPC (no radio): deltas.
+        state_outbox: (exchange == Exchange::Measurements).then(|| {
+            message::EstimateOutbox::new(
+                config.uav,
+                incarnation,
+                estimator_config.oem_full_every,
+            )
+            .with_set_deltas()
+            .without_map()
+        }),
         inbox: message::EstimateInbox::new(),
         radio,
         lost_by_step: BTreeMap::new(),
@@ -409,7 +443,7 @@ struct PeerInfo {
     heard_step: Option<u64>,
     incarnation: Option<u64>,
     /// Estimates received ahead of this agent's step.
-    pending: Vec<PeerEstimate>,
+    pending: Vec<PeerMessage>,
 }
 
 struct Agent<'a> {
@@ -425,6 +459,13 @@ struct Agent<'a> {
     /// The agents the world serves at the current step (the frame's mask).
     served: u32,
     outbox: message::EstimateOutbox,
+    /// What the estimates carry (`comms.exchange`).
+    exchange: Exchange,
+    /// This agent's measurement of the current step, under the measurement exchange.
+    measurement: Option<Measurement>,
+    /// Under the measurement exchange, the observers' copy of this agent's sets once it
+    /// applied its peers' measurements ([`WireKind::State`]).
+    state_outbox: Option<message::EstimateOutbox>,
     /// The peers' sets, the bases of their deltas.
     inbox: message::EstimateInbox,
     /// The simulated links ([`protocol::radio`]).
@@ -629,6 +670,10 @@ impl Agent<'_> {
                     acked = true;
                 }
                 self.gather(k);
+                let before = self.clock.enter(phase::PUBLISH);
+                let published = self.publish_state(k);
+                self.clock.enter(before);
+                published?;
                 if guidance_step {
                     yaw_ref = self.decide(k)?;
                 }
@@ -663,7 +708,7 @@ impl Agent<'_> {
     /// run's first frame (a checkpoint of a run that was started over) drops it and starts
     /// fresh.
     fn fold(&mut self, frame: &CvsFrame) -> Result<StepReport, EstimatorStepError> {
-        match self.estimator.step(frame) {
+        match self.fold_once(frame) {
             Err(EstimatorStepError::Stale { state_step, .. })
                 if self.report.frames == 0 && self.report.resumed_from_step.is_some() =>
             {
@@ -674,9 +719,23 @@ impl Agent<'_> {
                 );
                 self.report.resumed_from_step = None;
                 self.estimator = Estimator::new(self.estimator.config().clone());
-                self.estimator.step(frame)
+                self.fold_once(frame)
             }
             other => other,
+        }
+    }
+
+    /// One estimator step; under the measurement exchange it keeps the frame's measurement
+    /// for this step's estimate.
+    fn fold_once(&mut self, frame: &CvsFrame) -> Result<StepReport, EstimatorStepError> {
+        match self.exchange {
+            Exchange::Sets => self.estimator.step(frame),
+            Exchange::Measurements => {
+                let (report, measurement) =
+                    self.estimator.step_sharing(frame, self.config.uav)?;
+                self.measurement = Some(measurement);
+                Ok(report)
+            }
         }
     }
 
@@ -725,17 +784,13 @@ impl Agent<'_> {
             self.outbox.request_full();
             self.full_map_from = None;
         }
-        let mut msg = self.outbox.compose(self.estimator.state_mut());
-        msg.stats = AgentStats {
-            frames: self.report.frames,
-            frames_refused: self.report.frames_refused,
-            estimates_received: self.report.estimates_received,
-            messages_dropped: self.report.dropped.values().sum(),
-            decisions: self.report.decisions,
-            token_timeouts: self.report.token_timeouts,
-            estimates_lost: self.report.estimates_lost,
-            tokens_lost: self.report.tokens_lost,
+        let mut msg = match (&self.measurement, self.exchange) {
+            (Some(m), Exchange::Measurements) => {
+                self.outbox.compose_measurement(self.estimator.state_mut(), m)
+            }
+            _ => self.outbox.compose(self.estimator.state_mut()),
         };
+        msg.stats = self.stats();
         msg.want_whole = self.inbox.wanted();
         let bytes = message::to_bytes(&msg)?;
         self.links
@@ -744,7 +799,37 @@ impl Agent<'_> {
         Ok(())
     }
 
-    /// Fuses the awaited peers' estimates of step `k`, waiting for them (bounded).
+    /// Under the measurement exchange, sends the observers this agent's sets once it applied
+    /// its peers' measurements of step `k` (the guarantee is checked on them).
+    fn publish_state(&mut self, k: u64) -> Result<(), AgentError> {
+        let Some(outbox) = &mut self.state_outbox else {
+            return Ok(());
+        };
+        let mut msg = outbox.compose(self.estimator.state_mut());
+        msg.stats = self.stats();
+        let bytes = message::to_bytes(&msg)?;
+        self.links
+            .send_wire(WireKind::State, self.run_tag, self.config.uav, k, &bytes)?;
+        Ok(())
+    }
+
+    /// The counters an estimate carries.
+    fn stats(&self) -> AgentStats {
+        AgentStats {
+            frames: self.report.frames,
+            frames_refused: self.report.frames_refused,
+            estimates_received: self.report.estimates_received,
+            messages_dropped: self.report.dropped.values().sum(),
+            decisions: self.report.decisions,
+            token_timeouts: self.report.token_timeouts,
+            estimates_lost: self.report.estimates_lost,
+            tokens_lost: self.report.tokens_lost,
+        }
+    }
+
+    /// Fuses the awaited peers' estimates of step `k`, waiting for them (bounded). They are
+    /// taken in once the wait is over, all together in the order of the peers: measurements
+    /// are not applied in whatever order they happened to come.
     fn gather(&mut self, k: u64) {
         // The world lists the nodes before every step: a peer it serves is alive unless it
         // died since, which the waits below notice. Only a peer that (re)joined needs a look.
@@ -758,7 +843,6 @@ impl Agent<'_> {
         loop {
             let before = self.clock.enter(phase::FUSE);
             self.drain_estimates();
-            self.fuse_pending(k);
             self.clock.enter(before);
             let missing = self.awaited_peers().iter().any(|j| {
                 self.peers
@@ -767,17 +851,20 @@ impl Agent<'_> {
                     .is_none_or(|s| s < k)
             });
             if !missing || self.stopping() || self.end_of_run {
-                return;
+                break;
             }
             if Instant::now() >= deadline {
                 self.report.peer_timeouts += 1;
                 tracing::debug!(step = k, "some peers' estimates did not arrive in time");
-                return;
+                break;
             }
             self.wait(deadline.min(Instant::now() + WAIT_SLICE), phase::WAIT_PEERS);
             // A peer that died meanwhile is no longer awaited.
             self.refresh_live_if_stale();
         }
+        let before = self.clock.enter(phase::FUSE);
+        self.fuse_pending(k);
+        self.clock.enter(before);
     }
 
     /// Reads every pending peer estimate into the peers' queues.
@@ -795,6 +882,10 @@ impl Agent<'_> {
                     }
                 };
                 let header = *sample.user_header();
+                if header.kind == WireKind::State as u32 {
+                    // The peer's sets for the observers: nothing for an agent.
+                    continue;
+                }
                 let checked = header.check(
                     sample.payload().len(),
                     WireKind::Estimate,
@@ -845,7 +936,7 @@ impl Agent<'_> {
         if m.want_whole & uav_bit(self.config.uav) != 0 {
             self.outbox.request_full();
         }
-        match self.inbox.read(m, self.estimator.config()) {
+        match self.inbox.read_message(m, self.estimator.config()) {
             Ok(p) => self.queue_peer(p),
             Err(e) => {
                 let reason = e.drop_reason();
@@ -861,7 +952,7 @@ impl Agent<'_> {
         }
     }
 
-    fn queue_peer(&mut self, p: PeerEstimate) {
+    fn queue_peer(&mut self, p: PeerMessage) {
         let info = self.peers.entry(p.uav).or_default();
         if info.incarnation.is_some_and(|i| p.incarnation < i) {
             let detail = format!("from UAV {}'s replaced process", p.uav);
@@ -911,7 +1002,12 @@ impl Agent<'_> {
                 }
                 info.fused_step = Some(p.step);
                 if radio.fuses(&me, &p.endpoint()) {
-                    self.estimator.fuse(&p);
+                    if let Some(m) = &p.measurement {
+                        self.estimator.apply(m);
+                    }
+                    if let Some(e) = &p.estimate {
+                        self.estimator.fuse(e);
+                    }
                     self.report.estimates_received += 1;
                 } else {
                     self.report.estimates_out_of_range += 1;

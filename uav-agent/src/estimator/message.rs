@@ -411,6 +411,12 @@ pub struct PeerMessage {
 }
 
 impl PeerMessage {
+    /// Validates a received message that holds no deltas (a message with delta sets needs an
+    /// [`EstimateInbox`]: here it is [`EstimateReadError::MissingBase`]).
+    pub fn from_msg(msg: &EstimateMsg, config: &EstimatorConfig) -> Result<Self, EstimateReadError> {
+        rebuild(msg, config, None).map(|(message, _)| message)
+    }
+
     /// Decodes and validates a received message that holds no deltas (a message with delta
     /// sets needs an [`EstimateInbox`]: here it is [`EstimateReadError::MissingBase`]).
     pub fn from_bytes(bytes: &[u8], config: &EstimatorConfig) -> Result<Self, EstimateReadError> {
