@@ -33,7 +33,9 @@ const SMALL: [&str; 12] = [
 fn chaos_runs_complete_with_agents_back_and_nothing_left() {
     let mut faults_seen = 0;
     let mut kinds = std::collections::BTreeSet::new();
-    for seed in 1..=3u64 {
+    // Seed 4 under the measurement exchange: a restarted agent rebuilds from its checkpoint
+    // and its peers' whole sets, and applies their measurements from then on.
+    for seed in 1..=4u64 {
         let t = TestRun::new("chaos");
         let out_dir = t.dir.join("out");
         let seed_text = seed.to_string();
@@ -47,6 +49,9 @@ fn chaos_runs_complete_with_agents_back_and_nothing_left() {
         if seed == 1 {
             // An explicit fault combines with the schedule.
             cmd.args(["--fault", "pause:2@4+2"]);
+        }
+        if seed == 4 {
+            cmd.args(["--set", "comms.exchange=measurements"]);
         }
         let mut fleet = ChildGuard::spawn(&mut cmd);
         let out = fleet

@@ -125,9 +125,18 @@ fn without_wall_clock(mut v: Value) -> Value {
 fn the_same_seed_in_lockstep_gives_the_same_results() {
     // `paper`, `kappa0` and `nomap` share the paper's planner; `setfleet` has its own. Lossy,
     // slow links lose the same messages with the same seed (drawn from it, never from timing)
-    // and never wait for them.
+    // and never wait for them. Both exchanges: measurements are applied in a fixed order
+    // whatever order they came in.
     let lossy = ["--set", "comms.loss=0.3", "--set", "comms.latency_ms=700"];
-    for (variant, links) in [("paper", &[][..]), ("setfleet", &[]), ("paper", &lossy[..])] {
+    let measurements = ["--set", "comms.exchange=measurements"];
+    let lossy_measurements = [&lossy[..], &measurements[..]].concat();
+    for (variant, links) in [
+        ("paper", &[][..]),
+        ("setfleet", &[]),
+        ("paper", &lossy[..]),
+        ("paper", &measurements[..]),
+        ("paper", &lossy_measurements[..]),
+    ] {
         let results: Vec<(Value, String)> = (0..2)
             .map(|_| {
                 let t = TestRun::new("run-determinism");
@@ -151,7 +160,7 @@ fn the_same_seed_in_lockstep_gives_the_same_results() {
             results[0].0, results[1].0,
             "{variant} {links:?}: summary.json differs"
         );
-        if !links.is_empty() {
+        if links.contains(&"comms.loss=0.3") {
             let agents = results[0].0["agents"].as_array().expect("agents");
             let lost: u64 = agents
                 .iter()
@@ -164,6 +173,14 @@ fn the_same_seed_in_lockstep_gives_the_same_results() {
 
 #[test]
 fn killed_agents_leave_a_run_that_completes_with_guaranteed_survivors() {
+    for exchange in ["sets", "measurements"] {
+        killed_agents_leave_a_complete_run(exchange);
+    }
+}
+
+/// The checks of `killed_agents_leave_a_run_that_completes_with_guaranteed_survivors` under
+/// `comms.exchange = exchange`.
+fn killed_agents_leave_a_complete_run(exchange: &str) {
     let t = TestRun::new("run-faults");
     let file = t.write("scenario.toml", &scenario(30.0, 3));
     let out_dir = t.dir.join("out");
@@ -177,16 +194,18 @@ fn killed_agents_leave_a_run_that_completes_with_guaranteed_survivors() {
         "kill:1@6",
         "--fault",
         "restart:1@9",
+        "--set",
+        &format!("comms.exchange={exchange}"),
     ];
     let out = finish(
         &t,
         ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &args)),
     );
-    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(out.status.success(), "{exchange}: {}", stderr(&out));
     let s = summary(&out_dir);
     let steps = 60;
     assert_eq!(s["steps"], steps, "{s}");
-    assert_eq!(s["violations"], 0, "{s}");
+    assert_eq!(s["violations"], 0, "{exchange}: {s}");
     let faults = s["faults"].as_array().expect("faults");
     assert_eq!(faults.len(), 3, "{s}");
     assert!(faults.iter().all(|f| f["effective"] == true), "{s}");
