@@ -144,6 +144,11 @@ impl Radio {
         self.loss > 0.0
     }
 
+    /// Whether a message can fail to reach a peer in time: some loss, or a finite range.
+    pub fn loses_or_limits(&self) -> bool {
+        self.is_lossy() || self.range_m().is_finite()
+    }
+
     /// Steps between an estimate's step and the step it is fused at.
     pub fn latency_steps(&self) -> u64 {
         self.latency_steps

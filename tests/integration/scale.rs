@@ -1,6 +1,7 @@
-//! `fleet bench scale` end to end: a tiny scaling study (1 and 2 UAVs, 2 s each) writes a
-//! report with a row per fleet size and every field, a decodable picture, sees no violation
-//! and leaves no process and no iceoryx2 file; bad flags exit with code 2 and name the flag.
+//! `fleet bench scale` end to end: a tiny scaling study (1 and 2 UAVs under both exchanges,
+//! 2 s each) writes a report with a row per run and every field, the headline keys of each
+//! exchange, a decodable picture, sees no violation and leaves no process and no iceoryx2
+//! file; bad flags exit with code 2 and name the flag.
 
 use std::ffi::OsStr;
 use std::path::Path;
@@ -52,8 +53,11 @@ fn json(path: &Path) -> Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// The exchanges the test measures, in the order they run.
+const EXCHANGES: [&str; 2] = ["sets", "measurements"];
+
 #[test]
-fn a_tiny_scale_bench_reports_every_size_and_leaves_nothing() {
+fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing() {
     let t = TestRun::new("scale");
     t.write("scenario.toml", SCENARIO);
     let out_dir = t.dir.join("out");
@@ -63,6 +67,8 @@ fn a_tiny_scale_bench_reports_every_size_and_leaves_nothing() {
         [
             OsStr::new("--uavs"),
             OsStr::new("2,1"),
+            OsStr::new("--exchange"),
+            OsStr::new("sets,measurements"),
             OsStr::new("--duration"),
             OsStr::new("2"),
             OsStr::new("--out"),
@@ -73,8 +79,13 @@ fn a_tiny_scale_bench_reports_every_size_and_leaves_nothing() {
     );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "fleet bench scale failed: {stderr}");
-    // A line when each fleet size is done.
-    for line in ["scale 1/2: 1 UAVs, 1 cars", "scale 2/2: 2 UAVs, 2 cars"] {
+    // A line when each run is done: each exchange in turn, the sizes smallest first.
+    for line in [
+        "scale 1/4: sets, 1 UAVs, 1 cars",
+        "scale 2/4: sets, 2 UAVs, 2 cars",
+        "scale 3/4: measurements, 1 UAVs, 1 cars",
+        "scale 4/4: measurements, 2 UAVs, 2 cars",
+    ] {
         assert!(stderr.contains(line), "no {line:?} in {stderr}");
     }
 
@@ -88,12 +99,32 @@ fn a_tiny_scale_bench_reports_every_size_and_leaves_nothing() {
     );
     assert_eq!(report["goal_real_time_factor"], 2.0);
     assert_eq!(report["goal_bytes_per_uav_ratio"], 1.5);
+    assert_eq!(report["goal_cpu_per_uav_step_ratio"], 1.5);
+    assert_eq!(report["goal_agent_peak_mb"], 60.0);
+    assert_eq!(report["exchanges"], serde_json::json!(EXCHANGES));
+    // The headline keys of each exchange: null, as no run has 16 UAVs.
+    for exchange in EXCHANGES {
+        for key in [
+            "real_time_factor_16",
+            "bytes_per_uav_ratio_16",
+            "cpu_per_uav_step_ratio_16",
+            "agent_peak_mb_16",
+        ] {
+            let key = format!("{key}_{exchange}");
+            assert_eq!(report.get(&key), Some(&Value::Null), "{key}: {report}");
+        }
+    }
     assert_eq!(report["violations"], 0);
     assert_eq!(report["failed_runs"], serde_json::json!([]));
     let cases = report["cases"].as_array().expect("cases");
-    assert_eq!(cases.len(), 2, "{report}");
-    for (case, (uavs, cars, half)) in cases.iter().zip([(1, 1, 50.0), (2, 2, 50.0 * 2f64.sqrt())]) {
+    assert_eq!(cases.len(), 4, "{report}");
+    let runs = EXCHANGES
+        .iter()
+        .flat_map(|&e| [(e, 1, 1, 50.0), (e, 2, 2, 50.0 * 2f64.sqrt())]);
+    for (case, (exchange, uavs, cars, half)) in cases.iter().zip(runs) {
+        assert_eq!(case["name"], format!("{exchange} uavs={uavs}"), "{case}");
         let p = &case["params"];
+        assert_eq!(p["exchange"], exchange, "{case}");
         assert_eq!(p["uavs"], uavs, "{case}");
         assert_eq!(p["cars"], cars, "{case}");
         assert_eq!(p["status"], "ok", "{case}");
@@ -104,7 +135,7 @@ fn a_tiny_scale_bench_reports_every_size_and_leaves_nothing() {
             let v = m[key].as_f64().unwrap_or(f64::NAN);
             assert!(
                 v.is_finite() && v > 0.0,
-                "uavs={uavs}: {key} = {:?}",
+                "{exchange} uavs={uavs}: {key} = {:?}",
                 m[key]
             );
         }
@@ -121,10 +152,17 @@ fn a_tiny_scale_bench_reports_every_size_and_leaves_nothing() {
         assert!(m["peak_rss_mb_agents_sum"].as_f64() >= m["peak_rss_mb_agent_max"].as_f64());
         // No 4-UAV row: no ratio.
         assert!(m.get("bytes_per_uav_ratio_to_4").is_none(), "{case}");
+        assert!(m.get("cpu_per_uav_step_ratio_to_4").is_none(), "{case}");
 
-        // Each run is a whole `fleet run` in its own directory.
-        let run_dir = runs_dir.join(format!("uavs-{uavs}"));
+        // Each run is a whole `fleet run` in its own directory, under its exchange.
+        let run_dir = runs_dir.join(exchange).join(format!("uavs-{uavs}"));
         let summary = json(&run_dir.join("summary.json"));
+        let scenario = std::fs::read_to_string(run_dir.join("scenario.toml"))
+            .unwrap_or_else(|e| panic!("{}: {e}", run_dir.display()));
+        assert!(
+            scenario.contains(&format!("exchange = \"{exchange}\"")),
+            "{exchange} uavs={uavs}: {scenario}"
+        );
         assert_eq!(summary["uavs"], uavs);
         assert_eq!(summary["targets"], cars);
         assert_eq!(summary["mode"], "lockstep");
@@ -132,7 +170,10 @@ fn a_tiny_scale_bench_reports_every_size_and_leaves_nothing() {
         let run = summary["timing"]["run_id"].as_str().expect("run id");
         let run = RunId::new(run).expect("a valid run id");
         let left = ipc::run_files(&run).unwrap_or_default();
-        assert!(left.is_empty(), "uavs={uavs}: files left: {left:?}");
+        assert!(
+            left.is_empty(),
+            "{exchange} uavs={uavs}: files left: {left:?}"
+        );
     }
 
     let path = out_dir.join("scale.png");
@@ -162,6 +203,8 @@ fn bad_scale_flags_exit_2_naming_the_flag() {
         (&["--uavs", "1,0"], "--uavs 0"),
         (&["--duration", "0"], "--duration 0"),
         (&["--duration=-1"], "--duration -1"),
+        (&["--exchange", "bogus"], "--exchange"),
+        (&["--exchange", "sets,bogus"], "--exchange"),
     ] {
         let with_out = args
             .iter()

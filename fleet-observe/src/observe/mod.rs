@@ -66,9 +66,9 @@ use protocol::wire::{
     UavCommand, WireHeader, WireKind, unix_now_ns,
 };
 use tokio::sync::mpsc::UnboundedSender;
+use uav_agent::estimator::EstimateReadError;
 use uav_agent::estimator::EstimatorConfig;
 use uav_agent::estimator::fusion::SharedSet;
-use uav_agent::estimator::EstimateReadError;
 use uav_agent::estimator::message::{self, EstimateInbox, PeerMessage};
 use uav_agent::occupancy::OccupancyMap;
 
@@ -636,9 +636,7 @@ impl Observer<'_> {
             if self.exchange == Exchange::Measurements && kind == WireKind::Estimate {
                 let read = message::from_bytes(sample.payload())
                     .map_err(EstimateReadError::from)
-                    .and_then(|msg| {
-                        PeerMessage::from_msg(&msg, &self.estimator).map(|_| msg)
-                    });
+                    .and_then(|msg| PeerMessage::from_msg(&msg, &self.estimator).map(|_| msg));
                 drop(sample);
                 match read {
                     Ok(msg) if msg.uav == sender => {

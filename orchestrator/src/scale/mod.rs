@@ -1,20 +1,27 @@
-//! `fleet bench scale`: how the whole system scales with the fleet. It runs real fleets, the
-//! same code path as `fleet run` ([`execute`], lockstep, one seed), of 1, 2, 4, 8 and 16 UAVs
-//! (`--uavs`), each over a region scaled so that the **area per UAV** and the **cars per
-//! area** stay those of the scenario's, read as a fleet of [`REFERENCE_UAVS`] UAVs (the
-//! default scenario: 4 UAVs, 8 cars, 500 x 500 m): the region's side scales with
-//! `sqrt(n / 4)`, the cars with `n / 4` (rounded, at least 1 if the scenario has any).
+//! `fleet bench scale`: how the whole system scales with the fleet, under each way the agents
+//! exchange what they know. It runs real fleets, the same code path as `fleet run`
+//! ([`execute`], lockstep, one seed), of 1, 2, 4, 8 and 16 UAVs (`--uavs`, up to the
+//! protocol's [`MAX_UAVS`]), each under every exchange of `--exchange` (`comms.exchange`:
+//! `sets` and `measurements` by default), each over a region scaled so that the **area per
+//! UAV** and the **cars per area** stay those of the scenario's, read as a fleet of
+//! [`REFERENCE_UAVS`] UAVs (the default scenario: 4 UAVs, 8 cars, 500 x 500 m): the region's
+//! side scales with `sqrt(n / 4)`, the cars with `n / 4` (rounded, at least 1 if the scenario
+//! has any).
 //!
-//! Per fleet size ([`report::ScaleRow`]): wall time per simulated second and the real-time
-//! factor, CPU per UAV-step (every process's CPU over UAVs x steps), the estimates' and the
-//! token's messages and bytes per simulated second in total and per UAV, peak resident memory
-//! per process (world, largest agent, all agents, orchestrator), violations, and the bytes per
-//! UAV per second against the 4-UAV figure. Writes `scale.json` (a [`BenchReport`]) and
-//! `scale.png` ([`plot`]) into `--out`, each run's own results under `--runs`.
+//! Per run, one (exchange, fleet size) pair ([`report::ScaleRow`]): wall time per simulated
+//! second and the real-time factor, CPU per UAV-step (every process's CPU over UAVs x steps),
+//! the estimates' and the token's messages and bytes per simulated second in total and per
+//! UAV, peak resident memory per process (world, largest agent, all agents, orchestrator),
+//! violations, and the bytes per UAV per second and the CPU per UAV-step against the 4-UAV
+//! run **of the same exchange**. Writes `scale.json` (a [`BenchReport`], one case per run,
+//! the headline figures per exchange) and `scale.png` ([`plot`], one line per exchange) into
+//! `--out`, each run's own results under `--runs` in `<exchange>/uavs-<N>`.
 //!
-//! The fleet sizes run one after another, smallest first: a run needs the machine to itself
-//! for its real-time factor to mean anything. A run that fails is a row with its status, the
-//! next sizes still run (a signal stops the bench), and the exit code is 1.
+//! The runs go one after another: for each exchange in the order given, the fleet sizes
+//! smallest first. A run needs the machine to itself for its real-time factor to mean
+//! anything. The exchange is the last override of each run's scenario, so `--exchange` wins
+//! over a `--set comms.exchange=...`. A run that fails is a row with its status, the next runs
+//! still go (a signal stops the bench), and the exit code is 1.
 //!
 //! [`BenchReport`]: fleet_bench::BenchReport
 
@@ -25,7 +32,8 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use protocol::scenario::Scenario;
+use clap::builder::PossibleValuesParser;
+use protocol::scenario::{Exchange, Scenario};
 use protocol::wire::MAX_UAVS;
 use world_server::server::StepMode;
 
@@ -59,20 +67,41 @@ pub struct BenchScaleArgs {
     /// Seconds of simulated time per run.
     #[arg(long, default_value_t = 20.0)]
     pub duration: f64,
-    /// Fleet sizes, comma-separated (run smallest first).
+    /// Fleet sizes, comma-separated (run smallest first), each at most the protocol's largest
+    /// fleet (32).
     #[arg(long, value_delimiter = ',', default_values_t = DEFAULT_UAVS.to_vec())]
     pub uavs: Vec<u32>,
+    /// The exchanges (`comms.exchange`) to measure, comma-separated, in the order they run;
+    /// every fleet size runs under each (overrides `--set comms.exchange=...`).
+    #[arg(
+        long,
+        value_name = "LIST",
+        value_delimiter = ',',
+        value_parser = PossibleValuesParser::new(Exchange::NAMES),
+        default_values = Exchange::NAMES
+    )]
+    pub exchange: Vec<String>,
     /// Where `scale.json` and `scale.png` go (default: `runs/scale-<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Where each run's directory (`uavs-<N>`) goes (default: `<out>/runs`).
+    /// Where each run's directory (`<exchange>/uavs-<N>`) goes (default: `<out>/runs`).
     #[arg(long)]
     pub runs: Option<PathBuf>,
 }
 
-/// One fleet size of the bench, its scenario resolved.
+/// The name of an exchange as a scenario writes it (one of [`Exchange::NAMES`]).
+pub fn exchange_name(exchange: Exchange) -> &'static str {
+    match exchange {
+        Exchange::Sets => "sets",
+        Exchange::Measurements => "measurements",
+    }
+}
+
+/// One run of the bench, an exchange and a fleet size, its scenario resolved.
 #[derive(Debug, Clone)]
 pub struct ScalePoint {
+    /// The exchange (the run's `comms.exchange`).
+    pub exchange: Exchange,
     /// UAVs.
     pub uavs: u32,
     /// The run.
@@ -94,8 +123,10 @@ impl ScalePoint {
 /// A validated `fleet bench scale`.
 #[derive(Debug, Clone)]
 pub struct ScaleConfig {
-    /// The fleet sizes in the order they run (increasing).
+    /// The runs in the order they go: by exchange, then by increasing fleet size.
     pub points: Vec<ScalePoint>,
+    /// The exchanges measured, in the order they run (no repeats).
+    pub exchanges: Vec<Exchange>,
     /// The seed of every run.
     pub seed: u64,
     /// Simulated seconds per run.
@@ -124,15 +155,33 @@ pub fn scaled_region(half_extent_m: f64, cars: u32, uavs: u32) -> (f64, u32) {
     (half, scaled_cars)
 }
 
+/// The items in their order, each at its first place only.
+fn each_once<T: PartialEq>(items: impl IntoIterator<Item = T>) -> Vec<T> {
+    let mut once = Vec::new();
+    for item in items {
+        if !once.contains(&item) {
+            once.push(item);
+        }
+    }
+    once
+}
+
 impl BenchScaleArgs {
-    /// Checks the flags and resolves every fleet size's scenario.
+    /// Checks the flags and resolves every run's scenario.
     pub fn validate(&self) -> Result<ScaleConfig, UsageError> {
         if self.uavs.is_empty() {
             return Err(UsageError("--uavs: give at least one fleet size".into()));
         }
         if let Some(&bad) = self.uavs.iter().find(|&&n| n == 0 || n as usize > MAX_UAVS) {
             return Err(UsageError(format!(
-                "--uavs {bad}: every fleet size must be 1 to {MAX_UAVS}"
+                "--uavs {bad}: every fleet size must be 1 to {MAX_UAVS}, the largest fleet the \
+                 protocol carries"
+            )));
+        }
+        if self.exchange.is_empty() {
+            return Err(UsageError(format!(
+                "--exchange: give at least one of {}",
+                Exchange::NAMES.join(", ")
             )));
         }
         if !(self.duration.is_finite() && self.duration > 0.0) {
@@ -144,6 +193,7 @@ impl BenchScaleArgs {
         let mut sizes = self.uavs.clone();
         sizes.sort_unstable();
         sizes.dedup();
+        let exchanges = each_once(self.exchange.iter().map(String::as_str));
         let mut base_overrides = self.variant.with_user_overrides(&self.scenario.overrides);
         base_overrides.push(format!("seed={}", self.seed));
         base_overrides.push(format!("duration_s={:?}", self.duration));
@@ -157,37 +207,30 @@ impl BenchScaleArgs {
             .clone()
             .unwrap_or_else(|| default_out_dir("scale-"));
         let runs = self.runs.clone().unwrap_or_else(|| out.join("runs"));
-        let mut points = Vec::with_capacity(sizes.len());
-        for (i, &uavs) in sizes.iter().enumerate() {
+        let pairs = exchanges
+            .iter()
+            .flat_map(|&name| sizes.iter().map(move |&uavs| (name, uavs)));
+        let mut points = Vec::with_capacity(exchanges.len() * sizes.len());
+        for (index, (name, uavs)) in pairs.enumerate() {
             let (half, cars) = scaled_region(base.region.half_extent_m, base.targets.count, uavs);
             let mut overrides = base_overrides.clone();
             overrides.push(format!("uavs.count={uavs}"));
             overrides.push(format!("region.half_extent_m={half:?}"));
             overrides.push(format!("targets.count={cars}"));
-            let scenario = Scenario::load(self.scenario.scenario.as_deref(), &overrides)
-                .map_err(|e| UsageError(format!("--uavs {uavs}: bad scenario: {e}")))?;
-            points.push(ScalePoint {
-                uavs,
-                config: RunConfig {
-                    scenario,
-                    mode: StepMode::Lockstep,
-                    faults: Vec::new(),
-                    out: runs.join(format!("uavs-{uavs}")),
-                    strict: false,
-                    run_id: new_run_id(u32::try_from(i).unwrap_or(u32::MAX)),
-                    // One line per tenth of a run: the bench's own lines stay readable.
-                    progress_bar: false,
-                    variant: self.variant,
-                    chaos_seed: None,
-                    listen: None,
-                    tls: None,
-                    insecure_links: false,
-                    view: fleet_observe::viewer::ViewConfig::default(),
-                    layout: HostLayout::single(uavs),
-                },
-            });
+            // Last, so that the flag wins over a `--set comms.exchange=...`.
+            overrides.push(format!("comms.exchange={name}"));
+            let scenario =
+                Scenario::load(self.scenario.scenario.as_deref(), &overrides).map_err(|e| {
+                    UsageError(format!(
+                        "--uavs {uavs} --exchange {name}: bad scenario: {e}"
+                    ))
+                })?;
+            let out = runs.join(name).join(format!("uavs-{uavs}"));
+            let run_id = new_run_id(u32::try_from(index).unwrap_or(u32::MAX));
+            points.push(self.point(scenario, out, run_id));
         }
         Ok(ScaleConfig {
+            exchanges: each_once(points.iter().map(|p| p.exchange)),
             points,
             seed: self.seed,
             duration_s: self.duration,
@@ -196,10 +239,42 @@ impl BenchScaleArgs {
             runs,
         })
     }
+
+    /// The run of a resolved scenario: lockstep, no faults, its own directory and id.
+    fn point(
+        &self,
+        scenario: Scenario,
+        out: PathBuf,
+        run_id: protocol::service::RunId,
+    ) -> ScalePoint {
+        let uavs = scenario.uavs.count;
+        ScalePoint {
+            exchange: scenario.comms.exchange,
+            uavs,
+            config: RunConfig {
+                scenario,
+                mode: StepMode::Lockstep,
+                faults: Vec::new(),
+                out,
+                strict: false,
+                run_id,
+                // One line per tenth of a run: the bench's own lines stay readable.
+                progress_bar: false,
+                variant: self.variant,
+                chaos_seed: None,
+                listen: None,
+                tls: None,
+                insecure_links: false,
+                view: fleet_observe::viewer::ViewConfig::default(),
+                layout: HostLayout::single(uavs),
+            },
+        }
+    }
 }
 
-/// `fleet bench scale`: runs every fleet size in turn, writes `scale.json` and `scale.png`,
-/// prints the table. Exit code 1 if a run failed, was interrupted or saw a violation.
+/// `fleet bench scale`: runs every (exchange, fleet size) pair in turn, writes `scale.json`
+/// and `scale.png`, prints the table. Exit code 1 if a run failed, was interrupted or saw a
+/// violation.
 pub fn command(config: &ScaleConfig) -> anyhow::Result<Outcome> {
     std::fs::create_dir_all(&config.out)
         .with_context(|| format!("cannot create {}", config.out.display()))?;
@@ -208,15 +283,16 @@ pub fn command(config: &ScaleConfig) -> anyhow::Result<Outcome> {
     let mut rows = Vec::with_capacity(total);
     for (i, point) in config.points.iter().enumerate() {
         let side = 2.0 * point.half_extent_m();
+        let exchange = exchange_name(point.exchange);
         eprintln!(
-            "fleet: scale {}/{total}: {} UAVs, {} cars, region {side:.0} x {side:.0} m, {} s \
-             simulated",
+            "fleet: scale {}/{total}: {exchange}, {} UAVs, {} cars, region {side:.0} x {side:.0} \
+             m, {} s simulated",
             i + 1,
             point.uavs,
             point.cars(),
             config.duration_s,
         );
-        let label = format!("{} UAVs", point.uavs);
+        let label = format!("{exchange}, {} UAVs", point.uavs);
         let row = match rt.block_on(execute(&point.config, &label)) {
             Ok(record) => {
                 // The row is the record's, whether or not the run's files could be written.
@@ -235,7 +311,7 @@ pub fn command(config: &ScaleConfig) -> anyhow::Result<Outcome> {
         let stop = row.status == RowStatus::Interrupted;
         rows.push(row);
         if stop {
-            eprintln!("fleet: interrupted: the remaining fleet sizes do not run");
+            eprintln!("fleet: interrupted: the remaining runs do not run");
             break;
         }
     }
@@ -258,7 +334,7 @@ pub fn command(config: &ScaleConfig) -> anyhow::Result<Outcome> {
     let bad = rows.iter().filter(|r| !r.is_clean()).count();
     if bad > 0 {
         eprintln!(
-            "fleet: {bad} of {} fleet sizes failed (see scale.json)",
+            "fleet: {bad} of {} runs failed (see scale.json)",
             rows.len()
         );
         return Ok(Outcome::Failed);
@@ -294,6 +370,7 @@ mod tests {
             (4, 250.0, 8),
             (8, 250.0 * 2.0_f64.sqrt(), 16),
             (16, 500.0, 32),
+            (32, 250.0 * 8.0_f64.sqrt(), 64),
         ] {
             let (h, c) = scaled_region(250.0, 8, uavs);
             assert!((h - half).abs() < 1e-9, "{uavs}: {h}");
@@ -309,10 +386,29 @@ mod tests {
     }
 
     #[test]
+    fn every_exchange_name_is_the_one_a_scenario_reads() {
+        for name in Exchange::NAMES {
+            let s = Scenario::load(None, &[format!("comms.exchange={name}")]).unwrap();
+            assert_eq!(exchange_name(s.comms.exchange), name);
+        }
+    }
+
+    #[test]
     fn fleet_sizes_are_sorted_and_each_gets_its_scenario_and_directory() {
-        let c = parse(&["--uavs", "8,1,4,1", "--duration", "5", "--out", "o"]).unwrap();
+        let c = parse(&[
+            "--uavs",
+            "8,1,4,1",
+            "--exchange",
+            "sets",
+            "--duration",
+            "5",
+            "--out",
+            "o",
+        ])
+        .unwrap();
         let sizes: Vec<u32> = c.points.iter().map(|p| p.uavs).collect();
         assert_eq!(sizes, vec![1, 4, 8]);
+        assert_eq!(c.exchanges, vec![Exchange::Sets]);
         let four = &c.points[1];
         assert_eq!(four.config.scenario.uavs.count, 4);
         assert_eq!(four.cars(), 8);
@@ -322,18 +418,60 @@ mod tests {
         assert_eq!(four.config.mode, StepMode::Lockstep);
         assert_eq!(c.points[2].cars(), 16);
         assert_eq!(c.runs, PathBuf::from("o/runs"));
-        assert_eq!(c.points[0].config.out, PathBuf::from("o/runs/uavs-1"));
+        assert_eq!(c.points[0].config.out, PathBuf::from("o/runs/sets/uavs-1"));
+        let c = parse(&["--seed", "5", "--runs", "r", "--set", "targets.count=2"]).unwrap();
+        assert_eq!(c.points.len(), 2 * DEFAULT_UAVS.len());
+        assert_eq!(c.points[0].config.scenario.seed, 5);
+        assert_eq!(c.points[0].config.out, PathBuf::from("r/sets/uavs-1"));
+        assert_eq!(c.points[4].cars(), 8);
+        // The largest fleet the protocol carries.
+        let c = parse(&["--uavs", "32", "--exchange", "measurements"]).unwrap();
+        assert_eq!(c.points[0].config.scenario.uavs.count, 32);
+        assert_eq!(c.points[0].cars(), 64);
+    }
+
+    #[test]
+    fn every_exchange_runs_every_size_in_the_order_given() {
+        let c = parse(&["--uavs", "4,1", "--out", "o"]).unwrap();
+        assert_eq!(c.exchanges, vec![Exchange::Sets, Exchange::Measurements]);
+        let runs: Vec<(Exchange, u32)> = c.points.iter().map(|p| (p.exchange, p.uavs)).collect();
+        assert_eq!(
+            runs,
+            vec![
+                (Exchange::Sets, 1),
+                (Exchange::Sets, 4),
+                (Exchange::Measurements, 1),
+                (Exchange::Measurements, 4),
+            ]
+        );
+        for p in &c.points {
+            assert_eq!(p.config.scenario.comms.exchange, p.exchange);
+            let dir = format!("o/runs/{}/uavs-{}", exchange_name(p.exchange), p.uavs);
+            assert_eq!(p.config.out, PathBuf::from(dir));
+        }
         let ids: std::collections::BTreeSet<_> = c
             .points
             .iter()
             .map(|p| p.config.run_id.to_string())
             .collect();
-        assert_eq!(ids.len(), 3, "every run has its own id");
-        let c = parse(&["--seed", "5", "--runs", "r", "--set", "targets.count=2"]).unwrap();
-        assert_eq!(c.points.len(), DEFAULT_UAVS.len());
-        assert_eq!(c.points[0].config.scenario.seed, 5);
-        assert_eq!(c.points[0].config.out, PathBuf::from("r/uavs-1"));
-        assert_eq!(c.points[4].cars(), 8);
+        assert_eq!(ids.len(), 4, "every run has its own id");
+
+        // The order given, each once; the flag wins over `--set`.
+        let c = parse(&[
+            "--uavs",
+            "2",
+            "--exchange",
+            "measurements,sets,measurements",
+            "--set",
+            "comms.exchange=sets",
+        ])
+        .unwrap();
+        assert_eq!(c.exchanges, vec![Exchange::Measurements, Exchange::Sets]);
+        assert_eq!(c.points.len(), 2);
+        assert_eq!(
+            c.points[0].config.scenario.comms.exchange,
+            Exchange::Measurements
+        );
     }
 
     #[test]
@@ -341,10 +479,18 @@ mod tests {
         for (args, says) in [
             (&["--uavs", "0"][..], "--uavs 0: every fleet size must be 1"),
             (&["--uavs", "2,33"], "--uavs 33"),
+            (
+                &["--uavs", "1,2,4,8,16,32,64"],
+                "--uavs 64: every fleet size must be 1 to 32, the largest fleet the protocol \
+                 carries",
+            ),
             (&["--duration", "0"], "--duration 0: must be a positive"),
             (&["--duration=-3"], "--duration -3"),
             (&["--duration", "NaN"], "--duration NaN"),
             (&["--uavs", ""], "--uavs"),
+            (&["--exchange", "bogus"], "--exchange"),
+            (&["--exchange", "sets,bogus"], "--exchange"),
+            (&["--exchange", ""], "--exchange"),
             (&["--set", "region.half_extent_m=1"], "half_extent_m"),
         ] {
             let e = parse(args).unwrap_err();

@@ -1,71 +1,94 @@
 //! `scale.png`: four panels against the fleet size (log2 axis): the real-time factor (log
 //! axis, with the goal and real time marked), CPU per UAV-step, bytes per UAV per simulated
-//! second, and the largest agent's peak memory. A fleet size whose run failed has no point.
+//! second, and the largest agent's peak memory. Each panel has one line per exchange
+//! (`comms.exchange`), in the colour of its place in the bench's order ([`palette`] from the
+//! second colour on, the first being as red as the goal), named in the panel's legend. A run
+//! that failed has no point.
 
 use std::path::Path;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::ScaleConfig;
 use super::report::{GOAL_RTF_16, RowStatus, ScaleRow};
+use super::{ScaleConfig, exchange_name};
 use fleet_observe::pictures::{FONT, palette, short_number};
 
-/// One panel: its points (fleet size, value) and how its y axis reads.
+/// One exchange's points in a panel: (fleet size, value).
+struct Line {
+    name: &'static str,
+    colour: RGBColor,
+    points: Vec<(u32, f64)>,
+}
+
+/// One panel: its lines and how its y axis reads.
 struct Panel {
     caption: &'static str,
     y_desc: &'static str,
-    points: Vec<(u32, f64)>,
+    lines: Vec<Line>,
     /// A log10 y axis (for values spanning decades).
     log_y: bool,
     /// Horizontal reference lines: value and name.
     marks: Vec<(f64, String)>,
-    colour: RGBColor,
+    /// Where the legend goes: where the lines are not (a falling real-time factor leaves the
+    /// upper right free, the figures that grow from a 0-based axis the lower right).
+    legend: SeriesLabelPosition,
 }
 
 /// Writes the picture of `rows` to `path`.
 pub fn draw(rows: &[ScaleRow], config: &ScaleConfig, path: &Path) -> anyhow::Result<()> {
-    let ok: Vec<&ScaleRow> = rows.iter().filter(|r| r.status == RowStatus::Ok).collect();
-    let points = |f: &dyn Fn(&ScaleRow) -> Option<f64>| -> Vec<(u32, f64)> {
-        ok.iter()
-            .filter_map(|r| f(r).filter(|v| v.is_finite()).map(|v| (r.uavs, v)))
+    // One line per exchange, in the bench's order.
+    let lines = |f: &dyn Fn(&ScaleRow) -> Option<f64>| -> Vec<Line> {
+        config
+            .exchanges
+            .iter()
+            .enumerate()
+            .map(|(i, &exchange)| Line {
+                name: exchange_name(exchange),
+                colour: palette(i + 1),
+                points: rows
+                    .iter()
+                    .filter(|r| r.exchange == exchange && r.status == RowStatus::Ok)
+                    .filter_map(|r| f(r).filter(|v| v.is_finite()).map(|v| (r.uavs, v)))
+                    .collect(),
+            })
             .collect()
     };
     let panels = [
         Panel {
             caption: "real-time factor",
             y_desc: "simulated s per wall s",
-            points: points(&|r| r.real_time_factor().filter(|v| *v > 0.0)),
+            lines: lines(&|r| r.real_time_factor().filter(|v| *v > 0.0)),
             log_y: true,
             marks: vec![
                 (1.0, "real time".into()),
                 (GOAL_RTF_16, format!("goal at 16 UAVs: {GOAL_RTF_16}x")),
             ],
-            colour: palette(0),
+            legend: SeriesLabelPosition::UpperRight,
         },
         Panel {
             caption: "CPU per UAV-step (all processes)",
             y_desc: "ms",
-            points: points(&|r| r.cpu_ms_per_uav_step),
+            lines: lines(&|r| r.cpu_ms_per_uav_step),
             log_y: false,
             marks: Vec::new(),
-            colour: palette(1),
+            legend: SeriesLabelPosition::LowerRight,
         },
         Panel {
             caption: "estimates and token, per UAV",
             y_desc: "kB per simulated s",
-            points: points(&|r| r.bytes_per_uav_s().map(|b| b / 1e3)),
+            lines: lines(&|r| r.bytes_per_uav_s().map(|b| b / 1e3)),
             log_y: false,
             marks: Vec::new(),
-            colour: palette(2),
+            legend: SeriesLabelPosition::LowerRight,
         },
         Panel {
             caption: "peak memory of the largest agent",
             y_desc: "MB",
-            points: points(&|r| r.memory.agent_max_mb),
+            lines: lines(&|r| r.memory.agent_max_mb),
             log_y: false,
             marks: Vec::new(),
-            colour: palette(3),
+            legend: SeriesLabelPosition::LowerRight,
         },
     ];
     let root = BitMapBackend::new(path, (1100, 820)).into_drawing_area();
@@ -104,9 +127,9 @@ fn x_range(sizes: &[u32]) -> std::ops::Range<f64> {
 /// span of log10 values on a log axis.
 fn y_range(panel: &Panel) -> std::ops::Range<f64> {
     let values = panel
-        .points
+        .lines
         .iter()
-        .map(|p| p.1)
+        .flat_map(|l| l.points.iter().map(|p| p.1))
         .chain(panel.marks.iter().map(|m| m.0));
     if panel.log_y {
         let logs: Vec<f64> = values.filter(|v| *v > 0.0).map(f64::log10).collect();
@@ -121,6 +144,15 @@ fn y_range(panel: &Panel) -> std::ops::Range<f64> {
         let top = values.fold(0.0_f64, f64::max);
         0.0..if top > 0.0 { top * 1.12 } else { 1.0 }
     }
+}
+
+/// Whether `value` is at least every line's value at `uavs`.
+fn is_highest(panel: &Panel, uavs: u32, value: f64) -> bool {
+    panel
+        .lines
+        .iter()
+        .flat_map(|l| &l.points)
+        .all(|&(n, v)| n != uavs || v <= value)
 }
 
 fn draw_panel(
@@ -173,33 +205,40 @@ fn draw_panel(
                 PathElement::new(vec![(px, py), (px + 22, py)], colour.stroke_width(1))
             });
     }
-    let points: Vec<(f64, f64)> = panel.points.iter().map(|&(n, v)| (x(n), y(v))).collect();
-    let colour = panel.colour;
-    chart.draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))?;
-    chart.draw_series(points.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
-    chart.draw_series(
-        panel
-            .points
-            .iter()
-            // Each value beside its point, up and to the right of the marker.
-            .map(|&(n, v)| {
-                EmptyElement::at((x(n), y(v)))
-                    + Text::new(
-                        short_number(v),
-                        (7, -17),
-                        (FONT, 12).into_font().color(&BLACK),
-                    )
-            }),
-    )?;
-    if !panel.marks.is_empty() {
+    for line in &panel.lines {
+        let points: Vec<(f64, f64)> = line.points.iter().map(|&(n, v)| (x(n), y(v))).collect();
+        let colour = line.colour;
         chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font((FONT, 12))
-            .draw()?;
+            .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))?
+            .label(line.name)
+            .legend(move |(px, py)| {
+                PathElement::new(vec![(px, py), (px + 22, py)], colour.stroke_width(2))
+            });
+        chart.draw_series(points.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+        // Each value beside its point in its line's colour, to the right of the marker: above
+        // it where it is the highest at its size, below it elsewhere, so the values of two
+        // lines at one size do not cross.
+        chart.draw_series(line.points.iter().map(|&(n, v)| {
+            let offset = if is_highest(panel, n, v) {
+                (7, -17)
+            } else {
+                (7, 5)
+            };
+            EmptyElement::at((x(n), y(v)))
+                + Text::new(
+                    short_number(v),
+                    offset,
+                    (FONT, 12).into_font().color(&colour),
+                )
+        }))?;
     }
+    chart
+        .configure_series_labels()
+        .position(panel.legend.clone())
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 12))
+        .draw()?;
     Ok(())
 }
 
@@ -211,22 +250,31 @@ mod tests {
     fn axes_hold_every_size_and_value() {
         let x = x_range(&[1, 2, 16]);
         assert!(x.start < 0.0 && x.end > 4.0);
-        let panel = |log_y, points: Vec<(u32, f64)>| Panel {
+        let line = |name, points| Line {
+            name,
+            colour: palette(1),
+            points,
+        };
+        let panel = |log_y, sets: Vec<(u32, f64)>, measurements: Vec<(u32, f64)>| Panel {
             caption: "",
             y_desc: "",
-            points,
+            lines: vec![line("sets", sets), line("measurements", measurements)],
             log_y,
             marks: vec![(2.0, "goal".into())],
-            colour: palette(0),
+            legend: SeriesLabelPosition::UpperRight,
         };
-        // 0.08 to 16.5 on a log axis: 10^-2 to 10^2.
+        // 0.08 to 16.5 on a log axis, over both lines: 10^-2 to 10^2.
         assert_eq!(
-            y_range(&panel(true, vec![(1, 16.5), (16, 0.08)])),
+            y_range(&panel(true, vec![(1, 16.5)], vec![(16, 0.08)])),
             -2.0..2.0
         );
-        let linear = y_range(&panel(false, vec![(1, 10.0)]));
-        assert_eq!(linear.start, 0.0);
-        assert!(linear.end > 10.0);
+        let linear = panel(false, vec![(1, 10.0), (2, 20.0)], vec![(1, 30.0), (2, 5.0)]);
+        let range = y_range(&linear);
+        assert_eq!(range.start, 0.0);
+        assert!(range.end > 30.0);
+        // The highest value at a size is labelled above its point, whichever line it is on.
+        assert!(is_highest(&linear, 1, 30.0) && !is_highest(&linear, 1, 10.0));
+        assert!(is_highest(&linear, 2, 20.0) && !is_highest(&linear, 2, 5.0));
         assert_eq!(short_number(0.0812), "0.081");
         assert_eq!(short_number(16.49), "16.5");
         assert_eq!(short_number(1234.0), "1234");

@@ -1,6 +1,12 @@
-//! The rows of `fleet bench scale` (one per fleet size, [`ScaleRow`]) and the report they make:
-//! a [`BenchReport`] of kind `scale` with one case per fleet size, the goals and the headline
-//! figures at the top.
+//! The rows of `fleet bench scale` (one per run, an exchange and a fleet size, [`ScaleRow`]) and
+//! the report they make: a [`BenchReport`] of kind `scale` with one case per run (named
+//! `"<exchange> uavs=<N>"`), the goals and, per exchange, the headline figures at the top
+//! (`real_time_factor_16_<exchange>`, `bytes_per_uav_ratio_16_<exchange>`,
+//! `cpu_per_uav_step_ratio_16_<exchange>`, `agent_peak_mb_16_<exchange>`).
+//!
+//! A run's ratios ([`set_ratios`]) are against the [`REFERENCE_UAVS`]-UAV run **of the same
+//! exchange**: each exchange is its own scaling curve, the other's 4-UAV run is never the
+//! reference.
 //!
 //! Rates are per second of **simulated** time, so they do not depend on the machine's speed.
 //! Messages and bytes are those the observer received from the estimates' and the token's
@@ -12,18 +18,23 @@ use std::io::Write;
 
 use serde_json::{Value, json};
 
-use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint};
+use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint, exchange_name};
 use crate::run::RunRecord;
 use fleet_bench::{BenchCase, BenchReport, Metrics};
 use fleet_observe::results::resources::ProcessResources;
 use fleet_observe::results::summary::Summary;
+use protocol::scenario::Exchange;
 
 /// The issue's goal: real-time factor of a 16-UAV fleet (on 2 cores).
 pub const GOAL_RTF_16: f64 = 2.0;
 /// The issue's goal: bytes per UAV per second at 16 UAVs over the 4-UAV figure.
 pub const GOAL_BYTES_RATIO_16: f64 = 1.5;
+/// The issue's goal: CPU per UAV-step at 16 UAVs over the 4-UAV figure.
+pub const GOAL_CPU_RATIO_16: f64 = 1.5;
+/// The issue's goal: peak resident memory of the largest agent at 16 UAVs, MB.
+pub const GOAL_AGENT_PEAK_MB_16: f64 = 60.0;
 
-/// How a fleet size's run ended.
+/// How a run ended.
 #[derive(Clone, Debug, PartialEq)]
 pub enum RowStatus {
     /// It ran to its end and its results are written.
@@ -98,9 +109,11 @@ impl PeakMemory {
     }
 }
 
-/// One fleet size: what its run measured.
+/// One run, an exchange and a fleet size: what it measured.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScaleRow {
+    /// The exchange (`comms.exchange`).
+    pub exchange: Exchange,
     /// UAVs.
     pub uavs: u32,
     /// Side of the square region, metres.
@@ -138,14 +151,18 @@ pub struct ScaleRow {
     pub violations: u64,
     /// The run's iceoryx2 files left after it (must be 0).
     pub leftover_ipc_files: Option<usize>,
-    /// Bytes per UAV per second over the same figure at [`REFERENCE_UAVS`] UAVs (set by
-    /// [`set_ratios`]).
+    /// Bytes per UAV per second over the same figure at [`REFERENCE_UAVS`] UAVs under the
+    /// same exchange (set by [`set_ratios`]).
     pub bytes_per_uav_ratio_to_4: Option<f64>,
+    /// CPU per UAV-step over the same figure at [`REFERENCE_UAVS`] UAVs under the same
+    /// exchange (set by [`set_ratios`]).
+    pub cpu_per_uav_step_ratio_to_4: Option<f64>,
 }
 
 impl ScaleRow {
     fn empty(point: &ScalePoint, status: RowStatus) -> ScaleRow {
         ScaleRow {
+            exchange: point.exchange,
             uavs: point.uavs,
             region_side_m: 2.0 * point.half_extent_m(),
             cars: point.cars(),
@@ -165,6 +182,7 @@ impl ScaleRow {
             violations: 0,
             leftover_ipc_files: None,
             bytes_per_uav_ratio_to_4: None,
+            cpu_per_uav_step_ratio_to_4: None,
         }
     }
 
@@ -234,12 +252,13 @@ impl ScaleRow {
             && self.leftover_ipc_files.is_some_and(|n| n == 0)
     }
 
-    /// The line `fleet bench scale` prints when the size is done.
+    /// The line `fleet bench scale` prints when the run is done.
     pub fn progress_line(&self) -> String {
         let opt = |v: Option<f64>, f: &dyn Fn(f64) -> String| v.map_or_else(|| "-".into(), f);
         format!(
-            "{} UAVs, {} cars, {:.0} m: {}, real time x{}, CPU {} ms per UAV-step, {} B per UAV \
-             per s, agent peak {} MB, {} violations",
+            "{}, {} UAVs, {} cars, {:.0} m: {}, real time x{}, CPU {} ms per UAV-step, {} B per \
+             UAV per s, agent peak {} MB, {} violations",
+            exchange_name(self.exchange),
             self.uavs,
             self.cars,
             self.region_side_m,
@@ -252,10 +271,12 @@ impl ScaleRow {
         )
     }
 
-    /// The row as a report case: the sizes and the status as parameters, every measured
-    /// value as a metric (a value not measured is left out).
+    /// The row as a report case: the exchange, the sizes and the status as parameters, every
+    /// measured value as a metric (a value not measured is left out).
     pub fn to_case(&self) -> BenchCase {
+        let exchange = exchange_name(self.exchange);
         let mut params = BTreeMap::new();
+        params.insert("exchange".into(), json!(exchange));
         params.insert("uavs".into(), json!(self.uavs));
         params.insert("region_side_m".into(), json!(self.region_side_m));
         params.insert("cars".into(), json!(self.cars));
@@ -304,6 +325,10 @@ impl ScaleRow {
         );
         put("bytes_per_uav_s", self.bytes_per_uav_s());
         put("bytes_per_uav_ratio_to_4", self.bytes_per_uav_ratio_to_4);
+        put(
+            "cpu_per_uav_step_ratio_to_4",
+            self.cpu_per_uav_step_ratio_to_4,
+        );
         put("peak_rss_mb_world", self.memory.world_mb);
         put("peak_rss_mb_agent_max", self.memory.agent_max_mb);
         put("peak_rss_mb_agents_sum", self.memory.agents_sum_mb);
@@ -314,28 +339,46 @@ impl ScaleRow {
             self.leftover_ipc_files.map(|n| n as f64),
         );
         BenchCase {
-            name: format!("uavs={}", self.uavs),
+            name: format!("{exchange} uavs={}", self.uavs),
             params,
             metrics: m,
         }
     }
 }
 
-/// Sets every row's bytes per UAV per second over the [`REFERENCE_UAVS`]-UAV row's (none
-/// without that row or its figure).
+/// The run a row's ratios are against: the [`REFERENCE_UAVS`]-UAV run of `exchange` that
+/// went well.
+fn reference(rows: &[ScaleRow], exchange: Exchange) -> Option<&ScaleRow> {
+    rows.iter()
+        .find(|r| r.exchange == exchange && r.uavs == REFERENCE_UAVS && r.status == RowStatus::Ok)
+}
+
+/// Sets every row's bytes per UAV per second and CPU per UAV-step over the
+/// [`REFERENCE_UAVS`]-UAV row's of the same exchange (none without that row or its figure).
 pub fn set_ratios(rows: &mut [ScaleRow]) {
-    let reference = rows
+    let ratios: Vec<(Option<f64>, Option<f64>)> = rows
         .iter()
-        .find(|r| r.uavs == REFERENCE_UAVS && r.status == RowStatus::Ok)
-        .and_then(ScaleRow::bytes_per_uav_s)
-        .filter(|b| *b > 0.0);
-    for row in rows {
-        row.bytes_per_uav_ratio_to_4 = reference.and_then(|r| Some(row.bytes_per_uav_s()? / r));
+        .map(|row| {
+            let reference = reference(rows, row.exchange);
+            let ratio = |f: &dyn Fn(&ScaleRow) -> Option<f64>| {
+                let base = reference.and_then(f).filter(|b| *b > 0.0)?;
+                Some(f(row)? / base)
+            };
+            (
+                ratio(&ScaleRow::bytes_per_uav_s),
+                ratio(&|r| r.cpu_ms_per_uav_step),
+            )
+        })
+        .collect();
+    for (row, (bytes, cpu)) in rows.iter_mut().zip(ratios) {
+        row.bytes_per_uav_ratio_to_4 = bytes;
+        row.cpu_per_uav_step_ratio_to_4 = cpu;
     }
 }
 
-/// The report: the goals and the headline figures (the largest fleet's real-time factor and
-/// bytes ratio), one case per row.
+/// The report: the goals, the exchanges and, per exchange, the headline figures of its
+/// 16-UAV run (real-time factor, bytes and CPU ratios, largest agent's peak memory; `null`
+/// without a good 16-UAV run), one case per row.
 pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
     let mut report = BenchReport::new("scale");
     let s = &mut report.summary;
@@ -343,6 +386,8 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
     s.insert("duration_s".into(), json!(config.duration_s));
     s.insert("variant".into(), json!(config.variant.name()));
     s.insert("mode".into(), json!("lockstep"));
+    let names: Vec<&str> = config.exchanges.iter().map(|&e| exchange_name(e)).collect();
+    s.insert("exchanges".into(), json!(names));
     s.insert("reference_uavs".into(), json!(REFERENCE_UAVS));
     s.insert("goal_uavs".into(), json!(16));
     s.insert("goal_real_time_factor".into(), json!(GOAL_RTF_16));
@@ -351,21 +396,42 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
         "goal_bytes_per_uav_ratio".into(),
         json!(GOAL_BYTES_RATIO_16),
     );
-    let at_16 = rows
-        .iter()
-        .find(|r| r.uavs == 16 && r.status == RowStatus::Ok);
+    s.insert(
+        "goal_cpu_per_uav_step_ratio".into(),
+        json!(GOAL_CPU_RATIO_16),
+    );
+    s.insert("goal_agent_peak_mb".into(), json!(GOAL_AGENT_PEAK_MB_16));
     let number = |v: Option<f64>| {
         v.filter(|v| v.is_finite())
             .map_or(Value::Null, |v| json!(v))
     };
-    s.insert(
-        "real_time_factor_16".into(),
-        number(at_16.and_then(ScaleRow::real_time_factor)),
-    );
-    s.insert(
-        "bytes_per_uav_ratio_16".into(),
-        number(at_16.and_then(|r| r.bytes_per_uav_ratio_to_4)),
-    );
+    for &exchange in &config.exchanges {
+        let name = exchange_name(exchange);
+        let at_16 = rows
+            .iter()
+            .find(|r| r.exchange == exchange && r.uavs == 16 && r.status == RowStatus::Ok);
+        let headline: [(&str, Option<f64>); 4] = [
+            (
+                "real_time_factor_16",
+                at_16.and_then(ScaleRow::real_time_factor),
+            ),
+            (
+                "bytes_per_uav_ratio_16",
+                at_16.and_then(|r| r.bytes_per_uav_ratio_to_4),
+            ),
+            (
+                "cpu_per_uav_step_ratio_16",
+                at_16.and_then(|r| r.cpu_per_uav_step_ratio_to_4),
+            ),
+            (
+                "agent_peak_mb_16",
+                at_16.and_then(|r| r.memory.agent_max_mb),
+            ),
+        ];
+        for (key, value) in headline {
+            s.insert(format!("{key}_{name}"), number(value));
+        }
+    }
     s.insert(
         "violations".into(),
         json!(rows.iter().map(|r| r.violations).sum::<u64>()),
@@ -373,26 +439,36 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
     let failed: Vec<String> = rows
         .iter()
         .filter(|r| !r.is_clean())
-        .map(|r| format!("uavs={}: {}", r.uavs, r.status.text()))
+        .map(|r| {
+            format!(
+                "{} uavs={}: {}",
+                exchange_name(r.exchange),
+                r.uavs,
+                r.status.text()
+            )
+        })
         .collect();
     s.insert("failed_runs".into(), json!(failed));
     report.cases = rows.iter().map(ScaleRow::to_case).collect();
     report
 }
 
-/// Prints the headline columns, one line per fleet size.
+/// Prints the headline columns, one line per run.
 pub fn print_table(rows: &[ScaleRow], out: &mut impl Write) -> std::io::Result<()> {
     writeln!(
         out,
-        "{:>5} {:>7} {:>5} {:>7} {:>9} {:>12} {:>12} {:>7} {:>10} {:>10} {:>4}  status",
+        "{:<12} {:>5} {:>7} {:>5} {:>7} {:>9} {:>12} {:>9} {:>12} {:>7} {:>10} {:>10} {:>4}  \
+         status",
+        "exchange",
         "UAVs",
         "side m",
         "cars",
         "steps",
         "RTF",
         "CPU ms/UAV",
+        "CPU vs 4",
         "B/UAV/s",
-        "vs 4",
+        "B vs 4",
         "agent MB",
         "agents MB",
         "viol"
@@ -404,13 +480,16 @@ pub fn print_table(rows: &[ScaleRow], out: &mut impl Write) -> std::io::Result<(
     for r in rows {
         writeln!(
             out,
-            "{:>5} {:>7.0} {:>5} {:>7} {:>9} {:>12} {:>12} {:>7} {:>10} {:>10} {:>4}  {}",
+            "{:<12} {:>5} {:>7.0} {:>5} {:>7} {:>9} {:>12} {:>9} {:>12} {:>7} {:>10} {:>10} {:>4}  \
+             {}",
+            exchange_name(r.exchange),
             r.uavs,
             r.region_side_m,
             r.cars,
             r.steps,
             cell(r.real_time_factor(), 2),
             cell(r.cpu_ms_per_uav_step, 2),
+            cell(r.cpu_per_uav_step_ratio_to_4, 2),
             cell(r.bytes_per_uav_s(), 0),
             cell(r.bytes_per_uav_ratio_to_4, 2),
             cell(r.memory.agent_max_mb, 0),
@@ -425,10 +504,14 @@ pub fn print_table(rows: &[ScaleRow], out: &mut impl Write) -> std::io::Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use protocol::variant::Variant;
+    use std::path::PathBuf;
 
-    /// A row of `uavs` that ran, with `bytes` per second of estimates over 10 simulated s.
-    fn row(uavs: u32, estimate_bytes_per_s: f64) -> ScaleRow {
+    /// A row of `uavs` under `exchange` that ran 10 simulated s, with `estimate_bytes_per_s`
+    /// bytes of estimates per second and `cpu_ms` per UAV-step.
+    fn row(exchange: Exchange, uavs: u32, estimate_bytes_per_s: f64, cpu_ms: f64) -> ScaleRow {
         ScaleRow {
+            exchange,
             uavs,
             region_side_m: 100.0,
             cars: 1,
@@ -440,7 +523,7 @@ mod tests {
             wall_s_per_sim_s: Some(0.5),
             stepping_wall_s_per_sim_s: Some(0.4),
             cpu_s: Some(4.0),
-            cpu_ms_per_uav_step: Some(100.0),
+            cpu_ms_per_uav_step: Some(cpu_ms),
             world_and_agents_cpu_ms_per_uav_step: Some(90.0),
             estimates: Some(Rates {
                 msgs_per_s: 2.0 * f64::from(uavs),
@@ -459,28 +542,99 @@ mod tests {
             violations: 0,
             leftover_ipc_files: Some(0),
             bytes_per_uav_ratio_to_4: None,
+            cpu_per_uav_step_ratio_to_4: None,
+        }
+    }
+
+    fn sets(uavs: u32, bytes: f64, cpu_ms: f64) -> ScaleRow {
+        row(Exchange::Sets, uavs, bytes, cpu_ms)
+    }
+
+    fn measurements(uavs: u32, bytes: f64, cpu_ms: f64) -> ScaleRow {
+        row(Exchange::Measurements, uavs, bytes, cpu_ms)
+    }
+
+    fn ratios(rows: &[ScaleRow]) -> Vec<(Option<f64>, Option<f64>)> {
+        rows.iter()
+            .map(|r| (r.bytes_per_uav_ratio_to_4, r.cpu_per_uav_step_ratio_to_4))
+            .collect()
+    }
+
+    fn config(exchanges: Vec<Exchange>) -> ScaleConfig {
+        ScaleConfig {
+            points: Vec::new(),
+            exchanges,
+            seed: 1,
+            duration_s: 10.0,
+            variant: Variant::Paper,
+            out: PathBuf::from("o"),
+            runs: PathBuf::from("o/runs"),
         }
     }
 
     #[test]
-    fn bytes_ratios_are_per_uav_against_the_four_uav_row() {
-        let mut rows = vec![row(2, 200.0), row(4, 800.0), row(8, 4800.0)];
+    fn ratios_are_per_uav_against_the_four_uav_row_of_the_same_exchange() {
+        let mut rows = vec![
+            sets(2, 200.0, 50.0),
+            sets(4, 800.0, 100.0),
+            sets(8, 4800.0, 300.0),
+            measurements(2, 100.0, 40.0),
+            measurements(4, 400.0, 80.0),
+            measurements(8, 800.0, 120.0),
+        ];
         set_ratios(&mut rows);
-        let ratios: Vec<Option<f64>> = rows.iter().map(|r| r.bytes_per_uav_ratio_to_4).collect();
-        // 100, 200 and 600 bytes per UAV per second.
-        assert_eq!(ratios, vec![Some(0.5), Some(1.0), Some(3.0)]);
-        let mut without = vec![row(2, 200.0), row(8, 800.0)];
+        // Sets: 100, 200 and 600 bytes per UAV per second; measurements: 50, 100 and 100.
+        assert_eq!(
+            ratios(&rows),
+            vec![
+                (Some(0.5), Some(0.5)),
+                (Some(1.0), Some(1.0)),
+                (Some(3.0), Some(3.0)),
+                (Some(0.5), Some(0.5)),
+                (Some(1.0), Some(1.0)),
+                (Some(1.0), Some(1.5)),
+            ]
+        );
+        let mut without = vec![sets(2, 200.0, 50.0), sets(8, 800.0, 100.0)];
         set_ratios(&mut without);
-        assert!(without.iter().all(|r| r.bytes_per_uav_ratio_to_4.is_none()));
+        assert!(ratios(&without).iter().all(|r| *r == (None, None)));
+    }
+
+    #[test]
+    fn the_other_exchanges_four_uav_row_is_never_the_reference() {
+        // Only the sets have a 4-UAV row: the measurements' rows have no ratio.
+        let mut rows = vec![
+            sets(4, 800.0, 100.0),
+            sets(8, 1600.0, 200.0),
+            measurements(2, 100.0, 40.0),
+            measurements(8, 800.0, 120.0),
+        ];
+        set_ratios(&mut rows);
+        assert_eq!(
+            ratios(&rows),
+            vec![
+                (Some(1.0), Some(1.0)),
+                (Some(1.0), Some(2.0)),
+                (None, None),
+                (None, None),
+            ]
+        );
+        // Nor when its own 4-UAV run failed.
+        let mut failed = measurements(4, 400.0, 80.0);
+        failed.status = RowStatus::Failed("the world-server exited".into());
+        let mut rows = vec![sets(4, 800.0, 100.0), failed, measurements(8, 800.0, 120.0)];
+        set_ratios(&mut rows);
+        assert_eq!(ratios(&rows)[2], (None, None));
     }
 
     #[test]
     fn a_case_carries_every_measure_and_a_failed_row_only_its_status() {
-        let mut rows = vec![row(4, 800.0)];
+        let mut rows = vec![sets(4, 800.0, 100.0)];
         set_ratios(&mut rows);
         let case = rows[0].to_case();
-        assert_eq!(case.name, "uavs=4");
+        assert_eq!(case.name, "sets uavs=4");
         assert_eq!(case.params["status"], "ok");
+        assert_eq!(case.params["exchange"], "sets");
         for (key, value) in [
             ("real_time_factor", 2.0),
             ("cpu_ms_per_uav_step", 100.0),
@@ -490,22 +644,87 @@ mod tests {
             ("msgs_per_s", 9.0),
             ("bytes_per_uav_s", 200.0),
             ("bytes_per_uav_ratio_to_4", 1.0),
+            ("cpu_per_uav_step_ratio_to_4", 1.0),
             ("peak_rss_mb_agents_sum", 120.0),
             ("violations", 0.0),
         ] {
             assert_eq!(case.metrics.get(key), Some(value), "{key}");
         }
-        let mut failed = row(16, 0.0);
+        assert_eq!(
+            measurements(16, 0.0, 1.0).to_case().name,
+            "measurements uavs=16"
+        );
+        let mut failed = sets(16, 0.0, 100.0);
         failed.status = RowStatus::Failed("the world-server exited".into());
         assert!(!failed.is_clean());
-        assert!(
-            failed
-                .progress_line()
-                .contains("failed: the world-server exited")
-        );
-        let mut violated = row(1, 0.0);
+        let line = failed.progress_line();
+        assert!(line.starts_with("sets, 16 UAVs"), "{line}");
+        assert!(line.contains("failed: the world-server exited"), "{line}");
+        let mut violated = sets(1, 0.0, 100.0);
         violated.violations = 2;
         assert!(!violated.is_clean());
         assert!(rows[0].is_clean());
+    }
+
+    #[test]
+    fn the_summary_has_the_headline_figures_of_each_exchange() {
+        let mut failed = measurements(2, 100.0, 40.0);
+        failed.status = RowStatus::Interrupted;
+        let mut rows = vec![
+            sets(4, 800.0, 100.0),
+            sets(16, 6400.0, 250.0),
+            measurements(4, 400.0, 80.0),
+            measurements(16, 1600.0, 80.0),
+            failed,
+        ];
+        rows[1].memory.agent_max_mb = Some(400.0);
+        rows[3].memory.agent_max_mb = Some(55.0);
+        set_ratios(&mut rows);
+        let report = build(&config(vec![Exchange::Sets, Exchange::Measurements]), &rows);
+        let s = &report.summary;
+        assert_eq!(s["exchanges"], json!(["sets", "measurements"]));
+        assert_eq!(s["goal_cpu_per_uav_step_ratio"], 1.5);
+        assert_eq!(s["goal_agent_peak_mb"], 60.0);
+        assert_eq!(s["goal_bytes_per_uav_ratio"], 1.5);
+        for (key, value) in [
+            ("real_time_factor_16_sets", 2.0),
+            ("bytes_per_uav_ratio_16_sets", 2.0),
+            ("cpu_per_uav_step_ratio_16_sets", 2.5),
+            ("agent_peak_mb_16_sets", 400.0),
+            ("real_time_factor_16_measurements", 2.0),
+            ("bytes_per_uav_ratio_16_measurements", 1.0),
+            ("cpu_per_uav_step_ratio_16_measurements", 1.0),
+            ("agent_peak_mb_16_measurements", 55.0),
+        ] {
+            assert_eq!(s[key], value, "{key}");
+        }
+        assert!(!s.contains_key("real_time_factor_16"));
+        assert_eq!(
+            s["failed_runs"],
+            json!(["measurements uavs=2: interrupted"])
+        );
+        assert_eq!(report.cases.len(), 5);
+        // Without a 16-UAV run, the headline figures are null.
+        let report = build(&config(vec![Exchange::Measurements]), &rows[..1]);
+        assert_eq!(report.summary["exchanges"], json!(["measurements"]));
+        assert_eq!(
+            report.summary["real_time_factor_16_measurements"],
+            Value::Null
+        );
+    }
+
+    #[test]
+    fn the_table_has_a_line_per_run_with_its_exchange() {
+        let mut rows = vec![sets(4, 800.0, 100.0), measurements(4, 400.0, 80.0)];
+        set_ratios(&mut rows);
+        let mut out = Vec::new();
+        print_table(&rows, &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 3, "{text}");
+        assert!(lines[0].starts_with("exchange"), "{text}");
+        assert!(lines[0].contains("CPU vs 4"), "{text}");
+        assert!(lines[1].starts_with("sets "), "{text}");
+        assert!(lines[2].starts_with("measurements "), "{text}");
     }
 }

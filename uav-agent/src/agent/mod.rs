@@ -326,10 +326,17 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
                 outbox.with_set_deltas()
             }
         }
+        // Whole sets now and then where the radio loses messages or limits the range (they
+        // carry what was lost or is out of reach); on perfect links only in the first message
+        // and when a peer (re)joins or asks.
         Exchange::Measurements => message::EstimateOutbox::new(
             config.uav,
             incarnation,
-            u64::from(config.scenario.comms.whole_sets_every),
+            if radio.loses_or_limits() {
+                u64::from(config.scenario.comms.whole_sets_every)
+            } else {
+                u64::MAX
+            },
         ),
     };
     let mut agent = Agent {
@@ -337,16 +344,13 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         incarnation,
         outbox,
         exchange,
+        missed: 0,
         measurement: None,
         // The observers' copy of this agent's sets, over the local IPC (no radio): deltas.
         state_outbox: (exchange == Exchange::Measurements).then(|| {
-            message::EstimateOutbox::new(
-                config.uav,
-                incarnation,
-                estimator_config.oem_full_every,
-            )
-            .with_set_deltas()
-            .without_map()
+            message::EstimateOutbox::new(config.uav, incarnation, estimator_config.oem_full_every)
+                .with_set_deltas()
+                .without_map()
         }),
         inbox: message::EstimateInbox::new(),
         radio,
@@ -442,6 +446,8 @@ struct PeerInfo {
     /// dropped for want of its base. What [`Agent::gather`] awaits.
     heard_step: Option<u64>,
     incarnation: Option<u64>,
+    /// The message counter of the last estimate read from this incarnation.
+    last_seq: Option<u64>,
     /// Estimates received ahead of this agent's step.
     pending: Vec<PeerMessage>,
 }
@@ -466,6 +472,9 @@ struct Agent<'a> {
     /// Under the measurement exchange, the observers' copy of this agent's sets once it
     /// applied its peers' measurements ([`WireKind::State`]).
     state_outbox: Option<message::EstimateOutbox>,
+    /// Peers this agent missed an estimate of since its last estimate, bit `i` for UAV `i`:
+    /// its next estimate asks them for whole sets.
+    missed: u32,
     /// The peers' sets, the bases of their deltas.
     inbox: message::EstimateInbox,
     /// The simulated links ([`protocol::radio`]).
@@ -731,8 +740,7 @@ impl Agent<'_> {
         match self.exchange {
             Exchange::Sets => self.estimator.step(frame),
             Exchange::Measurements => {
-                let (report, measurement) =
-                    self.estimator.step_sharing(frame, self.config.uav)?;
+                let (report, measurement) = self.estimator.step_sharing(frame, self.config.uav)?;
                 self.measurement = Some(measurement);
                 Ok(report)
             }
@@ -785,13 +793,13 @@ impl Agent<'_> {
             self.full_map_from = None;
         }
         let mut msg = match (&self.measurement, self.exchange) {
-            (Some(m), Exchange::Measurements) => {
-                self.outbox.compose_measurement(self.estimator.state_mut(), m)
-            }
+            (Some(m), Exchange::Measurements) => self
+                .outbox
+                .compose_measurement(self.estimator.state_mut(), m),
             _ => self.outbox.compose(self.estimator.state_mut()),
         };
         msg.stats = self.stats();
-        msg.want_whole = self.inbox.wanted();
+        msg.want_whole = self.inbox.wanted() | std::mem::take(&mut self.missed);
         let bytes = message::to_bytes(&msg)?;
         self.links
             .send_wire(WireKind::Estimate, self.run_tag, self.config.uav, k, &bytes)?;
@@ -970,6 +978,20 @@ impl Agent<'_> {
             self.full_map_from = Some(self.full_map_from.map_or(from, |f| f.min(from)));
             info.incarnation = Some(p.incarnation);
             info.fused_step = None;
+            info.last_seq = None;
+        }
+        // Under the measurement exchange on links that lose nothing, a message missed (this
+        // agent was stalled, its buffer overflowed) is a measurement never applied: ask the
+        // peer for its whole sets. Lossy and limited links have them periodically instead.
+        let missed = info.last_seq.is_some_and(|last| p.seq > last + 1);
+        info.last_seq = Some(p.seq);
+        if missed && self.exchange == Exchange::Measurements && !self.radio.loses_or_limits() {
+            tracing::info!(
+                peer = p.uav,
+                seq = p.seq,
+                "estimates missed: asking for whole sets"
+            );
+            self.missed |= uav_bit(p.uav);
         }
         info.heard_step = info.heard_step.max(Some(p.step));
         info.pending.push(p);

@@ -413,7 +413,10 @@ pub struct PeerMessage {
 impl PeerMessage {
     /// Validates a received message that holds no deltas (a message with delta sets needs an
     /// [`EstimateInbox`]: here it is [`EstimateReadError::MissingBase`]).
-    pub fn from_msg(msg: &EstimateMsg, config: &EstimatorConfig) -> Result<Self, EstimateReadError> {
+    pub fn from_msg(
+        msg: &EstimateMsg,
+        config: &EstimatorConfig,
+    ) -> Result<Self, EstimateReadError> {
         rebuild(msg, config, None).map(|(message, _)| message)
     }
 
