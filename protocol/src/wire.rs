@@ -11,8 +11,9 @@ use serde::{Deserialize, Serialize};
 use crate::camera::CameraPose;
 use sets::raster::delta::SetCode;
 
-/// Version of every message layout in this module and in [`crate::frame`]. 6: estimates carry
-/// the sender's `P^g` ([`EstimateMsg::free_ground`]).
+/// Version of every message layout in this module and in [`crate::frame`]. 7: an estimate's
+/// sets are optional ([`SetsMsg`]) and it may carry its frame's measurement
+/// ([`MeasurementMsg`]); agents also send [`WireKind::State`] messages.
 pub const PROTOCOL_VERSION: u32 = 7;
 /// Targets a truth message can hold.
 pub const TRUTH_MAX_TARGETS: usize = 64;
