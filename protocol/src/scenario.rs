@@ -468,7 +468,7 @@ impl Planner {
 /// | `latency_ms` | `0.0` | `0 <= value <= 10000` | an estimate of step `k` is fused at the receiver's first step whose time is at least `t(k) + latency`, `ceil(latency / cvs_period_s)` steps later, dilated by that lag; tokens are not delayed (the ring's hops take no simulated time, like the planners' computing) |
 ///
 /// | `exchange` | `"sets"` | `"sets"`, `"measurements"` | what estimates carry ([`Exchange`]) |
-/// | `whole_sets_every` | `20` | `1 <= value <= 10000` | under `exchange = "measurements"` with some `loss` or a finite `range_m`, an estimate also carries the sender's whole sets every this many messages, which relay what a lost message or the range kept from a receiver; on any links, whole sets also go in an agent's first message, after a peer (re)joined and to a peer that missed a message |
+/// | `whole_sets_every` | `20` | `1 <= value <= 10000` | under `exchange = "measurements"` with some `loss` or a finite `range_m`, an estimate also carries the sender's whole sets every this many messages, which relay what a lost message or the range kept from a receiver; on any links, whole sets also go in an agent's first message, after a peer joined late or restarted, and to a peer that missed a message |
 ///
 /// `latency_ms` is bounded because every receiver, and the observer, holds the estimates in
 /// flight: 10 s is 20 steps of the default scenario's estimates.

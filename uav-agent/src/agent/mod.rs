@@ -4,8 +4,9 @@
 //! 1. the estimator folds the frame in (predict, correct);
 //! 2. the agent publishes its estimate on `{run}/uav/{i}/estimate`: its corrected sets
 //!    (`comms.exchange = "sets"`), or its frame's measurement (`"measurements"`,
-//!    [`crate::estimator::exchange`]) with its whole sets every `comms.whole_sets_every` steps
-//!    and after a peer (re)joined;
+//!    [`crate::estimator::exchange`]) with its whole sets in its first message, for a peer
+//!    that joined late or asked, and every `comms.whole_sets_every` messages on lossy or
+//!    range-limited links;
 //! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are taken in
 //!    when they come) and, once the wait is over, takes them in by ascending peer: it applies
 //!    their measurements (late ones at their own clock) and fuses their sets (dilated by the
@@ -973,9 +974,14 @@ impl Agent<'_> {
             }
             // A newcomer or a restarted peer needs the whole map to rebuild its own. It goes
             // with the estimate of the step after the peer's, whenever this message arrived:
-            // in lockstep that keeps the traffic, like everything else, reproducible.
-            let from = p.step + 1;
-            self.full_map_from = Some(self.full_map_from.map_or(from, |f| f.min(from)));
+            // in lockstep that keeps the traffic, like everything else, reproducible. Under
+            // the measurement exchange a peer that starts with the run (its first estimate is
+            // of step 0) has missed nothing: the measurements bring it everything.
+            let started_with_run = p.step == 0 && info.incarnation.is_none();
+            if !(started_with_run && self.exchange == Exchange::Measurements) {
+                let from = p.step + 1;
+                self.full_map_from = Some(self.full_map_from.map_or(from, |f| f.min(from)));
+            }
             info.incarnation = Some(p.incarnation);
             info.fused_step = None;
             info.last_seq = None;
