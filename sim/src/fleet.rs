@@ -125,9 +125,11 @@ impl Fleet {
         let config = EstimatorConfig::from_scenario(scenario);
         let n = world.uav_count();
         let exchange = scenario.comms.exchange;
+        // On perfect links an agent sends whole sets in its first measurement message only
+        // (`comms.whole_sets_every` is for lossy or range-limited links).
         let full_every = match exchange {
             Exchange::Sets => options.oem_full_every.unwrap_or(config.oem_full_every),
-            Exchange::Measurements => u64::from(scenario.comms.whole_sets_every),
+            Exchange::Measurements => u64::MAX,
         };
         Ok(Fleet {
             estimators: (0..n).map(|_| Estimator::new(config.clone())).collect(),

@@ -24,9 +24,9 @@ fn scenario(seed: u64, exchange: Exchange) -> Scenario {
     s.camera.cols = 120;
     s.targets.count = 6;
     s.uavs.count = 3;
+    // On perfect links whole sets go in the first message only: what the measurements alone
+    // do.
     s.comms.exchange = exchange;
-    // Whole sets in the first message only: what the measurements alone do.
-    s.comms.whole_sets_every = 10_000;
     s
 }
 

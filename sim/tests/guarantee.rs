@@ -197,7 +197,6 @@ fn exchanged_measurements_keep_the_guarantee() {
     for seed in [4, 6] {
         let mut s = small_scenario(seed);
         s.comms.exchange = protocol::scenario::Exchange::Measurements;
-        s.comms.whole_sets_every = 7;
         let out = run(&s, 200, true);
         assert!(out.checks > 0 && out.identified > 0);
         eprintln!("seed {seed} measurements: {} identified", out.identified);
