@@ -505,6 +505,14 @@ pub enum Exchange {
 impl Exchange {
     /// Every choice's name, as written in a scenario.
     pub const NAMES: [&'static str; 2] = ["sets", "measurements"];
+
+    /// The choice's name, as written in a scenario (one of [`Exchange::NAMES`]).
+    pub fn name(self) -> &'static str {
+        match self {
+            Exchange::Sets => "sets",
+            Exchange::Measurements => "measurements",
+        }
+    }
 }
 
 impl Default for Scenario {

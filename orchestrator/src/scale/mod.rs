@@ -89,14 +89,6 @@ pub struct BenchScaleArgs {
     pub runs: Option<PathBuf>,
 }
 
-/// The name of an exchange as a scenario writes it (one of [`Exchange::NAMES`]).
-pub fn exchange_name(exchange: Exchange) -> &'static str {
-    match exchange {
-        Exchange::Sets => "sets",
-        Exchange::Measurements => "measurements",
-    }
-}
-
 /// One run of the bench, an exchange and a fleet size, its scenario resolved.
 #[derive(Debug, Clone)]
 pub struct ScalePoint {
@@ -283,7 +275,7 @@ pub fn command(config: &ScaleConfig) -> anyhow::Result<Outcome> {
     let mut rows = Vec::with_capacity(total);
     for (i, point) in config.points.iter().enumerate() {
         let side = 2.0 * point.half_extent_m();
-        let exchange = exchange_name(point.exchange);
+        let exchange = point.exchange.name();
         eprintln!(
             "fleet: scale {}/{total}: {exchange}, {} UAVs, {} cars, region {side:.0} x {side:.0} \
              m, {} s simulated",
@@ -389,7 +381,7 @@ mod tests {
     fn every_exchange_name_is_the_one_a_scenario_reads() {
         for name in Exchange::NAMES {
             let s = Scenario::load(None, &[format!("comms.exchange={name}")]).unwrap();
-            assert_eq!(exchange_name(s.comms.exchange), name);
+            assert_eq!(s.comms.exchange.name(), name);
         }
     }
 
@@ -446,7 +438,7 @@ mod tests {
         );
         for p in &c.points {
             assert_eq!(p.config.scenario.comms.exchange, p.exchange);
-            let dir = format!("o/runs/{}/uavs-{}", exchange_name(p.exchange), p.uavs);
+            let dir = format!("o/runs/{}/uavs-{}", p.exchange.name(), p.uavs);
             assert_eq!(p.config.out, PathBuf::from(dir));
         }
         let ids: std::collections::BTreeSet<_> = c

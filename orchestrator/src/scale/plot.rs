@@ -10,8 +10,8 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use super::ScaleConfig;
 use super::report::{GOAL_RTF_16, RowStatus, ScaleRow};
-use super::{ScaleConfig, exchange_name};
 use fleet_observe::pictures::{FONT, palette, short_number};
 
 /// One exchange's points in a panel: (fleet size, value).
@@ -44,7 +44,7 @@ pub fn draw(rows: &[ScaleRow], config: &ScaleConfig, path: &Path) -> anyhow::Res
             .iter()
             .enumerate()
             .map(|(i, &exchange)| Line {
-                name: exchange_name(exchange),
+                name: exchange.name(),
                 colour: palette(i + 1),
                 points: rows
                     .iter()

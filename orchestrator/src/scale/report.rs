@@ -18,7 +18,7 @@ use std::io::Write;
 
 use serde_json::{Value, json};
 
-use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint, exchange_name};
+use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint};
 use crate::run::RunRecord;
 use fleet_bench::{BenchCase, BenchReport, Metrics};
 use fleet_observe::results::resources::ProcessResources;
@@ -258,7 +258,7 @@ impl ScaleRow {
         format!(
             "{}, {} UAVs, {} cars, {:.0} m: {}, real time x{}, CPU {} ms per UAV-step, {} B per \
              UAV per s, agent peak {} MB, {} violations",
-            exchange_name(self.exchange),
+            self.exchange.name(),
             self.uavs,
             self.cars,
             self.region_side_m,
@@ -274,7 +274,7 @@ impl ScaleRow {
     /// The row as a report case: the exchange, the sizes and the status as parameters, every
     /// measured value as a metric (a value not measured is left out).
     pub fn to_case(&self) -> BenchCase {
-        let exchange = exchange_name(self.exchange);
+        let exchange = self.exchange.name();
         let mut params = BTreeMap::new();
         params.insert("exchange".into(), json!(exchange));
         params.insert("uavs".into(), json!(self.uavs));
@@ -386,7 +386,7 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
     s.insert("duration_s".into(), json!(config.duration_s));
     s.insert("variant".into(), json!(config.variant.name()));
     s.insert("mode".into(), json!("lockstep"));
-    let names: Vec<&str> = config.exchanges.iter().map(|&e| exchange_name(e)).collect();
+    let names: Vec<&str> = config.exchanges.iter().map(|&e| e.name()).collect();
     s.insert("exchanges".into(), json!(names));
     s.insert("reference_uavs".into(), json!(REFERENCE_UAVS));
     s.insert("goal_uavs".into(), json!(16));
@@ -406,7 +406,7 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
             .map_or(Value::Null, |v| json!(v))
     };
     for &exchange in &config.exchanges {
-        let name = exchange_name(exchange);
+        let name = exchange.name();
         let at_16 = rows
             .iter()
             .find(|r| r.exchange == exchange && r.uavs == 16 && r.status == RowStatus::Ok);
@@ -439,14 +439,7 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
     let failed: Vec<String> = rows
         .iter()
         .filter(|r| !r.is_clean())
-        .map(|r| {
-            format!(
-                "{} uavs={}: {}",
-                exchange_name(r.exchange),
-                r.uavs,
-                r.status.text()
-            )
-        })
+        .map(|r| format!("{} uavs={}: {}", r.exchange.name(), r.uavs, r.status.text()))
         .collect();
     s.insert("failed_runs".into(), json!(failed));
     report.cases = rows.iter().map(ScaleRow::to_case).collect();
@@ -482,7 +475,7 @@ pub fn print_table(rows: &[ScaleRow], out: &mut impl Write) -> std::io::Result<(
             out,
             "{:<12} {:>5} {:>7.0} {:>5} {:>7} {:>9} {:>12} {:>9} {:>12} {:>7} {:>10} {:>10} {:>4}  \
              {}",
-            exchange_name(r.exchange),
+            r.exchange.name(),
             r.uavs,
             r.region_side_m,
             r.cars,
