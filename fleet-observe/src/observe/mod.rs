@@ -945,7 +945,9 @@ impl Observer<'_> {
     /// With a link latency, keeps step `k`'s estimates for the steps that fuse them.
     fn keep_sent(&mut self, k: u64, estimates: Vec<ObservedEstimate>) {
         let d = self.radio.latency_steps();
-        if d > 0 {
+        // Under the measurement exchange the agents' own state messages are measured: nothing
+        // is fused later.
+        if d > 0 && self.exchange == Exchange::Sets {
             // Kept for the steps `k + 1 ..= k + d`, which fuse them.
             self.sent.insert(k, estimates);
             self.sent = self.sent.split_off(&k.saturating_add(1).saturating_sub(d));

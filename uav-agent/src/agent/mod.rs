@@ -836,9 +836,10 @@ impl Agent<'_> {
         }
     }
 
-    /// Fuses the awaited peers' estimates of step `k`, waiting for them (bounded). They are
-    /// taken in once the wait is over, all together in the order of the peers: measurements
-    /// are not applied in whatever order they happened to come.
+    /// Fuses the awaited peers' estimates of step `k`, waiting for them (bounded). Sets are
+    /// fused as they come (intersection does not depend on the order, so the work overlaps
+    /// the wait); measurements are applied once the wait is over, all together in the order
+    /// of the peers, not in whatever order they happened to come.
     fn gather(&mut self, k: u64) {
         // The world lists the nodes before every step: a peer it serves is alive unless it
         // died since, which the waits below notice. Only a peer that (re)joined needs a look.
@@ -852,6 +853,9 @@ impl Agent<'_> {
         loop {
             let before = self.clock.enter(phase::FUSE);
             self.drain_estimates();
+            if self.exchange == Exchange::Sets {
+                self.fuse_pending(k);
+            }
             self.clock.enter(before);
             let missing = self.awaited_peers().iter().any(|j| {
                 self.peers
