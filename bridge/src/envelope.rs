@@ -16,15 +16,16 @@
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, FrameHeader, TargetBox};
 use protocol::wire::{UavCommand, WireHeader};
 
-/// Version of the envelope layout, first in every payload.
-pub const ENVELOPE_VERSION: u32 = 1;
+/// Version of the envelope layout, first in every payload. 2: a frame's `served` mask is 64
+/// bits ([`protocol::wire::UavMask`]).
+pub const ENVELOPE_VERSION: u32 = 2;
 
 /// Largest wire payload (estimate or token) accepted from another host, bytes. The largest
 /// estimate of a default run is a few hundred KB; anything above this is refused unread.
 pub const MAX_WIRE_PAYLOAD: usize = 64 << 20;
 
 /// Bytes of an encoded [`FrameHeader`].
-const FRAME_HEADER_BYTES: usize = 8 + 8 + 8 + 5 * 4 + 3 * 8 + 3 * 8 + 2 * 8 + 8;
+const FRAME_HEADER_BYTES: usize = 8 + 8 + 8 + 4 * 4 + 8 + 3 * 8 + 3 * 8 + 2 * 8 + 8;
 /// Bytes of an encoded [`TargetBox`].
 const BOX_BYTES: usize = 5 * 4;
 /// Bytes of an encoded [`UavCommand`] after the version.
@@ -80,9 +81,10 @@ pub fn encode_frame(frame: &CvsFrame, out: &mut Vec<u8>) {
     put_u64(out, h.run_tag);
     put_u64(out, h.step);
     put_f64(out, h.time_s);
-    for v in [h.uav, h.rows, h.cols, boxes.len() as u32, h.served] {
+    for v in [h.uav, h.rows, h.cols, boxes.len() as u32] {
         put_u32(out, v);
     }
+    put_u64(out, h.served);
     for v in h.camera_position {
         put_f64(out, v);
     }
@@ -112,7 +114,8 @@ pub fn decode_frame_into(bytes: &[u8], frame: &mut CvsFrame) -> Result<(), Envel
     let run_tag = r.u64();
     let step = r.u64();
     let time_s = r.f64();
-    let [uav, rows, cols, box_count, served] = [r.u32(), r.u32(), r.u32(), r.u32(), r.u32()];
+    let [uav, rows, cols, box_count] = [r.u32(), r.u32(), r.u32(), r.u32()];
+    let served = r.u64();
     let n = rows as usize * cols as usize;
     if n > FRAME_MAX_PIXELS || box_count as usize > FRAME_MAX_BOXES {
         return Err(EnvelopeError::FrameSize {
@@ -314,7 +317,8 @@ mod tests {
         f.header.rows = 4;
         f.header.cols = 5;
         f.header.box_count = 1;
-        f.header.served = 0b1011;
+        // UAV 63's bit too: the mask crosses whole.
+        f.header.served = 0b1011 | protocol::wire::uav_bit(63);
         f.header.camera_position = [1.0, -2.0, 80.0];
         f.header.camera_yaw = 0.25;
         f.header.depth_noise = [0.95, 1.05];
@@ -340,6 +344,7 @@ mod tests {
         let mut bytes = Vec::new();
         encode_frame(&sent, &mut bytes);
         assert_eq!(bytes.len(), 4 + FRAME_HEADER_BYTES + BOX_BYTES + 20 * 5);
+        assert_eq!(FRAME_HEADER_BYTES, 120);
         let mut got = CvsFrame::new_boxed();
         decode_frame_into(&bytes, &mut got).unwrap();
         assert_eq!(got.header, sent.header);

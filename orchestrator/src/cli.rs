@@ -53,7 +53,7 @@ pub enum BenchKind {
     Estimator(fleet_bench::estimator::BenchEstimatorArgs),
     /// One MPC guidance decision.
     Guidance(fleet_bench::guidance::BenchGuidanceArgs),
-    /// Whole runs of 1 to 32 UAVs under both exchanges, the region scaled with the fleet:
+    /// Whole runs of 1 to 64 UAVs under both exchanges, the region scaled with the fleet:
     /// speed, CPU, traffic and memory per fleet size.
     Scale(crate::scale::BenchScaleArgs),
 }

@@ -9,12 +9,14 @@ use std::mem::MaybeUninit;
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::camera::{Camera, CameraModel, CameraPose};
+use crate::wire::UavMask;
 use sets::math::Point3;
 
 /// Pixels a frame can hold: the default camera, 360 x 480.
 pub const FRAME_MAX_PIXELS: usize = 360 * 480;
-/// Target boxes a frame can hold.
-pub const FRAME_MAX_BOXES: usize = 64;
+/// Target boxes a frame can hold: every car a scenario may have
+/// ([`crate::wire::TRUTH_MAX_TARGETS`]), so no car in view ever goes without its box.
+pub const FRAME_MAX_BOXES: usize = 128;
 
 /// The class the vision system gives a pixel.
 #[repr(u8)]
@@ -74,7 +76,7 @@ impl TargetBox {
 /// Everything about a frame but its pixels.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("setfleet.FrameHeader.v2")]
+#[type_name("setfleet.FrameHeader.v3")]
 pub struct FrameHeader {
     /// Hash of the run id ([`crate::service::RunId::tag`]).
     pub run_tag: u64,
@@ -90,10 +92,11 @@ pub struct FrameHeader {
     pub cols: u32,
     /// Boxes in use.
     pub box_count: u32,
-    /// The agents the world serves at this step, bit `i` for UAV `i`: every one of them got
-    /// this step's frame and is awaited. The same mask goes to every agent, so all agree on
-    /// whose estimates and whose turn in the token ring to wait for.
-    pub served: u32,
+    /// The agents the world serves at this step: every one of them got this step's frame and
+    /// is awaited. The same mask goes to every agent, so all agree on whose estimates and
+    /// whose turn in the token ring to wait for. At offset 40, 8-aligned: the header has no
+    /// padding.
+    pub served: UavMask,
     /// Optical centre, world frame.
     pub camera_position: [f64; 3],
     /// Yaw of the optical axis.
@@ -111,7 +114,7 @@ pub struct FrameHeader {
 /// One camera frame: header, boxes, then depth and labels row-major (`r * cols + c`).
 #[repr(C)]
 #[derive(ZeroCopySend)]
-#[type_name("setfleet.CvsFrame.v2")]
+#[type_name("setfleet.CvsFrame.v3")]
 pub struct CvsFrame {
     /// Metadata.
     pub header: FrameHeader,
@@ -263,6 +266,22 @@ mod tests {
     fn frame_is_864_kb_of_pixels() {
         assert!(std::mem::size_of::<CvsFrame>() >= 864_000);
         assert!(std::mem::size_of::<CvsFrame>() < 870_000);
+    }
+
+    #[test]
+    fn the_header_is_packed_with_its_mask_aligned() {
+        use std::mem::{align_of, offset_of, size_of};
+        // Every field at its natural alignment and no hole between them: the sum of the
+        // fields' sizes is the header's.
+        assert_eq!(offset_of!(FrameHeader, served), 40);
+        assert_eq!(offset_of!(FrameHeader, served) % align_of::<UavMask>(), 0);
+        assert_eq!(offset_of!(FrameHeader, camera_position), 48);
+        assert_eq!(
+            size_of::<FrameHeader>(),
+            3 * 8 + 4 * 4 + 8 + 3 * 8 + 3 * 8 + 2 * 8 + 8
+        );
+        assert_eq!(offset_of!(CvsFrame, boxes), size_of::<FrameHeader>());
+        assert_eq!(offset_of!(CvsFrame, depth) % align_of::<f32>(), 0);
     }
 
     #[test]

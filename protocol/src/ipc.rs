@@ -594,6 +594,63 @@ mod tests {
         assert_eq!(run_files(&run).unwrap(), Vec::<std::path::PathBuf>::new());
     }
 
+    /// What the largest fleet needs of each service on one host at worst: all its agents
+    /// and the world there, both observers, [`RESTART_OVERLAP`] restarted agents whose dead
+    /// predecessors are not cleaned up yet, and the host's bridge (one node that publishes
+    /// what comes from other hosts, one that subscribes to what goes to them) when some agent
+    /// is elsewhere.
+    #[test]
+    fn the_largest_fleet_fits_every_services_limits() {
+        assert_eq!(MAX_UAVS, 64);
+        let run = RunId::new(&format!("ipc-fleet-{}", std::process::id())).unwrap();
+        {
+            let node = RunNode::new(&run, "agent-0", SignalHandlingMode::Disabled).unwrap();
+            // Every process of the run, the restarted ones and both bridge nodes.
+            let nodes = MAX_UAVS + RESTART_OVERLAP + 1 + MAX_OBSERVERS + 2;
+            // UAV 0's estimates: the other 63 agents, the observers, the restarted agents and
+            // the bridge (one agent less when the bridge is there: 63 + 2 + 2 + 1 at most).
+            let est = node.open_estimate(0).unwrap();
+            let readers = (MAX_UAVS - 1) + MAX_OBSERVERS + RESTART_OVERLAP + 1;
+            assert!(est.static_config().max_subscribers() >= readers);
+            assert!(est.static_config().max_nodes() >= nodes);
+            let subscribers: Vec<_> = (0..readers)
+                .map(|_| est.subscriber_builder().create().unwrap())
+                .collect();
+            // The token: sent by every agent, the restarted ones and the bridge (which
+            // publishes the tokens of remote agents, so 63 local ones at most), read by as
+            // many and the observers.
+            let guidance = node.open_guidance().unwrap();
+            let senders = (MAX_UAVS - 1) + RESTART_OVERLAP + 1;
+            assert!(guidance.static_config().max_publishers() >= senders.max(MAX_UAVS));
+            assert!(guidance.static_config().max_subscribers() >= readers);
+            let publishers: Vec<_> = (0..senders)
+                .map(|_| RunNode::wire_publisher(&guidance, 64).unwrap())
+                .collect();
+            // Agent 0's wake-ups: the world, the 63 other agents, the observers, the
+            // restarted agents and the bridge.
+            let wake = node.open_agent_wake(0).unwrap();
+            let wakers = 1 + (MAX_UAVS - 1) + MAX_OBSERVERS + RESTART_OVERLAP + 1;
+            assert!(wake.static_config().max_notifiers() >= wakers);
+            let notifiers: Vec<_> = (0..wakers)
+                .map(|_| wake.notifier_builder().create().unwrap())
+                .collect();
+            // The world's and the observers' wake-ups: every agent, the observers, the
+            // restarted agents (and the bridge instead of one agent).
+            for service in [
+                node.open_world_wake().unwrap(),
+                node.open_observer_wake().unwrap(),
+            ] {
+                assert!(service.static_config().max_notifiers() >= fleet_senders());
+                assert!(service.static_config().max_nodes() >= nodes);
+            }
+            assert_eq!(
+                (subscribers.len(), publishers.len(), notifiers.len()),
+                (readers, senders, wakers)
+            );
+        }
+        remove_run_files(&run).unwrap();
+    }
+
     #[test]
     fn config_carries_the_run_prefix() {
         let run = RunId::new("cfg-test").unwrap();

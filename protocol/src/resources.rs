@@ -22,6 +22,14 @@
 //! A process's own account comes from `getrusage(RUSAGE_SELF)` ([`own_usage`]); a child's,
 //! exactly and whatever ended it (a SIGKILL too), from `waitid(WNOWAIT)` on the exited child
 //! before it is reaped ([`exited_child_usage`]), which leaves the reaping to its owner.
+//!
+//! The kernel's peak memory of a child (`ru_maxrss`) is not the child program's own: the
+//! kernel carries the peak of the image a process replaces at `exec` over to the new program,
+//! and a spawned child's image before its `exec` is the spawning process's. So a child of a
+//! `fleet` that already ran a large fleet reports at least that `fleet`'s memory. A process
+//! reads its own peak instead with [`own_peak_rss_kb`] (`VmHWM`, the high-water mark of the
+//! program's own memory) and reports it; the kernel's figure is the fallback for a process
+//! that could not report (a killed agent).
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -166,7 +174,7 @@ impl ProcessUsage {
 
     /// Peak resident set size, MiB.
     pub fn peak_rss_mb(&self) -> f64 {
-        self.peak_rss_kb as f64 / 1024.0
+        kib_to_mib(self.peak_rss_kb)
     }
 
     fn from_rusage(ru: &libc::rusage) -> ProcessUsage {
@@ -196,6 +204,27 @@ pub enum UsageReadError {
     /// This system has no way to read a child's usage without reaping it.
     #[error("reading a child's resource usage is not supported on this system")]
     Unsupported,
+}
+
+/// KiB (the kernel's unit of memory) in MiB.
+pub fn kib_to_mib(kib: u64) -> f64 {
+    kib as f64 / 1024.0
+}
+
+/// This program's own peak resident memory so far, KiB: `VmHWM` of `/proc/self/status`, the
+/// high-water mark of this process's memory since its `exec`, without the spawning process's
+/// memory that the kernel's `ru_maxrss` of a child includes (see the module's docs). A child
+/// process reads it at the end of its run and puts it in its report. `None` where `/proc` is
+/// not there (off Linux) or has no such line.
+pub fn own_peak_rss_kb() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    vm_hwm_kb(&status)
+}
+
+/// The `VmHWM` line of a `/proc/<pid>/status` text, KiB.
+fn vm_hwm_kb(status: &str) -> Option<u64> {
+    let value = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
+    value.trim().strip_suffix("kB")?.trim().parse().ok()
 }
 
 /// This process's usage so far (`getrusage(RUSAGE_SELF)`: every thread, peak RSS since start).
@@ -334,6 +363,31 @@ mod tests {
         assert!(usage.cpu_s() >= 0.005, "{usage:?}");
         assert!(usage.peak_rss_kb > 0);
         assert!(usage.peak_rss_mb() > 0.0);
+    }
+
+    #[test]
+    fn the_peak_is_read_from_the_vm_hwm_line() {
+        let status = "Name:\tuav-agent\nVmPeak:\t  912344 kB\nVmSize:\t  900000 kB\n\
+                      VmHWM:\t   40960 kB\nVmRSS:\t   30000 kB\n";
+        assert_eq!(vm_hwm_kb(status), Some(40960));
+        assert_eq!(vm_hwm_kb("Name:\tx\nVmRSS:\t 1 kB\n"), None);
+        assert_eq!(vm_hwm_kb("VmHWM:\t lots kB\n"), None);
+        assert_eq!(kib_to_mib(40960), 40.0);
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn the_own_peak_follows_this_programs_memory() {
+        let before = own_peak_rss_kb().expect("VmHWM");
+        assert!(before > 0);
+        // 64 MiB touched page by page: the high-water mark rises by about as much.
+        let mut block = vec![0u8; 64 << 20];
+        for i in (0..block.len()).step_by(4096) {
+            block[i] = 1;
+        }
+        std::hint::black_box(&block);
+        let after = own_peak_rss_kb().expect("VmHWM");
+        assert!(after >= before.max(60 << 10), "{before} then {after} KiB");
     }
 
     #[cfg(target_os = "linux")]

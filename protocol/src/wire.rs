@@ -11,14 +11,21 @@ use serde::{Deserialize, Serialize};
 use crate::camera::CameraPose;
 use sets::raster::delta::SetCode;
 
-/// Version of every message layout in this module and in [`crate::frame`]. 7: an estimate's
-/// sets are optional ([`SetsMsg`]) and it may carry its frame's measurement
-/// ([`MeasurementMsg`]); agents also send [`WireKind::State`] messages.
-pub const PROTOCOL_VERSION: u32 = 7;
-/// Targets a truth message can hold.
-pub const TRUTH_MAX_TARGETS: usize = 64;
-/// UAVs a truth message can hold, and the largest fleet.
-pub const MAX_UAVS: usize = 32;
+/// Version of every message layout in this module and in [`crate::frame`]. 8: UAV masks
+/// ([`UavMask`]) are 64 bits wide, for fleets of up to 64 UAVs, and truth messages and frames
+/// hold 128 cars. 7: an estimate's sets are optional ([`SetsMsg`]) and it may carry its
+/// frame's measurement ([`MeasurementMsg`]); agents also send [`WireKind::State`] messages.
+pub const PROTOCOL_VERSION: u32 = 8;
+/// Targets a truth message can hold: the cars of the largest fleet's region (64 UAVs over
+/// 2 x 2 km keep the default scenario's 8 cars per 4 UAVs).
+pub const TRUTH_MAX_TARGETS: usize = 128;
+/// UAVs a truth message can hold, and the largest fleet: one bit of a [`UavMask`] each.
+pub const MAX_UAVS: usize = UavMask::BITS as usize;
+
+/// A set of UAVs, bit `i` for UAV `i` ([`uav_bit`]): the frame's
+/// [`crate::frame::FrameHeader::served`], [`ObserverAck::restarted`] and
+/// [`EstimateMsg::want_whole`]. Its width is the largest fleet, [`MAX_UAVS`].
+pub type UavMask = u64;
 
 /// The `step` of a [`UavCommand`] that means "agent ready": an agent sends it once its
 /// subscribers are open (and again every so often until its first frame arrives, since a
@@ -26,15 +33,13 @@ pub const MAX_UAVS: usize = 32;
 /// that means "observer ready".
 pub const HELLO_STEP: u64 = u64::MAX;
 
-/// Bit `uav` of a UAV mask (the [`crate::frame::FrameHeader::served`] and
-/// [`ObserverAck::restarted`] fields): bit `i` stands for UAV `i`. 0 for a UAV beyond
-/// [`MAX_UAVS`].
-pub fn uav_bit(uav: u32) -> u32 {
-    1u32.checked_shl(uav).unwrap_or(0)
+/// Bit `uav` of a [`UavMask`]: bit `i` stands for UAV `i`. 0 for a UAV beyond [`MAX_UAVS`].
+pub fn uav_bit(uav: u32) -> UavMask {
+    UavMask::from(1u8).checked_shl(uav).unwrap_or(0)
 }
 
 /// The UAVs of a mask, ascending.
-pub fn uavs_in(mask: u32) -> impl Iterator<Item = u32> {
+pub fn uavs_in(mask: UavMask) -> impl Iterator<Item = u32> {
     (0..MAX_UAVS as u32).filter(move |&i| mask & uav_bit(i) != 0)
 }
 
@@ -63,17 +68,15 @@ pub struct UavCommand {
 /// [`HELLO_STEP`] means "observer ready".
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ZeroCopySend)]
-#[type_name("setfleet.ObserverAck.v2")]
+#[type_name("setfleet.ObserverAck.v3")]
 pub struct ObserverAck {
     /// [`crate::service::RunId::tag`] of the run.
     pub run_tag: u64,
     /// The step acknowledged.
     pub step: u64,
-    /// Agents restarted at this step, bit `i` for UAV `i`: the world waits for their hellos
-    /// (bounded) before it publishes the next step, so they are served from it.
-    pub restarted: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// Agents restarted at this step: the world waits for their hellos (bounded) before it
+    /// publishes the next step, so they are served from it.
+    pub restarted: UavMask,
 }
 
 /// Ground truth of one target.
@@ -123,7 +126,7 @@ impl UavTruth {
 /// World -> observers: the true state at a step (agents never subscribe).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
-#[type_name("setfleet.TruthState.v2")]
+#[type_name("setfleet.TruthState.v3")]
 pub struct TruthState {
     /// [`crate::service::RunId::tag`] of the run.
     pub run_tag: u64,
@@ -378,9 +381,9 @@ pub struct EstimateMsg {
     /// The `seq` of the message (same sender and incarnation) the deltas are against; `None`
     /// when every set is whole.
     pub base_seq: Option<u64>,
-    /// Peers whose sets the sender could not rebuild, bit `i` for UAV `i`
-    /// ([`uav_bit`]): each of them sends whole sets in its next estimate.
-    pub want_whole: u32,
+    /// Peers whose sets the sender could not rebuild ([`uav_bit`]): each of them sends whole
+    /// sets in its next estimate.
+    pub want_whole: UavMask,
     /// The camera pose of the frame.
     pub pose: CameraPose,
     /// The sender's sets, if the message carries them.
@@ -562,14 +565,66 @@ mod tests {
 
     #[test]
     fn masks_hold_every_uav_of_the_largest_fleet_and_nothing_beyond() {
+        assert_eq!(MAX_UAVS, 64);
         let all: Vec<u32> = (0..MAX_UAVS as u32).collect();
         let mask = all.iter().fold(0, |m, &u| m | uav_bit(u));
-        assert_eq!(mask, u32::MAX);
+        assert_eq!(mask, UavMask::MAX);
         assert_eq!(uavs_in(mask).collect::<Vec<_>>(), all);
         assert_eq!(uav_bit(MAX_UAVS as u32), 0);
+        assert_eq!(uav_bit(u32::MAX), 0);
         assert_eq!(
-            uavs_in(uav_bit(3) | uav_bit(31)).collect::<Vec<_>>(),
-            [3, 31]
+            uavs_in(uav_bit(3) | uav_bit(31) | uav_bit(32) | uav_bit(63)).collect::<Vec<_>>(),
+            [3, 31, 32, 63]
+        );
+        // The last UAV's bit is the top one, and alone it names that UAV only.
+        assert_eq!(uav_bit(63), 1 << 63);
+        assert_eq!(uavs_in(uav_bit(63)).collect::<Vec<_>>(), [63]);
+    }
+
+    #[test]
+    fn the_last_uavs_bit_survives_the_wire() {
+        let ack = ObserverAck {
+            run_tag: 1,
+            step: 2,
+            restarted: uav_bit(63) | uav_bit(0),
+        };
+        assert_eq!(uavs_in(ack.restarted).collect::<Vec<_>>(), [0, 63]);
+        let msg = EstimateMsg {
+            uav: 62,
+            step: 3,
+            time_s: 1.5,
+            seq: 4,
+            incarnation: 5,
+            base_seq: None,
+            want_whole: uav_bit(63) | uav_bit(40),
+            pose: CameraPose {
+                position: sets::math::Point3::new(1.0, 2.0, 80.0),
+                yaw: 0.5,
+            },
+            sets: None,
+            measurement: None,
+            stats: AgentStats::default(),
+            oem: Vec::new(),
+            oem_full: false,
+        };
+        let bytes = crate::codec::encode(&msg).expect("encode");
+        let back: EstimateMsg = crate::codec::decode(&bytes).expect("decode");
+        assert_eq!(back, msg);
+        assert_eq!(uavs_in(back.want_whole).collect::<Vec<_>>(), [40, 63]);
+    }
+
+    #[test]
+    fn fixed_size_messages_have_no_padding_and_aligned_masks() {
+        use std::mem::{align_of, offset_of, size_of};
+        // Three 8-byte fields: no hole for a sender's stale bytes to fill.
+        assert_eq!(size_of::<ObserverAck>(), 24);
+        assert_eq!(offset_of!(ObserverAck, restarted), 16);
+        assert_eq!(align_of::<UavMask>(), 8);
+        let truth = size_of::<TargetTruth>() * TRUTH_MAX_TARGETS + size_of::<UavTruth>() * MAX_UAVS;
+        assert_eq!(size_of::<TruthState>(), 32 + truth);
+        assert_eq!(
+            offset_of!(TruthState, targets) % align_of::<TargetTruth>(),
+            0
         );
     }
 }

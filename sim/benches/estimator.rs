@@ -1,7 +1,9 @@
 //! Estimator benchmarks on the default scenario (360 x 480 camera, 0.5 m cells):
-//! one step on a real frame, its phases, fusion, and the estimate message size after ~100 steps.
+//! one step on a real frame, its phases, fusion, applying a peer's measurement (the
+//! measurement exchange), and the estimate message size after ~100 steps.
 //!
-//! `cargo bench -p sim --bench estimator`
+//! `cargo bench -p sim --bench estimator`; `SETFLEET_BENCH_SCENARIO=FILE` runs it on that
+//! scenario file instead (e.g. the `scenario.toml` of a 16-UAV run).
 
 use std::sync::OnceLock;
 use std::time::Duration;
@@ -11,7 +13,7 @@ use divan::counter::BytesCount;
 use protocol::frame::CvsFrame;
 use protocol::scenario::Scenario;
 use sim::{Fleet, FleetOptions};
-use uav_agent::estimator::{Estimator, PeerEstimate, StepTimings};
+use uav_agent::estimator::{Estimator, Measurement, PeerEstimate, StepTimings};
 
 /// Steps run before measuring, so the sets look like a run's rather than a fresh start's.
 const WARMUP_STEPS: u64 = 100;
@@ -23,6 +25,10 @@ struct Fixture {
     peer: PeerEstimate,
     /// Its next frame.
     frame: Box<CvsFrame>,
+    /// The measured UAV's estimator after its next frame.
+    stepped: Estimator,
+    /// A peer's measurement of that frame's step.
+    measurement: Measurement,
     /// The encoded estimate message of that UAV after the warm-up (a delta, not a full map).
     message: Vec<u8>,
 }
@@ -30,8 +36,12 @@ struct Fixture {
 fn fixture() -> &'static Fixture {
     static FIXTURE: OnceLock<Fixture> = OnceLock::new();
     FIXTURE.get_or_init(|| {
-        let mut fleet =
-            Fleet::new(&Scenario::default(), FleetOptions::default()).expect("default world");
+        let scenario = match std::env::var_os("SETFLEET_BENCH_SCENARIO") {
+            Some(path) => Scenario::load(Some(std::path::Path::new(&path)), &[])
+                .expect("SETFLEET_BENCH_SCENARIO names a valid scenario file"),
+            None => Scenario::default(),
+        };
+        let mut fleet = Fleet::new(&scenario, FleetOptions::default()).expect("the world");
         let n = fleet.uav_count();
         let mut sizes = Vec::new();
         for k in 0..WARMUP_STEPS {
@@ -70,10 +80,25 @@ fn fixture() -> &'static Fixture {
         print_phase_medians(&estimator, &frame);
         let other = (chosen + 1) % n;
         let peer = estimators[other].state().to_peer(other as u32);
+        let mut stepped = estimator.clone();
+        stepped.step(&frame).expect("the measured UAV's next frame");
+        let mut peer_frame = CvsFrame::new_boxed();
+        world.render(other, 1, &mut peer_frame);
+        let (_, measurement) = estimators[other]
+            .clone()
+            .step_sharing(&peer_frame, other as u32)
+            .expect("the peer's next frame");
+        eprintln!(
+            "the peer's measurement: box {:?}, {} free cells",
+            measurement.free_ground.bounding_box(),
+            measurement.free_ground.count()
+        );
         Fixture {
             estimator,
             peer,
             frame,
+            stepped,
+            measurement,
             message: fleet.messages()[chosen].clone(),
         }
     })
@@ -129,6 +154,16 @@ fn fuse(bencher: Bencher) {
     bencher
         .with_inputs(|| f.estimator.clone())
         .bench_local_values(|mut e| e.fuse(&f.peer));
+}
+
+/// Applying a peer's measurement of the same step (the measurement exchange's counterpart of
+/// [`fuse`]).
+#[divan::bench(sample_count = 60, sample_size = 1)]
+fn apply(bencher: Bencher) {
+    let f = fixture();
+    bencher
+        .with_inputs(|| f.stepped.clone())
+        .bench_local_values(|mut e| e.apply(&f.measurement).measured.len());
 }
 
 /// Decoding and validating a typical estimate message (its size is the byte counter).

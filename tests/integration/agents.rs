@@ -10,7 +10,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
 use protocol::ipc::{Ipc, RunNode, WakeEvent, WirePublisher, scan_nodes};
-use protocol::wire::{HELLO_STEP, ObserverAck, TruthState, WireHeader, WireKind, uav_bit};
+use protocol::wire::{HELLO_STEP, ObserverAck, TruthState, UavMask, WireHeader, WireKind, uav_bit};
 use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, follow, run_process, wait_until, world_server};
 
 /// A small scenario with a camera large enough to see and identify cars.
@@ -358,12 +358,11 @@ impl PlayedObserver {
         }
     }
 
-    fn ack(&self, step: u64, restarted: u32) {
+    fn ack(&self, step: u64, restarted: UavMask) {
         let ack = ObserverAck {
             run_tag: self.tag,
             step,
             restarted,
-            reserved: 0,
         };
         self.acks.send_copy(ack).expect("ack sent");
         let _ = self
@@ -373,7 +372,7 @@ impl PlayedObserver {
 
     /// Says hello until the first truth, then acks every step with the agents `on_step`
     /// reports restarted at it, until the end of the run or the world's exit.
-    fn follow(&self, world: &mut ChildGuard, mut on_step: impl FnMut(u64) -> u32) {
+    fn follow(&self, world: &mut ChildGuard, mut on_step: impl FnMut(u64) -> UavMask) {
         let hello = || self.ack(HELLO_STEP, 0);
         follow(
             &self.waitset,

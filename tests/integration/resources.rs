@@ -1,5 +1,5 @@
 //! `summary.json` `resources`: every process of a run, killed ones included, with its CPU
-//! time, peak memory and the phases of its time.
+//! time, peak memory (its own when it reported it) and the phases of its time.
 
 use serde_json::Value;
 use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary};
@@ -73,18 +73,28 @@ fn every_process_has_its_cpu_memory_and_phases_within_its_cpu() {
             p["incarnation"].as_u64(),
             p["uav"].as_u64(),
         ) {
-            (Some("orchestrator"), ..) => assert!(has("observe"), "{p}"),
-            (Some("world"), ..) => assert!(has("render") && has("wait"), "{p}"),
-            // Killed by the fault: it counts its CPU, and printed no phases.
+            (Some("orchestrator"), ..) => {
+                assert!(has("observe"), "{p}");
+                assert_eq!(p["peak_rss_source"], "rusage", "{p}");
+            }
+            (Some("world"), ..) => {
+                assert!(has("render") && has("wait"), "{p}");
+                // Its own peak, as it reported it, not the kernel's with the orchestrator's.
+                assert_eq!(p["peak_rss_source"], "vmhwm", "{p}");
+            }
+            // Killed by the fault: it counts its CPU, printed no phases and no peak of its
+            // own, so the kernel's peak stands in.
             (Some("agent"), Some(1), Some(1)) => {
                 assert_eq!(p["end"], "signal 9", "{p}");
                 assert!(phases.is_empty(), "{p}");
+                assert_eq!(p["peak_rss_source"], "rusage", "{p}");
             }
             (Some("agent"), ..) => {
                 assert_eq!(p["end"], "exit 0", "{p}");
                 for name in ["estimate", "fuse", "plan", "publish", "wait_frame"] {
                     assert!(has(name), "no {name}: {p}");
                 }
+                assert_eq!(p["peak_rss_source"], "vmhwm", "{p}");
             }
             _ => panic!("unexpected process {p}"),
         }

@@ -167,6 +167,13 @@ fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing
         assert_eq!(summary["targets"], cars);
         assert_eq!(summary["mode"], "lockstep");
         assert_eq!(summary["timing"]["leftover_ipc_files"], 0);
+        // The world's and the agents' memory is their own, not the bench process's.
+        let processes = summary["resources"]["processes"]
+            .as_array()
+            .expect("processes");
+        for p in processes.iter().filter(|p| p["role"] != "orchestrator") {
+            assert_eq!(p["peak_rss_source"], "vmhwm", "{exchange} uavs={uavs}: {p}");
+        }
         let run = summary["timing"]["run_id"].as_str().expect("run id");
         let run = RunId::new(run).expect("a valid run id");
         let left = ipc::run_files(&run).unwrap_or_default();
@@ -201,6 +208,10 @@ fn bad_scale_flags_exit_2_naming_the_flag() {
     for (args, flag) in [
         (&["--uavs", ""][..], "--uavs"),
         (&["--uavs", "1,0"], "--uavs 0"),
+        (
+            &["--uavs", "1,65"],
+            "--uavs 65: every fleet size must be 1 to 64",
+        ),
         (&["--duration", "0"], "--duration 0"),
         (&["--duration=-1"], "--duration -1"),
         (&["--exchange", "bogus"], "--exchange"),

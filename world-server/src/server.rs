@@ -44,11 +44,13 @@ use iceoryx2::prelude::*;
 use iceoryx2::sample_mut::SampleMut;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{self, EventService, Ipc, IpcOpenError, PubSubService, RunNode, WakeEvent};
-use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
+use protocol::resources::{CpuClock, PhaseClock, PhaseTimes, own_peak_rss_kb};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
-use protocol::wire::{HELLO_STEP, MAX_UAVS, ObserverAck, TruthState, UavCommand, uav_bit, uavs_in};
+use protocol::wire::{
+    HELLO_STEP, MAX_UAVS, ObserverAck, TruthState, UavCommand, UavMask, uav_bit, uavs_in,
+};
 use serde::Serialize;
 
 use crate::World;
@@ -210,6 +212,10 @@ pub struct ServerReport {
     /// Where the process's time went ([`phase`]): process CPU time and wall time per phase,
     /// from opening the world to the end of the run.
     pub phases: PhaseTimes,
+    /// The process's own peak resident memory at the end of the run, KiB
+    /// ([`own_peak_rss_kb`]: without the memory of whoever spawned it); `None` if it could not
+    /// be read.
+    pub peak_rss_kb: Option<u64>,
 }
 
 /// The phases of the world-server's time ([`ServerReport::phases`]).
@@ -303,6 +309,7 @@ pub fn run(config: ServerConfig, shutdown: &AtomicBool) -> Result<ServerReport, 
         observer_misses: server.observer.misses,
         pid: std::process::id(),
         phases: server.clock.times(),
+        peak_rss_kb: own_peak_rss_kb(),
     };
     tracing::info!(
         steps = report.steps,
@@ -412,7 +419,7 @@ struct Server<'a> {
     /// Newest step whose frames went out.
     published: Option<u64>,
     /// Agents the observer reported restarted and the world has not heard from since.
-    restarted: u32,
+    restarted: UavMask,
     start_timeout: Duration,
     interrupted: bool,
     shutdown: &'a AtomicBool,
@@ -903,7 +910,7 @@ impl Server<'_> {
         self.clock.enter(before);
     }
 
-    fn send_frame(&self, uav: usize, served: u32) -> Result<(), FrameSendError> {
+    fn send_frame(&self, uav: usize, served: UavMask) -> Result<(), FrameSendError> {
         let frame = render_frame(&self.ports.cvs[uav], &self.world, uav, self.run_tag)?;
         send_rendered(frame, served)
     }
@@ -942,7 +949,7 @@ fn render_frame(
 /// Sends a rendered frame with the mask of the agents served at its step.
 fn send_rendered(
     mut frame: SampleMut<Ipc, CvsFrame, ()>,
-    served: u32,
+    served: UavMask,
 ) -> Result<(), FrameSendError> {
     frame.payload_mut().header.served = served;
     frame.send()?;

@@ -41,7 +41,7 @@ pub mod tally;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -63,7 +63,7 @@ use protocol::scenario::{Exchange, Scenario};
 use protocol::service::RunId;
 use protocol::wire::{
     DropReason, GuidanceToken, HELLO_STEP, ObserverAck, PlannedView, TargetTruth, TruthState,
-    UavCommand, WireHeader, WireKind, unix_now_ns,
+    UavCommand, UavMask, WireHeader, WireKind, unix_now_ns,
 };
 use tokio::sync::mpsc::UnboundedSender;
 use uav_agent::estimator::EstimateReadError;
@@ -94,7 +94,7 @@ pub struct ObserverConfig {
     /// Agents the orchestrator continued (SIGCONT) since the last ack, bit `i` for UAV `i`.
     /// The next ack announces them to the world as it does restarts, so a lockstep world
     /// that skipped a stopped agent waits for it before its next frame instead of running on.
-    pub resumed: Arc<AtomicU32>,
+    pub resumed: Arc<AtomicU64>,
     /// What the run is shown to (Foxglove, `run.gif`).
     pub sinks: Vec<SinkMaker>,
     /// The UAV whose sets are shown (the lowest id's when its estimate of a step is missing).
@@ -153,7 +153,7 @@ pub enum ObserverEvent {
         time_s: f64,
         /// Signalled once the faults are applied, with the mask of the agents restarted (bit
         /// `i` for UAV `i`): the world waits for their hellos before the next step.
-        done: std::sync::mpsc::Sender<u32>,
+        done: std::sync::mpsc::Sender<UavMask>,
     },
 }
 
@@ -506,14 +506,13 @@ impl Observer<'_> {
         }
     }
 
-    fn send_ack(&self, step: u64, restarted: u32) -> anyhow::Result<()> {
+    fn send_ack(&self, step: u64, restarted: UavMask) -> anyhow::Result<()> {
         self.ports
             .ack
             .send_copy(ObserverAck {
                 run_tag: self.run_tag,
                 step,
                 restarted,
-                reserved: 0,
             })
             .context("cannot send the observer's ack")?;
         if let Err(e) = self
@@ -1006,7 +1005,7 @@ impl Observer<'_> {
 
     /// Lets the orchestrator apply the faults due by this step's time before the step is
     /// acked; returns the mask of the agents it restarted.
-    fn apply_faults(&mut self, truth: &TruthState) -> u32 {
+    fn apply_faults(&mut self, truth: &TruthState) -> UavMask {
         let times = &self.config.fault_times;
         let mut due = false;
         // A tiny slack so that a time written as a multiple of T is reached at that step.

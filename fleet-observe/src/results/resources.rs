@@ -30,10 +30,25 @@ pub struct ProcessResources {
     pub system_s: Option<f64>,
     /// Peak resident memory, MiB.
     pub peak_rss_mb: Option<f64>,
+    /// Where `peak_rss_mb` comes from (`null` when there is none).
+    pub peak_rss_source: Option<PeakSource>,
     /// CPU seconds per phase, as the process measured it (empty if it reported none).
     pub phases: BTreeMap<String, f64>,
     /// Wall seconds per phase (the waits' length is here).
     pub phases_wall_s: BTreeMap<String, f64>,
+}
+
+/// Where a process's peak resident memory was read ([`ProcessResources::peak_rss_source`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PeakSource {
+    /// `vmhwm`: the process's own high-water mark (`VmHWM`), which it reported at its end
+    /// (the world-server and the agents).
+    Vmhwm,
+    /// `rusage`: the kernel's account (`ru_maxrss`): the orchestrator's own, and a child
+    /// that reported none (a killed agent, a bridge), whose figure includes the memory of the
+    /// `fleet` process that spawned it.
+    Rusage,
 }
 
 /// Every process of the run and the totals.

@@ -516,6 +516,11 @@ mod tests {
         ] {
             assert_eq!(shown[topic]["visible"], true, "{topic}");
         }
+        // ... and the set of every car a scenario may hold.
+        for id in 0..protocol::wire::TRUTH_MAX_TARGETS as u32 {
+            let topic = topics::target_topic(id);
+            assert_eq!(shown[&topic]["visible"], true, "{topic}");
+        }
     }
 
     #[test]

@@ -14,8 +14,8 @@
 //! Every child is reaped here and nowhere else, after the kernel's account of the exited
 //! process was read ([`protocol::resources::exited_child_usage`]: exact CPU time and peak
 //! resident memory, a SIGKILLed agent's too). [`Children::exited`] lists every process that
-//! ended, with that account ([`super::resources`] joins it to the phases the process
-//! reported).
+//! ended, with that account ([`super::resources`] joins it to the phases and the own peak
+//! memory the process reported, which replaces the kernel's peak when there is one).
 
 use std::collections::BTreeMap;
 use std::ffi::OsString;

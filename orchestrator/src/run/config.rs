@@ -429,6 +429,13 @@ mod tests {
         );
         let e = args(&["--uavs", "0"]).validate().unwrap_err();
         assert!(e.0.contains("uavs.count"), "{e}");
+        // The largest fleet the protocol carries, and one more.
+        let c = args(&["--uavs", "64", "--show-uav", "63"])
+            .validate()
+            .unwrap();
+        assert_eq!(c.scenario.uavs.count, 64);
+        let e = args(&["--uavs", "65"]).validate().unwrap_err();
+        assert!(e.0.contains("uavs.count") && e.0.contains("<= 64"), "{e}");
         let e = args(&["--uavs", "2", "--fault", "kill:3@1"])
             .validate()
             .unwrap_err();

@@ -37,7 +37,7 @@ pub mod stale;
 use std::path::PathBuf;
 use std::process::ExitStatus;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
@@ -255,7 +255,7 @@ struct Running<'a> {
     plan: FaultPlan,
     resumes: Resumes,
     /// Agents continued since the observer's last ack, for the observer to announce.
-    resumed: Arc<AtomicU32>,
+    resumed: Arc<AtomicU64>,
     /// Raised to stop the observer.
     stop: Arc<AtomicBool>,
     events: mpsc::UnboundedReceiver<ObserverEvent>,
@@ -279,7 +279,7 @@ impl<'a> Running<'a> {
     ) -> anyhow::Result<Running<'a>> {
         let run = &config.run_id;
         let plan = FaultPlan::new(&config.faults);
-        let resumed = Arc::new(AtomicU32::new(0));
+        let resumed = Arc::new(AtomicU64::new(0));
         let stop = Arc::new(AtomicBool::new(false));
         let (events_tx, events) = mpsc::unbounded_channel();
         let (observer, observer_started) = observe::spawn(

@@ -1,12 +1,21 @@
 //! `fleet bench scale`: how the whole system scales with the fleet, under each way the agents
 //! exchange what they know. It runs real fleets, the same code path as `fleet run`
-//! ([`execute`], lockstep, one seed), of 1, 2, 4, 8 and 16 UAVs (`--uavs`, up to the
-//! protocol's [`MAX_UAVS`]), each under every exchange of `--exchange` (`comms.exchange`:
-//! `sets` and `measurements` by default), each over a region scaled so that the **area per
-//! UAV** and the **cars per area** stay those of the scenario's, read as a fleet of
-//! [`REFERENCE_UAVS`] UAVs (the default scenario: 4 UAVs, 8 cars, 500 x 500 m): the region's
-//! side scales with `sqrt(n / 4)`, the cars with `n / 4` (rounded, at least 1 if the scenario
-//! has any).
+//! ([`execute`], lockstep, one seed), of 1, 2, 4, 8 and 16 UAVs by default ([`DEFAULT_UAVS`];
+//! `--uavs 1,2,4,8,16,32,64` adds the larger fleets, up to the protocol's [`MAX_UAVS`]), each
+//! under every exchange of `--exchange` (`comms.exchange`: `sets` and `measurements` by
+//! default), each over a region scaled so that the **area per UAV** and the **cars per area**
+//! stay those of the scenario's, read as a fleet of [`REFERENCE_UAVS`] UAVs
+//! ([`scaled_region`]): the region's side scales with `sqrt(n / 4)`, the cars with `n / 4`
+//! (rounded, at least 1 if the scenario has any). On the default scenario (4 UAVs, 8 cars,
+//! 500 x 500 m):
+//!
+//! | UAVs | 1 | 2 | 4 | 8 | 16 | 32 | 64 |
+//! |---|---:|---:|---:|---:|---:|---:|---:|
+//! | region side | 250 m | 354 m | 500 m | 707 m | 1000 m | 1414 m | 2000 m |
+//! | cars | 2 | 4 | 8 | 16 | 32 | 64 | 128 |
+//!
+//! The scenario's UAV altitudes stay automatic (one [`ALTITUDE_STEP_M`] per UAV above the
+//! first) unless it gives them, so a large fleet's last UAVs fly high.
 //!
 //! Per run, one (exchange, fleet size) pair ([`report::ScaleRow`]): wall time per simulated
 //! second and the real-time factor, CPU per UAV-step (every process's CPU over UAVs x steps),
@@ -24,6 +33,7 @@
 //! still go (a signal stops the bench), and the exit code is 1.
 //!
 //! [`BenchReport`]: fleet_bench::BenchReport
+//! [`ALTITUDE_STEP_M`]: protocol::scenario::ALTITUDE_STEP_M
 
 pub mod plot;
 pub mod report;
@@ -68,7 +78,7 @@ pub struct BenchScaleArgs {
     #[arg(long, default_value_t = 20.0)]
     pub duration: f64,
     /// Fleet sizes, comma-separated (run smallest first), each at most the protocol's largest
-    /// fleet (32).
+    /// fleet (64): `1,2,4,8,16,32,64` adds the large fleets to the default sizes.
     #[arg(long, value_delimiter = ',', default_values_t = DEFAULT_UAVS.to_vec())]
     pub uavs: Vec<u32>,
     /// The exchanges (`comms.exchange`) to measure, comma-separated, in the order they run;
@@ -141,7 +151,7 @@ pub fn scaled_region(half_extent_m: f64, cars: u32, uavs: u32) -> (f64, u32) {
     let scaled_cars = if cars == 0 {
         0
     } else {
-        // At most MAX_UAVS / 4 times the scenario's cars: no overflow.
+        // At most MAX_UAVS / 4 = 16 times the scenario's cars: no overflow.
         ((f64::from(cars) * share).round() as u32).max(1)
     };
     (half, scaled_cars)
@@ -416,10 +426,33 @@ mod tests {
         assert_eq!(c.points[0].config.scenario.seed, 5);
         assert_eq!(c.points[0].config.out, PathBuf::from("r/sets/uavs-1"));
         assert_eq!(c.points[4].cars(), 8);
-        // The largest fleet the protocol carries.
-        let c = parse(&["--uavs", "32", "--exchange", "measurements"]).unwrap();
-        assert_eq!(c.points[0].config.scenario.uavs.count, 32);
-        assert_eq!(c.points[0].cars(), 64);
+    }
+
+    #[test]
+    fn the_large_fleets_get_the_issues_regions_and_cars() {
+        let c = parse(&["--uavs", "1,2,4,8,16,32,64", "--exchange", "measurements"]).unwrap();
+        let got: Vec<(u32, f64, u32)> = c
+            .points
+            .iter()
+            .map(|p| (p.uavs, (2.0 * p.half_extent_m()).round(), p.cars()))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (1, 250.0, 2),
+                (2, 354.0, 4),
+                (4, 500.0, 8),
+                (8, 707.0, 16),
+                (16, 1000.0, 32),
+                (32, 1414.0, 64),
+                // The largest fleet the protocol carries: 2 x 2 km, 128 cars.
+                (64, 2000.0, 128),
+            ]
+        );
+        let largest = &c.points[6].config.scenario;
+        assert_eq!(largest.uavs.count as usize, MAX_UAVS);
+        assert_eq!(largest.region.half_extent_m, 1000.0);
+        assert_eq!(largest.targets.count, 128);
     }
 
     #[test]
@@ -470,10 +503,10 @@ mod tests {
     fn bad_flags_are_named() {
         for (args, says) in [
             (&["--uavs", "0"][..], "--uavs 0: every fleet size must be 1"),
-            (&["--uavs", "2,33"], "--uavs 33"),
+            (&["--uavs", "2,65"], "--uavs 65"),
             (
-                &["--uavs", "1,2,4,8,16,32,64"],
-                "--uavs 64: every fleet size must be 1 to 32, the largest fleet the protocol \
+                &["--uavs", "1,2,4,8,16,32,64,128"],
+                "--uavs 128: every fleet size must be 1 to 64, the largest fleet the protocol \
                  carries",
             ),
             (&["--duration", "0"], "--duration 0: must be a positive"),

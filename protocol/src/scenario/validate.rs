@@ -873,6 +873,29 @@ mod tests {
     }
 
     #[test]
+    fn the_largest_fleet_over_2_km_with_128_cars_is_accepted_and_one_more_uav_is_not() {
+        let load = |uavs: u32| {
+            Scenario::load(
+                None,
+                &[
+                    format!("uavs.count={uavs}"),
+                    "region.half_extent_m=1000".to_owned(),
+                    "targets.count=128".to_owned(),
+                ],
+            )
+        };
+        let s = load(64).expect("64 UAVs, 128 cars");
+        assert_eq!((s.uavs.count, s.targets.count), (64, 128));
+        assert_eq!(MAX_UAVS, 64);
+        assert_eq!(MAX_TARGETS, 128);
+        let e = load(65).unwrap_err().to_string();
+        assert!(
+            e.contains("uavs.count") && e.contains("65") && e.contains("1 <= value <= 64"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn edge_values_inside_the_ranges_are_accepted() {
         let mut s = Scenario {
             seed: i64::MAX as u64,

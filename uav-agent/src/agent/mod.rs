@@ -68,13 +68,13 @@ use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_for_wake};
 use protocol::radio::{Endpoint, LinkKind, Radio};
-use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
+use protocol::resources::{CpuClock, PhaseClock, PhaseTimes, own_peak_rss_kb};
 use protocol::scenario::{Exchange, Scenario};
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
 use protocol::wire::{
-    AgentStats, DropReason, EstimateMsg, GuidanceToken, HELLO_STEP, UavCommand, WireKind, uav_bit,
-    unix_now_ns,
+    AgentStats, DropReason, EstimateMsg, GuidanceToken, HELLO_STEP, UavCommand, UavMask, WireKind,
+    uav_bit, unix_now_ns,
 };
 use serde::Serialize;
 
@@ -260,6 +260,10 @@ pub struct AgentReport {
     /// Where the agent's thread spent its time ([`phase`]): CPU time of the thread and wall
     /// time per phase, from the start of the loop to its end.
     pub phases: PhaseTimes,
+    /// The process's own peak resident memory at the end of its loop, KiB
+    /// ([`own_peak_rss_kb`]: without the memory of whoever spawned it); `None` if it could not
+    /// be read.
+    pub peak_rss_kb: Option<u64>,
 }
 
 /// The phases of an agent's time ([`AgentReport::phases`]).
@@ -353,7 +357,11 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
                 .with_set_deltas()
                 .without_map()
         }),
-        inbox: message::EstimateInbox::new(),
+        // Whole sets of the measurement exchange are never the base of a delta.
+        inbox: match exchange {
+            Exchange::Sets => message::EstimateInbox::new(),
+            Exchange::Measurements => message::EstimateInbox::without_bases(),
+        },
         radio,
         lost_by_step: BTreeMap::new(),
         estimator,
@@ -365,7 +373,7 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
                 .ok()
         }),
         checkpoint,
-        served: u32::MAX,
+        served: UavMask::MAX,
         guidance: GuidanceParams::from_scenario(&config.scenario),
         ring: TokenRing::new(config.uav),
         peers: BTreeMap::new(),
@@ -464,7 +472,7 @@ struct Agent<'a> {
     /// The thread that flushes the checkpoints to the disk (none: flushed in the loop).
     checkpoint_flusher: Option<CheckpointFlusher>,
     /// The agents the world serves at the current step (the frame's mask).
-    served: u32,
+    served: UavMask,
     outbox: message::EstimateOutbox,
     /// What the estimates carry (`comms.exchange`).
     exchange: Exchange,
@@ -473,9 +481,9 @@ struct Agent<'a> {
     /// Under the measurement exchange, the observers' copy of this agent's sets once it
     /// applied its peers' measurements ([`WireKind::State`]).
     state_outbox: Option<message::EstimateOutbox>,
-    /// Peers this agent missed an estimate of since its last estimate, bit `i` for UAV `i`:
-    /// its next estimate asks them for whole sets.
-    missed: u32,
+    /// Peers this agent missed an estimate of since its last estimate: its next estimate asks
+    /// them for whole sets.
+    missed: UavMask,
     /// The peers' sets, the bases of their deltas.
     inbox: message::EstimateInbox,
     /// The simulated links ([`protocol::radio`]).
@@ -526,6 +534,7 @@ impl Agent<'_> {
         let report = AgentReport {
             pid: std::process::id(),
             phases: self.clock.times(),
+            peak_rss_kb: own_peak_rss_kb(),
             final_undetected_cells: state.undetected.cells().count(),
             final_undetected_digest: state.undetected.cells().digest(),
             final_step: state.step,
@@ -667,7 +676,7 @@ impl Agent<'_> {
                 self.report.frames += 1;
                 self.served = match frame.header.served {
                     // A world that does not say whom it serves: await every live peer.
-                    0 => u32::MAX,
+                    0 => UavMask::MAX,
                     mask => mask,
                 };
                 let before = self.clock.enter(phase::PUBLISH);

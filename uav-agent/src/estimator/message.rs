@@ -45,7 +45,7 @@ use std::sync::Arc;
 use protocol::camera::CameraPose;
 use protocol::codec::{self, DecodeError, EncodeError};
 use protocol::wire::{
-    DropReason, EstimateMsg, MeasurementMsg, OemCellUpdate, SetsMsg, TargetSetMsg, uav_bit,
+    DropReason, EstimateMsg, MeasurementMsg, OemCellUpdate, SetsMsg, TargetSetMsg, UavMask, uav_bit,
 };
 use sets::grid::GroundGrid;
 use sets::math::Point3;
@@ -572,7 +572,8 @@ fn rebuild_sets(
 struct Held {
     incarnation: u64,
     seq: u64,
-    sets: EstimateSets,
+    /// The base of the sender's next delta (none in an inbox that keeps no bases).
+    sets: Option<EstimateSets>,
 }
 
 /// The receiving side of estimates whose sets may be deltas: per sender, the sets of the last
@@ -580,13 +581,26 @@ struct Held {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct EstimateInbox {
     held: BTreeMap<u32, Held>,
-    wanted: u32,
+    /// Whether the sets of each sender's last message are kept as the base of its deltas.
+    no_bases: bool,
+    wanted: UavMask,
 }
 
 impl EstimateInbox {
     /// An inbox that holds nothing (a newcomer: it needs a whole message from each sender).
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// An inbox for senders that never send deltas (the measurement exchange's whole sets,
+    /// [`EstimateOutbox::compose_measurement`]): it keeps no sets between messages, so its
+    /// memory does not grow with the fleet times the region. A delta read by it finds no
+    /// base, and its sender is wanted.
+    pub fn without_bases() -> Self {
+        Self {
+            no_bases: true,
+            ..Self::default()
+        }
     }
 
     /// Validates a received message and rebuilds its sets, applying its deltas to the sets
@@ -614,7 +628,7 @@ impl EstimateInbox {
         let held = self.held.get(&msg.uav);
         let base = held
             .filter(|h| h.incarnation == msg.incarnation && Some(h.seq) == msg.base_seq)
-            .map(|h| &h.sets);
+            .and_then(|h| h.sets.as_ref());
         match rebuild(msg, config, base) {
             Ok((message, sets)) => {
                 if let Some(sets) = sets
@@ -625,7 +639,7 @@ impl EstimateInbox {
                         Held {
                             incarnation: msg.incarnation,
                             seq: msg.seq,
-                            sets,
+                            sets: (!self.no_bases).then_some(sets),
                         },
                     );
                     self.wanted &= !uav_bit(msg.uav);
@@ -650,15 +664,18 @@ impl EstimateInbox {
         self.read(&from_bytes(bytes)?, config)
     }
 
-    /// The senders whose deltas could not be placed since their last rebuilt message, bit `i`
-    /// for UAV `i`: what to ask whole sets of ([`EstimateMsg::want_whole`]).
-    pub fn wanted(&self) -> u32 {
+    /// The senders whose deltas could not be placed since their last rebuilt message: what
+    /// to ask whole sets of ([`EstimateMsg::want_whole`]).
+    pub fn wanted(&self) -> UavMask {
         self.wanted
     }
 
     /// `H̄` of the last message rebuilt from `uav`.
     pub fn unseen(&self, uav: u32) -> Option<&CellSet> {
-        self.held.get(&uav).map(|h| &*h.sets.unseen)
+        self.held
+            .get(&uav)
+            .and_then(|h| h.sets.as_ref())
+            .map(|s| &*s.unseen)
     }
 }
 
@@ -881,6 +898,67 @@ mod tests {
             Err(EstimateReadError::MissingBase { .. })
         ));
         assert!(EstimateInbox::new().read(&next, &cfg).is_err());
+    }
+
+    #[test]
+    fn the_last_uav_of_the_largest_fleet_is_asked_for_whole_sets_and_resyncs() {
+        let cfg = config();
+        let last = protocol::wire::MAX_UAVS as u32 - 1;
+        let mut outbox = EstimateOutbox::new(last, 7, 100).with_set_deltas();
+        let mut other = EstimateOutbox::new(0, 7, 100).with_set_deltas();
+        let mut inbox = EstimateInbox::new();
+        inbox
+            .read(&outbox.compose(&mut moving_state(0)), &cfg)
+            .unwrap();
+        inbox
+            .read(&other.compose(&mut moving_state(0)), &cfg)
+            .unwrap();
+        // One message of each lost: both are wanted, UAV 63 in the mask's top bit.
+        outbox.compose(&mut moving_state(1));
+        other.compose(&mut moving_state(1));
+        assert!(
+            inbox
+                .read(&outbox.compose(&mut moving_state(2)), &cfg)
+                .is_err()
+        );
+        assert!(
+            inbox
+                .read(&other.compose(&mut moving_state(2)), &cfg)
+                .is_err()
+        );
+        assert_eq!(inbox.wanted(), 1 << 63 | 1);
+        // The ask crosses the wire whole.
+        let mut ask = other.compose(&mut moving_state(3));
+        ask.want_whole = inbox.wanted();
+        let back = from_bytes(&to_bytes(&ask).unwrap()).unwrap();
+        assert_eq!(back.want_whole & uav_bit(last), uav_bit(last));
+        outbox.request_full();
+        inbox
+            .read(&outbox.compose(&mut moving_state(4)), &cfg)
+            .unwrap();
+        assert_eq!(inbox.wanted(), uav_bit(0));
+    }
+
+    #[test]
+    fn an_inbox_without_bases_keeps_no_sets_and_wants_the_sender_of_a_delta() {
+        let cfg = config();
+        let mut outbox = EstimateOutbox::new(3, 7, 100).with_set_deltas();
+        let mut inbox = EstimateInbox::without_bases();
+        let whole = inbox
+            .read(&outbox.compose(&mut moving_state(0)), &cfg)
+            .unwrap();
+        assert_eq!(whole.step, 0);
+        assert_eq!(inbox.unseen(3), None, "no sets kept");
+        let e = inbox
+            .read(&outbox.compose(&mut moving_state(1)), &cfg)
+            .unwrap_err();
+        assert_eq!(e.drop_reason(), DropReason::NoBase);
+        assert_eq!(inbox.wanted(), uav_bit(3));
+        outbox.request_full();
+        inbox
+            .read(&outbox.compose(&mut moving_state(2)), &cfg)
+            .unwrap();
+        assert_eq!(inbox.wanted(), 0);
     }
 
     #[test]

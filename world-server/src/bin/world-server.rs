@@ -1,7 +1,7 @@
 //! `world-server`: publishes the world of one run over iceoryx2 (usually started by `fleet`).
 //!
-//! At exit it prints its report (steps, agents, the phases of its time) as one line of JSON
-//! on stdout.
+//! At exit it prints its report (steps, agents, the phases of its time, its own peak memory)
+//! as one line of JSON on stdout.
 //!
 //! Exit codes: 0 the run ended (or was stopped by SIGTERM/SIGINT), 1 the run failed, 2 bad
 //! arguments or scenario.
