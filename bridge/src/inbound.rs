@@ -132,7 +132,7 @@ enum Refusal {
     #[error("its key names UAV {key} but the message UAV {inside}")]
     Sender { key: u32, inside: u32 },
     #[error("its header is not of a {0:?}")]
-    Kind(WireKind),
+    Kind(&'static [WireKind]),
     #[error("cannot publish it: {0}")]
     Publish(String),
 }
@@ -243,7 +243,14 @@ fn publish(plan: &HostPlan, ports: &Ports, topic: Topic, bytes: &[u8]) -> Result
         }
         Topic::Estimate(uav) => {
             let publisher = ports.estimates.get(&uav).ok_or(Refusal::NotForThisHost)?;
-            publish_wire(publisher, WireKind::Estimate, uav, bytes)?;
+            // Peers' estimates and, under the measurement exchange, the sender's state
+            // messages for the observers: both on the sender's estimate service.
+            publish_wire(
+                publisher,
+                &[WireKind::Estimate, WireKind::State],
+                uav,
+                bytes,
+            )?;
             ports.wake_agents(WakeEvent::Estimate);
             if let Some(n) = &ports.observer_wake {
                 notify(n, WakeEvent::Estimate);
@@ -253,7 +260,7 @@ fn publish(plan: &HostPlan, ports: &Ports, topic: Topic, bytes: &[u8]) -> Result
             if plan.is_local(uav) {
                 return Err(Refusal::NotForThisHost);
             }
-            publish_wire(&ports.token, WireKind::Token, uav, bytes)?;
+            publish_wire(&ports.token, &[WireKind::Token], uav, bytes)?;
             ports.wake_agents(WakeEvent::Token);
         }
         Topic::EndOfRun => {
@@ -266,10 +273,11 @@ fn publish(plan: &HostPlan, ports: &Ports, topic: Topic, bytes: &[u8]) -> Result
     Ok(())
 }
 
-/// Publishes a variable-size message whose key names `uav` as its sender.
+/// Publishes a variable-size message whose key names `uav` as its sender and whose header
+/// names one of `kinds`.
 fn publish_wire(
     publisher: &WirePublisher,
-    kind: WireKind,
+    kinds: &'static [WireKind],
     uav: u32,
     bytes: &[u8],
 ) -> Result<(), Refusal> {
@@ -280,8 +288,8 @@ fn publish_wire(
             inside: header.sender,
         });
     }
-    if header.kind != kind as u32 {
-        return Err(Refusal::Kind(kind));
+    if !kinds.iter().any(|&kind| header.kind == kind as u32) {
+        return Err(Refusal::Kind(kinds));
     }
     let mut sample = publisher
         .loan_slice_uninit(payload.len())

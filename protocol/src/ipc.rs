@@ -254,6 +254,20 @@ pub fn run_config(run: &RunId) -> Result<Config, IpcOpenError> {
     Ok(config)
 }
 
+/// Installs iceoryx2's SIGTERM and SIGINT handler now. iceoryx2 installs it at the first
+/// check for a termination request, i.e. at a process's first wait; until then either signal
+/// kills the process. An empty wait set's zero wait makes that check (and then fails for want
+/// of attachments, which is ignored); a request already made is seen by the next wait.
+fn install_termination_handler() {
+    let waitset = WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<Ipc>();
+    if let Ok(waitset) = waitset {
+        let _ = waitset
+            .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, Duration::ZERO);
+    }
+}
+
 /// One process's iceoryx2 node in a run, and the typed way to open the run's services.
 pub struct RunNode {
     node: Node<Ipc>,
@@ -272,12 +286,17 @@ impl RunNode {
         format!("agent-{uav}")
     }
 
-    /// Creates the node `name` of `run` with the given signal handling.
+    /// Creates the node `name` of `run` with the given signal handling. With
+    /// [`SignalHandlingMode::HandleTerminationRequests`], the process handles SIGTERM and
+    /// SIGINT from before its node exists: whoever sees the node may signal it.
     pub fn new(
         run: &RunId,
         name: &str,
         signals: SignalHandlingMode,
     ) -> Result<RunNode, IpcOpenError> {
+        if signals == SignalHandlingMode::HandleTerminationRequests {
+            install_termination_handler();
+        }
         let config = run_config(run)?;
         let node_name = NodeName::new(name).map_err(|_| IpcOpenError::NodeName(name.to_owned()))?;
         let node = NodeBuilder::new()

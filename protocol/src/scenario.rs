@@ -53,7 +53,8 @@ pub use validate::MAX_LATENCY_MS;
 
 /// Height above the tallest building of the lowest UAV when the scenario gives no altitudes, m.
 pub const CLEARANCE_ABOVE_BUILDINGS_M: f64 = 20.0;
-/// Altitude step between consecutive UAVs when the scenario gives no altitudes, m.
+/// Default of `uavs.altitude_step_m`: the altitude step between consecutive UAVs when the
+/// scenario gives no altitudes, m.
 pub const ALTITUDE_STEP_M: f64 = 10.0;
 
 use overrides::Override;
@@ -212,8 +213,12 @@ pub struct UavsConfig {
     pub count: u32,
     /// Constant ground speed, m/s.
     pub speed_mps: f64,
-    /// Altitudes; empty for distinct altitudes above every building.
+    /// Altitudes; empty for distinct altitudes above every building, `altitude_step_m` apart.
     pub altitudes_m: Vec<f64>,
+    /// Altitude step between consecutive UAVs when `altitudes_m` is empty, m (> 0). A camera
+    /// higher up sees more ground, so a large fleet on automatic altitudes gets a smaller
+    /// step to keep its band (`fleet bench scale` does).
+    pub altitude_step_m: f64,
     /// Largest yaw rate, rad/s.
     pub max_yaw_rate_rps: f64,
 }
@@ -493,12 +498,13 @@ pub struct CommsConfig {
 pub enum Exchange {
     /// The sender's sets after correction, fused by intersection (the paper's exchange):
     /// they hold what the whole fleet saw, so their size and their fusion grow with the fleet.
-    #[default]
     Sets,
     /// What the sender's frame proved (free ground, hidden ground, new obstacle ground, the
     /// cars' measurements), applied by each receiver as its own correction; whole sets only
     /// every `whole_sets_every` steps and for a peer that (re)joined. The size of a message
-    /// and the work of applying it follow one camera window, not the fleet.
+    /// and the work of applying it follow one camera window, not the fleet. The default: a
+    /// 30-seed paired sweep found no loss of search quality against `Sets`.
+    #[default]
     Measurements,
 }
 
@@ -563,6 +569,7 @@ impl Default for UavsConfig {
             count: 4,
             speed_mps: 10.0,
             altitudes_m: Vec::new(),
+            altitude_step_m: ALTITUDE_STEP_M,
             max_yaw_rate_rps: 1.0,
         }
     }
@@ -636,7 +643,7 @@ impl Default for CommsConfig {
             range_m: f64::INFINITY,
             loss: 0.0,
             latency_ms: 0.0,
-            exchange: Exchange::Sets,
+            exchange: Exchange::Measurements,
             whole_sets_every: 20,
         }
     }
@@ -687,11 +694,15 @@ impl Scenario {
 
     /// Altitude of UAV `i` at launch: `uavs.altitudes_m[i]`, or, when the scenario gives
     /// none, [`CLEARANCE_ABOVE_BUILDINGS_M`] above the tallest building of the city plus
-    /// [`ALTITUDE_STEP_M`] per UAV before it.
+    /// `uavs.altitude_step_m` per UAV before it.
     pub fn uav_altitude(&self, i: usize, tallest_building: f64) -> f64 {
         match self.uavs.altitudes_m.get(i) {
             Some(&z) => z,
-            None => tallest_building + CLEARANCE_ABOVE_BUILDINGS_M + ALTITUDE_STEP_M * i as f64,
+            None => {
+                tallest_building
+                    + CLEARANCE_ABOVE_BUILDINGS_M
+                    + self.uavs.altitude_step_m * i as f64
+            }
         }
     }
 

@@ -7,7 +7,7 @@
 //! `SETFLEET_PRINT_DIGESTS=1 cargo test -p sim --test pinned -- --nocapture` prints the
 //! digests a run computes (to record them after a deliberate change of the results).
 
-use protocol::scenario::{Scenario, SetGrowth};
+use protocol::scenario::{Exchange, Scenario, SetGrowth};
 use sets::raster::{CellSet, ReachSet};
 use sim::{Fleet, FleetOptions};
 use uav_agent::estimator::EstimatorState;
@@ -64,7 +64,9 @@ fn state_digest(state: &EstimatorState) -> u64 {
     h.0
 }
 
-fn scenario(seed: u64, sets: SetGrowth) -> Scenario {
+/// The pinned runs' scenario: 4 UAVs and 8 cars on 240 x 240 m, with `sets` and `exchange`.
+/// The digests of the set exchange were recorded when it was the default, and are kept.
+fn scenario(seed: u64, sets: SetGrowth, exchange: Exchange) -> Scenario {
     let mut s = Scenario {
         seed,
         ..Scenario::default()
@@ -75,6 +77,7 @@ fn scenario(seed: u64, sets: SetGrowth) -> Scenario {
     s.targets.count = 8;
     s.uavs.count = 4;
     s.estimator.sets = sets;
+    s.comms.exchange = exchange;
     s
 }
 
@@ -161,7 +164,7 @@ fn check(name: &str, got: &Digests, pinned: &[u64]) {
 
 #[test]
 fn reach_sets_are_the_pinned_ones() {
-    let got = run(&scenario(3, SetGrowth::Reach), 80, 10);
+    let got = run(&scenario(3, SetGrowth::Reach, Exchange::Sets), 80, 10);
     check(
         "reach",
         &got,
@@ -180,7 +183,7 @@ fn reach_sets_are_the_pinned_ones() {
 
 #[test]
 fn geodesic_sets_are_the_pinned_ones() {
-    let got = run(&scenario(4, SetGrowth::Geodesic), 40, 10);
+    let got = run(&scenario(4, SetGrowth::Geodesic, Exchange::Sets), 40, 10);
     check(
         "geodesic",
         &got,
@@ -195,7 +198,7 @@ fn geodesic_sets_are_the_pinned_ones() {
 
 #[test]
 fn whole_cell_sets_are_the_pinned_ones() {
-    let got = run(&scenario(5, SetGrowth::Cells), 40, 10);
+    let got = run(&scenario(5, SetGrowth::Cells, Exchange::Sets), 40, 10);
     check(
         "cells",
         &got,
@@ -204,6 +207,30 @@ fn whole_cell_sets_are_the_pinned_ones() {
             0x18bc3ee3e8852ff8,
             0x0cf66f1f074daad4,
             0x7b4e319649b811e3,
+        ],
+    );
+}
+
+/// The default exchange: every agent applies its peers' measurements of the step.
+#[test]
+fn reach_sets_under_the_measurement_exchange_are_the_pinned_ones() {
+    let got = run(
+        &scenario(3, SetGrowth::Reach, Exchange::Measurements),
+        80,
+        10,
+    );
+    check(
+        "reach, measurements",
+        &got,
+        &[
+            0x70be437cb23b3177,
+            0x0999d58ea5326f95,
+            0x33d62c68670b41f4,
+            0x0a5cb29579c83987,
+            0xf9185b7f8e96c963,
+            0x5428a653ef373b50,
+            0xf4a802e31ab48633,
+            0x064938c22f7d5505,
         ],
     );
 }

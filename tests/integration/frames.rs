@@ -197,7 +197,7 @@ fn world_stops_cleanly_on_sigterm_while_waiting_for_agents() {
         "--start-timeout-ms",
         "600000",
     ]));
-    // Wait until the world's node exists (it handles SIGTERM from its first wait on).
+    // Wait until the world's node exists (it handles SIGTERM from before that).
     let deadline = Instant::now() + EXIT_TIMEOUT;
     while !protocol::ipc::scan_nodes(&t.run, false)
         .map(|s| s.is_alive(RunNode::WORLD))

@@ -959,7 +959,9 @@ pub(crate) mod tests {
 
     /// The agents' own code over rendered frames (the in-process fleet of `fleet bench`): at
     /// every step, what the observer rebuilds from the estimates each agent published is what
-    /// its estimator holds once it fused its peers' (every one, as with perfect links).
+    /// its estimator holds once it fused its peers' (every one, as with perfect links). Under
+    /// the set exchange: the measurement exchange's estimates carry no sets to rebuild from,
+    /// and its observer measures the agents' state messages instead.
     #[test]
     fn the_observer_rebuilds_each_estimators_fused_sets_over_a_rendered_run() {
         let scenario = Scenario::load(
@@ -968,6 +970,7 @@ pub(crate) mod tests {
                 "region.half_extent_m=60".into(),
                 "targets.count=3".into(),
                 "uavs.count=3".into(),
+                "comms.exchange=sets".into(),
             ],
         )
         .expect("scenario");

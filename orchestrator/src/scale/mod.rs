@@ -14,8 +14,13 @@
 //! | region side | 250 m | 354 m | 500 m | 707 m | 1000 m | 1414 m | 2000 m |
 //! | cars | 2 | 4 | 8 | 16 | 32 | 64 | 128 |
 //!
-//! The scenario's UAV altitudes stay automatic (one [`ALTITUDE_STEP_M`] per UAV above the
-//! first) unless it gives them, so a large fleet's last UAVs fly high.
+//! A camera higher up sees more ground, so the fleets also keep the altitude band of the
+//! reference fleet ([`altitude_step`]): with automatic altitudes (`uavs.altitudes_m = []`), a
+//! fleet larger than [`REFERENCE_UAVS`] flies between the same lowest and highest altitudes
+//! as 4 UAVs do (30 m apart by default), its `uavs.altitude_step_m` shrunk to
+//! `step x 3 / (n - 1)`: 4.29 m for 8 UAVs, 2 m for 16, 0.48 m for 64. With one step of
+//! [`ALTITUDE_STEP_M`] per UAV, the last of 16 would fly 150 m above the first and see
+//! several times its ground, and the bench would compare altitudes as much as fleet sizes.
 //!
 //! Per run, one (exchange, fleet size) pair ([`report::ScaleRow`]): wall time per simulated
 //! second and the real-time factor, CPU per UAV-step (every process's CPU over UAVs x steps),
@@ -157,6 +162,17 @@ pub fn scaled_region(half_extent_m: f64, cars: u32, uavs: u32) -> (f64, u32) {
     (half, scaled_cars)
 }
 
+/// The automatic altitude step of a fleet of `uavs` that keeps the band of
+/// [`REFERENCE_UAVS`] UAVs flying `step` apart: `step` up to that size, then
+/// `step x (REFERENCE_UAVS - 1) / (uavs - 1)`.
+pub fn altitude_step(step: f64, uavs: u32) -> f64 {
+    if uavs <= REFERENCE_UAVS {
+        step
+    } else {
+        step * f64::from(REFERENCE_UAVS - 1) / f64::from(uavs - 1)
+    }
+}
+
 /// The items in their order, each at its first place only.
 fn each_once<T: PartialEq>(items: impl IntoIterator<Item = T>) -> Vec<T> {
     let mut once = Vec::new();
@@ -219,6 +235,10 @@ impl BenchScaleArgs {
             overrides.push(format!("uavs.count={uavs}"));
             overrides.push(format!("region.half_extent_m={half:?}"));
             overrides.push(format!("targets.count={cars}"));
+            if base.uavs.altitudes_m.is_empty() {
+                let step = altitude_step(base.uavs.altitude_step_m, uavs);
+                overrides.push(format!("uavs.altitude_step_m={step:?}"));
+            }
             // Last, so that the flag wins over a `--set comms.exchange=...`.
             overrides.push(format!("comms.exchange={name}"));
             let scenario =
@@ -351,6 +371,7 @@ pub fn command(config: &ScaleConfig) -> anyhow::Result<Outcome> {
 mod tests {
     use super::*;
     use clap::Parser;
+    use protocol::scenario::ALTITUDE_STEP_M;
 
     #[derive(Parser)]
     struct Wrap {
@@ -449,6 +470,14 @@ mod tests {
                 (64, 2000.0, 128),
             ]
         );
+        // Every fleet flies within the 4-UAV fleet's band: 30 m from the lowest to the highest.
+        for p in &c.points {
+            let s = &p.config.scenario;
+            let n = s.uavs.count as usize;
+            let band = s.uav_altitude(n - 1, 0.0) - s.uav_altitude(0, 0.0);
+            let expected = ALTITUDE_STEP_M * (n.min(4) - 1) as f64;
+            assert!((band - expected).abs() < 1e-9, "{n} UAVs: band {band} m");
+        }
         let largest = &c.points[6].config.scenario;
         assert_eq!(largest.uavs.count as usize, MAX_UAVS);
         assert_eq!(largest.region.half_extent_m, 1000.0);

@@ -434,6 +434,7 @@ impl Scenario {
         check_integer("uavs.count", i128::from(uavs.count))?;
         Interval::open_closed(0.0, 100.0).check("uavs.speed_mps", uavs.speed_mps)?;
         Interval::open_closed(0.0, 10.0).check("uavs.max_yaw_rate_rps", uavs.max_yaw_rate_rps)?;
+        Interval::open_closed(0.0, 100.0).check("uavs.altitude_step_m", uavs.altitude_step_m)?;
         let roof = self.region.building_height_m[1];
         let above_roofs = Interval::open(roof, f64::INFINITY);
         let altitudes = &uavs.altitudes_m;
@@ -722,6 +723,11 @@ mod tests {
             ("uavs.altitudes_m", |s| {
                 s.uavs.altitudes_m = vec![80.0, 90.0, 100.0, f64::INFINITY]
             }),
+            ("uavs.altitude_step_m", |s| s.uavs.altitude_step_m = 0.0),
+            ("uavs.altitude_step_m", |s| {
+                s.uavs.altitude_step_m = f64::NAN
+            }),
+            ("uavs.altitude_step_m", |s| s.uavs.altitude_step_m = 101.0),
             ("uavs.max_yaw_rate_rps", |s| s.uavs.max_yaw_rate_rps = 11.0),
             ("camera.rows", |s| s.camera.rows = 4),
             ("camera.cols", |s| s.camera.cols = 481),
