@@ -451,6 +451,12 @@ impl<'a> Running<'a> {
             self.world_exit = Some((status, Instant::now()));
         }
         for exit in self.children.reap_agents() {
+            // An agent exits 0 at the end of the run (or on SIGTERM), often before the world
+            // is seen gone: that is no news. A killed or failed agent is.
+            if exit.status.success() {
+                tracing::debug!(uav = exit.uav, "agent ended");
+                continue;
+            }
             self.progress
                 .note(&format!("agent {} exited with {}", exit.uav, exit.status));
             tracing::warn!(uav = exit.uav, status = %exit.status, "agent exited");
