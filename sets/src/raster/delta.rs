@@ -145,13 +145,18 @@ impl SetCode {
     }
 }
 
-/// `set ← set xor other`, word by word (both on grids of the same size; bits past `nx` stay
-/// clear since they are clear in both).
+/// `set ← set xor other`, word by word over the rows `other` has cells in (both on grids of
+/// the same size; bits past `nx` stay clear since they are clear in both).
 fn flip_words(set: &mut CellSet, other: &CellSet) {
-    set.words
-        .iter_mut()
-        .zip(&other.words)
-        .for_each(|(a, b)| *a ^= b);
+    let Some((lo, hi)) = other.row_range() else {
+        return;
+    };
+    for iy in lo..=hi {
+        for (a, b) in set.row_mut(iy).iter_mut().zip(other.row(iy)) {
+            *a ^= b;
+        }
+    }
+    set.trim_rows();
 }
 
 #[cfg(test)]

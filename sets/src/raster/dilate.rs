@@ -31,18 +31,20 @@ impl CellSet {
         let d = grid.cell_m;
         let reach = (radius + margin(radius + d)) / d;
         if !(reach.is_finite() && d > 0.0) {
-            let mut all = CellSet {
-                words: vec![0; self.words.len()],
-                ..*self
-            };
+            let mut all = self.empty_like();
             all.fill_all();
             return all;
         }
         let run = row_runs(reach, self.nx, self.ny);
-        let mut out = CellSet {
-            words: vec![0; self.words.len()],
-            ..*self
+        let Some((lo, hi)) = self.row_range() else {
+            return self.clone();
         };
+        let k_max = run.len() - 1;
+        let mut out = self.empty_like();
+        out.store_rows(
+            lo.saturating_sub(k_max as u32),
+            hi.saturating_add(k_max as u32 + 1),
+        );
         let wpr = self.words_per_row;
         let widest = run[0] as usize;
         // Padding on both sides keeps every bit within `widest` of the row in the buffer,
@@ -50,8 +52,7 @@ impl CellSet {
         let pad = widest.div_ceil(64) + 1;
         let mut smear = vec![0u64; wpr + 2 * pad];
         let mut scratch = vec![0u64; wpr + 2 * pad];
-        let k_max = run.len() - 1;
-        for y in 0..self.ny {
+        for y in lo..=hi {
             let src = self.row(y);
             if src.iter().all(|&w| w == 0) {
                 continue;
@@ -94,7 +95,7 @@ impl CellSet {
         let rows = rows.start.min(self.ny)..rows.end.min(self.ny);
         let d = grid.cell_m;
         let reach = (radius + margin(radius + d)) / d;
-        let empty = self.rows_words(rows.clone()).iter().all(|&w| w == 0);
+        let empty = self.row_range_within(rows.clone()).is_none();
         let element = if radius < 0.0 || empty {
             Element::Identity
         } else if !(reach.is_finite() && d > 0.0) {
@@ -131,10 +132,11 @@ impl CellSet {
         // The rows' non-empty words, grown by `words` along the row.
         let mut across = vec![0u64; ny * per_row];
         let mut shifted = vec![0u64; per_row];
-        for (row, mask) in self
-            .rows_words(held.start as u32..held.end as u32)
+        let (first, stored) = self.stored_words(held.start as u32..held.end as u32);
+        let first = first as usize;
+        for (row, mask) in stored
             .chunks_exact(wpr.max(1))
-            .zip(across[held.start * per_row..].chunks_exact_mut(per_row))
+            .zip(across[first * per_row..].chunks_exact_mut(per_row))
         {
             for (w, &word) in row.iter().enumerate() {
                 mask[w / 64] |= u64::from(word != 0) << (w % 64);

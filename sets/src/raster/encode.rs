@@ -120,6 +120,7 @@ impl CellSet {
         if got != expected {
             return Err(SetDecodeError::RunLength { expected, got });
         }
+        self.store_rows(b.y0, b.y1 + 1);
         let width = u64::from(b.x1 - b.x0) + 1;
         let mut pos = 0u64;
         for (i, &r) in encoded.runs.iter().enumerate() {

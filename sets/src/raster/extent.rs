@@ -33,8 +33,9 @@ impl CellSet {
     pub fn crop(&mut self, bbox: &CellBox) {
         let keep_rows = bbox.y0..=bbox.y1.min(self.ny.saturating_sub(1));
         let (x0, x1) = (bbox.x0, bbox.x1);
-        for iy in 0..self.ny {
-            let row = self.row_mut(iy);
+        let wpr = self.words_per_row.max(1);
+        let first = self.first;
+        for (iy, row) in (first..).zip(self.words.chunks_exact_mut(wpr)) {
             if !keep_rows.contains(&iy) || x0 > x1 {
                 row.fill(0);
                 continue;
@@ -43,6 +44,7 @@ impl CellSet {
                 *word &= span_mask(w as u32, x0, x1);
             }
         }
+        self.trim_rows();
     }
 
     /// One flag per cell of `window`, row-major: whether the cell is in the set; cells of the
@@ -86,7 +88,7 @@ impl CellSet {
     pub fn barycentre(&self, grid: &GroundGrid) -> Option<Point2> {
         let mut n = 0u64;
         let (mut sum_x, mut sum_y) = (0u128, 0u128);
-        for iy in 0..self.ny {
+        for iy in self.stored_rows() {
             let mut row_n = 0u64;
             for (w, &word) in self.row(iy).iter().enumerate() {
                 if word == 0 {

@@ -178,7 +178,15 @@ pub(super) fn apply(
         .map(|(id, xm)| (*id, Some(CellSet::clone(xm))))
         .collect();
     let late = (m.step < st.step).then_some(then);
-    let corrected = correct(cfg, st, &m.free_ground, targets, late, clock);
+    let corrected = correct(
+        cfg,
+        st,
+        &m.free_ground,
+        targets,
+        late,
+        clock,
+        Some(&m.obstacles),
+    );
     report.new_targets = corrected.newly_identified;
     report.measured = corrected.measured;
     report.empty_intersections = corrected.empty_intersections;

@@ -512,7 +512,7 @@ fn correct_sets(
         targets,
         ..
     } = measured;
-    let corrected = correct(cfg, st, &free_ground, targets, None, clock);
+    let corrected = correct(cfg, st, &free_ground, targets, None, clock, None);
     report.boxes_without_pixels += corrected.without_pixels;
     report.newly_identified = corrected.newly_identified;
     report.empty_intersections = corrected.empty_intersections;
@@ -563,6 +563,16 @@ struct Corrected {
 /// (`free_ground ∪ S^o`) leaves `X̄`, each measured target's set is restricted to its
 /// measurement `X^m_j` less the free ground (a new target's taken from `X̄`), and the other
 /// targets' sets lose the free ground near them.
+///
+/// `S^o` is taken whole for the agent's own frame (`peer_obstacles` `None`). A peer's
+/// measurement (`Some`: the cells of `S^o` it added) is applied after the agent's own frame of
+/// the same step, with no prediction between, and that frame's correction left no cell of
+/// `S^o` in any set; so only the rows of what the measurement brings can hold cells of `S^o`
+/// to remove: its free ground and the two rows around it (where the gaps are measured), its
+/// cars' measurements, and the cells of `S^o` it added. Taking `S^o` over those rows only
+/// removes the same cells, at the cost of the measurement's rows rather than the region's.
+/// (Without an own frame in the step, or when a peer's whole sets brought cells of `S^o` in
+/// it, fewer cells may leave the sets: never one that holds a target.)
 fn correct(
     cfg: &EstimatorConfig,
     st: &mut EstimatorState,
@@ -570,9 +580,23 @@ fn correct(
     targets: Vec<(u32, Option<CellSet>)>,
     late: Option<Real>,
     clock: Real,
+    peer_obstacles: Option<&CellSet>,
 ) -> Corrected {
     let mut free = free_ground.clone();
-    free.or_assign(&st.obstacle_neighbourhood);
+    match peer_obstacles {
+        None => free.or_assign(&st.obstacle_neighbourhood),
+        Some(added) => {
+            let rows = [free_ground, added]
+                .into_iter()
+                .chain(targets.iter().filter_map(|(_, xm)| xm.as_ref()))
+                .filter_map(CellSet::row_range)
+                .map(|(lo, hi)| (lo.saturating_sub(2), hi.saturating_add(3)))
+                .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
+            if let Some((lo, hi)) = rows {
+                free.or_assign_within(&st.obstacle_neighbourhood, lo..hi);
+            }
+        }
+    }
     let window = free_ground.bounding_box();
     let clearing = Clearing {
         grid: &cfg.grid,

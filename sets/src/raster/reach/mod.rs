@@ -89,10 +89,11 @@
 //! ```
 
 use std::cell::RefCell;
+use std::ops::Range;
 
 use super::distance::{GapField, UNREACHED};
 use super::geodesic::{self, geodesic_gap_field};
-use super::{CellBox, CellSet};
+use super::{CellBox, CellSet, common_rows};
 use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
 use window::FarField;
@@ -285,7 +286,7 @@ impl ReachSet {
 
     /// The words of the set's [`ReachSet::rows`].
     fn words(&self) -> &[u64] {
-        self.cells.rows_words(self.rows())
+        self.cells.stored_words(self.rows()).1
     }
 
     /// Whether the set has no cell.
@@ -306,8 +307,7 @@ impl ReachSet {
     /// Whether the set shares a cell with `other` (on the same grid).
     pub fn intersects(&self, other: &CellSet) -> bool {
         debug_assert!(self.cells.same_shape(other));
-        let theirs = other.rows_words(self.rows());
-        self.words().iter().zip(theirs).any(|(a, b)| a & b != 0)
+        self.cells.intersects(other)
     }
 
     /// The smallest box holding every cell of the set, `None` when empty.
@@ -429,14 +429,19 @@ impl ReachSet {
     /// conservative dilation of an earlier set). The reach is unchanged.
     pub fn intersect(&mut self, outer: &CellSet) {
         debug_assert!(self.cells.same_shape(outer));
-        self.remove_where(|cells, iy, w| cells.row(iy)[w] & !outer.row(iy)[w]);
+        self.remove_where(0..self.cells.ny(), |cells, iy, w| {
+            cells.row(iy)[w] & !outer.row(iy)[w]
+        });
     }
 
     /// Removes ground proven free (`free`, an inner raster) without raising the reach: the
     /// cells leave the set until the clock moves on.
     pub fn remove(&mut self, free: &CellSet) {
         debug_assert!(self.cells.same_shape(free));
-        self.remove_where(|cells, iy, w| cells.row(iy)[w] & free.row(iy)[w]);
+        // Rows `free` does not store hold nothing to remove.
+        self.remove_where(free.stored_rows(), |cells, iy, w| {
+            cells.row(iy)[w] & free.row(iy)[w]
+        });
     }
 
     /// `cells ← cells ∪ extra`, forgetting what the reach knew of the added cells (their
@@ -684,7 +689,7 @@ impl ReachSet {
             }
         }
         if !gone.is_empty() {
-            self.remove_where(|_, iy, w| {
+            self.remove_where(window.y0..last + 1, |_, iy, w| {
                 gone.binary_search_by(|&(y, x, _)| (y, x).cmp(&(iy, w)))
                     .map_or(0, |k| gone[k].2)
             });
@@ -793,13 +798,18 @@ impl ReachSet {
         }
     }
 
-    /// Removes the bits `remove(cells, row, word)` of every word of the set's rows (the
-    /// others hold no cell to remove); their pending bound drops to 0 (always a lower bound),
-    /// so the next advance settles those words. The rows shrink to those still holding cells.
-    fn remove_where(&mut self, remove: impl Fn(&CellSet, u32, usize) -> u64) {
+    /// Removes the bits `remove(cells, row, word)` of every word of the set's rows among
+    /// `within` (the others hold no cell to remove); their pending bound drops to 0 (always a
+    /// lower bound), so the next advance settles those words. The rows shrink to those still
+    /// holding cells, as far as the rows visited tell.
+    fn remove_where(&mut self, within: Range<u32>, remove: impl Fn(&CellSet, u32, usize) -> u64) {
+        let visit = common_rows(self.rows(), within);
+        if visit.is_empty() {
+            return;
+        }
         let wpr = self.cells.words_per_row();
         let mut held: Option<(u32, u32)> = None;
-        for iy in self.rows() {
+        for iy in visit.clone() {
             let mut any = 0;
             for w in 0..wpr {
                 let gone = remove(&self.cells, iy, w);
@@ -814,7 +824,20 @@ impl ReachSet {
                 held = Some(held.map_or((iy, iy), |(a, _)| (a, iy)));
             }
         }
-        self.rows = held.map_or((0, 0), |(first, last)| (first, last + 1));
+        // Rows before and after the visited ones keep whatever they held.
+        let (before, after) = (self.rows.0 < visit.start, self.rows.1 > visit.end);
+        let first = match held {
+            _ if before => Some(self.rows.0),
+            Some((a, _)) => Some(a),
+            None => after.then_some(visit.end),
+        };
+        let end = match held {
+            _ if after => Some(self.rows.1),
+            Some((_, b)) => Some(b + 1),
+            None => before.then_some(visit.start),
+        };
+        self.rows = first.zip(end).unwrap_or((0, 0));
+        self.cells.trim_rows();
     }
 
     /// The set as parts for snapshots ([`ReachSet::from_parts`]): its cells, the least reach

@@ -168,6 +168,8 @@ impl ReachSet {
     /// window is first cut to the rows within the margin of the box, and the bound becomes
     /// the far field.
     pub(super) fn bound_by(&mut self, far: FarField, bbox: &CellBox) {
+        // The box is the set's: its rows are exactly the rows holding cells.
+        self.rows = (bbox.y0, bbox.y1 + 1);
         if let Some(margin) = self.row_margin {
             let (lo, hi) = self.margin_rows(bbox, margin);
             self.store_rows(lo, hi);
