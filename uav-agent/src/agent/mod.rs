@@ -27,8 +27,9 @@
 //! Listing the nodes costs milliseconds of CPU, so it is done when the served mask names a
 //! peer not known alive, and while waiting at most once per wait slice, not at every step
 //! and every wake-up (the world drops a peer that died before the step from the mask). The
-//! world-server is presumed lost when no frame came for `world_timeout` and its node is gone,
-//! and the agent exits with an error. Only SIGINT and SIGTERM stop an agent: a stalled agent
+//! world-server is presumed lost when no frame came for `world_timeout` (before the first
+//! frame, that and the world's start wait) and its node is gone, and the agent exits with an
+//! error. Only SIGINT and SIGTERM stop an agent: a stalled agent
 //! (SIGSTOP, swapped out) resumes where it was; if the world stopped serving it meanwhile,
 //! its late ack, or the hello it repeats while no frame comes, brings it back from the next
 //! frame.
@@ -579,12 +580,20 @@ impl Agent<'_> {
             if self.interrupted || self.shutdown.load(Ordering::Relaxed) {
                 return Ok(EndReason::Interrupted);
             }
-            if self.last_frame.elapsed() >= self.config.world_timeout {
+            // Before the first frame the world may still be waiting out the slowest agents'
+            // hellos, up to its start wait; and a world on another host never shows its node
+            // here, so only frames can tell that it is there.
+            let lost_after = if first_frame {
+                self.config.world_timeout
+            } else {
+                self.config.world_timeout + timeouts.start()
+            };
+            if self.last_frame.elapsed() >= lost_after {
                 self.refresh_live();
                 if !self.world_live {
                     return Err(AgentError::WorldLost {
                         run: self.config.run_id.to_string(),
-                        waited: self.config.world_timeout,
+                        waited: lost_after,
                     });
                 }
             }
