@@ -20,16 +20,16 @@ fn grid() -> GroundGrid {
     GroundGrid::new(6.0, 0.5) // 24 x 24 cells
 }
 
-/// Sample points, row-major, with the cell holding each.
-fn samples(g: &GroundGrid) -> Vec<(Point2, CellIndex)> {
+/// Sample points, `n x n` a cell, row-major, with the cell holding each.
+fn samples(g: &GroundGrid, n: u32) -> Vec<(Point2, CellIndex)> {
     let mut out = Vec::new();
     for iy in 0..g.ny {
         for ix in 0..g.nx {
             let r = g.cell_rect((ix, iy));
-            for sy in 0..SAMPLES {
-                for sx in 0..SAMPLES {
-                    let fx = (f64::from(sx) + 0.5) / f64::from(SAMPLES);
-                    let fy = (f64::from(sy) + 0.5) / f64::from(SAMPLES);
+            for sy in 0..n {
+                for sx in 0..n {
+                    let fx = (f64::from(sx) + 0.5) / f64::from(n);
+                    let fy = (f64::from(sy) + 0.5) / f64::from(n);
                     let p = Point2::new(
                         r.min.x + fx * (r.max.x - r.min.x),
                         r.min.y + fy * (r.max.y - r.min.y),
@@ -61,7 +61,32 @@ enum Event {
     Bound,
 }
 
-/// Rows around its cells a learned set stores its reach over ([`Event::Learn`]).
+/// The grid of the test across words: 136 columns (two whole words and 8 cells), 12 rows.
+const WIDE: (u32, u32) = (136, 12);
+
+impl Event {
+    /// The event for a wide grid of `ny` rows: its box's rows folded into them, its motion
+    /// four times longer (so that a set crosses words within a history).
+    fn within_rows(self, ny: u32) -> Self {
+        let fold = |b: CellBox| {
+            let y0 = b.y0 % ny;
+            CellBox {
+                y0,
+                y1: (y0 + (b.y1 - b.y0)).min(ny - 1),
+                ..b
+            }
+        };
+        match self {
+            Event::Free(b) => Event::Free(fold(b)),
+            Event::Measure(b) => Event::Measure(fold(b)),
+            Event::Learn(b) => Event::Learn(fold(b)),
+            Event::Move(r) => Event::Move(4.0 * r),
+            other => other,
+        }
+    }
+}
+
+/// Cells around its box a learned set stores its reach over ([`Event::Learn`]).
 const LEARN_MARGIN: u32 = 3;
 
 /// Applies `e` to `set` as the estimator would: motion within the whole-cell dilation.
@@ -116,17 +141,29 @@ proptest! {
     /// whole-cell dilation it replaces.
     #[test]
     fn the_set_holds_every_possible_position(events in proptest::collection::vec(event(24), 1..24)) {
-        holds_every_possible_position(&events, None)?;
+        holds_every_possible_position(&grid(), SAMPLES, &events, None)?;
     }
 
     /// The same for a set that stores its reach over the rows near its cells only, with the
-    /// far field of its box elsewhere ([`ReachSet::with_row_margin`]), for every margin.
+    /// far field of its box elsewhere ([`ReachSet::with_margin`]), for every margin.
     #[test]
     fn a_set_stored_over_its_rows_holds_every_possible_position(
         events in proptest::collection::vec(event(24), 1..24),
         margin in 0u32..6,
     ) {
-        holds_every_possible_position(&events, Some(margin))?;
+        holds_every_possible_position(&grid(), SAMPLES, &events, Some(margin))?;
+    }
+
+    /// The same on a grid three words wide, so that the window also cuts and widens by
+    /// columns: a set stored over the cells near its box, moved, cleared, measured and cut
+    /// across the words of its rows.
+    #[test]
+    fn a_set_stored_over_its_box_holds_every_possible_position_across_words(
+        events in proptest::collection::vec(event(WIDE.0).prop_map(|e| e.within_rows(WIDE.1)), 1..24),
+        margin in 0u32..10,
+    ) {
+        let g = GroundGrid { nx: WIDE.0, ny: WIDE.1, ..GroundGrid::new(1.0, 0.5) };
+        holds_every_possible_position(&g, 2, &events, Some(margin))?;
     }
 
     /// Advancing within a dilation read word by word ([`ReachSet::advance_within`] with a
@@ -262,11 +299,11 @@ proptest! {
         if copy.is_empty() {
             return Ok(());
         }
-        let (stored, nx) = (copy.stored_rows(), g.nx as usize);
+        let (rows, columns, nx) = (copy.stored_rows(), copy.stored_columns(), g.nx as usize);
         let (mine, theirs) = (reach_of(&copy), reach_of(&reference));
         for (k, (a, b)) in mine.iter().zip(&theirs).enumerate() {
-            let (ix, iy) = (k % nx, (k / nx) as u32);
-            if stored.contains(&iy) {
+            let (ix, iy) = ((k % nx) as u32, (k / nx) as u32);
+            if rows.contains(&iy) && columns.contains(&ix) {
                 prop_assert_eq!(a, b, "cell {:?}", (ix, iy));
             } else {
                 prop_assert!(a <= b, "cell {:?}: {} > {}", (ix, iy), a, b);
@@ -295,14 +332,16 @@ fn reach_of(set: &ReachSet) -> Vec<u32> {
 /// The checks of `the_set_holds_every_possible_position` through `events`, for a set that
 /// stores every row (`margin` `None`) or the rows within `margin` of its cells.
 fn holds_every_possible_position(
+    g: &GroundGrid,
+    per_side: u32,
     events: &[Event],
     margin: Option<u32>,
 ) -> Result<(), TestCaseError> {
-    let g = grid();
-    let pts = samples(&g);
+    let g = *g;
+    let pts = samples(&g, per_side);
     let mut possible = vec![true; pts.len()];
     let stored_near = |set: ReachSet| match margin {
-        Some(m) => set.with_row_margin(m),
+        Some(m) => set.with_margin(m),
         None => set,
     };
     let mut set = stored_near(ReachSet::full(&g));
@@ -319,7 +358,8 @@ fn holds_every_possible_position(
                     .map(|((p, _), _)| *p)
                     .collect();
                 for ((p, _), k) in pts.iter().zip(possible.iter_mut()) {
-                    *k = held.iter().any(|q| (p - q).norm() <= *r);
+                    // A possible position stays possible (it may stand still).
+                    *k = *k || held.iter().any(|q| (p - q).norm() <= *r);
                 }
                 clock += r;
                 let previous = set.cells().dilate(&g, *r);
@@ -612,9 +652,9 @@ proptest! {
         margin in prop::option::of(0u32..6),
     ) {
         let g = grid();
-        let pts = samples(&g);
+        let pts = samples(&g, SAMPLES);
         let stored_near = |set: ReachSet| match margin {
-            Some(m) => set.with_row_margin(m),
+            Some(m) => set.with_margin(m),
             None => set,
         };
         let mut set = stored_near(ReachSet::full(&g));

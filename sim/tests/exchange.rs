@@ -212,7 +212,7 @@ proptest! {
             "seed {seed}: X̄ {tighter} cell-steps tighter; X_j {} of {} cell-steps outside",
             outside.0, outside.1
         );
-        // A car's set stores its reach over a window of rows (`ReachSet::with_row_margin`),
+        // A car's set stores its reach over a window around it (`ReachSet::with_margin`),
         // so how fast it regrows depends on where and when its window was cut; intersection
         // fusion meets every agent's window, an agent applying measurements has one. The cars'
         // sets are therefore not always inside the fusion's: the fringe left outside is

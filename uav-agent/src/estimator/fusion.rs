@@ -329,7 +329,7 @@ fn learned_set(undetected: &ReachSet, theirs: &CellSet, config: &EstimatorConfig
         SetGrowth::Reach | SetGrowth::Geodesic if undetected.intersects(theirs) => {
             undetected.restricted_copy(&config.grid, theirs, margin)
         }
-        SetGrowth::Reach | SetGrowth::Geodesic => undetected.clone().with_row_margin(margin),
+        SetGrowth::Reach | SetGrowth::Geodesic => undetected.clone().with_margin(margin),
         SetGrowth::Cells => undetected.clone(),
     }
 }

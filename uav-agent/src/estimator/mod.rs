@@ -53,8 +53,8 @@ use snapshot::{cell_set, reach_set, reach_set_map};
 /// whole-cell dilation beyond it.
 pub const TARGET_REACH_MARGIN_M: Real = 40.0;
 
-/// [`TARGET_REACH_MARGIN_M`] in cells of `grid`: also the rows around its cells over which a
-/// target's set stores its reach ([`ReachSet::with_row_margin`]).
+/// [`TARGET_REACH_MARGIN_M`] in cells of `grid`: also the margin around its box over which a
+/// target's set stores its reach ([`ReachSet::with_margin`]).
 fn target_reach_margin(grid: &GroundGrid) -> u32 {
     (TARGET_REACH_MARGIN_M / grid.cell_m).ceil() as u32
 }
@@ -312,7 +312,7 @@ impl Estimator {
         state.undetected = rebuild(&state.undetected);
         let margin = target_reach_margin(grid);
         for set in state.targets.values_mut() {
-            *set = rebuild(set).with_row_margin(margin);
+            *set = rebuild(set).with_margin(margin);
         }
         Ok(Self { config, state })
     }
@@ -662,7 +662,7 @@ fn restrict_measured(
                 "empty target set after correction: keeping the measurement alone"
             );
             out.empty_intersections.push(id);
-            x = ReachSet::full(clearing.grid).with_row_margin(margin);
+            x = ReachSet::full(clearing.grid).with_margin(margin);
             x.advance(clock);
             clearing.restrict(&mut x, &xm, margin);
         }

@@ -37,14 +37,14 @@
 //! and would take the larger reach (both bounds hold); the fleet exchanges cells only, so a
 //! peer's set enters as an outer raster through [`ReachSet::intersect`].
 //!
-//! # Storage over a window of rows
+//! # Storage over a window around the set
 //! A target's set is small next to the region, yet storing its reach for every cell of the
 //! grid (4 bytes a cell: 16 MB for a 1 km square of 0.5 m cells) makes every copy and every
-//! bound of it cost the whole region. A set given a row margin
-//! ([`ReachSet::with_row_margin`]) stores its reach only over a window of rows: the rows of its
-//! cells and the margin on each side, cut when the reach is bounded by the set's box
-//! ([`ReachSet::bound_by_box`]). Outside the window `τ` is the *far field* of the last cut:
-//! with `B` the bounding box of the set's cells and `b_w` the clock then,
+//! bound of it cost the whole region. A set given a margin ([`ReachSet::with_margin`]) stores
+//! its reach only over a window: the cells of its bounding box and the margin on each side
+//! (the columns rounded out to whole words of 64), cut when the reach is bounded by the set's
+//! box ([`ReachSet::bound_by_box`]). Outside the window `τ` is the *far field* of the last
+//! cut: with `B` the bounding box of the set's cells and `b_w` the clock then,
 //! `τ_far(c) = ⌊(gap(c, B) + b_w) / unit⌋`, less two units for the rounding of its `f32`
 //! arithmetic. Why (I1) holds for it:
 //!
@@ -56,12 +56,14 @@
 //!
 //! The window follows the set, and every cell the set holds stays in it:
 //!
-//! - before an advance lets the clock reach a row outside the window, the window widens and
-//!   its new rows take the far field. The far field never falls as a row's gap to `B` grows,
-//!   so once the rows next to the window are out of the clock's reach, every row beyond is;
-//! - an operation that writes the reach of rows outside the window (a measurement's window, a
-//!   join) widens it first;
-//! - clearing free ground raises the reach over the window's rows only, and counts the
+//! - before an advance lets the clock reach a cell outside the window, the window widens (by
+//!   rows above and below, by words left and right) and its new cells take the far field.
+//!   The far field never falls as a cell's gap to `B` grows, and its least value over a row
+//!   (a column) is at the box's columns (rows), so once the rows and the columns next to the
+//!   window are out of the clock's reach, every cell beyond is;
+//! - an operation that writes the reach of cells outside the window (a measurement's window,
+//!   a join) widens it first;
+//! - clearing free ground raises the reach over the window's cells only, and counts the
 //!   window's edges as not free, which only lowers the bounds.
 //!
 //! ```
@@ -96,7 +98,7 @@ use super::geodesic::{self, geodesic_gap_field};
 use super::{CellBox, CellSet, common_rows};
 use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
-use window::FarField;
+use window::{FarField, Stored};
 
 mod window;
 
@@ -153,13 +155,14 @@ const UNIT_MARGIN: Real = 1e-6;
 #[derive(Clone, Debug)]
 pub struct ReachSet {
     cells: CellSet,
-    /// `τ` per cell of the stored rows, row-major.
+    /// `τ` per stored cell, row-major over the stored part ([`ReachSet::stored_rows`],
+    /// [`ReachSet::stored_columns`]).
     reach: Vec<u32>,
-    /// Per word of the stored rows: a lower bound of `τ` over the word's cells outside the set
+    /// Per stored word: a lower bound of `τ` over the word's cells outside the set
     /// (`u32::MAX` when it has none), so that [`ReachSet::advance`] visits only the words the
     /// clock can change.
     pending: Vec<u32>,
-    /// Per word of the stored rows: its last scan of the reach ([`Scan`]), valid until a reach of the
+    /// Per stored word: its last scan of the reach ([`Scan`]), valid until a reach of the
     /// word changes, so that a word the clock keeps reaching (cells held out by a bound) is not
     /// read again while nothing in it changed.
     scanned: Vec<Scan>,
@@ -167,13 +170,13 @@ pub struct ReachSet {
     /// queries and meets visit only those rows: a car's small set costs its rows, not the
     /// grid's. Meets tighten it; growth widens it.
     rows: (u32, u32),
-    /// Rows `stored.0..stored.1` are those whose reach is stored; they hold `rows`.
-    stored: (u32, u32),
-    /// The reach of the rows outside the stored ones; `None` when every row is stored.
+    /// The rows and words whose reach is stored; they hold every cell of the set.
+    stored: Stored,
+    /// The reach of the cells outside the stored ones; `None` when every cell is stored.
     far: Option<FarField>,
-    /// Rows around the cells a cut of the window keeps ([`ReachSet::with_row_margin`]);
-    /// `None`: every row is stored.
-    row_margin: Option<u32>,
+    /// Cells around the set's box a cut of the window keeps ([`ReachSet::with_margin`]);
+    /// `None`: every cell is stored.
+    margin: Option<u32>,
     /// The motion clock `b` of the last [`ReachSet::advance`], metres.
     clock_m: Real,
 }
@@ -201,8 +204,8 @@ impl PartialEq for ReachSet {
         let nx = self.cells.nx() as usize;
         let (mut mine, mut theirs) = (vec![0; nx], vec![0; nx]);
         (0..self.cells.ny()).all(|iy| {
-            self.copy_reach_row(iy, &mut mine);
-            other.copy_reach_row(iy, &mut theirs);
+            self.copy_reach_span(iy, 0, &mut mine);
+            other.copy_reach_span(iy, 0, &mut theirs);
             mine == theirs
         })
     }
@@ -231,9 +234,9 @@ impl ReachSet {
             pending: vec![u32::MAX; words],
             scanned: vec![Scan::default(); words],
             rows: rows_of(&cells),
-            stored: (0, cells.ny()),
+            stored: Stored::everything(&cells),
             far: None,
-            row_margin: None,
+            margin: None,
             cells,
             clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
         }
@@ -340,14 +343,27 @@ impl ReachSet {
         Some((Real::from(tau) * REACH_UNIT_M - self.clock_m).max(0.0))
     }
 
-    /// Index into `reach` of cell `(ix, iy)` of a stored row.
+    /// Index into `reach` of the stored cell `(ix, iy)`.
     fn index(&self, ix: u32, iy: u32) -> usize {
-        (iy - self.stored.0) as usize * self.cells.nx() as usize + ix as usize
+        (iy - self.stored.rows.0) as usize * self.stride()
+            + (ix - self.stored_columns().start) as usize
     }
 
-    /// Index into `pending` and `scanned` of word `w` of stored row `iy`.
+    /// Index into `pending` and `scanned` of the stored word `w` of row `iy`.
     fn slot(&self, iy: u32, w: usize) -> usize {
-        (iy - self.stored.0) as usize * self.cells.words_per_row() + w
+        (iy - self.stored.rows.0) as usize * self.stored_words() + (w - self.stored.words.0)
+    }
+
+    /// The stored words of the set, `(row, word)`, row after row.
+    fn stored_word_indices(&self) -> impl Iterator<Item = (u32, usize)> + use<> {
+        let words = self.stored.words.0..self.stored.words.1;
+        self.stored_rows()
+            .flat_map(move |iy| words.clone().map(move |w| (iy, w)))
+    }
+
+    /// The cells of word `w` of the grid's rows: `w * 64..` up to 64 of them, cut at `nx`.
+    fn word_cells(&self, w: usize) -> usize {
+        64.min(self.cells.nx() as usize - w * 64)
     }
 
     /// Moves the clock to `clock_m` (`v_max` times the time since the clock's origin): every
@@ -449,10 +465,14 @@ impl ReachSet {
     /// estimates of one target disagree.
     pub fn join(&mut self, extra: &CellSet) {
         debug_assert!(self.cells.same_shape(extra));
-        let Some((first, last)) = extra.row_range() else {
+        let Some(b) = extra.bounding_box() else {
             return;
         };
-        self.store_rows(first, last + 1);
+        let (first, last) = (b.y0, b.y1);
+        self.store(Stored {
+            rows: (b.y0, b.y1 + 1),
+            words: (b.x0 as usize / 64, b.x1 as usize / 64 + 1),
+        });
         for (ix, iy) in extra.iter() {
             if !self.cells.contains((ix, iy)) {
                 let (at, slot) = (self.index(ix, iy), self.slot(iy, ix as usize / 64));
@@ -533,17 +553,22 @@ impl ReachSet {
         self.remove(free);
     }
 
-    /// The window grown by 2 cells and clamped to the grid and to the stored rows, and its
+    /// The window grown by 2 cells and clamped to the grid and to the stored cells, and its
     /// seeds: the cells that are not free, and the cells of every window side inside the grid
     /// (they stand for every cell beyond it, so counting them as not free keeps each gap at
     /// most the true one).
     fn window_seeds(&self, free: &CellSet, window: &CellBox) -> Option<(CellBox, Vec<bool>)> {
         let mut w = clamp_box(window, 2, &self.cells)?;
+        let columns = self.stored_columns();
         (w.y0, w.y1) = (
-            w.y0.max(self.stored.0),
-            w.y1.min(self.stored.1.checked_sub(1)?),
+            w.y0.max(self.stored.rows.0),
+            w.y1.min(self.stored.rows.1.checked_sub(1)?),
         );
-        if w.y0 > w.y1 {
+        (w.x0, w.x1) = (
+            w.x0.max(columns.start),
+            w.x1.min(columns.end.checked_sub(1)?),
+        );
+        if w.y0 > w.y1 || w.x0 > w.x1 {
             return None;
         }
         let (nx, ny) = (self.cells.nx(), self.cells.ny());
@@ -574,7 +599,6 @@ impl ReachSet {
         field: &[u32],
     ) {
         self.forget_scans(window);
-        let nx = self.cells.nx() as usize;
         let w = (window.x1 - window.x0 + 1) as usize;
         let (unit, clock) = (grid.cell_m / REACH_UNIT_M, self.clock_m / REACH_UNIT_M);
         for (k, &d) in field.iter().enumerate() {
@@ -586,8 +610,9 @@ impl ReachSet {
                 Some(gap) => (gap * unit + clock - UNIT_MARGIN).max(0.0) as u32,
                 None => u32::MAX - 1,
             };
-            let (ix, iy) = (window.x0 as usize + k % w, window.y0 as usize + k / w);
-            let slot = &mut self.reach[(iy - self.stored.0 as usize) * nx + ix];
+            let (ix, iy) = (window.x0 + (k % w) as u32, window.y0 + (k / w) as u32);
+            let at = self.index(ix, iy);
+            let slot = &mut self.reach[at];
             *slot = (*slot).max(tau.min(u32::MAX - 1));
         }
     }
@@ -609,7 +634,10 @@ impl ReachSet {
         let was_wider = self
             .bounding_box()
             .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
-        self.store_rows(window.y0, window.y1 + 1);
+        self.store(Stored {
+            rows: (window.y0, window.y1 + 1),
+            words: (window.x0 as usize / 64, window.x1 as usize / 64 + 1),
+        });
         self.raise_outside(
             grid,
             &window,
@@ -652,7 +680,10 @@ impl ReachSet {
         let was_wider = self
             .bounding_box()
             .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
-        self.store_rows(window.y0, window.y1 + 1);
+        self.store(Stored {
+            rows: (window.y0, window.y1 + 1),
+            words: (window.x0 as usize / 64, window.x1 as usize / 64 + 1),
+        });
         self.raise_outside(grid, &window, &outer.window_flags(&window, false), then_m);
         self.drop_unreached(&window);
         self.intersect(&outer.dilate(grid, self.clock_m - then_m));
@@ -666,22 +697,18 @@ impl ReachSet {
     /// a reach raised since, by a late fact, puts a cell of the set beyond the clock.)
     fn drop_unreached(&mut self, window: &CellBox) {
         let reached = reached_units(self.clock_m);
-        let nx = self.cells.nx() as usize;
-        let last = window.y1.min(self.stored.1.saturating_sub(1));
+        let last = window.y1.min(self.stored.rows.1.saturating_sub(1));
+        let words = (window.x0 as usize / 64).max(self.stored.words.0)
+            ..(window.x1 as usize / 64 + 1).min(self.stored.words.1);
         let mut gone: Vec<(u32, usize, u64)> = Vec::new();
-        for iy in window.y0.max(self.stored.0)..=last {
-            if self.stored.0 >= self.stored.1 {
-                break;
-            }
-            let base = self.index(0, iy);
-            for w in window.x0 as usize / 64..=window.x1 as usize / 64 {
+        for iy in window.y0.max(self.stored.rows.0)..=last {
+            for w in words.clone() {
                 let word = self.cells.row(iy)[w];
                 if word == 0 {
                     continue;
                 }
-                let x0 = w * 64;
-                let x1 = (x0 + 64).min(nx);
-                let (hits, _) = reached_bits(&self.reach[base + x0..base + x1], reached);
+                let base = self.index(w as u32 * 64, iy);
+                let (hits, _) = reached_bits(&self.reach[base..base + self.word_cells(w)], reached);
                 let out = word & !hits;
                 if out != 0 {
                     gone.push((iy, w, out));
@@ -699,8 +726,8 @@ impl ReachSet {
     /// Raises the reach of every cell to the gap between its square and the bounding box of
     /// the set's cells (which hold the targets, so they are no nearer): the far field of a
     /// small set, so that it regrows as a rounded box rather than all at once. A set with a
-    /// row margin ([`ReachSet::with_row_margin`]) then stores the rows within the margin of
-    /// its box only, and this bound is its reach elsewhere.
+    /// margin ([`ReachSet::with_margin`]) then stores the cells within the margin of its box
+    /// only, and this bound is its reach elsewhere.
     pub fn bound_by_box(&mut self, grid: &GroundGrid) {
         let Some(b) = self.bounding_box() else {
             return;
@@ -721,12 +748,11 @@ impl ReachSet {
     ) {
         self.forget_scans(window);
         GAPS.with_borrow_mut(|field| {
-            let nx = self.cells.nx() as usize;
             let w = (window.x1 - window.x0 + 1) as usize;
             let (unit, clock) = (grid.cell_m / REACH_UNIT_M, clock_m / REACH_UNIT_M);
             field.compute_rows(window, inside, |y, gap_row| {
                 let seed_row = &inside[y * w..(y + 1) * w];
-                let start = (window.y0 - self.stored.0) as usize * nx + y * nx + window.x0 as usize;
+                let start = self.index(window.x0, window.y0 + y as u32);
                 let reach = &mut self.reach[start..start + w];
                 for ((slot, &gap2), &seed) in reach.iter_mut().zip(gap_row).zip(seed_row) {
                     if seed {
@@ -755,20 +781,17 @@ impl ReachSet {
         skip: impl Fn(u32, usize) -> bool,
         mut visit: impl FnMut(&mut CellSet, u32, usize, u64),
     ) {
-        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
         for iy in self.stored_rows() {
             if skip_row(iy) {
                 continue;
             }
-            for w in 0..wpr {
+            for w in self.stored.words.0..self.stored.words.1 {
                 let slot = self.slot(iy, w);
                 if self.pending[slot] > reached || skip(iy, w) {
                     continue;
                 }
-                let x0 = w * 64;
-                let x1 = (x0 + 64).min(nx);
-                let base = self.index(0, iy);
-                let (bits, next) = self.scan(slot, base + x0..base + x1, reached);
+                let base = self.index(w as u32 * 64, iy);
+                let (bits, next) = self.scan(slot, base..base + self.word_cells(w), reached);
                 self.pending[slot] = next;
                 visit(&mut self.cells, iy, w, bits);
             }
@@ -790,11 +813,16 @@ impl ReachSet {
 
     /// Marks the scans of the words of `window` stale (their reach is about to change).
     fn forget_scans(&mut self, window: &CellBox) {
-        let wpr = self.cells.words_per_row();
-        let (w0, w1) = (window.x0 as usize / 64, window.x1 as usize / 64);
-        for iy in window.y0..=window.y1.min(self.stored.1.saturating_sub(1)) {
-            let row = self.slot(iy, 0);
-            self.scanned[row + w0..=row + w1.min(wpr - 1)].fill(Scan::default());
+        let words = (window.x0 as usize / 64).max(self.stored.words.0)
+            ..(window.x1 as usize / 64 + 1).min(self.stored.words.1);
+        if words.is_empty() {
+            return;
+        }
+        for iy in
+            window.y0.max(self.stored.rows.0)..=window.y1.min(self.stored.rows.1.saturating_sub(1))
+        {
+            let (first, last) = (self.slot(iy, words.start), self.slot(iy, words.end - 1));
+            self.scanned[first..=last].fill(Scan::default());
         }
     }
 
@@ -807,11 +835,12 @@ impl ReachSet {
         if visit.is_empty() {
             return;
         }
-        let wpr = self.cells.words_per_row();
+        // The set has no cell outside its stored words.
+        let words = self.stored.words.0..self.stored.words.1;
         let mut held: Option<(u32, u32)> = None;
         for iy in visit.clone() {
             let mut any = 0;
-            for w in 0..wpr {
+            for w in words.clone() {
                 let gone = remove(&self.cells, iy, w);
                 if gone != 0 {
                     self.cells.row_mut(iy)[w] &= !gone;
@@ -847,7 +876,7 @@ impl ReachSet {
         let mut reach = vec![0; nx * self.cells.ny() as usize];
         if nx > 0 {
             for (iy, row) in (0..self.cells.ny()).zip(reach.chunks_exact_mut(nx)) {
-                self.copy_reach_row(iy, row);
+                self.copy_reach_span(iy, 0, row);
             }
         }
         let base = reach.iter().copied().min().unwrap_or(0);
@@ -871,19 +900,15 @@ impl ReachSet {
 
     /// Recomputes every word's pending reach exactly.
     fn rebuild_pending(&mut self) {
-        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
-        for iy in self.stored_rows() {
-            for w in 0..wpr {
-                let word = self.cells.row(iy)[w];
-                let base = self.index(0, iy) + w * 64;
-                let len = 64.min(nx - w * 64);
-                let slot = self.slot(iy, w);
-                self.pending[slot] = (0..len)
-                    .filter(|b| word >> b & 1 == 0)
-                    .map(|b| self.reach[base + b])
-                    .min()
-                    .unwrap_or(u32::MAX);
-            }
+        for (iy, w) in self.stored_word_indices() {
+            let word = self.cells.row(iy)[w];
+            let base = self.index(w as u32 * 64, iy);
+            let slot = self.slot(iy, w);
+            self.pending[slot] = (0..self.word_cells(w))
+                .filter(|b| word >> b & 1 == 0)
+                .map(|b| self.reach[base + b])
+                .min()
+                .unwrap_or(u32::MAX);
         }
     }
 }

@@ -1,5 +1,5 @@
-//! A [`ReachSet`] that stores its reach over a window of rows, with the far field of its box
-//! outside (the module docs of [`super`] say why this keeps the guarantee).
+//! A [`ReachSet`] that stores its reach over a window of cells around its box, with the far
+//! field of its box outside (the module docs of [`super`] say why this keeps the guarantee).
 
 use super::{REACH_UNIT_M, ReachSet, Scan, gap_cells};
 use crate::grid::GroundGrid;
@@ -9,6 +9,9 @@ use crate::raster::{CellBox, CellSet};
 /// Rows a window widens by at least when the clock comes near its edge, so that a growing
 /// set widens it every few steps rather than at every step.
 const WIDEN_ROWS: u32 = 32;
+
+/// Words (of 64 columns) a window widens by at least when the clock comes near its side.
+const WIDEN_WORDS: usize = 1;
 
 /// The reach implied outside a set's window: when the clock was `clock`, every target lay in
 /// the closed rectangle of `bbox`, so a cell's square is at least its gap to that rectangle
@@ -32,13 +35,13 @@ impl FarField {
         }
     }
 
-    /// Raises every reach of `row`, the whole row `iy` of the grid, to the bound.
-    pub(super) fn raise_row(&self, iy: u32, row: &mut [u32]) {
+    /// Raises every reach of `span`, the cells `x0..` of row `iy`, to the bound.
+    pub(super) fn raise_span(&self, iy: u32, x0: u32, span: &mut [u32]) {
         let b = &self.bbox;
         let gy = gap_cells(iy, b.y0, b.y1);
         let gy2 = (gy * gy) as f32;
-        for (ix, tau) in row.iter_mut().enumerate() {
-            let gx = gap_cells(ix as u32, b.x0, b.x1) as f32;
+        for (ix, tau) in (x0..).zip(span.iter_mut()) {
+            let gx = gap_cells(ix, b.x0, b.x1) as f32;
             *tau = (*tau).max(self.units(gx * gx + gy2));
         }
     }
@@ -56,9 +59,14 @@ impl FarField {
         self.tau(self.bbox.x0, iy)
     }
 
+    /// The least bound over column `ix` (a row of the box has no vertical gap).
+    fn column_least(&self, ix: u32) -> u32 {
+        self.tau(ix, self.bbox.y0)
+    }
+
     /// The bound at a squared gap of `gap2` cells². f32 keeps the row loop vectorised; its
     /// rounding (below 1e-6 relative) and the float to integer truncation are covered by
-    /// taking two units off. Every step is monotone in `gap2`, so rows farther from the box
+    /// taking two units off. Every step is monotone in `gap2`, so cells farther from the box
     /// never have a smaller bound.
     fn units(&self, gap2: f32) -> u32 {
         let units = gap2.sqrt() * self.unit + self.clock;
@@ -66,197 +74,306 @@ impl FarField {
     }
 }
 
+/// The part of the grid whose reach a set stores: rows `rows.0..rows.1` and the words (of 64
+/// columns) `words.0..words.1` of each.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Stored {
+    pub(super) rows: (u32, u32),
+    pub(super) words: (usize, usize),
+}
+
+impl Stored {
+    /// Every row and word of a grid of `cells`' shape.
+    pub(super) fn everything(cells: &CellSet) -> Self {
+        Self {
+            rows: (0, cells.ny()),
+            words: (0, cells.words_per_row()),
+        }
+    }
+
+    /// Whether no cell is stored.
+    fn is_empty(&self) -> bool {
+        self.rows.0 >= self.rows.1 || self.words.0 >= self.words.1
+    }
+
+    /// The smallest part holding both.
+    fn union(&self, other: &Self) -> Self {
+        if self.is_empty() {
+            return *other;
+        }
+        if other.is_empty() {
+            return *self;
+        }
+        Self {
+            rows: (self.rows.0.min(other.rows.0), self.rows.1.max(other.rows.1)),
+            words: (
+                self.words.0.min(other.words.0),
+                self.words.1.max(other.words.1),
+            ),
+        }
+    }
+}
+
 impl ReachSet {
-    /// The set keeps its reach over the rows within `margin_rows` of its cells only, from the
-    /// next [`ReachSet::bound_by_box`] on (which cuts the window); outside them the reach is
-    /// the bound of the set's box at that clock. For a target's set, whose cells are a small
-    /// part of the grid: its storage, its copies and its bounds then cost its rows.
+    /// The set keeps its reach over the cells within `margin` cells of its box only (rows,
+    /// and columns rounded out to whole words of 64), from the next [`ReachSet::bound_by_box`]
+    /// on (which cuts the window); outside them the reach is the bound of the set's box at that
+    /// clock. For a target's set, whose cells are a small part of the grid: its storage, its
+    /// copies and its bounds then cost its box, not the grid's rows.
     #[must_use]
-    pub fn with_row_margin(mut self, margin_rows: u32) -> Self {
-        self.row_margin = Some(margin_rows);
+    pub fn with_margin(mut self, margin: u32) -> Self {
+        self.margin = Some(margin);
         self
     }
 
-    /// The rows whose reach the set stores (every row, unless it has a row margin).
+    /// The rows whose reach the set stores (every row, unless it has a margin).
     pub fn stored_rows(&self) -> std::ops::Range<u32> {
-        self.stored.0..self.stored.1
+        self.stored.rows.0..self.stored.rows.1
+    }
+
+    /// The columns whose reach the set stores in each stored row (every column, unless it has
+    /// a margin): whole words of 64 columns, the last one cut at the grid's edge.
+    pub fn stored_columns(&self) -> std::ops::Range<u32> {
+        let x = |w: usize| (w as u32).saturating_mul(64).min(self.cells.nx());
+        x(self.stored.words.0)..x(self.stored.words.1)
+    }
+
+    /// Whether the reach of cell `(ix, iy)` is stored.
+    pub(super) fn stores(&self, ix: u32, iy: u32) -> bool {
+        self.stored_rows().contains(&iy) && self.stored_columns().contains(&ix)
+    }
+
+    /// Cells per stored row.
+    pub(super) fn stride(&self) -> usize {
+        self.stored_columns().len()
+    }
+
+    /// Words per stored row.
+    pub(super) fn stored_words(&self) -> usize {
+        self.stored.words.1.saturating_sub(self.stored.words.0)
     }
 
     /// This set met with `outer`, an outer raster of the targets the copy is for at the set's
     /// clock (a measurement of one target, or a peer's set of it, grown to this clock), with
     /// its reach raised to the bound of its box ([`ReachSet::bound_by_box`]) and kept over the
-    /// rows within `margin_rows` of its cells: the cells, and the reach over those rows, of
-    /// cloning the set, meeting `outer` and bounding by the box; the reach of the other rows
-    /// is that bound alone. It costs the window's rows, not the grid's.
-    pub fn restricted_copy(&self, grid: &GroundGrid, outer: &CellSet, margin_rows: u32) -> Self {
+    /// cells within `margin` of its cells: the cells, and the reach over those cells, of
+    /// cloning the set, meeting `outer` and bounding by the box; the reach of the other cells
+    /// is that bound alone. It costs the window, not the grid.
+    pub fn restricted_copy(&self, grid: &GroundGrid, outer: &CellSet, margin: u32) -> Self {
         debug_assert!(self.cells.same_shape(outer));
         let Some(bbox) = outer.bounding_box() else {
             // No cell: the copy is empty wherever it is stored.
-            let mut copy = self.clone().with_row_margin(margin_rows);
+            let mut copy = self.clone().with_margin(margin);
             copy.intersect(outer);
             return copy;
         };
-        let (lo, hi) = self.margin_rows(&bbox, margin_rows);
+        let part = self.margin_box(&bbox, margin);
+        let (lo, hi) = part.rows;
         let mut cells = CellSet::empty(grid);
         for iy in lo..hi {
-            for ((dst, &mine), &theirs) in cells
-                .row_mut(iy)
-                .iter_mut()
-                .zip(self.cells.row(iy))
-                .zip(outer.row(iy))
-            {
-                *dst = mine & theirs;
+            let (mine, theirs) = (self.cells.row(iy), outer.row(iy));
+            if theirs.iter().all(|&w| w == 0) {
+                continue;
+            }
+            for ((dst, &m), &t) in cells.row_mut(iy).iter_mut().zip(mine).zip(theirs) {
+                *dst = m & t;
             }
         }
-        let nx = self.cells.nx() as usize;
-        let mut reach = vec![0; (hi - lo) as usize * nx];
-        for (iy, row) in (lo..hi).zip(reach.chunks_exact_mut(nx)) {
-            self.copy_reach_row(iy, row);
-        }
-        let words = (hi - lo) as usize * self.cells.words_per_row();
         let mut copy = Self {
-            pending: vec![u32::MAX; words],
-            scanned: vec![Scan::default(); words],
+            pending: Vec::new(),
+            scanned: Vec::new(),
             rows: cells
                 .row_range_within(lo..hi)
                 .map_or((0, 0), |(first, last)| (first, last + 1)),
             cells,
-            reach,
-            stored: (lo, hi),
+            reach: Vec::new(),
+            stored: part,
             far: Some(FarField::new(grid, bbox, self.clock_m)),
-            row_margin: Some(margin_rows),
+            margin: Some(margin),
             clock_m: self.clock_m,
         };
+        let (x0, stride) = (copy.stored_columns().start, copy.stride());
+        copy.reach = vec![0; (hi - lo) as usize * stride];
+        if stride > 0 {
+            for (iy, span) in (lo..hi).zip(copy.reach.chunks_exact_mut(stride)) {
+                self.copy_reach_span(iy, x0, span);
+            }
+        }
+        let words = (hi - lo) as usize * copy.stored_words();
+        copy.pending = vec![u32::MAX; words];
+        copy.scanned = vec![Scan::default(); words];
         copy.rebuild_pending();
         copy.bound_by_box(grid);
         copy
     }
 
-    /// The rows of `bbox` grown by `margin` rows on each side, clamped to the grid.
-    fn margin_rows(&self, bbox: &CellBox, margin: u32) -> (u32, u32) {
-        let ny = self.cells.ny();
-        (
-            bbox.y0.saturating_sub(margin),
-            bbox.y1.saturating_add(1).saturating_add(margin).min(ny),
-        )
+    /// The cells of `bbox` grown by `margin` on each side, clamped to the grid, with the
+    /// columns rounded out to whole words.
+    fn margin_box(&self, bbox: &CellBox, margin: u32) -> Stored {
+        let (nx, ny) = (self.cells.nx(), self.cells.ny());
+        Stored {
+            rows: (
+                bbox.y0.saturating_sub(margin),
+                bbox.y1.saturating_add(1).saturating_add(margin).min(ny),
+            ),
+            words: (
+                bbox.x0.saturating_sub(margin) as usize / 64,
+                (bbox.x1.saturating_add(margin).min(nx.saturating_sub(1)) as usize / 64 + 1)
+                    .min(self.cells.words_per_row()),
+            ),
+        }
     }
 
-    /// Writes the reach of row `iy` into `row`: the stored one, else the far field.
-    pub(super) fn copy_reach_row(&self, iy: u32, row: &mut [u32]) {
-        if self.stored_rows().contains(&iy) {
-            let nx = self.cells.nx() as usize;
-            let start = (iy - self.stored.0) as usize * nx;
-            row.copy_from_slice(&self.reach[start..start + nx]);
-        } else {
-            row.fill(0);
-            if let Some(far) = &self.far {
-                far.raise_row(iy, row);
-            }
+    /// Writes the reach of cells `x0..x0 + span.len()` of row `iy` into `span`: the stored
+    /// one where it is stored, else the far field.
+    pub(super) fn copy_reach_span(&self, iy: u32, x0: u32, span: &mut [u32]) {
+        span.fill(0);
+        if let Some(far) = &self.far {
+            far.raise_span(iy, x0, span);
+        }
+        if !self.stored_rows().contains(&iy) {
+            return;
+        }
+        let columns = self.stored_columns();
+        let (from, to) = (
+            columns.start.max(x0),
+            columns.end.min(x0.saturating_add(span.len() as u32)),
+        );
+        if from < to {
+            let src = self.index(from, iy);
+            span[(from - x0) as usize..(to - x0) as usize]
+                .copy_from_slice(&self.reach[src..src + (to - from) as usize]);
         }
     }
 
     /// The reach of cell `(ix, iy)` of the grid.
     pub(super) fn reach_at(&self, ix: u32, iy: u32) -> u32 {
-        if self.stored_rows().contains(&iy) {
+        if self.stores(ix, iy) {
             self.reach[self.index(ix, iy)]
         } else {
             self.far.as_ref().map_or(0, |far| far.tau(ix, iy))
         }
     }
 
-    /// The bound of the set's box, [`ReachSet::bound_by_box`]'s work: with a row margin, the
-    /// window is first cut to the rows within the margin of the box, and the bound becomes
+    /// The bound of the set's box, [`ReachSet::bound_by_box`]'s work: with a margin, the
+    /// window is first cut to the cells within the margin of the box, and the bound becomes
     /// the far field.
     pub(super) fn bound_by(&mut self, far: FarField, bbox: &CellBox) {
         // The box is the set's: its rows are exactly the rows holding cells.
         self.rows = (bbox.y0, bbox.y1 + 1);
-        if let Some(margin) = self.row_margin {
-            let (lo, hi) = self.margin_rows(bbox, margin);
-            self.store_rows(lo, hi);
-            self.keep_rows(lo, hi);
+        if let Some(margin) = self.margin {
+            let part = self.margin_box(bbox, margin);
+            self.reshape(part);
             self.far = Some(far);
         }
         self.scanned.fill(Scan::default());
-        let nx = self.cells.nx() as usize;
-        for (iy, row) in self.stored_rows().zip(self.reach.chunks_exact_mut(nx)) {
-            far.raise_row(iy, row);
+        let (x0, stride) = (self.stored_columns().start, self.stride());
+        if stride == 0 {
+            return;
+        }
+        for (iy, span) in self.stored_rows().zip(self.reach.chunks_exact_mut(stride)) {
+            far.raise_span(iy, x0, span);
         }
     }
 
     /// Widens the window before an advance to the clock `reached` (reach units) so that every
     /// cell the clock reaches is stored: the far field grows with the gap to its box, so once
-    /// the rows next to the window are out of reach, so is every row beyond.
+    /// the rows and the columns next to the window are out of reach, so is every cell beyond.
     pub(super) fn widen_for(&mut self, reached: u32) {
         let Some(far) = self.far else {
             return;
         };
-        let ny = self.cells.ny();
-        let (mut lo, mut hi) = self.stored;
+        let (ny, wpr) = (self.cells.ny(), self.cells.words_per_row());
+        let Stored {
+            rows: (mut lo, mut hi),
+            words: (mut w0, mut w1),
+        } = self.stored;
         while lo > 0 && far.row_least(lo - 1) <= reached {
             lo = lo.saturating_sub(WIDEN_ROWS);
         }
         while hi < ny && far.row_least(hi) <= reached {
             hi = hi.saturating_add(WIDEN_ROWS).min(ny);
         }
-        self.store_rows(lo, hi);
+        while w0 > 0 && far.column_least((w0 * 64 - 1) as u32) <= reached {
+            w0 = w0.saturating_sub(WIDEN_WORDS);
+        }
+        while w1 < wpr && far.column_least((w1 * 64) as u32) <= reached {
+            w1 = (w1 + WIDEN_WORDS).min(wpr);
+        }
+        self.store(Stored {
+            rows: (lo, hi),
+            words: (w0, w1),
+        });
     }
 
-    /// Widens the window to hold rows `lo..hi` (clamped to the grid); the new rows take the far
-    /// field. A set without a far field stores every row already.
-    pub(super) fn store_rows(&mut self, lo: u32, hi: u32) {
-        let Some(far) = self.far else {
-            return;
-        };
-        let lo = lo.min(self.stored.0);
-        let hi = hi.min(self.cells.ny()).max(self.stored.1);
-        if (lo, hi) == self.stored {
+    /// Widens the window to hold `part` (clamped to the grid); the new cells take the far
+    /// field. A set without a far field stores every cell already.
+    pub(super) fn store(&mut self, part: Stored) {
+        if self.far.is_none() {
             return;
         }
-        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
-        let far_rows = |rows: std::ops::Range<u32>| {
-            let mut reach = vec![0; rows.len() * nx];
-            let mut pending = Vec::with_capacity(rows.len() * wpr);
-            for (iy, row) in rows.zip(reach.chunks_exact_mut(nx)) {
-                far.raise_row(iy, row);
-                // The set has no cell outside its window: every cell counts.
-                pending.extend(
-                    row.chunks(64)
-                        .map(|w| w.iter().copied().min().unwrap_or(u32::MAX)),
-                );
+        let part = Stored {
+            rows: (part.rows.0, part.rows.1.min(self.cells.ny())),
+            words: (part.words.0, part.words.1.min(self.cells.words_per_row())),
+        };
+        let wanted = self.stored.union(&part);
+        if wanted != self.stored {
+            self.reshape(wanted);
+        }
+    }
+
+    /// Stores the reach over `part` exactly: the cells stored before keep their reach, the
+    /// others take the far field (a set without one stores every cell, so it has none to
+    /// take), and the cells outside `part` are forgotten (the set must have no cell there).
+    fn reshape(&mut self, part: Stored) {
+        if part == self.stored {
+            return;
+        }
+        debug_assert!(
+            self.rows.0 >= self.rows.1
+                || (part.rows.0 <= self.rows.0 && self.rows.1 <= part.rows.1),
+            "the set's rows {:?} outside {:?}",
+            self.rows,
+            part.rows
+        );
+        let old = Stored {
+            rows: self.stored.rows,
+            words: self.stored.words,
+        };
+        let nx = self.cells.nx();
+        let x = |w: usize| (w as u32).saturating_mul(64).min(nx);
+        let (x0, x1) = (x(part.words.0), x(part.words.1));
+        let stride = (x1 - x0) as usize;
+        let words = part.words.1.saturating_sub(part.words.0);
+        let rows = part.rows.1.saturating_sub(part.rows.0) as usize;
+        let mut reach = vec![0u32; rows * stride];
+        let mut pending = vec![u32::MAX; rows * words];
+        let mut scanned = vec![Scan::default(); rows * words];
+        if stride > 0 && words > 0 {
+            for (iy, (span, (pend, scan))) in (part.rows.0..part.rows.1).zip(
+                reach.chunks_exact_mut(stride).zip(
+                    pending
+                        .chunks_exact_mut(words)
+                        .zip(scanned.chunks_exact_mut(words)),
+                ),
+            ) {
+                self.copy_reach_span(iy, x0, span);
+                for (k, w) in (part.words.0..part.words.1).enumerate() {
+                    if old.rows.0 <= iy && iy < old.rows.1 && old.words.0 <= w && w < old.words.1 {
+                        let slot = self.slot(iy, w);
+                        (pend[k], scan[k]) = (self.pending[slot], self.scanned[slot]);
+                    } else {
+                        // The set has no cell outside its window: every cell counts.
+                        let from = w * 64 - x0 as usize;
+                        let to = (from + 64).min(stride);
+                        pend[k] = span[from..to].iter().copied().min().unwrap_or(u32::MAX);
+                    }
+                }
             }
-            (reach, pending)
-        };
-        let (top, top_pending) = far_rows(lo..self.stored.0);
-        let (bottom, bottom_pending) = far_rows(self.stored.1..hi);
-        let added_above = top_pending.len();
-        self.reach.splice(0..0, top);
-        self.reach.extend(bottom);
-        self.pending.splice(0..0, top_pending);
-        self.pending.extend(bottom_pending);
-        self.scanned
-            .splice(0..0, std::iter::repeat_n(Scan::default(), added_above));
-        self.scanned.resize(self.pending.len(), Scan::default());
-        self.stored = (lo, hi);
-    }
-
-    /// Forgets the reach of the rows outside `lo..hi`, which the window holds; the set has no
-    /// cell there.
-    fn keep_rows(&mut self, lo: u32, hi: u32) {
-        debug_assert!(self.stored.0 <= lo && hi <= self.stored.1);
-        debug_assert!(self.rows.0 >= self.rows.1 || (lo <= self.rows.0 && self.rows.1 <= hi));
-        let (nx, wpr) = (self.cells.nx() as usize, self.cells.words_per_row());
-        let (skip, keep) = ((lo - self.stored.0) as usize, (hi - lo) as usize);
-        self.reach.drain(..skip * nx);
-        self.reach.truncate(keep * nx);
-        self.pending.drain(..skip * wpr);
-        self.pending.truncate(keep * wpr);
-        self.scanned.drain(..skip * wpr);
-        self.scanned.truncate(keep * wpr);
-        if self.reach.capacity() > 2 * self.reach.len() {
-            self.reach.shrink_to_fit();
-            self.pending.shrink_to_fit();
-            self.scanned.shrink_to_fit();
         }
-        self.stored = (lo, hi);
+        self.reach = reach;
+        self.pending = pending;
+        self.scanned = scanned;
+        self.stored = part;
     }
 }
