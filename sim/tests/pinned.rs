@@ -171,12 +171,12 @@ fn reach_sets_are_the_pinned_ones() {
         &[
             0xff0dc413393a4585,
             0x7e86e1ea0dca459f,
-            0x7ec5ea304475e5aa,
-            0xedde71661c88bdc2,
-            0x9db6563168330b1b,
-            0xf94c421691e4bca5,
-            0x35dadef1a220f213,
-            0x6bab52a82e1511bc,
+            0x7fd7cdcfe7a0661a,
+            0xe8de1593d2ee1d5e,
+            0xcb1c07cd5d774559,
+            0xd3fdfa5ca343fd4a,
+            0xbc719eec39070d08,
+            0x3f8f646f102760cf,
         ],
     );
 }
@@ -225,12 +225,12 @@ fn reach_sets_under_the_measurement_exchange_are_the_pinned_ones() {
         &[
             0x70be437cb23b3177,
             0x0999d58ea5326f95,
-            0x33d62c68670b41f4,
-            0x0a5cb29579c83987,
-            0xf9185b7f8e96c963,
-            0x5428a653ef373b50,
-            0xf4a802e31ab48633,
-            0x064938c22f7d5505,
+            0x1c55fcf3ef658d7c,
+            0xc86b45b95a0d7d56,
+            0x85a399b18e0113dd,
+            0xbaa83d14a4583067,
+            0xcfd904153b67c24f,
+            0x69149182697b09cc,
         ],
     );
 }
