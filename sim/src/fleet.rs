@@ -125,17 +125,22 @@ impl Fleet {
         let config = EstimatorConfig::from_scenario(scenario);
         let n = world.uav_count();
         let exchange = scenario.comms.exchange;
-        // On perfect links an agent sends whole sets in its first measurement message only
-        // (`comms.whole_sets_every` is for lossy or range-limited links).
+        // On perfect links a fresh agent never sends whole sets with its measurements, as
+        // agents do (`comms.whole_sets_every` is for lossy or range-limited links).
         let full_every = match exchange {
             Exchange::Sets => options.oem_full_every.unwrap_or(config.oem_full_every),
             Exchange::Measurements => u64::MAX,
         };
+        let outbox = |i: usize| {
+            let outbox = EstimateOutbox::new(i as u32, 1, full_every);
+            match exchange {
+                Exchange::Sets => outbox,
+                Exchange::Measurements => outbox.starting_fresh(),
+            }
+        };
         Ok(Fleet {
             estimators: (0..n).map(|_| Estimator::new(config.clone())).collect(),
-            outboxes: (0..n)
-                .map(|i| EstimateOutbox::new(i as u32, 1, full_every))
-                .collect(),
+            outboxes: (0..n).map(outbox).collect(),
             measurements: vec![None; n],
             exchange,
             messages: vec![Vec::new(); n],

@@ -4,9 +4,9 @@
 //! 1. the estimator folds the frame in (predict, correct);
 //! 2. the agent publishes its estimate on `{run}/uav/{i}/estimate`: its corrected sets
 //!    (`comms.exchange = "sets"`), or its frame's measurement (`"measurements"`,
-//!    [`crate::estimator::exchange`]) with its whole sets in its first message, for a peer
-//!    that joined late or asked, and every `comms.whole_sets_every` messages on lossy or
-//!    range-limited links;
+//!    [`crate::estimator::exchange`]) with its whole sets for a peer that joined late or
+//!    asked, in its first message when it resumed from a checkpoint, and every
+//!    `comms.whole_sets_every` messages on lossy or range-limited links;
 //! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are taken in
 //!    when they come) and, once the wait is over, takes them in by ascending peer: it applies
 //!    their measurements (late ones at their own clock) and fuses their sets (dilated by the
@@ -333,17 +333,25 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
             }
         }
         // Whole sets now and then where the radio loses messages or limits the range (they
-        // carry what was lost or is out of reach); on perfect links only in the first message
-        // and when a peer (re)joins or asks.
-        Exchange::Measurements => message::EstimateOutbox::new(
-            config.uav,
-            incarnation,
-            if radio.loses_or_limits() {
-                u64::from(config.scenario.comms.whole_sets_every)
+        // carry what was lost or is out of reach); on perfect links only when a peer
+        // (re)joins or asks, and in the first message of an agent resumed from a checkpoint
+        // (a fresh one's sets hold nothing its measurements do not carry).
+        Exchange::Measurements => {
+            let outbox = message::EstimateOutbox::new(
+                config.uav,
+                incarnation,
+                if radio.loses_or_limits() {
+                    u64::from(config.scenario.comms.whole_sets_every)
+                } else {
+                    u64::MAX
+                },
+            );
+            if report.resumed_from_step.is_some() {
+                outbox
             } else {
-                u64::MAX
-            },
-        ),
+                outbox.starting_fresh()
+            }
+        }
     };
     let mut agent = Agent {
         run_tag: config.run_id.tag(),

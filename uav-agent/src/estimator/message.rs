@@ -104,6 +104,9 @@ pub struct EstimateOutbox {
     seq: u64,
     full_every: u64,
     full_requested: bool,
+    /// Whether the first message is whole (not for a sender that starts from the prior under
+    /// the measurement exchange: [`EstimateOutbox::starting_fresh`]).
+    first_whole: bool,
     set_deltas: bool,
     /// Whether messages carry the map.
     map: bool,
@@ -122,6 +125,7 @@ impl EstimateOutbox {
             seq: 0,
             full_every: full_every.max(1),
             full_requested: true,
+            first_whole: true,
             set_deltas: false,
             map: true,
             last: None,
@@ -132,6 +136,18 @@ impl EstimateOutbox {
     /// exchange: the map travels with the measurements), and leave the state's map alone.
     pub fn without_map(mut self) -> Self {
         self.map = false;
+        self
+    }
+
+    /// For a sender that starts from the prior (no checkpoint) under the measurement
+    /// exchange: its first message is not whole. Its sets and its map are then the prior
+    /// corrected by its own frame, and its measurement carries that frame, so a receiver
+    /// learns nothing more from them: at a fleet's start each receiver would decode and fuse
+    /// every peer's whole sets of the region for nothing. Later whole messages come as
+    /// before: asked for, or every `full_every`-th.
+    pub fn starting_fresh(mut self) -> Self {
+        self.full_requested = false;
+        self.first_whole = false;
         self
     }
 
@@ -204,7 +220,9 @@ impl EstimateOutbox {
 
     /// Whether the next message is a whole one; clears a request.
     fn next_is_full(&mut self) -> bool {
-        let full = self.full_requested || self.seq.is_multiple_of(self.full_every);
+        let periodic =
+            self.seq.is_multiple_of(self.full_every) && (self.seq > 0 || self.first_whole);
+        let full = self.full_requested || periodic;
         self.full_requested = false;
         full
     }
@@ -831,6 +849,45 @@ mod tests {
         outbox.request_full();
         assert!(outbox.compose(&mut s).oem_full);
         assert_eq!(outbox.sent(), 5);
+    }
+
+    #[test]
+    fn a_fresh_sender_sends_whole_sets_only_when_asked_or_periodically() {
+        let cfg = config();
+        let mut s = EstimatorState::new(&cfg);
+        s.oem
+            .observe_obstacle(&sets::math::Point2::new(1.0, 1.0), 20.0);
+        let nothing = Arc::new(CellSet::empty(&cfg.grid));
+        let m = Measurement {
+            uav: 0,
+            step: 0,
+            pose: None,
+            free_ground: nothing.clone(),
+            hidden: nothing.clone(),
+            obstacles: nothing,
+            targets: BTreeMap::new(),
+            map_cells: Vec::new(),
+        };
+        let whole = |msg: EstimateMsg| {
+            assert_eq!(msg.sets.is_some(), msg.oem_full);
+            msg.oem_full
+        };
+        // Resumed (or under the set exchange): the first message is whole.
+        let mut resumed = EstimateOutbox::new(0, 1, 3);
+        assert!(whole(resumed.compose_measurement(&mut s, &m)));
+        // Fresh: its first message is its measurement alone, and its map's changes.
+        let mut fresh = EstimateOutbox::new(0, 1, 3).starting_fresh();
+        s.oem
+            .observe_obstacle(&sets::math::Point2::new(-5.0, 1.0), 10.0);
+        let first = fresh.compose_measurement(&mut s, &m);
+        assert!(first.measurement.is_some() && first.oem.is_empty());
+        assert!(!whole(first));
+        assert!(!whole(fresh.compose_measurement(&mut s, &m)));
+        assert!(!whole(fresh.compose_measurement(&mut s, &m)));
+        assert!(whole(fresh.compose_measurement(&mut s, &m))); // seq 3: periodic
+        fresh.request_full();
+        assert!(whole(fresh.compose_measurement(&mut s, &m)));
+        assert!(!whole(fresh.compose_measurement(&mut s, &m)));
     }
 
     /// A state whose sets change a little at each step, as a real one's do (the seen ground
