@@ -356,7 +356,7 @@ impl ReachSet {
 
     /// The stored words of the set, `(row, word)`, row after row.
     fn stored_word_indices(&self) -> impl Iterator<Item = (u32, usize)> + use<> {
-        let words = self.stored.words.0..self.stored.words.1;
+        let words = self.stored.word_range();
         self.stored_rows()
             .flat_map(move |iy| words.clone().map(move |w| (iy, w)))
     }
@@ -468,11 +468,7 @@ impl ReachSet {
         let Some(b) = extra.bounding_box() else {
             return;
         };
-        let (first, last) = (b.y0, b.y1);
-        self.store(Stored {
-            rows: (b.y0, b.y1 + 1),
-            words: (b.x0 as usize / 64, b.x1 as usize / 64 + 1),
-        });
+        self.store(Stored::of_box(&b));
         for (ix, iy) in extra.iter() {
             if !self.cells.contains((ix, iy)) {
                 let (at, slot) = (self.index(ix, iy), self.slot(iy, ix as usize / 64));
@@ -481,8 +477,8 @@ impl ReachSet {
             }
         }
         self.cells.or_assign(extra);
-        self.hold_row(first);
-        self.hold_row(last);
+        self.hold_row(b.y0);
+        self.hold_row(b.y1);
     }
 
     /// Removes ground proven free at the current clock (`free`, an inner raster: no target in
@@ -634,10 +630,7 @@ impl ReachSet {
         let was_wider = self
             .bounding_box()
             .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
-        self.store(Stored {
-            rows: (window.y0, window.y1 + 1),
-            words: (window.x0 as usize / 64, window.x1 as usize / 64 + 1),
-        });
+        self.store(Stored::of_box(&window));
         self.raise_outside(
             grid,
             &window,
@@ -680,10 +673,7 @@ impl ReachSet {
         let was_wider = self
             .bounding_box()
             .is_some_and(|b| !(window.contains((b.x0, b.y0)) && window.contains((b.x1, b.y1))));
-        self.store(Stored {
-            rows: (window.y0, window.y1 + 1),
-            words: (window.x0 as usize / 64, window.x1 as usize / 64 + 1),
-        });
+        self.store(Stored::of_box(&window));
         self.raise_outside(grid, &window, &outer.window_flags(&window, false), then_m);
         self.drop_unreached(&window);
         self.intersect(&outer.dilate(grid, self.clock_m - then_m));
@@ -698,8 +688,7 @@ impl ReachSet {
     fn drop_unreached(&mut self, window: &CellBox) {
         let reached = reached_units(self.clock_m);
         let last = window.y1.min(self.stored.rows.1.saturating_sub(1));
-        let words = (window.x0 as usize / 64).max(self.stored.words.0)
-            ..(window.x1 as usize / 64 + 1).min(self.stored.words.1);
+        let words = self.stored_words_of(window);
         let mut gone: Vec<(u32, usize, u64)> = Vec::new();
         for iy in window.y0.max(self.stored.rows.0)..=last {
             for w in words.clone() {
@@ -785,7 +774,7 @@ impl ReachSet {
             if skip_row(iy) {
                 continue;
             }
-            for w in self.stored.words.0..self.stored.words.1 {
+            for w in self.stored.word_range() {
                 let slot = self.slot(iy, w);
                 if self.pending[slot] > reached || skip(iy, w) {
                     continue;
@@ -813,8 +802,7 @@ impl ReachSet {
 
     /// Marks the scans of the words of `window` stale (their reach is about to change).
     fn forget_scans(&mut self, window: &CellBox) {
-        let words = (window.x0 as usize / 64).max(self.stored.words.0)
-            ..(window.x1 as usize / 64 + 1).min(self.stored.words.1);
+        let words = self.stored_words_of(window);
         if words.is_empty() {
             return;
         }
@@ -836,7 +824,7 @@ impl ReachSet {
             return;
         }
         // The set has no cell outside its stored words.
-        let words = self.stored.words.0..self.stored.words.1;
+        let words = self.stored.word_range();
         let mut held: Option<(u32, u32)> = None;
         for iy in visit.clone() {
             let mut any = 0;

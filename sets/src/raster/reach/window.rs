@@ -91,6 +91,30 @@ impl Stored {
         }
     }
 
+    /// The rows of `b` and the words holding its columns.
+    pub(super) fn of_box(b: &CellBox) -> Self {
+        Self {
+            rows: (b.y0, b.y1 + 1),
+            words: (b.x0 as usize / 64, b.x1 as usize / 64 + 1),
+        }
+    }
+
+    /// The columns of the stored words in a grid `nx` cells wide (the last word cut there).
+    pub(super) fn columns(&self, nx: u32) -> std::ops::Range<u32> {
+        let x = |w: usize| (w as u32).saturating_mul(64).min(nx);
+        x(self.words.0)..x(self.words.1)
+    }
+
+    /// The stored words of each stored row.
+    pub(super) fn word_range(&self) -> std::ops::Range<usize> {
+        self.words.0..self.words.1
+    }
+
+    /// Whether word `w` of row `iy` is stored.
+    fn holds(&self, iy: u32, w: usize) -> bool {
+        (self.rows.0..self.rows.1).contains(&iy) && self.word_range().contains(&w)
+    }
+
     /// Whether no cell is stored.
     fn is_empty(&self) -> bool {
         self.rows.0 >= self.rows.1 || self.words.0 >= self.words.1
@@ -134,8 +158,13 @@ impl ReachSet {
     /// The columns whose reach the set stores in each stored row (every column, unless it has
     /// a margin): whole words of 64 columns, the last one cut at the grid's edge.
     pub fn stored_columns(&self) -> std::ops::Range<u32> {
-        let x = |w: usize| (w as u32).saturating_mul(64).min(self.cells.nx());
-        x(self.stored.words.0)..x(self.stored.words.1)
+        self.stored.columns(self.cells.nx())
+    }
+
+    /// The stored words that hold columns of `window`.
+    pub(super) fn stored_words_of(&self, window: &CellBox) -> std::ops::Range<usize> {
+        (window.x0 as usize / 64).max(self.stored.words.0)
+            ..(window.x1 as usize / 64 + 1).min(self.stored.words.1)
     }
 
     /// Whether the reach of cell `(ix, iy)` is stored.
@@ -150,7 +179,7 @@ impl ReachSet {
 
     /// Words per stored row.
     pub(super) fn stored_words(&self) -> usize {
-        self.stored.words.1.saturating_sub(self.stored.words.0)
+        self.stored.word_range().len()
     }
 
     /// This set met with `outer`, an outer raster of the targets the copy is for at the set's
@@ -336,14 +365,8 @@ impl ReachSet {
             self.rows,
             part.rows
         );
-        let old = Stored {
-            rows: self.stored.rows,
-            words: self.stored.words,
-        };
-        let nx = self.cells.nx();
-        let x = |w: usize| (w as u32).saturating_mul(64).min(nx);
-        let (x0, x1) = (x(part.words.0), x(part.words.1));
-        let stride = (x1 - x0) as usize;
+        let columns = part.columns(self.cells.nx());
+        let (x0, stride) = (columns.start, columns.len());
         let words = part.words.1.saturating_sub(part.words.0);
         let rows = part.rows.1.saturating_sub(part.rows.0) as usize;
         let mut reach = vec![0u32; rows * stride];
@@ -359,7 +382,7 @@ impl ReachSet {
             ) {
                 self.copy_reach_span(iy, x0, span);
                 for (k, w) in (part.words.0..part.words.1).enumerate() {
-                    if old.rows.0 <= iy && iy < old.rows.1 && old.words.0 <= w && w < old.words.1 {
+                    if self.stored.holds(iy, w) {
                         let slot = self.slot(iy, w);
                         (pend[k], scan[k]) = (self.pending[slot], self.scanned[slot]);
                     } else {
