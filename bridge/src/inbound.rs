@@ -199,6 +199,7 @@ pub fn topic_label(topic: Topic) -> &'static str {
         Topic::Frame(_) => "frame",
         Topic::Command(_) => "command",
         Topic::Estimate(_) => "estimate",
+        Topic::State(_) => "state",
         Topic::Token(_) => "token",
         Topic::EndOfRun => "end_of_run",
     }
@@ -243,15 +244,20 @@ fn publish(plan: &HostPlan, ports: &Ports, topic: Topic, bytes: &[u8]) -> Result
         }
         Topic::Estimate(uav) => {
             let publisher = ports.estimates.get(&uav).ok_or(Refusal::NotForThisHost)?;
-            // Peers' estimates and, under the measurement exchange, the sender's state
-            // messages for the observers: both on the sender's estimate service.
-            publish_wire(
-                publisher,
-                &[WireKind::Estimate, WireKind::State],
-                uav,
-                bytes,
-            )?;
+            publish_wire(publisher, &[WireKind::Estimate], uav, bytes)?;
             ports.wake_agents(WakeEvent::Estimate);
+            if let Some(n) = &ports.observer_wake {
+                notify(n, WakeEvent::Estimate);
+            }
+        }
+        Topic::State(uav) => {
+            // The sender's sets for the observers, on its estimate service as on one host
+            // (peers skip them unread): only the observer's host takes them.
+            if !plan.world {
+                return Err(Refusal::NotForThisHost);
+            }
+            let publisher = ports.estimates.get(&uav).ok_or(Refusal::NotForThisHost)?;
+            publish_wire(publisher, &[WireKind::State], uav, bytes)?;
             if let Some(n) = &ports.observer_wake {
                 notify(n, WakeEvent::Estimate);
             }

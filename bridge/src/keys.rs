@@ -4,7 +4,8 @@
 //! |---|---|---|
 //! | `setfleet/{run}/uav/{i}/cvs` | UAV `i`'s frames | the world host |
 //! | `setfleet/{run}/uav/{i}/cmd` | agent `i`'s commands, acks, hellos | agent `i`'s host |
-//! | `setfleet/{run}/uav/{i}/estimate` | agent `i`'s estimates | agent `i`'s host |
+//! | `setfleet/{run}/uav/{i}/estimate` | agent `i`'s estimates, for its peers | agent `i`'s host |
+//! | `setfleet/{run}/uav/{i}/state` | agent `i`'s state messages, for the observer | agent `i`'s host |
 //! | `setfleet/{run}/guidance/{i}` | the token as agent `i` passes it | agent `i`'s host |
 //! | `setfleet/{run}/world/end` | the end of the run | the world host |
 //! | `setfleet/{run}/alive/{host}/{node}` | liveliness token of a process | its host |
@@ -26,6 +27,8 @@ pub enum Topic {
     Command(u32),
     /// Agent `i`'s estimate.
     Estimate(u32),
+    /// Agent `i`'s state message (sets for the observer, under the measurement exchange).
+    State(u32),
     /// The token as agent `i` passed it.
     Token(u32),
     /// The end of the run.
@@ -50,6 +53,12 @@ pub fn command(run: &RunId, uav: u32) -> String {
 /// `setfleet/{run}/uav/{i}/estimate`.
 pub fn estimate(run: &RunId, uav: u32) -> String {
     format!("{}/uav/{uav}/estimate", run_root(run))
+}
+
+/// `setfleet/{run}/uav/{i}/state`: only the world host, where the observer runs, subscribes
+/// to it, so the other hosts never receive the sets meant for the observer.
+pub fn state(run: &RunId, uav: u32) -> String {
+    format!("{}/uav/{uav}/state", run_root(run))
 }
 
 /// `setfleet/{run}/guidance/{i}`.
@@ -83,6 +92,7 @@ pub fn topic(run: &RunId, key: &str) -> Option<Topic> {
                 "cvs" => Some(Topic::Frame(uav)),
                 "cmd" => Some(Topic::Command(uav)),
                 "estimate" => Some(Topic::Estimate(uav)),
+                "state" => Some(Topic::State(uav)),
                 _ => None,
             }
         }
@@ -116,6 +126,7 @@ mod tests {
         assert_eq!(topic(&run, &frame(&run, 2)), Some(Topic::Frame(2)));
         assert_eq!(topic(&run, &command(&run, 0)), Some(Topic::Command(0)));
         assert_eq!(topic(&run, &estimate(&run, 9)), Some(Topic::Estimate(9)));
+        assert_eq!(topic(&run, &state(&run, 9)), Some(Topic::State(9)));
         assert_eq!(topic(&run, &token(&run, 1)), Some(Topic::Token(1)));
         assert_eq!(topic(&run, &end_of_run(&run)), Some(Topic::EndOfRun));
         assert_eq!(topic(&run, "setfleet/r-1/uav/02/cvs"), None);

@@ -129,7 +129,8 @@ fn subscribe(
         format!("{root}/guidance/*"),
     ];
     if plan.world {
-        data_keys.push(format!("{root}/uav/*/cmd"));
+        // The agents' sets for the observer, which runs here.
+        data_keys.extend([format!("{root}/uav/*/cmd"), format!("{root}/uav/*/state")]);
     } else {
         data_keys.extend(plan.agents.iter().map(|&u| keys::frame(run, u)));
         data_keys.push(keys::end_of_run(run));

@@ -26,7 +26,7 @@ use protocol::ipc::{
     EventService, Ipc, IpcOpenError, PubSubService, RunNode, WakeEvent, WireService,
     WireSubscriber, scan_nodes,
 };
-use protocol::wire::{UavCommand, WireHeader};
+use protocol::wire::{UavCommand, WireHeader, WireKind};
 use zenoh::Wait;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::Publisher;
@@ -47,6 +47,15 @@ struct Route<S> {
     uav: u32,
     from: S,
     to: Publisher<'static>,
+}
+
+/// A local agent's estimate service: its estimates go to every other host, its state messages
+/// (sets for the observer) only to the observer's host, and nowhere when the observer is here.
+struct EstimateRoute {
+    uav: u32,
+    from: WireSubscriber,
+    estimates: Publisher<'static>,
+    states: Option<Publisher<'static>>,
 }
 
 /// A UAV's frames from the local world to its remote agent.
@@ -70,7 +79,7 @@ pub struct Outbound<'a> {
     node: RunNode,
     frames: Vec<FrameRoute>,
     commands: Vec<CommandRoute>,
-    estimates: Vec<Route<WireSubscriber>>,
+    estimates: Vec<EstimateRoute>,
     tokens_in: WireSubscriber,
     tokens_out: BTreeMap<u32, Publisher<'static>>,
     end_of_run: Option<Publisher<'static>>,
@@ -167,8 +176,8 @@ impl RemoteAgents {
 struct LocalAgents {
     /// Their commands, for a remote world (none when the world is local).
     commands: Vec<CommandRoute>,
-    /// Their estimates.
-    estimates: Vec<Route<WireSubscriber>>,
+    /// Their estimates and state messages.
+    estimates: Vec<EstimateRoute>,
     /// The Zenoh publisher of each one's tokens.
     tokens_out: BTreeMap<u32, Publisher<'static>>,
 }
@@ -199,13 +208,18 @@ impl LocalAgents {
                 services._commands.push(service);
             }
             let service = node.open_estimate(uav)?;
-            estimates.push(Route {
+            estimates.push(EstimateRoute {
                 uav,
                 from: service
                     .subscriber_builder()
                     .create()
                     .map_err(IpcOpenError::from)?,
-                to: publisher(session, keys::estimate(run, uav))?,
+                estimates: publisher(session, keys::estimate(run, uav))?,
+                states: if plan.world {
+                    None
+                } else {
+                    Some(publisher(session, keys::state(run, uav))?)
+                },
             });
             services._wire.push(service);
             tokens_out.insert(uav, publisher(session, keys::token(run, uav))?);
@@ -406,8 +420,14 @@ impl<'a> Outbound<'a> {
                 let Some(header) = receive_wire(&route.from, &mut self.buf) else {
                     break;
                 };
-                tracing::trace!(uav = header.sender, step = header.step, "estimate out");
-                put(&route.to, &self.buf, "estimate", &mut self.counters);
+                if header.kind == WireKind::State as u32 {
+                    if let Some(to) = &route.states {
+                        put(to, &self.buf, "state", &mut self.counters);
+                    }
+                } else {
+                    tracing::trace!(uav = header.sender, step = header.step, "estimate out");
+                    put(&route.estimates, &self.buf, "estimate", &mut self.counters);
+                }
             }
         }
         while let Some(header) = receive_wire(&self.tokens_in, &mut self.buf) {

@@ -17,7 +17,8 @@ pub struct Flow {
 /// The counters of one thread, or of the whole bridge once merged.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct Counters {
-    /// Sent to other hosts, by kind (`frame`, `command`, `estimate`, `token`, `end_of_run`).
+    /// Sent to other hosts, by kind (`frame`, `command`, `estimate`, `state`, `token`,
+    /// `end_of_run`).
     pub sent: BTreeMap<String, Flow>,
     /// Received from other hosts and published here, by kind.
     pub received: BTreeMap<String, Flow>,

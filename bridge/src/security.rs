@@ -55,6 +55,7 @@
 //! | `setfleet/{run}/world/**`         | world host                   | [`keys::end_of_run`](crate::keys::end_of_run) |
 //! | `setfleet/{run}/uav/{i}/cmd`      | host running UAV `i`         | [`keys::command`](crate::keys::command) |
 //! | `setfleet/{run}/uav/{i}/estimate` | host running UAV `i`         | [`keys::estimate`](crate::keys::estimate) |
+//! | `setfleet/{run}/uav/{i}/state`    | host running UAV `i`         | [`keys::state`](crate::keys::state) |
 //! | `setfleet/{run}/guidance/{i}`     | host running UAV `i`         | [`keys::token`](crate::keys::token) |
 //! | `setfleet/{run}/alive/{host}/{node}` | liveliness of `host`'s own processes | [`keys::alive`](crate::keys::alive) |
 //! | `setfleet/{run}/**`, `.../alive/**` | the relay (router), relaying | |

@@ -198,3 +198,32 @@ fn gap_field_frame_window(bencher: Bencher) {
     let mut field = GapField::default();
     bencher.bench_local(|| black_box(field.compute(black_box(&window), black_box(&seeds)).len()));
 }
+
+/// Clearing a frame's free ground from `X̄` (`ReachSet::clear`): a camera's trapezoid
+/// footprint, 120 m deep and 60 to 200 m wide (240 x 400 cells, about half of them free, as
+/// in a 16-UAV run's frames), less the blobs of ground it did not prove free, applied to a set
+/// that covers the grid. What applying one peer's measurement costs `X̄` under the
+/// measurement exchange: the transform over the window and the raise of every free cell.
+#[divan::bench]
+fn reach_clear_frame_window(bencher: Bencher) {
+    use sets::raster::ReachSet;
+    let g = grid();
+    let footprint = [
+        Point2::new(-30.0, -60.0),
+        Point2::new(30.0, -60.0),
+        Point2::new(100.0, 60.0),
+        Point2::new(-100.0, 60.0),
+    ];
+    let mut free = CellSet::empty(&g);
+    free.fill_convex_polygon(&g, &footprint, Coverage::Inner);
+    free.and_not_assign(&blobs(&g, 5, 0.1));
+    let window = free.bounding_box().expect("a footprint");
+    let mut set = ReachSet::full(&g);
+    set.advance(10.0);
+    let mut clock = 10.0;
+    bencher.bench_local(|| {
+        clock += 1.0;
+        set.advance(clock);
+        set.clear(&g, black_box(&free), &window);
+    });
+}

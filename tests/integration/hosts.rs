@@ -99,11 +99,18 @@ fn run_on_hosts(hosts: u16, extra: &[&str]) -> (String, Value) {
             r["received"]["estimate"]["messages"].as_u64() > Some(0),
             "host {host}: {r}"
         );
-        // Each agent host got its agents' frames over Zenoh.
+        // Each agent host got its agents' frames over Zenoh, and none of the other hosts'
+        // state messages: those are the observer's, which runs on host 0, which gets them.
         if host > 0 {
             assert!(
                 r["received"]["frame"]["messages"].as_u64() >= Some(20),
                 "{r}"
+            );
+            assert_eq!(r["received"].get("state"), None, "host {host}: {r}");
+        } else {
+            assert!(
+                r["received"]["state"]["messages"].as_u64() >= Some(20),
+                "host {host}: {r}"
             );
         }
     }
@@ -236,13 +243,14 @@ fn intruder_config(port: u16, ca: &Path, identity: Option<&Path>) -> zenoh::Conf
     config
 }
 
-/// What an intruder forges: an estimate and a token of UAV 0 and the end of the run, each a
-/// well-formed envelope, as a peer would send them.
+/// What an intruder forges: an estimate, a state message and a token of UAV 0 and the end of
+/// the run, each a well-formed envelope, as a peer would send them.
 fn forgeries(run: &protocol::service::RunId) -> Vec<(String, Vec<u8>)> {
     use protocol::wire::{WireHeader, WireKind};
     let mut out = Vec::new();
     for (key, kind) in [
         (bridge::keys::estimate(run, 0), WireKind::Estimate),
+        (bridge::keys::state(run, 0), WireKind::State),
         (bridge::keys::token(run, 0), WireKind::Token),
     ] {
         let payload = [0u8; 16];

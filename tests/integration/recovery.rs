@@ -169,7 +169,8 @@ fn a_fleet_killed_whole_resumes_from_its_checkpoints() {
         let resumed = r["resumed_from_step"]
             .as_u64()
             .expect("resumed from a checkpoint");
-        assert!((18..=20).contains(&resumed), "{r}");
+        // The last checkpoint before the kill: agents save one at every fourth step.
+        assert!([16, 20].contains(&resumed), "{r}");
         assert_eq!(r["end"], "EndOfRun", "{r}");
     }
 }

@@ -177,6 +177,7 @@ impl AccessPolicy {
             keys.extend([
                 keys::command(run, uav),
                 keys::estimate(run, uav),
+                keys::state(run, uav),
                 keys::token(run, uav),
             ]);
         }
@@ -343,9 +344,11 @@ mod tests {
             [
                 "setfleet/r/uav/0/cmd",
                 "setfleet/r/uav/0/estimate",
+                "setfleet/r/uav/0/state",
                 "setfleet/r/guidance/0",
                 "setfleet/r/uav/1/cmd",
                 "setfleet/r/uav/1/estimate",
+                "setfleet/r/uav/1/state",
                 "setfleet/r/guidance/1"
             ]
         );

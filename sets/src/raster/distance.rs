@@ -154,18 +154,11 @@ struct Envelope {
 /// One parabola `(x - apex)² + g(apex)²` of an envelope.
 #[derive(Clone, Copy, Debug)]
 struct Parabola {
-    apex: usize,
+    apex: i64,
     /// `g(apex)² + apex²`: the parabola is `x² - 2 apex x + level`.
     level: i64,
     /// Where it starts to be the lowest, as the fraction `num / den` (`den > 0`).
     from: (i64, i64),
-}
-
-impl Parabola {
-    /// The parabola at `x`, less `x²` (the same for every parabola).
-    fn at(&self, x: i64) -> i64 {
-        self.level - 2 * self.apex as i64 * x
-    }
 }
 
 impl Envelope {
@@ -183,7 +176,7 @@ impl Envelope {
             let level = i64::from(gq) * i64::from(gq) + qi * qi;
             // Where the parabola at q undercuts the one at p: s = (level(q) - level(p)) /
             // (2 (q - p)), kept as an exact fraction.
-            let meets = |p: &Parabola| (level - p.level, 2 * (qi - p.apex as i64));
+            let meets = |p: &Parabola| (level - p.level, 2 * (qi - p.apex));
             while let [.., _, last] = envelope.as_slice() {
                 let s = meets(last);
                 // s <= start, both with positive denominators.
@@ -196,7 +189,7 @@ impl Envelope {
             // The first parabola starts at minus infinity; its fraction is never read.
             let from = envelope.last().map_or((0, 1), meets);
             envelope.push(Parabola {
-                apex: q,
+                apex: qi,
                 level,
                 from,
             });
@@ -205,21 +198,22 @@ impl Envelope {
             out.fill(UNREACHED);
             return;
         }
-        let mut k = 0;
-        for (x, o) in out.iter_mut().enumerate() {
-            // Move to the last parabola that starts at or before x: a parabola is at or below
-            // the one before it in the envelope exactly from their meeting point on, so the
-            // comparison stands for the fraction `from` (no division).
-            let xi = x as i64;
-            while envelope
-                .get(k + 1)
-                .is_some_and(|p| p.at(xi) <= envelope[k].at(xi))
-            {
-                k += 1;
+        // Each parabola is the lowest (or tied) from its start on, up to the next one's start;
+        // at a whole `x` that is from the ceiling of its start. A parabola whose span holds no
+        // whole `x` is skipped: the next one is at or below it there.
+        let len = out.len() as i64;
+        let mut x = 0;
+        for (k, p) in envelope.iter().enumerate() {
+            let end = envelope.get(k + 1).map_or(len, |next| {
+                let (num, den) = next.from;
+                (-(-num).div_euclid(den)).clamp(0, len)
+            });
+            let g2 = (p.level - p.apex * p.apex) as u64;
+            while x < end {
+                let d = x.abs_diff(p.apex);
+                out[x as usize] = d * d + g2;
+                x += 1;
             }
-            let p = envelope[k].apex;
-            let d = x.abs_diff(p) as u64;
-            *o = d * d + u64::from(g[p]) * u64::from(g[p]);
         }
     }
 }

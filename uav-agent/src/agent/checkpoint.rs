@@ -1,7 +1,7 @@
 //! Crash-safe checkpoints of an agent's estimator state.
 //!
-//! An agent with a checkpoint file saves its [`EstimatorState`] there after each step it
-//! acked. A restarted agent reads it back before its first frame and resumes from it: the
+//! An agent with a checkpoint file saves its [`EstimatorState`] there after every few steps
+//! it acked ([`super::AgentConfig::checkpoint_every`]). A restarted agent reads it back before its first frame and resumes from it: the
 //! first frame's prediction grows every set by the motion since the checkpoint's step, so the
 //! sets hold the targets as surely as if the agent had never stopped, and nothing the agent
 //! had learned (explored ground, identified targets, the map) is lost even when no peer is
@@ -9,8 +9,8 @@
 //!
 //! **Off the step's path.** The step loop encodes the state and replaces the file (a write
 //! and a rename: a crash or a kill of the agent cannot undo it, so a restarted agent always
-//! finds the last step it acked); a [`CheckpointFlusher`] thread then flushes it to the disk,
-//! so the loop never waits for the disk.
+//! finds the last checkpoint it wrote); a [`CheckpointFlusher`] thread then flushes it to the
+//! disk, so the loop never waits for the disk.
 //!
 //! **Atomic.** A checkpoint is written to `<file>.tmp` and renamed over `<file>`, then the
 //! file and the directory are flushed (`fsync`): a crash of the agent at any point leaves

@@ -42,9 +42,14 @@ struct Args {
     #[arg(long)]
     world_timeout_ms: Option<u64>,
     /// Directory of the run's checkpoints: the agent saves its state to `agent-<id>.ckpt`
-    /// there after every step, and resumes from it when restarted (default: no checkpoint).
+    /// there after every `--checkpoint-every`-th step, and resumes from it when restarted
+    /// (default: no checkpoint).
     #[arg(long)]
     checkpoint_dir: Option<PathBuf>,
+    /// Checkpoint after the steps that are multiples of this.
+    #[arg(long, default_value_t = agent::DEFAULT_CHECKPOINT_EVERY,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    checkpoint_every: u64,
 }
 
 fn main() -> ExitCode {
@@ -68,6 +73,7 @@ fn main() -> ExitCode {
     config.checkpoint = args
         .checkpoint_dir
         .map(|dir| AgentConfig::checkpoint_in(&dir, args.id));
+    config.checkpoint_every = args.checkpoint_every;
     #[cfg(feature = "test-hooks")]
     apply_test_hooks(&mut config);
     let shutdown = AtomicBool::new(false);

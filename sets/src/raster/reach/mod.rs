@@ -93,7 +93,7 @@
 use std::cell::RefCell;
 use std::ops::Range;
 
-use super::distance::{GapField, UNREACHED};
+use super::distance::GapField;
 use super::geodesic::{self, geodesic_gap_field};
 use super::{CellBox, CellSet, common_rows};
 use crate::grid::{CellIndex, GroundGrid};
@@ -743,17 +743,14 @@ impl ReachSet {
                 let seed_row = &inside[y * w..(y + 1) * w];
                 let start = self.index(window.x0, window.y0 + y as u32);
                 let reach = &mut self.reach[start..start + w];
+                // Without branches, so that the loop runs at the speed of its arithmetic: a seed
+                // keeps its reach, and an unreached cell (`gap2` is `distance::UNREACHED`, whose
+                // root times the unit is far above `u32::MAX`) gets the largest.
                 for ((slot, &gap2), &seed) in reach.iter_mut().zip(gap_row).zip(seed_row) {
-                    if seed {
-                        continue;
-                    }
-                    let tau = if gap2 == UNREACHED {
-                        u32::MAX - 1
-                    } else {
-                        // Truncation is the floor here (non-negative); `as` saturates.
-                        ((gap2 as Real).sqrt() * unit + clock - UNIT_MARGIN).max(0.0) as u32
-                    };
-                    *slot = (*slot).max(tau.min(u32::MAX - 1));
+                    // Truncation is the floor here (non-negative); `as` saturates.
+                    let tau = ((gap2 as Real).sqrt() * unit + clock - UNIT_MARGIN).max(0.0) as u32;
+                    let raised = (*slot).max(tau.min(u32::MAX - 1));
+                    *slot = if seed { *slot } else { raised };
                 }
             });
         });
