@@ -73,7 +73,8 @@ pub fn access_policy(
 /// |---|---|---|
 /// | `uav/{i}/cvs` (frames) | the world host | agent `i`'s host |
 /// | `uav/{i}/cmd` (commands, acks, hellos) | agent `i`'s host | the world host |
-/// | `uav/{i}/estimate` | agent `i`'s host | every other host |
+/// | `uav/{i}/estimate`, estimates | agent `i`'s host | every other host |
+/// | `uav/{i}/estimate`, state messages (for the observer) | agent `i`'s host, when not the world host | the world host |
 /// | `guidance` (token passed by `i`) | agent `i`'s host | every other host |
 /// | end of run (an event) | the world host | every other host |
 /// | liveliness of each process | its host | every other host |

@@ -49,7 +49,7 @@ use sets::grid::GroundGrid;
 mod overrides;
 mod validate;
 
-pub use validate::MAX_LATENCY_MS;
+pub use validate::{MAX_LATENCY_MS, MAX_RELAY_HOPS};
 
 /// Height above the tallest building of the lowest UAV when the scenario gives no altitudes, m.
 pub const CLEARANCE_ABOVE_BUILDINGS_M: f64 = 20.0;
@@ -474,6 +474,7 @@ impl Planner {
 ///
 /// | `exchange` | `"sets"` | `"sets"`, `"measurements"` | what estimates carry ([`Exchange`]) |
 /// | `whole_sets_every` | `20` | `1 <= value <= 10000` | under `exchange = "measurements"` with some `loss` or a finite `range_m`, an estimate also carries the sender's whole sets every this many messages, which relay what a lost message or the range kept from a receiver; on any links, whole sets also go in an agent's first message, after a peer joined late or restarted, and to a peer that missed a message |
+/// | `relay_hops` | `0` | `0 <= value <= 8` | under `exchange = "measurements"`, an agent forwards in its next estimate every peer measurement it applied that has been forwarded fewer than this many times, so a measurement reaches UAVs up to this many hops beyond the radio's range, a step later per hop (0: no forwarding) |
 ///
 /// `latency_ms` is bounded because every receiver, and the observer, holds the estimates in
 /// flight: 10 s is 20 steps of the default scenario's estimates.
@@ -490,6 +491,8 @@ pub struct CommsConfig {
     pub exchange: Exchange,
     /// Under the measurement exchange, steps between two estimates with whole sets.
     pub whole_sets_every: u32,
+    /// Under the measurement exchange, how many times a peer measurement is forwarded.
+    pub relay_hops: u32,
 }
 
 /// What the agents' estimates carry (`comms.exchange`); both keep the guarantee.
@@ -645,6 +648,7 @@ impl Default for CommsConfig {
             latency_ms: 0.0,
             exchange: Exchange::Measurements,
             whole_sets_every: 20,
+            relay_hops: 0,
         }
     }
 }

@@ -11,11 +11,12 @@ use serde::{Deserialize, Serialize};
 use crate::camera::CameraPose;
 use sets::raster::delta::SetCode;
 
-/// Version of every message layout in this module and in [`crate::frame`]. 8: UAV masks
+/// Version of every message layout in this module and in [`crate::frame`]. 9: an estimate
+/// carries the peer measurements its sender forwards ([`RelayedMeasurementMsg`]). 8: UAV masks
 /// ([`UavMask`]) are 64 bits wide, for fleets of up to 64 UAVs, and truth messages and frames
 /// hold 128 cars. 7: an estimate's sets are optional ([`SetsMsg`]) and it may carry its
 /// frame's measurement ([`MeasurementMsg`]); agents also send [`WireKind::State`] messages.
-pub const PROTOCOL_VERSION: u32 = 8;
+pub const PROTOCOL_VERSION: u32 = 9;
 /// Targets a truth message can hold: the cars of the largest fleet's region (64 UAVs over
 /// 2 x 2 km keep the default scenario's 8 cars per 4 UAVs).
 pub const TRUTH_MAX_TARGETS: usize = 128;
@@ -353,6 +354,10 @@ pub struct AgentStats {
     pub estimates_lost: u64,
     /// Tokens the simulated radio lost on the way to this agent.
     pub tokens_lost: u64,
+    /// Peer measurements applied from a copy another agent forwarded (`comms.relay_hops`).
+    pub relayed_applied: u64,
+    /// Peer measurements this agent forwarded.
+    pub relayed_sent: u64,
 }
 
 /// Agent -> peers and observers: the agent's estimate at a step.
@@ -390,6 +395,8 @@ pub struct EstimateMsg {
     pub sets: Option<SetsMsg>,
     /// What the sender's frame of `step` proved, under the measurement exchange.
     pub measurement: Option<MeasurementMsg>,
+    /// Peers' measurements the sender applied and forwards (`comms.relay_hops`).
+    pub relayed: Vec<RelayedMeasurementMsg>,
     /// The sender's counters, so observers see them even if the agent is killed.
     pub stats: AgentStats,
     /// OEM cells changed since the last message, or the whole known map when `oem_full`.
@@ -430,6 +437,23 @@ pub struct MeasurementMsg {
     pub obstacles: SetCode,
     /// `X^m_j` of each car the frame measured.
     pub targets: Vec<TargetSetMsg>,
+}
+
+/// A peer's measurement as another agent forwards it (`comms.relay_hops`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RelayedMeasurementMsg {
+    /// The UAV whose frame it is.
+    pub uav: u32,
+    /// The frame's step.
+    pub step: u64,
+    /// How many agents forwarded it, this message's sender included (at least 1).
+    pub hops: u32,
+    /// The camera pose of the frame.
+    pub pose: CameraPose,
+    /// What the frame proved.
+    pub measurement: MeasurementMsg,
+    /// The map cells the frame changed.
+    pub oem: Vec<OemCellUpdate>,
 }
 
 /// One UAV's plan for the horizon, as the next UAVs in the token need it: its predicted camera
@@ -603,6 +627,7 @@ mod tests {
             },
             sets: None,
             measurement: None,
+            relayed: Vec::new(),
             stats: AgentStats::default(),
             oem: Vec::new(),
             oem_full: false,

@@ -269,7 +269,7 @@ impl Fleet {
             let start = Instant::now();
             let msg = match &self.measurements[uav] {
                 Some(m) if self.exchange == Exchange::Measurements => {
-                    outbox.compose_measurement(estimator.state_mut(), m)
+                    outbox.compose_measurement(estimator.state_mut(), m, &[])
                 }
                 _ => outbox.compose(estimator.state_mut()),
             };

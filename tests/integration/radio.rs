@@ -123,3 +123,30 @@ fn late_estimates_are_fused_late_and_measured_as_fused() {
         "the last 3 steps are in flight: {s}"
     );
 }
+
+/// With `comms.relay_hops`, agents forward the peers' measurements they applied: a
+/// measurement the radio lost on one link comes a step later through another agent, and is
+/// applied once. The guarantee holds and the observer still measures what each agent holds.
+#[test]
+fn forwarded_measurements_bring_what_the_radio_lost_and_keep_the_guarantee() {
+    let t = TestRun::new("radio-relay");
+    let s = run(&t, &["comms.loss=0.5", "comms.relay_hops=1"]);
+    assert_complete_and_exact(&t, &s);
+    let agents = s["agents"].as_array().expect("agents");
+    let sum = |key: &str| -> u64 { agents.iter().map(|a| a[key].as_u64().unwrap()).sum() };
+    // Every measurement an agent applied from its sender, it forwards once in its next
+    // estimate; some of them are what the radio lost on another link.
+    assert_eq!(sum("relayed_sent"), sum("estimates_received"), "{s}");
+    assert!(sum("relayed_applied") > 0, "{s}");
+    assert!(sum("relayed_applied") <= sum("estimates_lost"), "{s}");
+    // Without relaying nothing is forwarded.
+    let t = TestRun::new("radio-no-relay");
+    let s = run(&t, &["comms.loss=0.5"]);
+    let agents = s["agents"].as_array().expect("agents");
+    assert!(
+        agents
+            .iter()
+            .all(|a| a["relayed_sent"] == 0 && a["relayed_applied"] == 0),
+        "{s}"
+    );
+}

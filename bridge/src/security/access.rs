@@ -399,8 +399,9 @@ mod tests {
             .unwrap()
             .agent_host(&host("h1"), &[1])
             .unwrap();
-        assert_eq!(both.publications(&host("world")).len(), 2 + 3);
-        assert_eq!(both.publications(&host("h1")).len(), 6);
+        // Four keys per UAV: commands, estimates, state messages, tokens.
+        assert_eq!(both.publications(&host("world")).len(), 2 + 4);
+        assert_eq!(both.publications(&host("h1")).len(), 2 * 4);
     }
 
     #[test]

@@ -168,6 +168,16 @@ impl AgentTally {
         self.sum(|i| i.stats.tokens_lost)
     }
 
+    /// Peer measurements the agent applied from a copy another agent forwarded.
+    pub fn relayed_applied(&self) -> u64 {
+        self.sum(|i| i.stats.relayed_applied)
+    }
+
+    /// Peer measurements the agent forwarded.
+    pub fn relayed_sent(&self) -> u64 {
+        self.sum(|i| i.stats.relayed_sent)
+    }
+
     /// Incarnations seen (1 + restarts that published).
     pub fn incarnations(&self) -> usize {
         self.incarnations.len()

@@ -158,6 +158,11 @@ pub struct AgentSummary {
     pub estimates_lost: u64,
     /// Tokens the simulated radio lost on their way to the agent.
     pub tokens_lost: u64,
+    /// Peer measurements the agent applied from a copy another agent forwarded
+    /// (`comms.relay_hops`), as of its last estimate.
+    pub relayed_applied: u64,
+    /// Peer measurements the agent forwarded, as of its last estimate.
+    pub relayed_sent: u64,
     /// Fingerprint ([`sets::raster::CellSet::digest`]) of the agent's `X̄` after its last
     /// measured step's fusion, as the observer rebuilt it: the agent's own report
     /// (`final_undetected_digest` in its log) holds the same value when the observer
@@ -603,6 +608,8 @@ fn agent_summaries(
                 token_timeouts: t.map_or(0, |t| t.token_timeouts()),
                 estimates_lost: t.map_or(0, |t| t.estimates_lost()),
                 tokens_lost: t.map_or(0, |t| t.tokens_lost()),
+                relayed_applied: t.map_or(0, |t| t.relayed_applied()),
+                relayed_sent: t.map_or(0, |t| t.relayed_sent()),
                 final_undetected_digest: last.map(|(_, set)| set.digest()),
                 final_measured_step: last.map(|(step, _)| *step),
                 restarts: faults::restarts(record.faults, uav),

@@ -43,6 +43,9 @@ const MIN_IMAGE_SIDE: u32 = 8;
 /// Longest link latency, milliseconds: every receiver and the observer hold the estimates in
 /// flight, so a latency is memory (10 s is 20 steps of estimates by default).
 pub const MAX_LATENCY_MS: f64 = 10_000.0;
+/// Most times a measurement is forwarded (`comms.relay_hops`): each hop adds a step of
+/// delay and the measurement's bytes to the forwarding agent's estimate.
+pub const MAX_RELAY_HOPS: u32 = 8;
 /// Relative tolerance of "a whole number of CVS periods".
 const PERIOD_MULTIPLE_TOLERANCE: f64 = 1e-9;
 
@@ -88,6 +91,7 @@ pub(super) fn integer_range(key: &str) -> Option<(i128, i128)> {
         "guidance.lookahead_periods" => (1, MAX_LOOKAHEAD_PERIODS as i128),
         "guidance.beam_width" => (1, MAX_BEAM_WIDTH as i128),
         "comms.whole_sets_every" => (1, 10_000),
+        "comms.relay_hops" => (0, MAX_RELAY_HOPS as i128),
         _ => return None,
     };
     Some(range)
@@ -384,7 +388,9 @@ impl Scenario {
         let comms = &self.comms;
         Interval::open_closed(0.0, f64::INFINITY).check("comms.range_m", comms.range_m)?;
         Interval::closed(0.0, 1.0).check("comms.loss", comms.loss)?;
-        Interval::closed(0.0, MAX_LATENCY_MS).check("comms.latency_ms", comms.latency_ms)
+        Interval::closed(0.0, MAX_LATENCY_MS).check("comms.latency_ms", comms.latency_ms)?;
+        check_integer("comms.whole_sets_every", i128::from(comms.whole_sets_every))?;
+        check_integer("comms.relay_hops", i128::from(comms.relay_hops))
     }
 
     fn validate_region(&self) -> Result<(), ScenarioError> {
@@ -773,6 +779,10 @@ mod tests {
             }),
             ("guidance.beam_width", |s| s.guidance.beam_width = 0),
             ("guidance.beam_width", |s| s.guidance.beam_width = 65),
+            ("comms.whole_sets_every", |s| s.comms.whole_sets_every = 0),
+            ("comms.relay_hops", |s| {
+                s.comms.relay_hops = MAX_RELAY_HOPS + 1
+            }),
             ("guidance.target_weight", |s| {
                 s.guidance.target_weight = -1.0
             }),

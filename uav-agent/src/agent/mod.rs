@@ -6,11 +6,12 @@
 //!    (`comms.exchange = "sets"`), or its frame's measurement (`"measurements"`,
 //!    [`crate::estimator::exchange`]) with its whole sets for a peer that joined late or
 //!    asked, in its first message when it resumed from a checkpoint, and every
-//!    `comms.whole_sets_every` messages on lossy or range-limited links;
+//!    `comms.whole_sets_every` messages on lossy or range-limited links; with
+//!    `comms.relay_hops` it also forwards the peers' measurements it applied at the last step;
 //! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are taken in
 //!    when they come) and, once the wait is over, takes them in by ascending peer: it applies
 //!    their measurements (late ones at their own clock) and fuses their sets (dilated by the
-//!    steps they lag). Under the measurement exchange it then sends the observers its sets
+//!    steps they lag), then the measurements they forward that it has not applied yet. Under the measurement exchange it then sends the observers its sets
 //!    (a [`WireKind::State`] message on its estimate service, which peers skip unread);
 //! 4. on a guidance step it takes its turn in the token ring ([`crate::guidance::ring`]) and
 //!    runs the planner the scenario names ([`crate::guidance::decide`]: the paper's MPC or
@@ -25,9 +26,9 @@
 //! serves at that step (the frame's `served` mask, the same for every agent) whose iceoryx2
 //! node is alive (a SIGKILLed peer shows up dead at once and its resources are cleaned).
 //! Listing the nodes costs milliseconds of CPU, so it is done when the served mask names a
-//! peer not known alive, and while waiting at most once per wait slice, not at every step
-//! and every wake-up (the world drops a peer that died before the step from the mask). The
-//! world-server is presumed lost when no frame came for `world_timeout` (before the first
+//! peer not known alive, and while waiting at most once per `liveness_scan_period` (250 ms per
+//! 4 UAVs of the fleet), not at every step and every wake-up (the world drops a peer that died
+//! before the step from the mask). The world-server is presumed lost when no frame came for `world_timeout` (before the first
 //! frame, that and the world's start wait) and its node is gone, and the agent exits with an
 //! error. Only SIGINT and SIGTERM stop an agent: a stalled agent
 //! (SIGSTOP, swapped out) resumes where it was; if the world stopped serving it meanwhile,
@@ -82,7 +83,7 @@ use serde::Serialize;
 
 use crate::estimator::message::PeerMessage;
 use crate::estimator::{
-    Estimator, EstimatorConfig, EstimatorStepError, Measurement, StepReport, message,
+    Estimator, EstimatorConfig, EstimatorStepError, Measurement, Relayed, StepReport, message,
 };
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use checkpoint::{CheckpointFile, CheckpointFlusher, Owner};
@@ -232,6 +233,11 @@ pub struct AgentReport {
     pub estimates_lost: u64,
     /// Tokens the simulated radio lost: their senders were skipped at once.
     pub tokens_lost: u64,
+    /// Peer measurements applied from a copy another agent forwarded (`comms.relay_hops`),
+    /// not from their sender.
+    pub relayed_applied: u64,
+    /// Peer measurements this agent forwarded in its estimates.
+    pub relayed_sent: u64,
     /// Messages dropped, by reason.
     pub dropped: BTreeMap<String, u64>,
     /// Guidance decisions taken.
@@ -371,6 +377,12 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         exchange,
         missed: 0,
         measurement: None,
+        relay_hops: match exchange {
+            Exchange::Sets => 0,
+            Exchange::Measurements => config.scenario.comms.relay_hops,
+        },
+        relay_out: Vec::new(),
+        applied: BTreeSet::new(),
         // The observers' copy of this agent's sets, over the local IPC (no radio): deltas.
         state_outbox: (exchange == Exchange::Measurements).then(|| {
             message::EstimateOutbox::new(config.uav, incarnation, estimator_config.oem_full_every)
@@ -461,6 +473,39 @@ fn restore(
     }
 }
 
+/// How an agent applies its peers' measurements when it forwards them (`comms.relay_hops`).
+struct Relaying<'a> {
+    /// How many times a measurement is forwarded (0: never, and nothing is remembered).
+    hops: u32,
+    /// The measurements applied lately, as (step, UAV).
+    applied: &'a mut BTreeSet<(u64, u32)>,
+    /// What the next estimate forwards.
+    out: &'a mut Vec<Relayed>,
+}
+
+impl Relaying<'_> {
+    /// Applies `m`, which reached this agent after `hops` forwardings (0: from its sender),
+    /// unless it was applied already; keeps it to forward when it has hops left. Whether it
+    /// was applied now.
+    fn apply(&mut self, estimator: &mut Estimator, m: &Measurement, hops: u32) -> bool {
+        if self.hops == 0 {
+            estimator.apply(m);
+            return true;
+        }
+        if !self.applied.insert((m.step, m.uav)) {
+            return false;
+        }
+        estimator.apply(m);
+        if hops < self.hops {
+            self.out.push(Relayed {
+                hops: hops + 1,
+                measurement: m.clone(),
+            });
+        }
+        true
+    }
+}
+
 /// A number that grows at each start of an agent process (the wall clock in nanoseconds), so
 /// the world and the peers tell a restarted agent from its predecessor and ignore the latter.
 fn incarnation() -> u64 {
@@ -498,6 +543,14 @@ struct Agent<'a> {
     exchange: Exchange,
     /// This agent's measurement of the current step, under the measurement exchange.
     measurement: Option<Measurement>,
+    /// How many times a peer measurement is forwarded (`comms.relay_hops`; 0 under the set
+    /// exchange).
+    relay_hops: u32,
+    /// The peer measurements applied at the last gather that the next estimate forwards.
+    relay_out: Vec<Relayed>,
+    /// The peer measurements applied lately, as (step, UAV), when relaying: a measurement
+    /// that comes again, from its sender or forwarded by another agent, is not applied twice.
+    applied: BTreeSet<(u64, u32)>,
     /// Under the measurement exchange, the observers' copy of this agent's sets once it
     /// applied its peers' measurements ([`WireKind::State`]).
     state_outbox: Option<message::EstimateOutbox>,
@@ -845,10 +898,13 @@ impl Agent<'_> {
             self.outbox.request_full();
             self.full_map_from = None;
         }
+        let relayed = std::mem::take(&mut self.relay_out);
         let mut msg = match (&self.measurement, self.exchange) {
-            (Some(m), Exchange::Measurements) => self
-                .outbox
-                .compose_measurement(self.estimator.state_mut(), m),
+            (Some(m), Exchange::Measurements) => {
+                self.report.relayed_sent += relayed.len() as u64;
+                self.outbox
+                    .compose_measurement(self.estimator.state_mut(), m, &relayed)
+            }
             _ => self.outbox.compose(self.estimator.state_mut()),
         };
         msg.stats = self.stats();
@@ -885,6 +941,8 @@ impl Agent<'_> {
             token_timeouts: self.report.token_timeouts,
             estimates_lost: self.report.estimates_lost,
             tokens_lost: self.report.tokens_lost,
+            relayed_applied: self.report.relayed_applied,
+            relayed_sent: self.report.relayed_sent,
         }
     }
 
@@ -1074,6 +1132,15 @@ impl Agent<'_> {
         let later = self.lost_by_step.split_off(&k.saturating_add(1));
         let lost = std::mem::replace(&mut self.lost_by_step, later);
         self.report.estimates_lost += lost.values().sum::<u64>();
+        // Measurements other agents forward, by (step, UAV), each with its fewest hops:
+        // applied after the senders' own, in that order, so runs stay reproducible.
+        let mut forwarded: BTreeMap<(u64, u32), Relayed> = BTreeMap::new();
+        let fleet = self.config.scenario.uavs.count;
+        let mut relay = Relaying {
+            hops: self.relay_hops,
+            applied: &mut self.applied,
+            out: &mut self.relay_out,
+        };
         for info in self.peers.values_mut() {
             let (ready, later): (Vec<_>, Vec<_>) = info
                 .pending
@@ -1087,10 +1154,20 @@ impl Agent<'_> {
                 info.fused_step = Some(p.step);
                 if radio.fuses(&me, &p.endpoint()) {
                     if let Some(m) = &p.measurement {
-                        self.estimator.apply(m);
+                        relay.apply(&mut self.estimator, m, 0);
                     }
                     if let Some(e) = &p.estimate {
                         self.estimator.fuse(e);
+                    }
+                    for r in p.relayed {
+                        let m = &r.measurement;
+                        if m.uav == me.uav || m.uav >= fleet {
+                            continue;
+                        }
+                        let key = (m.step, m.uav);
+                        if forwarded.get(&key).is_none_or(|kept| r.hops < kept.hops) {
+                            forwarded.insert(key, r);
+                        }
                     }
                     self.report.estimates_received += 1;
                 } else {
@@ -1098,6 +1175,17 @@ impl Agent<'_> {
                 }
             }
         }
+        for r in forwarded.into_values() {
+            if relay.apply(&mut self.estimator, &r.measurement, r.hops) {
+                self.report.relayed_applied += 1;
+            }
+        }
+        // A copy comes at most a step and the radio's delay per hop after the measurement's
+        // own step: older ones need no memory (one that came later still would be applied
+        // again, which keeps the guarantee like any measurement).
+        let keep = (u64::from(self.relay_hops) + 1) * (radio.latency_steps() + 1) + 1;
+        let oldest = k.saturating_sub(keep);
+        self.applied = self.applied.split_off(&(oldest, 0));
     }
 
     fn drain_tokens(&mut self) {

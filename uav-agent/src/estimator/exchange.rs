@@ -81,6 +81,17 @@ pub struct Measurement {
     pub map_cells: Vec<OemCellUpdate>,
 }
 
+/// A peer's measurement as an agent forwards it (`comms.relay_hops`): relaying under a limited
+/// radio range. The receiver applies it as any measurement of its step, late by a step per
+/// hop, so the guarantee argument above holds for it unchanged.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Relayed {
+    /// How many agents forwarded it so far (at least 1).
+    pub hops: u32,
+    /// The measurement.
+    pub measurement: Measurement,
+}
+
 /// What applying a measurement did.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ApplyReport {

@@ -45,7 +45,8 @@ use std::sync::Arc;
 use protocol::camera::CameraPose;
 use protocol::codec::{self, DecodeError, EncodeError};
 use protocol::wire::{
-    DropReason, EstimateMsg, MeasurementMsg, OemCellUpdate, SetsMsg, TargetSetMsg, UavMask, uav_bit,
+    DropReason, EstimateMsg, MeasurementMsg, OemCellUpdate, RelayedMeasurementMsg, SetsMsg,
+    TargetSetMsg, UavMask, uav_bit,
 };
 use sets::grid::GroundGrid;
 use sets::math::Point3;
@@ -53,7 +54,7 @@ use sets::raster::CellSet;
 use sets::raster::delta::{DeltaError, SetCode};
 
 use super::fusion::SharedSet;
-use super::{EstimatorConfig, EstimatorState, Measurement, PeerEstimate};
+use super::{EstimatorConfig, EstimatorState, Measurement, PeerEstimate, Relayed};
 use crate::occupancy::{OccupancyMap, OemUpdateError};
 
 /// The sets of one estimate: what a sender keeps as the base of its next deltas and a
@@ -187,11 +188,13 @@ impl EstimateOutbox {
     /// The measurement exchange's message of the current state: the frame's `measurement`,
     /// with the whole sets and the whole map in a whole message (the first, every
     /// `full_every`-th and the one after [`EstimateOutbox::request_full`]), else the map
-    /// cells the frame changed. Drains the map's pending changes.
+    /// cells the frame changed, and the peers' measurements it forwards (`relayed`). Drains
+    /// the map's pending changes.
     pub fn compose_measurement(
         &mut self,
         state: &mut EstimatorState,
         measurement: &Measurement,
+        relayed: &[Relayed],
     ) -> EstimateMsg {
         let full = self.next_is_full();
         let pending = self.take_map(state, full);
@@ -201,21 +204,22 @@ impl EstimateOutbox {
             measurement.map_cells.clone()
         };
         let sets = full.then(|| sets_msg(&EstimateSets::of_state(state), None).0);
-        let whole = |set: &SharedSet| SetCode::Whole(set.encode());
-        let measured = MeasurementMsg {
-            free_ground: whole(&measurement.free_ground),
-            hidden: whole(&measurement.hidden),
-            obstacles: whole(&measurement.obstacles),
-            targets: measurement
-                .targets
-                .iter()
-                .map(|(&id, set)| TargetSetMsg {
-                    id,
-                    set: whole(set),
-                })
-                .collect(),
-        };
-        self.message(state, sets, Some(measured), false, oem, full)
+        let relayed = relayed
+            .iter()
+            .map(|r| RelayedMeasurementMsg {
+                uav: r.measurement.uav,
+                step: r.measurement.step,
+                hops: r.hops,
+                pose: r.measurement.pose.unwrap_or(NO_POSE),
+                measurement: measurement_msg(&r.measurement),
+                oem: r.measurement.map_cells.clone(),
+            })
+            .collect();
+        let measured = measurement_msg(measurement);
+        EstimateMsg {
+            relayed,
+            ..self.message(state, sets, Some(measured), false, oem, full)
+        }
     }
 
     /// Whether the next message is a whole one; clears a request.
@@ -256,18 +260,41 @@ impl EstimateOutbox {
             // The base is the previous message: `last` is only kept between consecutive ones.
             base_seq: any_delta.then(|| self.seq.saturating_sub(1)),
             want_whole: 0,
-            pose: state.pose.unwrap_or(CameraPose {
-                position: Point3::origin(),
-                yaw: 0.0,
-            }),
+            pose: state.pose.unwrap_or(NO_POSE),
             sets,
             measurement,
+            relayed: Vec::new(),
             stats: protocol::wire::AgentStats::default(),
             oem,
             oem_full: full && self.map,
         };
         self.seq += 1;
         msg
+    }
+}
+
+/// The pose a message carries when its state has none (before the first frame).
+const NO_POSE: CameraPose = CameraPose {
+    position: Point3::new(0.0, 0.0, 0.0),
+    yaw: 0.0,
+};
+
+/// A measurement's sets, whole (a camera window's sets are small, and a receiver holds no
+/// base for them).
+fn measurement_msg(m: &Measurement) -> MeasurementMsg {
+    let whole = |set: &SharedSet| SetCode::Whole(set.encode());
+    MeasurementMsg {
+        free_ground: whole(&m.free_ground),
+        hidden: whole(&m.hidden),
+        obstacles: whole(&m.obstacles),
+        targets: m
+            .targets
+            .iter()
+            .map(|(&id, set)| TargetSetMsg {
+                id,
+                set: whole(set),
+            })
+            .collect(),
     }
 }
 
@@ -369,6 +396,17 @@ pub enum EstimateReadError {
     /// The message carries no sets where sets were expected (a measurement alone).
     #[error("the estimate of UAV {0} carries no sets")]
     NoSets(u32),
+    /// A forwarded measurement is of the sender itself, of a step not before the message's,
+    /// or claims a number of hops out of range.
+    #[error("bad forwarded measurement of UAV {uav} at step {step}: {reason}")]
+    BadRelay {
+        /// The UAV whose measurement it claims to be.
+        uav: u32,
+        /// Its step.
+        step: u64,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
 }
 
 impl EstimateReadError {
@@ -426,6 +464,8 @@ pub struct PeerMessage {
     pub estimate: Option<PeerEstimate>,
     /// What its frame proved (with the message's map when it carries no sets).
     pub measurement: Option<Measurement>,
+    /// Peers' measurements it forwards (`comms.relay_hops`).
+    pub relayed: Vec<Relayed>,
 }
 
 impl PeerMessage {
@@ -464,8 +504,7 @@ fn rebuild(
     if !msg.time_s.is_finite() {
         return Err(EstimateReadError::BadTime(msg.time_s));
     }
-    let pose_ok = msg.pose.position.iter().all(|v| v.is_finite()) && msg.pose.yaw.is_finite();
-    let pose = pose_ok.then_some(msg.pose);
+    let pose = finite(msg.pose);
     for u in &msg.oem {
         OccupancyMap::cell_of_update(&config.oem_grid, u)?;
     }
@@ -492,34 +531,22 @@ fn rebuild(
         }),
         None => None,
     };
-    let measurement = match &msg.measurement {
-        Some(m) => {
-            let grid = &config.grid;
-            let mut targets = BTreeMap::new();
-            for t in &m.targets {
-                let set = decode_set(grid, SetRole::Measured(t.id), &t.set, None)?;
-                if targets.insert(t.id, set).is_some() {
-                    return Err(EstimateReadError::DuplicateTarget(t.id));
-                }
-            }
-            Some(Measurement {
-                uav: msg.uav,
-                step: msg.step,
-                pose,
-                free_ground: decode_set(grid, SetRole::MeasuredFree, &m.free_ground, None)?,
-                hidden: decode_set(grid, SetRole::MeasuredHidden, &m.hidden, None)?,
-                obstacles: decode_set(grid, SetRole::MeasuredObstacles, &m.obstacles, None)?,
-                targets,
-                // The map goes with the sets when the message carries both.
-                map_cells: if sets.is_some() {
-                    Vec::new()
-                } else {
-                    msg.oem.clone()
-                },
-            })
-        }
-        None => None,
+    // The map goes with the sets when the message carries both.
+    let map_cells = if sets.is_some() {
+        Vec::new()
+    } else {
+        msg.oem.clone()
     };
+    let measurement = msg
+        .measurement
+        .as_ref()
+        .map(|m| decode_measurement(config, msg.uav, msg.step, pose, m, map_cells))
+        .transpose()?;
+    let relayed = msg
+        .relayed
+        .iter()
+        .map(|r| decode_relayed(config, msg, r))
+        .collect::<Result<_, _>>()?;
     let message = PeerMessage {
         uav: msg.uav,
         step: msg.step,
@@ -528,8 +555,82 @@ fn rebuild(
         pose,
         estimate,
         measurement,
+        relayed,
     };
     Ok((message, sets))
+}
+
+/// The pose, when every number of it is finite.
+fn finite(pose: CameraPose) -> Option<CameraPose> {
+    let ok = pose.position.iter().all(|v| v.is_finite()) && pose.yaw.is_finite();
+    ok.then_some(pose)
+}
+
+/// Validates and decodes the measurement of UAV `uav` at `step`, its camera at `pose`.
+fn decode_measurement(
+    config: &EstimatorConfig,
+    uav: u32,
+    step: u64,
+    pose: Option<CameraPose>,
+    m: &MeasurementMsg,
+    map_cells: Vec<OemCellUpdate>,
+) -> Result<Measurement, EstimateReadError> {
+    let grid = &config.grid;
+    let mut targets = BTreeMap::new();
+    for t in &m.targets {
+        let set = decode_set(grid, SetRole::Measured(t.id), &t.set, None)?;
+        if targets.insert(t.id, set).is_some() {
+            return Err(EstimateReadError::DuplicateTarget(t.id));
+        }
+    }
+    Ok(Measurement {
+        uav,
+        step,
+        pose,
+        free_ground: decode_set(grid, SetRole::MeasuredFree, &m.free_ground, None)?,
+        hidden: decode_set(grid, SetRole::MeasuredHidden, &m.hidden, None)?,
+        obstacles: decode_set(grid, SetRole::MeasuredObstacles, &m.obstacles, None)?,
+        targets,
+        map_cells,
+    })
+}
+
+/// Validates and decodes a measurement that `msg`'s sender forwards: another UAV's, of an
+/// earlier step, forwarded at most [`protocol::scenario::MAX_RELAY_HOPS`] times.
+fn decode_relayed(
+    config: &EstimatorConfig,
+    msg: &EstimateMsg,
+    r: &RelayedMeasurementMsg,
+) -> Result<Relayed, EstimateReadError> {
+    let bad = |reason| EstimateReadError::BadRelay {
+        uav: r.uav,
+        step: r.step,
+        reason,
+    };
+    if r.uav == msg.uav {
+        return Err(bad("the sender's own"));
+    }
+    if r.step >= msg.step {
+        return Err(bad("not of an earlier step than its message"));
+    }
+    if !(1..=protocol::scenario::MAX_RELAY_HOPS).contains(&r.hops) {
+        return Err(bad("hops out of range"));
+    }
+    for u in &r.oem {
+        OccupancyMap::cell_of_update(&config.oem_grid, u)?;
+    }
+    let measurement = decode_measurement(
+        config,
+        r.uav,
+        r.step,
+        finite(r.pose),
+        &r.measurement,
+        r.oem.clone(),
+    )?;
+    Ok(Relayed {
+        hops: r.hops,
+        measurement,
+    })
 }
 
 /// Rebuilds the sets of a message, its deltas against `base`.
@@ -874,20 +975,73 @@ mod tests {
         };
         // Resumed (or under the set exchange): the first message is whole.
         let mut resumed = EstimateOutbox::new(0, 1, 3);
-        assert!(whole(resumed.compose_measurement(&mut s, &m)));
+        assert!(whole(resumed.compose_measurement(&mut s, &m, &[])));
         // Fresh: its first message is its measurement alone, and its map's changes.
         let mut fresh = EstimateOutbox::new(0, 1, 3).starting_fresh();
         s.oem
             .observe_obstacle(&sets::math::Point2::new(-5.0, 1.0), 10.0);
-        let first = fresh.compose_measurement(&mut s, &m);
+        let first = fresh.compose_measurement(&mut s, &m, &[]);
         assert!(first.measurement.is_some() && first.oem.is_empty());
         assert!(!whole(first));
-        assert!(!whole(fresh.compose_measurement(&mut s, &m)));
-        assert!(!whole(fresh.compose_measurement(&mut s, &m)));
-        assert!(whole(fresh.compose_measurement(&mut s, &m))); // seq 3: periodic
+        assert!(!whole(fresh.compose_measurement(&mut s, &m, &[])));
+        assert!(!whole(fresh.compose_measurement(&mut s, &m, &[])));
+        assert!(whole(fresh.compose_measurement(&mut s, &m, &[]))); // seq 3: periodic
         fresh.request_full();
-        assert!(whole(fresh.compose_measurement(&mut s, &m)));
-        assert!(!whole(fresh.compose_measurement(&mut s, &m)));
+        assert!(whole(fresh.compose_measurement(&mut s, &m, &[])));
+        assert!(!whole(fresh.compose_measurement(&mut s, &m, &[])));
+    }
+
+    /// Forwarded measurements travel with the sender's own and come back as they went; one
+    /// of the sender itself, of a step not before its message's or with hops out of range is
+    /// refused as a whole message.
+    #[test]
+    fn forwarded_measurements_round_trip_and_bad_ones_are_refused() {
+        let cfg = config();
+        let pose = CameraPose {
+            position: Point3::new(1.0, 2.0, 80.0),
+            yaw: 0.25,
+        };
+        let mut s = EstimatorState::new(&cfg);
+        s.step = 5;
+        s.pose = Some(pose);
+        let cells = |c: &[(u32, u32)]| Arc::new(CellSet::from_cells(&cfg.grid, c.iter().copied()));
+        let of = |uav, step| Measurement {
+            uav,
+            step,
+            pose: Some(pose),
+            free_ground: cells(&[(1, 1), (2, 1)]),
+            hidden: cells(&[(3, 3)]),
+            obstacles: cells(&[]),
+            targets: BTreeMap::from([(7, cells(&[(4, 4)]))]),
+            map_cells: Vec::new(),
+        };
+        let relayed = vec![
+            Relayed {
+                hops: 1,
+                measurement: of(2, 4),
+            },
+            Relayed {
+                hops: 2,
+                measurement: of(3, 3),
+            },
+        ];
+        let mut outbox = EstimateOutbox::new(1, 1, 1000).starting_fresh();
+        let msg = outbox.compose_measurement(&mut s, &of(1, 5), &relayed);
+        let back = PeerMessage::from_bytes(&to_bytes(&msg).unwrap(), &cfg).unwrap();
+        assert_eq!(back.relayed, relayed);
+        assert_eq!(back.measurement, Some(of(1, 5)));
+        let refused = |edit: fn(&mut RelayedMeasurementMsg)| {
+            let mut bad = msg.clone();
+            edit(&mut bad.relayed[0]);
+            matches!(
+                PeerMessage::from_msg(&bad, &cfg),
+                Err(EstimateReadError::BadRelay { .. })
+            )
+        };
+        assert!(refused(|r| r.uav = 1), "the sender's own");
+        assert!(refused(|r| r.step = 5), "of the message's step");
+        assert!(refused(|r| r.hops = 0));
+        assert!(refused(|r| r.hops = protocol::scenario::MAX_RELAY_HOPS + 1));
     }
 
     /// A state whose sets change a little at each step, as a real one's do (the seen ground

@@ -39,7 +39,7 @@ use sets::grid::GroundGrid;
 use sets::math::Real;
 use sets::raster::{CellBox, CellSet, ReachSet};
 
-pub use exchange::{ApplyReport, Measurement};
+pub use exchange::{ApplyReport, Measurement, Relayed};
 pub use fusion::{FuseReport, PeerEstimate};
 pub use hidden::{HiddenHistory, Unseen};
 pub use message::{EstimateOutbox, EstimateReadError};
