@@ -50,6 +50,16 @@ fn agent_report(out: &Path, uav: u64) -> Value {
     serde_json::from_str(line).expect("the report is JSON")
 }
 
+/// `key` summed over the summary's agents.
+fn total(s: &Value, key: &str) -> u64 {
+    s["agents"]
+        .as_array()
+        .expect("agents")
+        .iter()
+        .map(|a| a[key].as_u64().unwrap_or_else(|| panic!("{key} in {a}")))
+        .sum()
+}
+
 /// The checks every lossy run passes: all steps run, no violation, and each agent's `X̄`
 /// after its last fusion is the one the observer rebuilt for it (the observer draws the same
 /// losses and fuses the same estimates).
@@ -78,8 +88,7 @@ fn lossy_links_lose_messages_never_the_guarantee_and_nothing_waits_for_them() {
     let t = TestRun::new("radio-loss");
     let s = run(&t, &["comms.loss=0.3"]);
     assert_complete_and_exact(&t, &s);
-    let agents = s["agents"].as_array().expect("agents");
-    let sum = |key: &str| -> u64 { agents.iter().map(|a| a[key].as_u64().unwrap()).sum() };
+    let sum = |key: &str| total(&s, key);
     let (lost, fused) = (sum("estimates_lost"), sum("estimates_received"));
     // Each agent hears 2 peers at each of the 59 steps its last estimate counts.
     assert_eq!(lost + fused, 3 * 2 * (STEPS - 1), "{s}");
@@ -92,19 +101,15 @@ fn lossy_links_lose_messages_never_the_guarantee_and_nothing_waits_for_them() {
     assert!(sum("tokens_lost") > 0, "{s}");
     // A lost token is its sender's turn passed: no holder was waited out.
     assert_eq!(sum("token_timeouts"), 0, "{s}");
-    for a in agents {
+    for a in s["agents"].as_array().expect("agents") {
         assert_eq!(a["decisions"], 10, "one decision per guidance period: {a}");
     }
     // The default links lose nothing.
     let t = TestRun::new("radio-perfect");
     let s = run(&t, &[]);
     assert_complete_and_exact(&t, &s);
-    let agents = s["agents"].as_array().expect("agents");
-    assert!(
-        agents
-            .iter()
-            .all(|a| a["estimates_lost"] == 0 && a["tokens_lost"] == 0)
-    );
+    let lost = (total(&s, "estimates_lost"), total(&s, "tokens_lost"));
+    assert_eq!(lost, (0, 0), "{s}");
 }
 
 #[test]
@@ -113,8 +118,7 @@ fn late_estimates_are_fused_late_and_measured_as_fused() {
     // 1.2 s is 3 steps of 0.5 s; half the messages lost too.
     let s = run(&t, &["comms.latency_ms=1200", "comms.loss=0.5"]);
     assert_complete_and_exact(&t, &s);
-    let agents = s["agents"].as_array().expect("agents");
-    let sum = |key: &str| -> u64 { agents.iter().map(|a| a[key].as_u64().unwrap()).sum() };
+    let sum = |key: &str| total(&s, key);
     // Lost: those of steps 0..=58; fused: those of steps 0..=55 (3 steps late), delivered.
     let (lost, fused) = (sum("estimates_lost"), sum("estimates_received"));
     assert!(lost > 0 && fused > 0, "{s}");
@@ -132,8 +136,7 @@ fn forwarded_measurements_bring_what_the_radio_lost_and_keep_the_guarantee() {
     let t = TestRun::new("radio-relay");
     let s = run(&t, &["comms.loss=0.5", "comms.relay_hops=1"]);
     assert_complete_and_exact(&t, &s);
-    let agents = s["agents"].as_array().expect("agents");
-    let sum = |key: &str| -> u64 { agents.iter().map(|a| a[key].as_u64().unwrap()).sum() };
+    let sum = |key: &str| total(&s, key);
     // Every measurement an agent applied from its sender, it forwards once in its next
     // estimate; some of them are what the radio lost on another link.
     assert_eq!(sum("relayed_sent"), sum("estimates_received"), "{s}");
@@ -142,11 +145,6 @@ fn forwarded_measurements_bring_what_the_radio_lost_and_keep_the_guarantee() {
     // Without relaying nothing is forwarded.
     let t = TestRun::new("radio-no-relay");
     let s = run(&t, &["comms.loss=0.5"]);
-    let agents = s["agents"].as_array().expect("agents");
-    assert!(
-        agents
-            .iter()
-            .all(|a| a["relayed_sent"] == 0 && a["relayed_applied"] == 0),
-        "{s}"
-    );
+    let relayed = (total(&s, "relayed_sent"), total(&s, "relayed_applied"));
+    assert_eq!(relayed, (0, 0), "{s}");
 }
