@@ -97,7 +97,9 @@ use iceoryx2::port::subscriber::SubscriberCreateError;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
-use iceoryx2::service::port_factory::{event, publish_subscribe};
+use iceoryx2::service::builder::request_response::RequestResponseOpenOrCreateError;
+use iceoryx2::service::port_factory::client::ClientCreateError;
+use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
 use iceoryx2::waitset::{
     WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError, WaitSetRunResult,
 };
@@ -123,6 +125,8 @@ pub type WirePublisher = Publisher<Ipc, [u8], WireHeader>;
 pub type WireSubscriber = iceoryx2::port::subscriber::Subscriber<Ipc, [u8], WireHeader>;
 /// An event service (wake-ups).
 pub type EventService = event::PortFactory<Ipc>;
+/// The request-response service of an agent and its external planner: bytes both ways.
+pub type PlanService = request_response::PortFactory<Ipc, [u8], (), [u8], ()>;
 
 /// Observers (the orchestrator's observer, a debugging tool) a run allows at once.
 pub const MAX_OBSERVERS: usize = 2;
@@ -156,11 +160,13 @@ pub enum WakeEvent {
     EndOfRun = 6,
     /// The observer acknowledged a step (or said hello).
     ObserverAck = 7,
+    /// An external planner answered the woken agent ([`crate::plan`]).
+    PlanAnswer = 8,
 }
 
 impl WakeEvent {
     /// Every event, in id order.
-    pub const ALL: [WakeEvent; 7] = [
+    pub const ALL: [WakeEvent; 8] = [
         WakeEvent::Frame,
         WakeEvent::Estimate,
         WakeEvent::Token,
@@ -168,9 +174,10 @@ impl WakeEvent {
         WakeEvent::Command,
         WakeEvent::EndOfRun,
         WakeEvent::ObserverAck,
+        WakeEvent::PlanAnswer,
     ];
     /// Largest id, the event services' `event_id_max_value`.
-    pub const MAX_ID: usize = WakeEvent::ObserverAck as usize;
+    pub const MAX_ID: usize = WakeEvent::PlanAnswer as usize;
 
     /// The iceoryx2 event id.
     pub fn id(self) -> EventId {
@@ -206,6 +213,17 @@ pub enum IpcOpenError {
         /// iceoryx2's reason.
         source: PublishSubscribeOpenOrCreateError,
     },
+    /// A request-response service could not be opened or created.
+    #[error("cannot open request-response service {service}: {source}")]
+    RequestResponse {
+        /// The service name.
+        service: String,
+        /// iceoryx2's reason.
+        source: RequestResponseOpenOrCreateError,
+    },
+    /// A client could not be created.
+    #[error("cannot create a client: {0}")]
+    Client(#[from] ClientCreateError),
     /// An event service could not be opened or created.
     #[error("cannot open event service {service}: {source}")]
     Event {
@@ -406,6 +424,41 @@ impl RunNode {
     pub fn open_observer_wake(&self) -> Result<EventService, IpcOpenError> {
         let name = service::observer_wake(&self.run);
         self.event_service(&name, fleet_senders() + 1, MAX_OBSERVERS + RESTART_OVERLAP)
+    }
+
+    /// `{run}/uav/{i}/plan`: agent `i`'s requests to an external planner and its answers
+    /// (payloads of bytes, [`crate::plan`]); the agent and a restarted one, and a planner
+    /// with a restarted one.
+    pub fn open_plan(&self, uav: u32) -> Result<PlanService, IpcOpenError> {
+        let name = service::plan(&self.run, uav);
+        self.node
+            .service_builder(&name)
+            .request_response::<[u8], [u8]>()
+            .max_clients(1 + RESTART_OVERLAP)
+            .max_servers(1 + RESTART_OVERLAP)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|source| IpcOpenError::RequestResponse {
+                service: name.as_str().to_owned(),
+                source,
+            })
+    }
+
+    /// `{run}/planner/wake`: wakes external planners; the event id is the asking UAV.
+    pub fn open_planner_wake(&self) -> Result<EventService, IpcOpenError> {
+        let name = service::planner_wake(&self.run);
+        self.node
+            .service_builder(&name)
+            .event()
+            .max_notifiers(fleet_senders())
+            .max_listeners(MAX_OBSERVERS + RESTART_OVERLAP)
+            .max_nodes(MAX_NODES)
+            .event_id_max_value(MAX_UAVS - 1)
+            .open_or_create()
+            .map_err(|source| IpcOpenError::Event {
+                service: name.as_str().to_owned(),
+                source,
+            })
     }
 
     fn fixed_message_service<T: std::fmt::Debug + ZeroCopySend>(

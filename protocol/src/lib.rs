@@ -7,6 +7,7 @@
 //! - [`scenario`]: the TOML scenario with the paper's defaults built in.
 //! - [`frame`]: the fixed-size CVS frame rendered in place into shared memory.
 //! - [`wire`]: commands, truth, estimates and the guidance token.
+//! - [`plan`]: what an agent asks an external planner (Python, say) and the answer it takes.
 //! - [`radio`]: the simulated radio links between agents (range, loss, latency), which the
 //!   receivers and the observer apply alike.
 //! - [`service`]: run ids and every iceoryx2 service name.
@@ -29,6 +30,7 @@ pub mod codec;
 pub mod flight;
 pub mod frame;
 pub mod ipc;
+pub mod plan;
 pub mod process;
 pub mod radio;
 pub mod resources;

@@ -251,6 +251,9 @@ pub struct TimingConfig {
     pub cvs_period_s: f64,
     /// Guidance period, seconds (a whole number of CVS periods).
     pub guidance_period_s: f64,
+    /// Longest wait of an agent for an external planner's answer, milliseconds (1 to 60000;
+    /// docs/python.md): a later answer is not waited for and the fallback planner decides.
+    pub external_planner_ms: u32,
 }
 
 /// `[estimator]`.
@@ -302,9 +305,18 @@ pub struct GuidanceConfig {
     pub kappa: f64,
     /// Whether the MPC uses the OEM.
     pub use_map: bool,
-    /// Which planner decides: `"paper"` (the paper's MPC, the default) or `"setfleet"` (the
-    /// project's beam search). The keys below are read by `setfleet` only.
+    /// Which planner decides: `"paper"` (the paper's MPC, the default), `"setfleet"` (the
+    /// project's beam search) or `"external"` (every UAV asks an external planner and falls
+    /// back to the paper's MPC; docs/python.md). The keys below up to `adapt_weights` are read
+    /// by `setfleet` only.
     pub planner: Planner,
+    /// The UAVs that ask an external planner for their decisions (docs/python.md), falling
+    /// back to `planner`; the others decide with `planner` (`fleet run --planner
+    /// external:0,2`). Default: none.
+    pub external_uavs: Vec<u32>,
+    /// When an asking UAV sends its request: `"turn"` (the default: in its turn of the token
+    /// ring, with the plans of the UAVs ahead) or `"round_start"` ([`ExternalRequest`]).
+    pub external_request: ExternalRequest,
     /// `setfleet`: guidance periods looked ahead by the beam search.
     pub lookahead_periods: u32,
     /// `setfleet`: partial sequences kept after each period of the beam search.
@@ -455,11 +467,32 @@ pub enum Planner {
     /// The project's planner: beam search over longer sequences, with the future growth of
     /// unobserved sets in its cost.
     Setfleet,
+    /// Every UAV asks an external planner (docs/python.md); the paper's MPC decides when no
+    /// answer comes in time.
+    External,
 }
 
 impl Planner {
     /// Every planner's name, as written in a scenario.
-    pub const NAMES: [&'static str; 2] = ["paper", "setfleet"];
+    pub const NAMES: [&'static str; 3] = ["paper", "setfleet", "external"];
+}
+
+/// When a UAV that asks an external planner sends its request (`guidance.external_request`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExternalRequest {
+    /// In its turn of the token ring, with the plans of the UAVs ahead.
+    #[default]
+    Turn,
+    /// At the start of the round, before the token comes, without the plans ahead: the
+    /// requests of a round's asking UAVs all exist before any of them is answered (what a
+    /// multi-agent environment that steps its UAVs together needs).
+    RoundStart,
+}
+
+impl ExternalRequest {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["turn", "round_start"];
 }
 
 /// `[comms]`: the simulated radio links between agents. Every message still crosses the IPC
@@ -597,6 +630,7 @@ impl Default for TimingConfig {
         Self {
             cvs_period_s: 0.5,
             guidance_period_s: 3.0,
+            external_planner_ms: 1000,
         }
     }
 }
@@ -623,6 +657,8 @@ impl Default for GuidanceConfig {
             kappa: 1.0,
             use_map: true,
             planner: Planner::Paper,
+            external_uavs: Vec::new(),
+            external_request: ExternalRequest::Turn,
             lookahead_periods: 6,
             beam_width: 4,
             target_weight: 4.0,
@@ -719,6 +755,12 @@ impl Scenario {
         (0..n).map(|i| self.uav_altitude(i, tallest)).sum::<f64>() / n as f64
     }
 
+    /// Whether UAV `uav` asks an external planner for its decisions (`guidance.planner =
+    /// "external"`, or `uav` in `guidance.external_uavs`).
+    pub fn asks_external(&self, uav: u32) -> bool {
+        self.guidance.planner == Planner::External || self.guidance.external_uavs.contains(&uav)
+    }
+
     /// CVS periods per guidance period.
     pub fn steps_per_guidance(&self) -> u64 {
         (self.timing.guidance_period_s / self.timing.cvs_period_s)
@@ -811,6 +853,9 @@ fn schema() -> Result<Table, ScenarioError> {
     if sample.guidance.yaw_increments_rad.is_empty() {
         sample.guidance.yaw_increments_rad.push(0.0);
     }
+    if sample.guidance.external_uavs.is_empty() {
+        sample.guidance.external_uavs.push(0);
+    }
     Table::try_from(&sample).map_err(|error| ScenarioError::Schema {
         message: error.to_string(),
     })
@@ -857,6 +902,37 @@ mod tests {
                 array.first().is_some_and(Value::is_float),
                 "{section}.{key}"
             );
+        }
+        let uavs = schema["guidance"]["external_uavs"].as_array().unwrap();
+        assert!(uavs.first().is_some_and(Value::is_integer));
+    }
+
+    #[test]
+    fn external_planner_keys_parse_and_name_their_range() {
+        let load = |o: &[&str]| {
+            let o: Vec<String> = o.iter().map(|s| (*s).to_owned()).collect();
+            Scenario::load(None, &o)
+        };
+        let s = load(&[
+            "guidance.external_uavs=[0,2]",
+            "guidance.external_request=\"round_start\"",
+            "timing.external_planner_ms=250",
+        ])
+        .unwrap();
+        assert_eq!(s.guidance.external_uavs, [0, 2]);
+        assert_eq!(s.guidance.external_request, ExternalRequest::RoundStart);
+        assert!(s.asks_external(2) && !s.asks_external(1));
+        let all = load(&["guidance.planner=\"external\""]).unwrap();
+        assert!((0..all.uavs.count).all(|u| all.asks_external(u)));
+        for bad in [
+            "guidance.external_uavs=[-1]",
+            "guidance.external_uavs=[0.5]",
+            "guidance.external_uavs=[9]",
+            "guidance.external_request=\"later\"",
+        ] {
+            let e = load(&[bad]).unwrap_err().to_string();
+            let key = bad.split('=').next().unwrap();
+            assert!(e.contains(key), "{bad}: {e}");
         }
     }
 }

@@ -11,6 +11,8 @@
 //! | [`world_wake`] `{run}/world/wake` | agents -> world-server (event) |
 //! | [`observer_wake`] `{run}/observer/wake` | world and agents -> observers (event) |
 //! | [`observer_ack`] `{run}/observer/ack` | observer -> world-server (lockstep ack) |
+//! | [`plan`] `{run}/uav/{i}/plan` | agent i -> an external planner (request-response) |
+//! | [`planner_wake`] `{run}/planner/wake` | agents -> external planners (event, id = UAV) |
 
 use std::fmt;
 
@@ -183,6 +185,17 @@ pub fn observer_wake(run: &RunId) -> ServiceName {
 /// `{run}/observer/ack`: an observer's lockstep acks, for a world that waits for it.
 pub fn observer_ack(run: &RunId) -> ServiceName {
     name(format!("{run}/observer/ack"))
+}
+
+/// `{run}/uav/{i}/plan`: agent `i` asks an external planner for its decisions
+/// ([`crate::plan`]).
+pub fn plan(run: &RunId, uav: u32) -> ServiceName {
+    name(format!("{run}/uav/{uav}/plan"))
+}
+
+/// `{run}/planner/wake`: wakes external planners; the event id is the asking UAV.
+pub fn planner_wake(run: &RunId) -> ServiceName {
+    name(format!("{run}/planner/wake"))
 }
 
 #[cfg(test)]

@@ -8,7 +8,9 @@
 //! | [`Timeouts::peer_wait`] | an agent | its served peers' estimates of a step | chosen, 2 s |
 //! | [`Timeouts::token_wait`] | an agent | one holder of the guidance token | chosen, 3 s |
 //! | [`Timeouts::compute`] | everyone | an agent's own work on a step on a busy machine | chosen, 2 s |
-//! | [`Timeouts::ack`] | the world (lockstep) | every served agent's ack of a step | peer + token + compute |
+//! | [`Timeouts::planner`] | an agent | an external planner's answer | the scenario's `timing.external_planner_ms` when a UAV asks one, else 0 |
+//! | [`Timeouts::holder_wait`] | an agent | one holder of the token | token + planner |
+//! | [`Timeouts::ack`] | the world (lockstep) | every served agent's ack of a step | peer + token + compute + planner |
 //! | [`Timeouts::estimate_wait`] | the observer | the served agents' estimates of a step | peer + compute |
 //! | [`Timeouts::world_lost`] | an agent | a frame, before it checks the world's node | 2 × ack |
 //! | [`Timeouts::start`] | the world | hellos at start and from announced restarts | 30 s |
@@ -30,6 +32,9 @@ pub struct Timeouts {
     pub token_wait: Duration,
     /// Budget for an agent's own estimator and planner on one step, on a loaded machine.
     pub compute: Duration,
+    /// Longest wait of an agent for an external planner's answer (docs/python.md): added to
+    /// the waits for a token holder and for an agent's ack ([`Timeouts::for_scenario`]).
+    pub planner: Duration,
 }
 
 impl Default for Timeouts {
@@ -38,6 +43,7 @@ impl Default for Timeouts {
             peer_wait: Duration::from_secs(2),
             token_wait: Duration::from_secs(3),
             compute: Duration::from_secs(2),
+            planner: Duration::ZERO,
         }
     }
 }
@@ -53,10 +59,31 @@ impl Timeouts {
         }
     }
 
+    /// These waits with the budget of the external planner `scenario` may ask
+    /// (`timing.external_planner_ms`, when any UAV asks one): the world and every agent derive
+    /// it from the same scenario, so they agree.
+    pub fn for_scenario(self, scenario: &crate::scenario::Scenario) -> Timeouts {
+        let asks = (0..scenario.uavs.count).any(|uav| scenario.asks_external(uav));
+        Timeouts {
+            planner: if asks {
+                Duration::from_millis(u64::from(scenario.timing.external_planner_ms))
+            } else {
+                Duration::ZERO
+            },
+            ..self
+        }
+    }
+
+    /// Longest wait of an agent for one token holder: the token wait, and the holder's wait
+    /// for its external planner.
+    pub fn holder_wait(&self) -> Duration {
+        self.token_wait + self.planner
+    }
+
     /// Longest wait of the lockstep world for the acks of one step: a healthy agent's worst
-    /// step (peer wait, one token wait, its own work).
+    /// step (peer wait, one token wait, its own work, its wait for an external planner).
     pub fn ack(&self) -> Duration {
-        self.peer_wait + self.token_wait + self.compute
+        self.peer_wait + self.token_wait + self.compute + self.planner
     }
 
     /// Longest wait of the observer for the served agents' estimates of a step. An agent
@@ -104,5 +131,22 @@ mod tests {
         assert!(t.estimate_wait() < t.ack());
         assert!(t.rehello() < t.ack());
         assert_eq!(Timeouts::with_waits_ms(None, None), Timeouts::default());
+    }
+
+    #[test]
+    fn an_external_planner_lengthens_the_holder_and_ack_waits_only_when_asked() {
+        use crate::scenario::Scenario;
+        let mut s = Scenario::default();
+        let plain = Timeouts::default().for_scenario(&s);
+        assert_eq!(plain, Timeouts::default());
+        s.guidance.external_uavs = vec![1];
+        s.timing.external_planner_ms = 1500;
+        let t = Timeouts::default().for_scenario(&s);
+        assert_eq!(
+            t.holder_wait(),
+            plain.token_wait + Duration::from_millis(1500)
+        );
+        assert_eq!(t.ack(), plain.ack() + Duration::from_millis(1500));
+        assert_eq!(t.estimate_wait(), plain.estimate_wait());
     }
 }

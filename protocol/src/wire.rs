@@ -16,7 +16,7 @@ use sets::raster::delta::SetCode;
 /// ([`UavMask`]) are 64 bits wide, for fleets of up to 64 UAVs, and truth messages and frames
 /// hold 128 cars. 7: an estimate's sets are optional ([`SetsMsg`]) and it may carry its
 /// frame's measurement ([`MeasurementMsg`]); agents also send [`WireKind::State`] messages.
-pub const PROTOCOL_VERSION: u32 = 9;
+pub const PROTOCOL_VERSION: u32 = 10;
 /// Targets a truth message can hold: the cars of the largest fleet's region (64 UAVs over
 /// 2 x 2 km keep the default scenario's 8 cars per 4 UAVs).
 pub const TRUTH_MAX_TARGETS: usize = 128;
@@ -358,6 +358,11 @@ pub struct AgentStats {
     pub relayed_applied: u64,
     /// Peer measurements this agent forwarded.
     pub relayed_sent: u64,
+    /// Decisions taken from an external planner's answer (docs/python.md).
+    pub external_decisions: u64,
+    /// Decisions of an agent that asks an external planner taken by its fallback planner
+    /// instead (the answer was late, malformed or absent).
+    pub external_fallbacks: u64,
 }
 
 /// Agent -> peers and observers: the agent's estimate at a step.

@@ -7,6 +7,7 @@ mod chaos;
 mod cli;
 mod frames;
 mod hosts;
+mod planner;
 mod radio;
 mod recovery;
 mod render;

@@ -89,16 +89,17 @@ pub struct ServerConfig {
 
 impl ServerConfig {
     /// A lockstep run of every UAV of `scenario`, without observer, with the waits of
-    /// `timeouts`.
+    /// `timeouts` (and the external planner's budget the scenario gives,
+    /// [`Timeouts::for_scenario`]).
     pub fn new(run_id: RunId, scenario: Scenario, timeouts: &Timeouts) -> ServerConfig {
         ServerConfig {
             run_id,
             expected_agents: (0..scenario.uavs.count).collect(),
+            ack_timeout: timeouts.for_scenario(&scenario).ack(),
             scenario,
             mode: StepMode::Lockstep,
             wait_for_observer: false,
             start_timeout: timeouts.start(),
-            ack_timeout: timeouts.ack(),
         }
     }
 }

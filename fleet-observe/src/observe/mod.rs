@@ -203,6 +203,8 @@ pub struct ObserverReport {
     pub oem: OccupancyMap,
     /// Each UAV's ground track (x, y) per step.
     pub tracks: Vec<Vec<[f64; 2]>>,
+    /// Every UAV's true pose at every step processed (`tracks.csv`).
+    pub poses: Vec<crate::results::tracks::UavPose>,
     /// Per UAV, the steps at which the world's geofence overrode its agent's command
     /// ([`protocol::wire::UavTruth::geofence_override`]).
     pub geofence_overrides: Vec<u64>,
@@ -396,6 +398,7 @@ fn observe(
             final_undetected: BTreeMap::new(),
             oem: OccupancyMap::new(estimator.oem_grid),
             tracks: vec![Vec::new(); uavs as usize],
+            poses: Vec::new(),
             geofence_overrides: vec![0; uavs as usize],
             stepping: None,
             phases: PhaseTimes::new(),
@@ -960,6 +963,13 @@ impl Observer<'_> {
             if let Some(track) = self.report.tracks.get_mut(u.id as usize) {
                 track.push([u.position[0], u.position[1]]);
             }
+            self.report.poses.push(crate::results::tracks::UavPose {
+                step: truth.step,
+                time_s: truth.time_s,
+                uav: u.id,
+                position: u.position,
+                yaw: u.yaw,
+            });
             if let Some(count) = self.report.geofence_overrides.get_mut(u.id as usize) {
                 *count += u64::from(u.geofence_override());
             }

@@ -178,6 +178,16 @@ impl AgentTally {
         self.sum(|i| i.stats.relayed_sent)
     }
 
+    /// Decisions the agent took from an external planner's answer.
+    pub fn external_decisions(&self) -> u64 {
+        self.sum(|i| i.stats.external_decisions)
+    }
+
+    /// Decisions its fallback planner took instead.
+    pub fn external_fallbacks(&self) -> u64 {
+        self.sum(|i| i.stats.external_fallbacks)
+    }
+
     /// Incarnations seen (1 + restarts that published).
     pub fn incarnations(&self) -> usize {
         self.incarnations.len()

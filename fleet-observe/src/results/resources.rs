@@ -36,6 +36,11 @@ pub struct ProcessResources {
     pub phases: BTreeMap<String, f64>,
     /// Wall seconds per phase (the waits' length is here).
     pub phases_wall_s: BTreeMap<String, f64>,
+    /// What an agent's external planner did, as the agent reported it at exit (decisions,
+    /// fallbacks by reason, the time from request to answer and its overhead, ms;
+    /// docs/python.md); absent for the other processes and an agent killed before its report.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub external: Option<serde_json::Value>,
 }
 
 /// Where a process's peak resident memory was read ([`ProcessResources::peak_rss_source`]).

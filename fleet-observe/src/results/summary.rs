@@ -163,6 +163,11 @@ pub struct AgentSummary {
     pub relayed_applied: u64,
     /// Peer measurements the agent forwarded, as of its last estimate.
     pub relayed_sent: u64,
+    /// Decisions the agent took from an external planner's answer, as of its last estimate
+    /// (docs/python.md).
+    pub external_decisions: u64,
+    /// Decisions its fallback planner took for want of a valid answer in time.
+    pub external_fallbacks: u64,
     /// Fingerprint ([`sets::raster::CellSet::digest`]) of the agent's `X̄` after its last
     /// measured step's fusion, as the observer rebuilt it: the agent's own report
     /// (`final_undetected_digest` in its log) holds the same value when the observer
@@ -610,6 +615,8 @@ fn agent_summaries(
                 tokens_lost: t.map_or(0, |t| t.tokens_lost()),
                 relayed_applied: t.map_or(0, |t| t.relayed_applied()),
                 relayed_sent: t.map_or(0, |t| t.relayed_sent()),
+                external_decisions: t.map_or(0, |t| t.external_decisions()),
+                external_fallbacks: t.map_or(0, |t| t.external_fallbacks()),
                 final_undetected_digest: last.map(|(_, set)| set.digest()),
                 final_measured_step: last.map(|(step, _)| *step),
                 restarts: faults::restarts(record.faults, uav),

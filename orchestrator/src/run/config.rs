@@ -36,12 +36,42 @@ pub struct RunScenarioArgs {
     /// Overrides the scenario's `uavs.count`.
     #[arg(long)]
     pub uavs: Option<u32>,
+    /// UAVs that ask an external planner for their decisions (docs/python.md):
+    /// `external:0,2` or `external:all`; the variant's planner decides when no answer comes
+    /// in time (sets `guidance.external_uavs`).
+    #[arg(long, value_name = "external:UAVS|external:all")]
+    pub planner: Option<PlannerArg>,
+}
+
+/// `--planner`: which UAVs ask an external planner.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PlannerArg {
+    /// These UAVs.
+    External(Vec<u32>),
+    /// Every UAV of the fleet.
+    ExternalAll,
+}
+
+impl std::str::FromStr for PlannerArg {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let usage = || format!("{s:?}: expected external:UAVS (e.g. external:0,2) or external:all");
+        let uavs = s.strip_prefix("external:").ok_or_else(usage)?;
+        if uavs == "all" {
+            return Ok(PlannerArg::ExternalAll);
+        }
+        uavs.split(',')
+            .map(|u| u.trim().parse::<u32>().map_err(|_| usage()))
+            .collect::<Result<Vec<_>, _>>()
+            .map(PlannerArg::External)
+    }
 }
 
 impl RunScenarioArgs {
     /// The scenario: the file, then the variant's settings, the `--set`s, and the `--seed`,
-    /// `--duration` and `--uavs` flags, which are overrides like any other, so the scenario's
-    /// checks name the key and its range.
+    /// `--duration`, `--uavs` and `--planner` flags, which are overrides like any other, so
+    /// the scenario's checks name the key and its range.
     pub fn resolve(&self) -> Result<Scenario, UsageError> {
         let mut overrides = self.variant.with_user_overrides(&self.scenario.overrides);
         if let Some(seed) = self.seed {
@@ -53,8 +83,19 @@ impl RunScenarioArgs {
         if let Some(n) = self.uavs {
             overrides.push(format!("uavs.count={n}"));
         }
-        Scenario::load(self.scenario.scenario.as_deref(), &overrides)
-            .map_err(|e| UsageError(format!("bad scenario: {e}")))
+        let load = |overrides: &[String]| {
+            Scenario::load(self.scenario.scenario.as_deref(), overrides)
+                .map_err(|e| UsageError(format!("bad scenario: {e}")))
+        };
+        let uavs = match &self.planner {
+            None => return load(&overrides),
+            Some(PlannerArg::External(uavs)) => uavs.clone(),
+            // The fleet's size is the scenario's: known once it is loaded.
+            Some(PlannerArg::ExternalAll) => (0..load(&overrides)?.uavs.count).collect(),
+        };
+        let list: Vec<String> = uavs.iter().map(u32::to_string).collect();
+        overrides.push(format!("guidance.external_uavs=[{}]", list.join(",")));
+        load(&overrides)
     }
 }
 
@@ -342,10 +383,33 @@ pub fn new_run_id(sequence: u32) -> RunId {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::Parser as _;
     use fleet_observe::faults::FaultOrigin;
 
     fn scenario() -> Scenario {
         Scenario::load(None, &["duration_s=60".into(), "uavs.count=2".into()]).unwrap()
+    }
+
+    #[test]
+    fn planner_flags_name_the_asking_uavs() {
+        assert_eq!("external:0,2".parse(), Ok(PlannerArg::External(vec![0, 2])));
+        assert_eq!("external:all".parse(), Ok(PlannerArg::ExternalAll));
+        for bad in ["paper", "external:", "external:a", "external:1,,2"] {
+            assert!(bad.parse::<PlannerArg>().is_err(), "{bad}");
+        }
+        let args = |planner: &str| {
+            crate::cli::Cli::try_parse_from(["fleet", "run", "--uavs", "3", "--planner", planner])
+                .map(|cli| match cli.command {
+                    crate::cli::FleetCommand::Run(run) => run.choice.resolve(),
+                    _ => unreachable!("a run"),
+                })
+                .unwrap()
+        };
+        let all = args("external:all").unwrap();
+        assert_eq!(all.guidance.external_uavs, [0, 1, 2]);
+        assert_eq!(args("external:1").unwrap().guidance.external_uavs, [1]);
+        let e = args("external:3").unwrap_err();
+        assert!(e.0.contains("guidance.external_uavs"), "{e}");
     }
 
     #[test]

@@ -51,7 +51,7 @@ use fleet_observe::observe::{self, ObserverConfig, ObserverEvent, ObserverReport
 use fleet_observe::results::maps::AnimationSink;
 use fleet_observe::results::resources::{Resources, RunSize};
 use fleet_observe::results::summary::{RunFacts, Summary};
-use fleet_observe::results::{curves, maps, timeseries};
+use fleet_observe::results::{curves, maps, timeseries, tracks};
 use fleet_observe::viewer::Viewer;
 
 use crate::Outcome;
@@ -171,8 +171,8 @@ pub fn outcome(record: &RunRecord) -> Outcome {
     Outcome::Success
 }
 
-/// Writes `summary.json`, `timeseries.csv`, `metrics.png`, `map.png`, `sets.png` and
-/// `run.gif` into the run's output directory; returns the summary.
+/// Writes `summary.json`, `timeseries.csv`, `tracks.csv`, `metrics.png`, `map.png`,
+/// `sets.png` and `run.gif` into the run's output directory; returns the summary.
 pub fn write_results(record: &RunRecord) -> anyhow::Result<Summary> {
     let out = &record.config.out;
     let scenario = &record.config.scenario;
@@ -185,6 +185,7 @@ pub fn write_results(record: &RunRecord) -> anyhow::Result<Summary> {
     );
     curves::draw_run(&record.series, &title, &out.join("metrics.png"))?;
     if let Some(observer) = &record.observer {
+        tracks::write(&observer.poses, &out.join("tracks.csv"))?;
         maps::draw_map(&observer.oem, scenario, &out.join("map.png"))?;
         if let Some(state) = &observer.final_state {
             maps::draw_sets(state, &observer.tracks, scenario, &out.join("sets.png"))?;

@@ -129,6 +129,9 @@ fn child(p: &ExitedProcess, report: Option<&Report>) -> ProcessResources {
         peak_rss_source,
         phases: phases.iter().map(|(n, t)| (n.clone(), t.cpu_s)).collect(),
         phases_wall_s: phases.iter().map(|(n, t)| (n.clone(), t.wall_s)).collect(),
+        external: report
+            .and_then(|r| r.external.clone())
+            .filter(|e| !e.is_null()),
     }
 }
 
@@ -141,6 +144,9 @@ struct Report {
     /// Its own peak resident memory, KiB (`VmHWM`); absent from an older child's report.
     #[serde(default)]
     peak_rss_kb: Option<u64>,
+    /// An agent's external planner's figures, passed on as they are.
+    #[serde(default)]
+    external: Option<serde_json::Value>,
 }
 
 /// The report every process printed, by pid: the JSON lines of the logs in `logs` that carry

@@ -17,7 +17,11 @@ use crate::wire::{MAX_UAVS, TRUTH_MAX_TARGETS};
 use sets::grid::GroundGrid;
 
 /// Arrays whose length the user chooses; every other array has the length of its default.
-const VARIABLE_LENGTH_ARRAYS: &[&str] = &["uavs.altitudes_m", "guidance.yaw_increments_rad"];
+const VARIABLE_LENGTH_ARRAYS: &[&str] = &[
+    "uavs.altitudes_m",
+    "guidance.yaw_increments_rad",
+    "guidance.external_uavs",
+];
 
 /// Longest run, seconds (about 11.5 days of simulated time).
 const MAX_DURATION_S: f64 = 1e6;
@@ -46,6 +50,11 @@ pub const MAX_LATENCY_MS: f64 = 10_000.0;
 /// Most times a measurement is forwarded (`comms.relay_hops`): each hop adds a step of
 /// delay and the measurement's bytes to the forwarding agent's estimate.
 pub const MAX_RELAY_HOPS: u32 = 8;
+/// Longest wait for an external planner's answer, milliseconds: a minute, for a learning
+/// planner that trains between its decisions. The world's lockstep wait and the token ring's
+/// wait for a holder grow by it (`protocol::timeouts`), so a slow planner stalls the run rather
+/// than being waited out.
+pub const MAX_EXTERNAL_PLANNER_MS: u32 = 60_000;
 /// Relative tolerance of "a whole number of CVS periods".
 const PERIOD_MULTIPLE_TOLERANCE: f64 = 1e-9;
 
@@ -67,6 +76,7 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
         "guidance.border" => Some(&super::PlanBorder::NAMES),
         "guidance.sweep" => Some(&super::SweepPlan::NAMES),
         "comms.exchange" => Some(&super::Exchange::NAMES),
+        "guidance.external_request" => Some(&super::ExternalRequest::NAMES),
         _ => None,
     }
 }
@@ -92,6 +102,9 @@ pub(super) fn integer_range(key: &str) -> Option<(i128, i128)> {
         "guidance.beam_width" => (1, MAX_BEAM_WIDTH as i128),
         "comms.whole_sets_every" => (1, 10_000),
         "comms.relay_hops" => (0, MAX_RELAY_HOPS as i128),
+        "timing.external_planner_ms" => (1, MAX_EXTERNAL_PLANNER_MS as i128),
+        // Each element: a UAV index.
+        "guidance.external_uavs" => (0, MAX_UAVS as i128 - 1),
         _ => return None,
     };
     Some(range)
@@ -187,11 +200,14 @@ fn check_array(user: &mut [Value], schema: &[Value], key: &str) -> Result<(), Sc
                 describe_found(item)
             )));
         }
-        if let Value::Integer(i) = item
-            && element.is_float()
-        {
-            let as_float = *i as f64;
-            *item = Value::Float(as_float);
+        if let Value::Integer(i) = item {
+            if element.is_float() {
+                let as_float = *i as f64;
+                *item = Value::Float(as_float);
+            } else {
+                // An integer array's elements have the key's range.
+                check_integer(key, i128::from(*i))?;
+            }
         }
     }
     Ok(())
@@ -533,6 +549,10 @@ impl Scenario {
                 3.0 * timing.cvs_period_s
             ),
         )?;
+        check_integer(
+            "timing.external_planner_ms",
+            i128::from(timing.external_planner_ms),
+        )?;
         require(
             self.duration_s >= timing.cvs_period_s,
             "duration_s",
@@ -598,7 +618,21 @@ impl Scenario {
             .check("guidance.growth_horizon_s", guidance.growth_horizon_s)?;
         Interval::closed(0.0, 1e4).check("guidance.spread_m", guidance.spread_m)?;
         Interval::closed(0.0, MAX_GROWTH_HORIZON_S)
-            .check("guidance.track_revisit_s", guidance.track_revisit_s)
+            .check("guidance.track_revisit_s", guidance.track_revisit_s)?;
+        let uavs = self.uavs.count;
+        let external = &guidance.external_uavs;
+        let mut sorted = external.clone();
+        sorted.sort_unstable();
+        sorted.dedup();
+        require(
+            sorted.len() == external.len() && external.iter().all(|&u| u < uavs),
+            "guidance.external_uavs",
+            external,
+            format!(
+                "distinct UAVs of the fleet (0 to {})",
+                uavs.saturating_sub(1)
+            ),
+        )
     }
 }
 
@@ -641,12 +675,12 @@ mod tests {
     #[test]
     fn variable_length_arrays_are_exactly_the_vec_fields() {
         // A fixed array of the struct rejects one more element; a Vec accepts it.
-        fn walk(table: &Table, prefix: &str, arrays: &mut Vec<(String, usize)>) {
+        fn walk(table: &Table, prefix: &str, arrays: &mut Vec<(String, Vec<Value>)>) {
             for (name, value) in table {
                 let key = dotted(prefix, name);
                 match value {
                     Value::Table(inner) => walk(inner, &key, arrays),
-                    Value::Array(items) => arrays.push((key, items.len())),
+                    Value::Array(items) => arrays.push((key, items.clone())),
                     _ => {}
                 }
             }
@@ -655,13 +689,14 @@ mod tests {
         let mut arrays = Vec::new();
         walk(&schema, "", &mut arrays);
         assert!(arrays.len() >= 5);
-        for (key, len) in arrays {
+        for (key, items) in arrays {
             let mut table = schema.clone();
             let (section, name) = key.split_once('.').unwrap();
             let section = table.get_mut(section).unwrap().as_table_mut().unwrap();
+            // One element more than the default, each of the kind of its sample element.
             section.insert(
                 name.to_owned(),
-                Value::Array(vec![Value::Float(1.0); len + 1]),
+                Value::Array(vec![items[0].clone(); items.len() + 1]),
             );
             let serde_accepts = table.try_into::<Scenario>().is_ok();
             assert_eq!(
@@ -782,6 +817,18 @@ mod tests {
             ("comms.whole_sets_every", |s| s.comms.whole_sets_every = 0),
             ("comms.relay_hops", |s| {
                 s.comms.relay_hops = MAX_RELAY_HOPS + 1
+            }),
+            ("timing.external_planner_ms", |s| {
+                s.timing.external_planner_ms = 0
+            }),
+            ("timing.external_planner_ms", |s| {
+                s.timing.external_planner_ms = MAX_EXTERNAL_PLANNER_MS + 1
+            }),
+            ("guidance.external_uavs", |s| {
+                s.guidance.external_uavs = vec![4]
+            }),
+            ("guidance.external_uavs", |s| {
+                s.guidance.external_uavs = vec![1, 1]
             }),
             ("guidance.target_weight", |s| {
                 s.guidance.target_weight = -1.0

@@ -70,9 +70,10 @@ use protocol::codec::{self, EncodeError};
 use protocol::flight::UavState;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_for_wake};
+use protocol::plan::FLAG_ROUND_START;
 use protocol::radio::{Endpoint, LinkKind, Radio};
 use protocol::resources::{CpuClock, PhaseClock, PhaseTimes, own_peak_rss_kb};
-use protocol::scenario::{Exchange, Scenario};
+use protocol::scenario::{Exchange, ExternalRequest, Scenario};
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;
 use protocol::wire::{
@@ -85,6 +86,7 @@ use crate::estimator::message::PeerMessage;
 use crate::estimator::{
     Estimator, EstimatorConfig, EstimatorStepError, Measurement, Relayed, StepReport, message,
 };
+use crate::guidance::external::{self, Asked, ExternalPlanner, ExternalReport, Fallback, Request};
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use checkpoint::{CheckpointFile, CheckpointFlusher, Owner};
 use links::{LinkError, Links};
@@ -120,9 +122,9 @@ pub struct AgentConfig {
 pub const DEFAULT_CHECKPOINT_EVERY: u64 = 4;
 
 impl AgentConfig {
-    /// The default [`Timeouts`], no checkpoint.
+    /// The default [`Timeouts`] (with the scenario's external planner budget), no checkpoint.
     pub fn new(run_id: RunId, uav: u32, scenario: Scenario) -> Self {
-        let timeouts = Timeouts::default();
+        let timeouts = Timeouts::default().for_scenario(&scenario);
         Self {
             run_id,
             uav,
@@ -238,6 +240,10 @@ pub struct AgentReport {
     pub relayed_applied: u64,
     /// Peer measurements this agent forwarded in its estimates.
     pub relayed_sent: u64,
+    /// Decisions taken from an external planner's answer.
+    pub external_decisions: u64,
+    /// Decisions the fallback planner took for want of a valid answer in time.
+    pub external_fallbacks: u64,
     /// Messages dropped, by reason.
     pub dropped: BTreeMap<String, u64>,
     /// Guidance decisions taken.
@@ -282,6 +288,9 @@ pub struct AgentReport {
     /// ([`own_peak_rss_kb`]: without the memory of whoever spawned it); `None` if it could not
     /// be read.
     pub peak_rss_kb: Option<u64>,
+    /// What the external planner did, for an agent that asks one: decisions, fallbacks by
+    /// reason, the time from request to answer and its overhead beyond the planner's own.
+    pub external: Option<ExternalReport>,
 }
 
 /// The phases of an agent's time ([`AgentReport::phases`]).
@@ -304,6 +313,8 @@ pub mod phase {
     pub const WAIT_PEERS: &str = "wait_peers";
     /// Waiting for the token.
     pub const WAIT_TOKEN: &str = "wait_token";
+    /// Waiting for an external planner's answer.
+    pub const WAIT_PLANNER: &str = "wait_planner";
     /// Everything else (commands, tokens read, start-up after the clock started).
     pub const OTHER: &str = "other";
 }
@@ -318,6 +329,11 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         SignalHandlingMode::HandleTerminationRequests,
     )?;
     let links = Links::open(&node, config.uav, config.scenario.uavs.count)?;
+    let external = if config.scenario.asks_external(config.uav) {
+        Some(ExternalPlanner::open(&node, config.uav)?)
+    } else {
+        None
+    };
     let waitset = node.waitset()?;
     let _guard = waitset
         .attach_notification(&links.wake)
@@ -422,7 +438,10 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         last_frame: Instant::now(),
         clock: PhaseClock::new(CpuClock::Thread, phase::OTHER),
         last_scan: Instant::now(),
+        external,
+        asked: None,
     };
+    agent.await_planner();
     agent.refresh_live();
     tracing::info!(uav = config.uav, run = %config.run_id, incarnation, "agent started");
     let result = agent.main_loop();
@@ -582,7 +601,17 @@ struct Agent<'a> {
     clock: PhaseClock,
     /// When the run's nodes were last listed.
     last_scan: Instant,
+    /// The external planner this agent asks for its decisions, if it asks one.
+    external: Option<ExternalPlanner>,
+    /// The request of the current round sent at its start (`guidance.external_request =
+    /// "round_start"`), whose answer the agent's turn takes.
+    asked: Option<Asked>,
 }
+
+/// How long an agent that asks an external planner waits for one to serve it before its first
+/// hello: well within the world's start wait, so a planner started with the run answers from
+/// the first decision.
+const PLANNER_START_WAIT: Duration = Duration::from_secs(20);
 
 /// Longest single wait, so the shutdown flag and dead processes are noticed promptly.
 const WAIT_SLICE: Duration = Duration::from_millis(50);
@@ -626,6 +655,7 @@ impl Agent<'_> {
             final_undetected_cells: state.undetected.cells().count(),
             final_undetected_digest: state.undetected.cells().digest(),
             final_step: state.step,
+            external: self.external.as_ref().map(ExternalPlanner::report),
             ..self.report
         };
         result.map(|end| AgentReport {
@@ -943,6 +973,8 @@ impl Agent<'_> {
             tokens_lost: self.report.tokens_lost,
             relayed_applied: self.report.relayed_applied,
             relayed_sent: self.report.relayed_sent,
+            external_decisions: self.report.external_decisions,
+            external_fallbacks: self.report.external_fallbacks,
         }
     }
 
@@ -1233,6 +1265,10 @@ impl Agent<'_> {
         let round = k / self.guidance.steps_per_period as u64;
         let mut waiting_for: Option<(u32, Instant)> = None;
         let mut waited_out = false;
+        self.asked = None;
+        if self.config.scenario.guidance.external_request == ExternalRequest::RoundStart {
+            self.ask_at_round_start(round, k);
+        }
         loop {
             self.drain_tokens();
             let mut live = self.awaited_peers();
@@ -1260,7 +1296,7 @@ impl Agent<'_> {
                     let deadline = match waiting_for {
                         Some((h, deadline)) if h == holder => deadline,
                         _ => {
-                            let deadline = Instant::now() + self.config.timeouts.token_wait;
+                            let deadline = Instant::now() + self.config.timeouts.holder_wait();
                             waiting_for = Some((holder, deadline));
                             deadline
                         }
@@ -1293,6 +1329,11 @@ impl Agent<'_> {
         live: &BTreeSet<u32>,
         others: &[protocol::wire::PlannedView],
     ) -> Result<f64, AgentError> {
+        if self.estimator.state().pose.is_none() {
+            return Err(AgentError::NoPose(k));
+        }
+        let fleet = self.ring.fleet(round, live);
+        let answer = self.ask_external(round, k, others, &fleet);
         let state = self.estimator.state();
         let Some(pose) = state.pose else {
             return Err(AgentError::NoPose(k));
@@ -1300,23 +1341,23 @@ impl Agent<'_> {
         let sets: Vec<&sets::raster::CellSet> = state.target_sets().collect();
         let hidden = state.hidden_history.recently_hidden();
         let obstacles = ObstacleCell::known(&state.oem);
-        let fleet = self.ring.fleet(round, live);
-        let decision = guidance::decide(
-            &self.guidance,
-            &PlanningInput {
-                uav: self.config.uav,
-                state: UavState {
-                    position: pose.position,
-                    yaw: pose.yaw,
-                },
-                sets: &sets,
-                recently_hidden: &hidden,
-                unseen: state.hidden_history.unseen(),
-                obstacles: &obstacles,
-                others,
-                fleet: &fleet,
+        let input = PlanningInput {
+            uav: self.config.uav,
+            state: UavState {
+                position: pose.position,
+                yaw: pose.yaw,
             },
-        );
+            sets: &sets,
+            recently_hidden: &hidden,
+            unseen: state.hidden_history.unseen(),
+            obstacles: &obstacles,
+            others,
+            fleet: &fleet,
+        };
+        let decision = match answer {
+            Some(answer) => external::decision(answer, &input),
+            None => guidance::decide(&self.guidance, &input),
+        };
         self.report.decisions += 1;
         let token = self.ring.pass(round, k, live, decision.view);
         let bytes = codec::encode(&token)?;
@@ -1330,6 +1371,152 @@ impl Agent<'_> {
             "decided"
         );
         Ok(decision.yaw_ref)
+    }
+}
+
+impl Agent<'_> {
+    /// Waits, before the first hello, for an external planner to serve this agent (at most
+    /// [`PLANNER_START_WAIT`]); an agent that asks none goes on at once.
+    fn await_planner(&mut self) {
+        let Some(planner) = &self.external else {
+            return;
+        };
+        let until = Instant::now() + PLANNER_START_WAIT;
+        if planner.has_server() {
+            return;
+        }
+        tracing::info!(
+            uav = self.config.uav,
+            "waiting for an external planner to serve this UAV"
+        );
+        while Instant::now() < until && !self.stopping() {
+            if self
+                .external
+                .as_ref()
+                .is_some_and(ExternalPlanner::has_server)
+            {
+                tracing::info!(uav = self.config.uav, "external planner connected");
+                return;
+            }
+            self.wait(Instant::now() + WAIT_SLICE, phase::WAIT_PLANNER);
+        }
+        tracing::warn!(
+            uav = self.config.uav,
+            waited = ?PLANNER_START_WAIT,
+            "no external planner came: the fallback planner decides until one does"
+        );
+    }
+
+    /// The scalar fields of this agent's request at step `k` of `round`.
+    fn request_header(&self, round: u64, k: u64, flags: u32) -> protocol::plan::RequestHeader {
+        let state = self.estimator.state();
+        let pose = state.pose.unwrap_or(protocol::camera::CameraPose {
+            position: sets::math::Point3::origin(),
+            yaw: 0.0,
+        });
+        let scenario = &self.config.scenario;
+        protocol::plan::RequestHeader {
+            run_tag: self.run_tag,
+            step: k,
+            round,
+            total_steps: scenario.steps(),
+            uav: self.config.uav,
+            fleet_size: scenario.uavs.count,
+            deadline_ms: scenario.timing.external_planner_ms,
+            flags,
+            ..Request::header(&self.guidance, state, &pose)
+        }
+    }
+
+    /// The external planner's answer for this turn, if this agent asks one and a valid
+    /// answer came in time (the request sent at the round's start, or one sent now); counts
+    /// the decision or the fallback.
+    fn ask_external(
+        &mut self,
+        round: u64,
+        k: u64,
+        others: &[protocol::wire::PlannedView],
+        fleet: &[u32],
+    ) -> Option<protocol::plan::Answer> {
+        let mut planner = self.external.take()?;
+        let asked = match self.asked.take() {
+            Some(asked) => Ok(asked),
+            None => {
+                let state = self.estimator.state();
+                let hidden = state.hidden_history.recently_hidden();
+                planner.ask(&Request {
+                    header: self.request_header(round, k, 0),
+                    grids: &self.guidance.grids,
+                    increments: &self.guidance.increments,
+                    state,
+                    recently_hidden: &hidden,
+                    others,
+                    fleet,
+                })
+            }
+        };
+        let answer = asked.and_then(|asked| self.await_answer(&mut planner, &asked));
+        match &answer {
+            Ok(_) => {
+                planner.answered();
+                self.report.external_decisions += 1;
+            }
+            Err(why) => {
+                planner.fell_back(*why, k);
+                self.report.external_fallbacks += 1;
+            }
+        }
+        self.external = Some(planner);
+        answer.ok()
+    }
+
+    /// Sends the round's request before the token comes (`"round_start"`), without the plans
+    /// ahead; the agent's turn takes its answer.
+    fn ask_at_round_start(&mut self, round: u64, k: u64) {
+        let Some(mut planner) = self.external.take() else {
+            return;
+        };
+        let mut live = self.awaited_peers();
+        live.insert(self.config.uav);
+        let fleet = self.ring.fleet(round, &live);
+        let state = self.estimator.state();
+        let hidden = state.hidden_history.recently_hidden();
+        let asked = planner.ask(&Request {
+            header: self.request_header(round, k, FLAG_ROUND_START),
+            grids: &self.guidance.grids,
+            increments: &self.guidance.increments,
+            state,
+            recently_hidden: &hidden,
+            others: &[],
+            fleet: &fleet,
+        });
+        // Without a planner now, the turn asks again (and falls back if there is still none).
+        self.asked = asked.ok();
+        self.external = Some(planner);
+    }
+
+    /// Waits for the answer to `asked`, at most `timing.external_planner_ms` from now; a
+    /// planner that died is noticed at the next listing of the run's nodes, which cleans its
+    /// node and with it its server.
+    fn await_answer(
+        &mut self,
+        planner: &mut ExternalPlanner,
+        asked: &Asked,
+    ) -> Result<protocol::plan::Answer, Fallback> {
+        let deadline = Instant::now() + self.config.timeouts.planner;
+        loop {
+            if let Some(answer) = planner.poll(asked) {
+                return answer;
+            }
+            if Instant::now() >= deadline || self.stopping() || self.end_of_run {
+                return Err(Fallback::Late);
+            }
+            self.wait(
+                deadline.min(Instant::now() + WAIT_SLICE),
+                phase::WAIT_PLANNER,
+            );
+            self.refresh_live_if_stale();
+        }
     }
 }
 

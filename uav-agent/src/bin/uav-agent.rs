@@ -66,7 +66,8 @@ fn main() -> ExitCode {
     };
     let run_id = args.child.run();
     let mut config = AgentConfig::new(run_id, args.id, scenario);
-    config.timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms);
+    config.timeouts = Timeouts::with_waits_ms(args.peer_wait_ms, args.token_wait_ms)
+        .for_scenario(&config.scenario);
     config.world_timeout = args
         .world_timeout_ms
         .map_or(config.timeouts.world_lost(), Duration::from_millis);

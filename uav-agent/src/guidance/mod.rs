@@ -4,6 +4,9 @@
 //!   paper writes it, [`paper::plan`]. The `paper` variant runs it untouched.
 //! - `setfleet`: the project's own planner, [`setfleet::plan`]: a beam search over longer
 //!   sequences that values the future growth of unobserved sets (see its docs).
+//! - `external`: a planner of another process answers ([`external`], docs/python.md); the
+//!   agent's loop asks it and falls back to the paper's MPC (or, for the UAVs of
+//!   `guidance.external_uavs`, to the variant's planner) when no valid answer comes in time.
 //!
 //! [`decide`] picks between them. This module holds what the two share: the settings of a run
 //! ([`GuidanceParams`]), what a decision looks at ([`PlanningInput`]) and what it gives
@@ -12,6 +15,7 @@
 //! that orders the decisions of a round ([`ring`]).
 
 pub mod coarse;
+pub mod external;
 pub mod growth;
 pub mod paper;
 pub mod ring;
@@ -71,7 +75,7 @@ pub struct GuidanceParams {
     /// The radio's range (`comms.range_m`), m: the `setfleet` planner counts the plans of the
     /// UAVs within it only.
     pub comms_range_m: f64,
-    /// Which planner [`decide`] runs.
+    /// Which planner [`decide`] runs (never `External`: an asking agent's fallback).
     pub planner: Planner,
     /// The `setfleet` planner's settings (unused by the paper's MPC).
     pub setfleet: SetfleetParams,
@@ -109,7 +113,11 @@ impl GuidanceParams {
             max_yaw_rate: s.uavs.max_yaw_rate_rps,
             target_max_speed: s.targets.max_speed_mps,
             comms_range_m: s.comms.range_m,
-            planner: s.guidance.planner,
+            // An external planner's fallback is the paper's MPC.
+            planner: match s.guidance.planner {
+                Planner::External => Planner::Paper,
+                p => p,
+            },
             setfleet: SetfleetParams {
                 lookahead_periods: s.guidance.lookahead_periods,
                 beam_width: s.guidance.beam_width,
@@ -194,7 +202,7 @@ pub struct Decision {
 /// One decision by the planner of `params` (`guidance.planner`).
 pub fn decide(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
     match params.planner {
-        Planner::Paper => paper::plan(params, input),
+        Planner::Paper | Planner::External => paper::plan(params, input),
         Planner::Setfleet => setfleet::plan(params, input),
     }
 }
