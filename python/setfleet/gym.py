@@ -211,6 +211,24 @@ class _Episodes:
         self._remove_temp()
 
 
+def _observation_space(size: int) -> spaces.Dict:
+    """One agent's observation space (the module's documentation)."""
+    return spaces.Dict(
+        {
+            "sets": spaces.Box(0.0, 1.0, (4, size, size), np.float32),
+            "pose": spaces.Box(-np.inf, np.inf, (4,), np.float32),
+        }
+    )
+
+
+def _checked_increments(increments: Sequence[float]) -> tuple[float, ...]:
+    """The actions' yaw increments: at least one, each in [-pi, pi]."""
+    checked = tuple(float(u) for u in increments)
+    if not checked or any(not -math.pi <= u <= math.pi for u in checked):
+        raise ValueError("increments: at least one, each in [-pi, pi]")
+    return checked
+
+
 def _draw_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(1, 2**31 - 1))
 
@@ -256,18 +274,11 @@ class SearchEnv(gymnasium.Env):
     ) -> None:
         super().__init__()
         self.learner = int(learner)
-        self.increments = tuple(float(u) for u in increments)
-        if not self.increments or any(not -math.pi <= u <= math.pi for u in self.increments):
-            raise ValueError("increments: at least one, each in [-pi, pi]")
+        self.increments = _checked_increments(increments)
         self.w_ua = float(w_ua)
         self.w_targets = float(w_targets)
         self.request_timeout = request_timeout
-        self.observation_space = spaces.Dict(
-            {
-                "sets": spaces.Box(0.0, 1.0, (4, size, size), np.float32),
-                "pose": spaces.Box(-np.inf, np.inf, (4,), np.float32),
-            }
-        )
+        self.observation_space = _observation_space(size)
         self.action_space = spaces.Discrete(len(self.increments))
         self._raster = SetsRaster(size)
         self._episodes = _Episodes(
@@ -407,15 +418,10 @@ class ParallelSearchEnv(_ParallelEnv):  # type: ignore[misc,valid-type]
         self.possible_agents = [f"uav_{u}" for u in self.learners]
         self.agents: list[str] = []
         self._uav_of = {f"uav_{u}": u for u in self.learners}
-        self.increments = tuple(float(u) for u in increments)
+        self.increments = _checked_increments(increments)
         self.w_ua, self.w_targets = float(w_ua), float(w_targets)
         self.request_timeout = request_timeout
-        self._observation_space = spaces.Dict(
-            {
-                "sets": spaces.Box(0.0, 1.0, (4, size, size), np.float32),
-                "pose": spaces.Box(-np.inf, np.inf, (4,), np.float32),
-            }
-        )
+        self._observation_space = _observation_space(size)
         self.observation_spaces = {a: self._observation_space for a in self.possible_agents}
         self.action_spaces = {a: spaces.Discrete(len(self.increments)) for a in self.possible_agents}
         self._raster = SetsRaster(size)

@@ -81,7 +81,7 @@ ANSWER_HEADER_BYTES = 48
 #: Most increments an answer may carry.
 MAX_ANSWER_INCREMENTS = 64
 #: Most planned views an answer may carry.
-MAX_ANSWER_VIEWS = 1024
+MAX_ANSWER_VIEWS = 256
 #: Request ``flags`` bit 0: asked at the start of the round (``others`` is empty).
 FLAG_ROUND_START = 1
 #: Answer ``kind`` 0: yaw increments, the first applied now.
@@ -674,7 +674,7 @@ class Action:
       carry up to 64 values (or none).
 
     ``views`` is an optional ``(n, 4)`` array of planned camera poses ``x, y, z, yaw``
-    (``n`` ≤ 1024), shared through the token with the UAVs after this one.
+    (``n`` ≤ 256), shared through the token with the UAVs after this one.
     """
 
     increments: Any = ()
@@ -743,7 +743,7 @@ def _check_action(action: Action) -> None:
         raise ActionError(f"an increment is outside [-pi, pi]: {action.increments.tolist()}")
     if action.views is not None:
         if action.views.shape[0] > MAX_ANSWER_VIEWS:
-            raise ActionError(f"{action.views.shape[0]} views: an answer carries at most 1024")
+            raise ActionError(f"{action.views.shape[0]} views: an answer carries at most {MAX_ANSWER_VIEWS}")
         if not np.all(np.isfinite(action.views)):
             raise ActionError("a view is not finite")
 

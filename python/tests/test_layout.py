@@ -236,7 +236,7 @@ def test_planner_results_are_normalised():
         (Action(increments=[4.0]), "outside"),
         (Action(increments=[math.nan]), "finite"),
         (Action(yaw_ref=math.inf), "finite"),
-        (Action(increments=[0.0], views=np.zeros((1025, 4))), "1024"),
+        (Action(increments=[0.0], views=np.zeros((257, 4))), "256"),
         (Action(increments=[0.0], views=[[0, 0, math.nan, 0]]), "finite"),
     ],
 )

@@ -1329,15 +1329,12 @@ impl Agent<'_> {
         live: &BTreeSet<u32>,
         others: &[protocol::wire::PlannedView],
     ) -> Result<f64, AgentError> {
-        if self.estimator.state().pose.is_none() {
+        let Some(pose) = self.estimator.state().pose else {
             return Err(AgentError::NoPose(k));
-        }
+        };
         let fleet = self.ring.fleet(round, live);
         let answer = self.ask_external(round, k, others, &fleet);
         let state = self.estimator.state();
-        let Some(pose) = state.pose else {
-            return Err(AgentError::NoPose(k));
-        };
         let sets: Vec<&sets::raster::CellSet> = state.target_sets().collect();
         let hidden = state.hidden_history.recently_hidden();
         let obstacles = ObstacleCell::known(&state.oem);

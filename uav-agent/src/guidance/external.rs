@@ -18,8 +18,7 @@ use protocol::camera::CameraPose;
 use protocol::ipc::{EventService, Ipc, IpcOpenError, PlanService, RunNode};
 use protocol::plan::Steer;
 use protocol::plan::{
-    Answer, AnswerError, ArrayId, OTHER_ROW_BYTES, RequestHeader, RequestShape, RequestWriter,
-    TARGET_ROW_BYTES,
+    Answer, ArrayId, OTHER_ROW_BYTES, RequestHeader, RequestShape, RequestWriter, TARGET_ROW_BYTES,
 };
 use protocol::wire::PlannedView;
 use serde::Serialize;
@@ -327,13 +326,6 @@ pub struct Asked {
     uav: u32,
 }
 
-impl Asked {
-    /// When it was sent.
-    pub fn sent(&self) -> Instant {
-        self.sent
-    }
-}
-
 /// The agent's side of `{run}/uav/{i}/plan`.
 pub struct ExternalPlanner {
     service: PlanService,
@@ -446,7 +438,7 @@ impl ExternalPlanner {
                         Ok(answer)
                     }
                     Err(e) => {
-                        self.refused(&e);
+                        tracing::warn!(uav = self.uav, error = %e, "external planner's answer refused");
                         Err(Fallback::Malformed)
                     }
                 })
@@ -460,10 +452,6 @@ impl ExternalPlanner {
                 Some(Err(Fallback::Absent))
             }
         }
-    }
-
-    fn refused(&mut self, e: &AnswerError) {
-        tracing::warn!(uav = self.uav, error = %e, "external planner's answer refused");
     }
 
     /// Counts a decision taken from an answer.
