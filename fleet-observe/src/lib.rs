@@ -13,7 +13,8 @@
 //! - [`pictures`]: plotters drawings with the bundled font.
 //! - [`faults`]: the faults a run injects, as the command line writes them and as the
 //!   summary reports them.
-//! - [`stats`] and [`clock`]: order statistics and the UTC clock the reports use.
+//! - [`stats`] (`protocol::stats`, re-exported) and [`clock`]: order statistics and the UTC
+//!   clock the reports use.
 //!
 //! The `fleet` command (the `orchestrator` crate) runs the processes and hands this crate
 //! what it needs; nothing here spawns a process.
@@ -31,5 +32,6 @@ pub mod faults;
 pub mod observe;
 pub mod pictures;
 pub mod results;
-pub mod stats;
+/// Order statistics, shared with the agents: [`protocol::stats`].
+pub use protocol::stats;
 pub mod viewer;

@@ -10,6 +10,8 @@
 //! - [`plan`]: what an agent asks an external planner (Python, say) and the answer it takes.
 //! - [`radio`]: the simulated radio links between agents (range, loss, latency), which the
 //!   receivers and the observer apply alike.
+//! - [`stats`]: order statistics of a sample (benchmarks' timings, message latencies, an
+//!   external planner's answer times).
 //! - [`service`]: run ids and every iceoryx2 service name.
 //! - [`ipc`]: iceoryx2 nodes and services with the fleet's quality of service, wake-up events,
 //!   cleanup after dead processes.
@@ -36,6 +38,7 @@ pub mod radio;
 pub mod resources;
 pub mod scenario;
 pub mod service;
+pub mod stats;
 pub mod timeouts;
 pub mod usage;
 pub mod variant;

@@ -233,7 +233,50 @@ def _draw_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(1, 2**31 - 1))
 
 
-class SearchEnv(gymnasium.Env):
+class _FleetEnv:
+    """What both environments share: their settings, their runs, the reward."""
+
+    def _setup(
+        self,
+        learners: Sequence[int],
+        increments: Sequence[float],
+        size: int,
+        w_ua: float,
+        w_targets: float,
+        request_timeout: float,
+        **episodes: Any,
+    ) -> None:
+        self.increments = _checked_increments(increments)
+        self.w_ua, self.w_targets = float(w_ua), float(w_targets)
+        self.request_timeout = request_timeout
+        self._raster = SetsRaster(size)
+        self._episodes = _Episodes(learners=learners, **episodes)
+        self.last_result: RunResult | None = None
+
+    @property
+    def run(self) -> Run | None:
+        """The current episode's run."""
+        return self._episodes.run
+
+    @property
+    def run_dir(self) -> Path | None:
+        """The current (or last) episode's output directory."""
+        return self._episodes.run_dir
+
+    def _reward(self, prev: Observation, nxt: Observation) -> float:
+        """The reward between two requests of a learner (the module's documentation)."""
+        b = prev.border_half_m
+        area = (2 * b) ** 2 if b > 0 else 1.0
+        return float(
+            (
+                self.w_ua * (prev.undetected_m2 - nxt.undetected_m2)
+                + self.w_targets * (prev.targets_m2 - nxt.targets_m2)
+            )
+            / area
+        )
+
+
+class SearchEnv(_FleetEnv, gymnasium.Env):
     """One learning UAV in a fleet run (see the module's documentation for the spaces, the
     reward and the episode's end).
 
@@ -274,15 +317,13 @@ class SearchEnv(gymnasium.Env):
     ) -> None:
         super().__init__()
         self.learner = int(learner)
-        self.increments = _checked_increments(increments)
-        self.w_ua = float(w_ua)
-        self.w_targets = float(w_targets)
-        self.request_timeout = request_timeout
-        self.observation_space = _observation_space(size)
-        self.action_space = spaces.Discrete(len(self.increments))
-        self._raster = SetsRaster(size)
-        self._episodes = _Episodes(
-            learners=[self.learner],
+        self._setup(
+            [self.learner],
+            increments,
+            size,
+            w_ua,
+            w_targets,
+            request_timeout,
             variant=variant,
             scenario=scenario,
             uavs=uavs,
@@ -293,20 +334,11 @@ class SearchEnv(gymnasium.Env):
             out_dir=out_dir,
             extra_args=extra_args,
         )
+        self.observation_space = _observation_space(size)
+        self.action_space = spaces.Discrete(len(self.increments))
         self._pending: Request | None = None
         self._last: dict[str, np.ndarray] | None = None
         self._last_info: dict[str, Any] | None = None
-        self.last_result: RunResult | None = None
-
-    @property
-    def run(self) -> Run | None:
-        """The current episode's run."""
-        return self._episodes.run
-
-    @property
-    def run_dir(self) -> Path | None:
-        """The current (or last) episode's output directory."""
-        return self._episodes.run_dir
 
     def _next(self, run: Run) -> Request | None:
         try:
@@ -349,9 +381,8 @@ class SearchEnv(gymnasium.Env):
         run = self._episodes.run
         if req is None or run is None:
             raise RuntimeError("step() needs a reset() first (or the episode terminated)")
-        prev = req.obs
+        prev = req.obs  # its scalars stay valid once answered; its arrays are not read
         last = prev.is_last_decision
-        prev_und, prev_tgt, b = prev.undetected_m2, prev.targets_m2, prev.border_half_m
         self._pending = None
         run.answer(req.handle, Action(increments=[self.increments[int(action)]]))
         nxt = None if last else self._next(run)
@@ -360,12 +391,7 @@ class SearchEnv(gymnasium.Env):
             assert self._last is not None and self._last_info is not None
             return _copy_obs(self._last), 0.0, True, False, dict(self._last_info)
         obs, info = self._take(nxt)
-        area = (2 * b) ** 2 if b > 0 else 1.0
-        reward = (
-            self.w_ua * (prev_und - nxt.obs.undetected_m2)
-            + self.w_targets * (prev_tgt - nxt.obs.targets_m2)
-        ) / area
-        return _copy_obs(obs), float(reward), False, False, dict(info)
+        return _copy_obs(obs), self._reward(prev, nxt.obs), False, False, dict(info)
 
     def close(self) -> None:
         """Stops any run and removes temporary run directories."""
@@ -380,7 +406,7 @@ except ImportError:  # pragma: no cover - pettingzoo is optional
     _ParallelEnv = object  # type: ignore[misc,assignment]
 
 
-class ParallelSearchEnv(_ParallelEnv):  # type: ignore[misc,valid-type]
+class ParallelSearchEnv(_FleetEnv, _ParallelEnv):  # type: ignore[misc,valid-type]
     """Several learning UAVs in a fleet run, as a PettingZoo ``ParallelEnv``: agents
     ``uav_{i}`` for ``i`` in ``learners``, the others on ``variant``'s planner.
 
@@ -418,15 +444,13 @@ class ParallelSearchEnv(_ParallelEnv):  # type: ignore[misc,valid-type]
         self.possible_agents = [f"uav_{u}" for u in self.learners]
         self.agents: list[str] = []
         self._uav_of = {f"uav_{u}": u for u in self.learners}
-        self.increments = _checked_increments(increments)
-        self.w_ua, self.w_targets = float(w_ua), float(w_targets)
-        self.request_timeout = request_timeout
-        self._observation_space = _observation_space(size)
-        self.observation_spaces = {a: self._observation_space for a in self.possible_agents}
-        self.action_spaces = {a: spaces.Discrete(len(self.increments)) for a in self.possible_agents}
-        self._raster = SetsRaster(size)
-        self._episodes = _Episodes(
-            learners=self.learners,
+        self._setup(
+            self.learners,
+            increments,
+            size,
+            w_ua,
+            w_targets,
+            request_timeout,
             variant=variant,
             scenario=scenario,
             uavs=uavs,
@@ -438,26 +462,18 @@ class ParallelSearchEnv(_ParallelEnv):  # type: ignore[misc,valid-type]
             extra_overrides=["guidance.external_request=round_start"],
             extra_args=extra_args,
         )
+        self._observation_space = _observation_space(size)
+        self.observation_spaces = {a: self._observation_space for a in self.possible_agents}
+        self.action_spaces = {a: spaces.Discrete(len(self.increments)) for a in self.possible_agents}
         self._rng = np.random.default_rng()
         self._pending: dict[str, Request] = {}
         self._last: dict[str, tuple[dict[str, np.ndarray], dict[str, Any]]] = {}
-        self.last_result: RunResult | None = None
 
     def observation_space(self, agent: str) -> spaces.Space:
         return self.observation_spaces[agent]
 
     def action_space(self, agent: str) -> spaces.Space:
         return self.action_spaces[agent]
-
-    @property
-    def run(self) -> Run | None:
-        """The current episode's run."""
-        return self._episodes.run
-
-    @property
-    def run_dir(self) -> Path | None:
-        """The current (or last) episode's output directory."""
-        return self._episodes.run_dir
 
     def _collect(self, run: Run, after: dict[int, int]) -> dict[int, Request] | None:
         """One request of every learner, each of a later step than ``after[uav]``; ``None``
@@ -517,14 +533,13 @@ class ParallelSearchEnv(_ParallelEnv):  # type: ignore[misc,valid-type]
         if run is None or not self.agents:
             raise RuntimeError("step() needs a reset() first (or the episode terminated)")
         default = self.increments.index(0.0) if 0.0 in self.increments else 0
-        prev = {a: r.obs for a, r in self._pending.items()}
-        stats = {a: (o.undetected_m2, o.targets_m2, o.border_half_m, o.step) for a, o in prev.items()}
+        prev = {a: r.obs for a, r in self._pending.items()}  # scalars only, after answering
         last = any(o.is_last_decision for o in prev.values())
         for agent, req in self._pending.items():
             a = actions.get(agent, default)
             run.answer(req.handle, Action(increments=[self.increments[int(a)]]))
         self._pending = {}
-        got = None if last else self._collect(run, {self._uav_of[a]: s[3] for a, s in stats.items()})
+        got = None if last else self._collect(run, {self._uav_of[a]: o.step for a, o in prev.items()})
         agents = self.agents
         if got is None:
             self.last_result = self._episodes.finish()
@@ -539,14 +554,7 @@ class ParallelSearchEnv(_ParallelEnv):  # type: ignore[misc,valid-type]
                 infos,
             )
         obs, infos = self._take(got)
-        rewards = {}
-        for a in agents:
-            und, tgt, b, _ = stats[a]
-            o = self._pending[a].obs
-            area = (2 * b) ** 2 if b > 0 else 1.0
-            rewards[a] = float(
-                (self.w_ua * (und - o.undetected_m2) + self.w_targets * (tgt - o.targets_m2)) / area
-            )
+        rewards = {a: self._reward(prev[a], self._pending[a].obs) for a in agents}
         return (
             obs,
             rewards,

@@ -118,7 +118,7 @@ fn an_external_planners_answers_steer_and_bad_or_missing_ones_fall_back() {
     assert_eq!(external["malformed"], 1, "{external}");
     assert_eq!(external["absent"], 6, "{external}");
     assert!(log.contains("answer refused"), "{log}");
-    assert_eq!(external["round_trip_ms"]["count"], 3, "{external}");
+    assert_eq!(external["round_trip_ms"]["n"], 3, "{external}");
     // The summary counts them from the agent's estimates (all but the last decision).
     let agent = &s["agents"][0];
     assert_eq!(agent["external_decisions"], 3, "{agent}");

@@ -1333,10 +1333,10 @@ impl Agent<'_> {
             return Err(AgentError::NoPose(k));
         };
         let fleet = self.ring.fleet(round, live);
-        let answer = self.ask_external(round, k, others, &fleet);
+        let hidden = self.estimator.state().hidden_history.recently_hidden();
+        let answer = self.ask_external(round, k, &hidden, others, &fleet);
         let state = self.estimator.state();
         let sets: Vec<&sets::raster::CellSet> = state.target_sets().collect();
-        let hidden = state.hidden_history.recently_hidden();
         let obstacles = ObstacleCell::known(&state.oem);
         let input = PlanningInput {
             uav: self.config.uav,
@@ -1426,31 +1426,29 @@ impl Agent<'_> {
     }
 
     /// The external planner's answer for this turn, if this agent asks one and a valid
-    /// answer came in time (the request sent at the round's start, or one sent now); counts
-    /// the decision or the fallback.
+    /// answer came in time (the request sent at the round's start, or one sent now with
+    /// `recently_hidden`, the plans ahead and the round's fleet); counts the decision or the
+    /// fallback.
     fn ask_external(
         &mut self,
         round: u64,
         k: u64,
+        recently_hidden: &sets::raster::CellSet,
         others: &[protocol::wire::PlannedView],
         fleet: &[u32],
     ) -> Option<protocol::plan::Answer> {
         let mut planner = self.external.take()?;
         let asked = match self.asked.take() {
             Some(asked) => Ok(asked),
-            None => {
-                let state = self.estimator.state();
-                let hidden = state.hidden_history.recently_hidden();
-                planner.ask(&Request {
-                    header: self.request_header(round, k, 0),
-                    grids: &self.guidance.grids,
-                    increments: &self.guidance.increments,
-                    state,
-                    recently_hidden: &hidden,
-                    others,
-                    fleet,
-                })
-            }
+            None => planner.ask(&Request {
+                header: self.request_header(round, k, 0),
+                grids: &self.guidance.grids,
+                increments: &self.guidance.increments,
+                state: self.estimator.state(),
+                recently_hidden,
+                others,
+                fleet,
+            }),
         };
         let answer = asked.and_then(|asked| self.await_answer(&mut planner, &asked));
         match &answer {

@@ -20,6 +20,7 @@ use protocol::plan::Steer;
 use protocol::plan::{
     Answer, ArrayId, OTHER_ROW_BYTES, RequestHeader, RequestShape, RequestWriter, TARGET_ROW_BYTES,
 };
+use protocol::stats::Stats;
 use protocol::wire::PlannedView;
 use serde::Serialize;
 use sets::raster::{CellBox, CellSet};
@@ -481,8 +482,8 @@ impl ExternalPlanner {
     /// What this agent's external planner did, for its report.
     pub fn report(&self) -> ExternalReport {
         ExternalReport {
-            round_trip_ms: Quantiles::of(&self.round_trips_ms),
-            overhead_ms: Quantiles::of(&self.overheads_ms),
+            round_trip_ms: Stats::from_samples(&self.round_trips_ms),
+            overhead_ms: Stats::from_samples(&self.overheads_ms),
             ..self.report.clone()
         }
     }
@@ -502,39 +503,10 @@ pub struct ExternalReport {
     /// Fallbacks for want of a planner.
     pub absent: u64,
     /// Time from request to answer, ms.
-    pub round_trip_ms: Option<Quantiles>,
+    pub round_trip_ms: Option<Stats>,
     /// That time less the planner's own (its `planner_ns`), ms: what the IPC and the waiting
     /// cost.
-    pub overhead_ms: Option<Quantiles>,
-}
-
-/// Median, 99th percentile and largest of a series.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct Quantiles {
-    /// Values.
-    pub count: usize,
-    /// Median.
-    pub median: f64,
-    /// 99th percentile (nearest rank).
-    pub p99: f64,
-    /// Largest.
-    pub max: f64,
-}
-
-impl Quantiles {
-    /// The quantiles of `values`; `None` without any.
-    pub fn of(values: &[f64]) -> Option<Quantiles> {
-        let mut v = values.to_vec();
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        let rank = |q: f64| v[((q * n as f64).ceil() as usize).clamp(1, n) - 1];
-        (n > 0).then(|| Quantiles {
-            count: n,
-            median: rank(0.5),
-            p99: rank(0.99),
-            max: v[n - 1],
-        })
-    }
+    pub overhead_ms: Option<Stats>,
 }
 
 #[cfg(test)]
@@ -578,16 +550,5 @@ mod tests {
         }
         assert_eq!(bits_in(&[u64::MAX, 1], 60, 65), 5);
         assert_eq!(bits_in(&[u64::MAX, 0], 0, 64), 64);
-    }
-
-    #[test]
-    fn quantiles_are_nearest_ranks() {
-        let v: Vec<f64> = (1..=200).map(f64::from).collect();
-        let q = Quantiles::of(&v).unwrap();
-        assert_eq!(
-            (q.median, q.p99, q.max, q.count),
-            (100.0, 198.0, 200.0, 200)
-        );
-        assert_eq!(Quantiles::of(&[]), None);
     }
 }

@@ -1,5 +1,5 @@
-//! Order statistics of a sample ([`Stats`]): the benchmarks' timings and the summary's
-//! message latencies.
+//! Order statistics of a sample ([`Stats`]): the benchmarks' timings, the summary's message
+//! latencies and an agent's external planner's answer times.
 
 use serde::Serialize;
 
