@@ -203,6 +203,11 @@ pub struct TargetsConfig {
     /// uniform in `[0, 1)` (the paper does not say how its speeds are drawn; 0: every car at
     /// `v_max`).
     pub cruise_spread: f64,
+    /// The smallest distance the world keeps between a car's centre and every building, m
+    /// (`>= r_s`). The paper asks only for "a distance larger than `r_s`"; the default,
+    /// 6 m, is `r_s + r_t` plus a 0.5 m margin for the default cars, which keeps the whole
+    /// target cylinder clear of the walls. `r_s` lets cars come as close as the paper allows.
+    pub building_clearance_m: f64,
 }
 
 /// `[uavs]`.
@@ -241,6 +246,29 @@ pub struct CameraConfig {
     pub unknown_fraction: f64,
     /// Visible pixels needed to identify a target.
     pub min_pixels: u32,
+    /// Which ray of a pixel its depth is measured along (`"centre"` or `"random"`,
+    /// [`DepthRay`]).
+    pub depth_ray: DepthRay,
+}
+
+/// The ray of a pixel along which the world measures its depth (`camera.depth_ray`). The
+/// paper's eq. (5) says only that the depth is the range along some ray of the pixel; the
+/// estimator's default rule assumes no more ([`RayAssumption::Any`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DepthRay {
+    /// The ray through the pixel's centre.
+    #[default]
+    Centre,
+    /// A ray through a point drawn uniformly in the pixel, per pixel and frame from the
+    /// scenario's seed (another simulator or a real depth camera, which measure along no
+    /// particular ray).
+    Random,
+}
+
+impl DepthRay {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["centre", "random"];
 }
 
 /// `[timing]`.
@@ -267,6 +295,31 @@ pub struct EstimatorConfig {
     /// How the sets grow between observations: `"reach"` (the default), `"geodesic"` or
     /// `"cells"` ([`SetGrowth`]).
     pub sets: SetGrowth,
+    /// What the estimator assumes of the ray a depth was measured along: `"any"` (the
+    /// default, the paper's eq. 5) or `"centre"` ([`RayAssumption`]).
+    pub depth_ray: RayAssumption,
+}
+
+/// What the estimator assumes of the ray along which a pixel's depth was measured
+/// (`estimator.depth_ray`). Only `S^o` and the map read a depth's direction: `P^g` reads no
+/// depth, and `X^m_j` always takes the whole pixel's frustum.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RayAssumption {
+    /// Some unknown ray of the pixel (the paper's eq. 5): an obstacle pixel proves an
+    /// obstacle point somewhere in its depth frustum. Sound for any depth source.
+    #[default]
+    Any,
+    /// The pixel's centre ray: an obstacle point on that ray. Tighter, by up to half a
+    /// pixel's footprint, and sound **only** for a source that measures along the centre ray
+    /// (this project's renderer with `camera.depth_ray = "centre"`); fed any other depth it
+    /// can put `S^o` over a car.
+    Centre,
+}
+
+impl RayAssumption {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["any", "centre"];
 }
 
 /// How the estimator's sets grow between observations (`estimator.sets`); every choice keeps
@@ -595,6 +648,7 @@ impl Default for TargetsConfig {
             cylinder_height_m: 2.0,
             safety_distance_m: 3.0,
             cruise_spread: 0.8,
+            building_clearance_m: 6.0,
         }
     }
 }
@@ -621,6 +675,7 @@ impl Default for CameraConfig {
             depth_noise: [-0.01, 0.01],
             unknown_fraction: 0.0,
             min_pixels: 20,
+            depth_ray: DepthRay::Centre,
         }
     }
 }
@@ -641,6 +696,7 @@ impl Default for EstimatorConfig {
             cell_m: 0.5,
             oem_cell_m: 5.0,
             sets: SetGrowth::Reach,
+            depth_ray: RayAssumption::Any,
         }
     }
 }

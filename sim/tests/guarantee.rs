@@ -3,7 +3,7 @@
 //! identified target is in its `X_j`, and no proven-free cell (`P^g`, `S^o`) holds a target.
 
 use protocol::frame::CvsFrame;
-use protocol::scenario::Scenario;
+use protocol::scenario::{DepthRay, RayAssumption, Scenario};
 use protocol::wire::TruthState;
 use sets::grid::GroundGrid;
 use sets::math::Point2;
@@ -63,7 +63,7 @@ fn check_state(
 
 /// Checks that this frame's `P^g` and `S^o` hold no target.
 fn check_frame(config: &EstimatorConfig, frame: &CvsFrame, truth: &TruthState, context: &str) {
-    let view = FrameView::new(frame, config.depth_noise);
+    let view = FrameView::new(frame, config.depth_noise, config.depth_ray);
     let grid = &config.grid;
     let free = measure::free_ground(&view, grid);
     let so = measure::obstacle_neighbourhood(&view, grid, config.safety_distance_m, 1);
@@ -207,4 +207,60 @@ fn exchanged_measurements_keep_the_guarantee() {
 fn default_scenario_keeps_the_guarantee() {
     let out = run(&Scenario::default(), 40, true);
     assert!(out.checks > 0);
+}
+
+/// The paper's sensor model (eq. 5): the world measures depth along a random ray of each
+/// pixel and lets the cars come as close to the walls as the paper allows (`r_s`); the
+/// estimator's default rule keeps the guarantee on every frame and state, fused or not.
+fn random_ray_scenario(seed: u64) -> Scenario {
+    let mut s = small_scenario(seed);
+    s.camera.depth_ray = DepthRay::Random;
+    s.targets.building_clearance_m = s.targets.safety_distance_m;
+    s.targets.count = 10;
+    s.region.building_fraction = 0.12;
+    s
+}
+
+#[test]
+fn random_depth_rays_keep_the_guarantee_under_the_default_rule() {
+    for seed in [2, 9] {
+        let s = random_ray_scenario(seed);
+        assert_eq!(s.estimator.depth_ray, RayAssumption::Any);
+        let out = run(&s, 200, seed == 9);
+        assert!(out.checks > 0 && out.identified > 0);
+        eprintln!("seed {seed} random rays: {} checks", out.checks);
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+
+    /// Single frames of random-ray worlds, from random seeds and random UAV headings: no car
+    /// in `P^g` or `S^o`, every identified car in its `X^m_j`.
+    #[test]
+    fn random_ray_frames_hold_no_car_in_proven_free_ground(
+        seed in 1u64..10_000,
+        yaws in proptest::collection::vec(-3.2f64..3.2, 3),
+        steps in 0u64..40,
+    ) {
+        let s = random_ray_scenario(seed);
+        let mut fleet = Fleet::new(&s, FleetOptions { run_tag: RUN_TAG, ..FleetOptions::default() })
+            .expect("world");
+        for _ in 0..steps {
+            fleet.advance();
+        }
+        for (i, &yaw) in yaws.iter().enumerate() {
+            let mut state = fleet.world().uav_state(i).expect("uav");
+            state.yaw = yaw;
+            fleet.world_mut().set_uav_state(i, state);
+        }
+        let config = fleet.config().clone();
+        let mut truth = Box::<TruthState>::default();
+        fleet.world().truth(RUN_TAG, &mut truth);
+        let mut frame = CvsFrame::new_boxed();
+        for i in 0..fleet.uav_count() {
+            fleet.world().render(i, RUN_TAG, &mut frame);
+            check_frame(&config, &frame, &truth, &format!("seed {seed} uav {i}"));
+        }
+    }
 }

@@ -375,6 +375,37 @@ fn the_setfleet_variant_runs_and_is_recorded() {
     assert!(resolved.contains("guidance_period_s = 1.0"), "{resolved}");
 }
 
+/// The paper's sensor model end to end: the world measures depth along a random ray of each
+/// pixel (eq. 5 leaves the ray unknown), cars come as close to the walls as the paper allows
+/// (`r_s`), and the estimator's default rule keeps every car in its sets.
+#[test]
+fn random_depth_rays_keep_the_guarantee_end_to_end() {
+    let t = TestRun::new("run-random-ray");
+    let text = "seed = 3\nduration_s = 30.0\n\n\
+                [region]\nhalf_extent_m = 100.0\nbuilding_fraction = 0.12\n\n\
+                [targets]\ncount = 6\nbuilding_clearance_m = 3.0\n\n\
+                [uavs]\ncount = 2\n\n\
+                [camera]\nrows = 120\ncols = 160\ndepth_ray = \"random\"\n";
+    let file = t.write("scenario.toml", text);
+    let out_dir = t.dir.join("out");
+    let out = finish(
+        &t,
+        ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &["--strict"])),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let s = summary(&out_dir);
+    assert_eq!(s["violations"], 0, "{s}");
+    assert_eq!(s["steps"], 60, "{s}");
+    let resolved = std::fs::read_to_string(out_dir.join("scenario.toml")).expect("scenario");
+    for line in [
+        "depth_ray = \"random\"",
+        "depth_ray = \"any\"",
+        "building_clearance_m = 3.0",
+    ] {
+        assert!(resolved.contains(line), "{line}: {resolved}");
+    }
+}
+
 #[test]
 fn run_and_sweep_help_list_and_explain_every_variant() {
     for command in ["run", "sweep"] {

@@ -105,6 +105,7 @@ impl World {
             depth_noise: self.scenario.camera.depth_noise,
             unknown_fraction: self.scenario.camera.unknown_fraction,
             min_pixels: self.scenario.camera.min_pixels,
+            depth_ray: self.scenario.camera.depth_ray,
         };
         match self.camera(uav) {
             Some(camera) => {

@@ -7,11 +7,12 @@ use parry3d_f64::query::{Ray, RayCast};
 use protocol::camera::{Camera, range_interval};
 use protocol::flight::UavState;
 use protocol::frame::{CvsFrame, Label};
-use protocol::scenario::Scenario;
+use protocol::scenario::{DepthRay, Scenario};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sets::math::{Point2, Point3, Real, Vector3};
 use world_server::World;
+use world_server::render::noise::RowRayPoints;
 use world_server::render::{ObjectKind, SceneObject};
 
 /// What a ray meets first.
@@ -57,6 +58,12 @@ fn scenario(seed: u64) -> Scenario {
     s.targets.count = 40;
     s.region.building_fraction = 0.12;
     s.camera.unknown_fraction = if seed.is_multiple_of(2) { 0.05 } else { 0.0 };
+    // Half the scenes measure depth along a random ray of each pixel, and let the cars come
+    // as close to the walls as the paper allows.
+    if seed > 3 {
+        s.camera.depth_ray = DepthRay::Random;
+        s.targets.building_clearance_m = s.targets.safety_distance_m;
+    }
     s
 }
 
@@ -83,10 +90,17 @@ fn check_frame(world: &World, uav: usize, frame: &CvsFrame, rng: &mut ChaCha8Rng
         .collect();
     let o = camera.origin();
     let (rows, cols) = (s.camera.rows, s.camera.cols);
+    let step = frame.header.step;
     let mut pixel_hits: Vec<Vec<Hit>> = Vec::with_capacity((rows * cols) as usize);
     for r in 0..rows {
+        // The points of this row's depth rays, drawn again as the world draws them.
+        let mut depth_points = RowRayPoints::new(s.seed, step, uav as u32, r);
         for c in 0..cols {
             let mut pts = vec![(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (0.5, 0.5)];
+            let depth_point = match s.camera.depth_ray {
+                DepthRay::Centre => (0.5, 0.5),
+                DepthRay::Random => depth_points.next_point(),
+            };
             let label = frame.label(r, c);
             if label != Label::Unknown {
                 for _ in 0..4 {
@@ -121,9 +135,19 @@ fn check_frame(world: &World, uav: usize, frame: &CvsFrame, rng: &mut ChaCha8Rng
                 }
                 Label::Unknown => {}
             }
-            // Depth: the true range of the centre ray lies in the interval the depth allows.
+            // Depth: the true range of the depth ray (the centre ray, or the ray through the
+            // pixel's random point) lies in the interval the depth allows.
             let depth = frame.depth_at(r, c);
-            let (centre, range) = hits[4];
+            let (du, dv) = depth_point;
+            assert!((0.0..1.0).contains(&du) && (0.0..1.0).contains(&dv));
+            let (centre, range) =
+                first_hit(&objects, &o, &camera.ray(c as Real + du, r as Real + dv));
+            if label != Label::Unknown {
+                assert_eq!(
+                    centre, hits[0].0,
+                    "({r}, {c}): the depth ray sees another thing"
+                );
+            }
             if centre == Hit::Nothing {
                 assert!(depth.is_nan());
             } else {

@@ -70,6 +70,8 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
     match key {
         "guidance.planner" => Some(&super::Planner::NAMES),
         "estimator.sets" => Some(&super::SetGrowth::NAMES),
+        "estimator.depth_ray" => Some(&super::RayAssumption::NAMES),
+        "camera.depth_ray" => Some(&super::DepthRay::NAMES),
         "guidance.hidden_resolution" => Some(&super::HiddenResolution::NAMES),
         "guidance.hidden_window" => Some(&super::HiddenWindow::NAMES),
         "guidance.predicted_views" => Some(&super::PredictedViews::NAMES),
@@ -448,7 +450,18 @@ impl Scenario {
                 targets.radius_m, targets.cylinder_height_m
             ),
         )?;
-        Interval::POSITIVE.check("targets.safety_distance_m", targets.safety_distance_m)
+        Interval::POSITIVE.check("targets.safety_distance_m", targets.safety_distance_m)?;
+        let clearance = targets.building_clearance_m;
+        require(
+            clearance.is_finite() && clearance >= targets.safety_distance_m && clearance <= 100.0,
+            "targets.building_clearance_m",
+            clearance,
+            format!(
+                "targets.safety_distance_m ({} m) <= value <= 100: the paper keeps cars more \
+                 than r_s from buildings",
+                targets.safety_distance_m
+            ),
+        )
     }
 
     fn validate_uavs(&self) -> Result<(), ScenarioError> {
@@ -749,6 +762,12 @@ mod tests {
             ("targets.safety_distance_m", |s| {
                 s.targets.safety_distance_m = 0.0
             }),
+            ("targets.building_clearance_m", |s| {
+                s.targets.building_clearance_m = 2.9
+            }),
+            ("targets.building_clearance_m", |s| {
+                s.targets.building_clearance_m = f64::NAN
+            }),
             ("uavs.count", |s| s.uavs.count = 0),
             ("uavs.count", |s| s.uavs.count = MAX_UAVS as u32 + 1),
             ("uavs.speed_mps", |s| s.uavs.speed_mps = 101.0),
@@ -862,6 +881,42 @@ mod tests {
             edit(&mut scenario);
             assert_eq!(out_of_range_key(&scenario), *key, "{scenario:?}");
         }
+    }
+
+    /// The depth-ray keys: the estimator assumes any ray of the pixel unless told, the world
+    /// measures along the centre unless told, and each refuses other names.
+    #[test]
+    fn the_depth_ray_keys_default_to_the_paper_and_the_renderer() {
+        use super::super::{DepthRay, RayAssumption};
+        let s = Scenario::default();
+        assert_eq!(s.estimator.depth_ray, RayAssumption::Any);
+        assert_eq!(s.camera.depth_ray, DepthRay::Centre);
+        assert_eq!(s.targets.building_clearance_m, 6.0);
+        let set =
+            |o: &[&str]| Scenario::load(None, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>());
+        let s = set(&[
+            "camera.depth_ray=\"random\"",
+            "estimator.depth_ray=\"centre\"",
+            "targets.building_clearance_m=3",
+        ])
+        .unwrap();
+        assert_eq!(s.camera.depth_ray, DepthRay::Random);
+        assert_eq!(s.estimator.depth_ray, RayAssumption::Centre);
+        assert_eq!(s.targets.building_clearance_m, 3.0);
+        for (bad, names) in [
+            ("camera.depth_ray=\"corner\"", "centre, random"),
+            ("estimator.depth_ray=\"random\"", "any, centre"),
+        ] {
+            let e = set(&[bad]).unwrap_err().to_string();
+            assert!(e.contains(names), "{bad}: {e}");
+        }
+        let e = set(&["targets.building_clearance_m=2"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("targets.safety_distance_m (3 m) <= value"),
+            "{e}"
+        );
     }
 
     #[test]

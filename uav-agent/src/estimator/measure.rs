@@ -14,24 +14,46 @@
 //!   target pixel's depth frustum in the box ([`Camera::pixel_frustum_ground_hull`]), grown by
 //!   a polygon circumscribing the disc of radius `r_t`. The hull contains the union, the
 //!   circumscribed polygon contains the disc, so the result contains the union dilated by `r_t`.
-//! - [`obstacle_neighbourhood`] (`S^o`, inner): the depth is the range of a pixel's *centre* ray, so an
-//!   obstacle pixel proves an obstacle point on that ray within `[lo, hi]`; its horizontal
-//!   position is within `e = (hi - lo) / 2 * |ray_xy|` of the interval's midpoint, and the disc
-//!   of radius `r_s - e` around the midpoint is within `r_s` of the obstacle point. This is
-//!   tighter than, and implied by, the design's rule on the frustum corners (the centre-ray
-//!   point lies in the frustum). Discs are drawn for a lattice of obstacle pixels every
-//!   `stride` pixels plus every obstacle pixel on the border of an obstacle region; a subset of
-//!   valid inner discs is still inner.
+//! - [`obstacle_neighbourhood`] (`S^o`, inner): an obstacle pixel proves an obstacle point in
+//!   its depth frustum, and the ground within `r_s` of that point is free of cars. The rule
+//!   depends on what is assumed of the ray the depth was measured along
+//!   (`estimator.depth_ray`, [`RayAssumption`]):
+//!   - `any` (the default, the paper's eq. 5: the range along *some* ray of the pixel): the
+//!     point lies in the pixel's frustum between the range bounds, which
+//!     [`Camera::pixel_frustum`] bounds by a convex polytope of 8 corners (its far face covers
+//!     the sphere cap that bulges past the far corners). With `m` the mean of the corners'
+//!     ground projections and `e` the largest horizontal distance from `m` to a corner (the
+//!     farthest point of a convex hull from a fixed point is a vertex), every point of the
+//!     frustum is within `e` of `m` horizontally, so the disc of radius `r_s - e` around `m`
+//!     is within `r_s` of the obstacle point, wherever in the pixel it was. This is the
+//!     design's rule on the frustum's corners.
+//!   - `centre` (valid **only** for a source that measures along the centre ray, as this
+//!     project's renderer does with `camera.depth_ray = "centre"`): the point is on the
+//!     centre ray within `[lo, hi]`, so its horizontal position is within
+//!     `e = (hi - lo) / 2 * |ray_xy|` of the interval's midpoint, and the disc of radius
+//!     `r_s - e` around the midpoint is within `r_s` of it. Tighter than the frustum rule by
+//!     up to half a pixel's footprint, and **not** implied by it: fed depth measured along
+//!     another ray of the pixel, it can claim ground up to that much too far and take a car's
+//!     cell out of its set.
+//!
+//!   Discs are drawn for a lattice of obstacle pixels every `stride` pixels plus every
+//!   obstacle pixel on the border of an obstacle region; a subset of valid inner discs is
+//!   still inner.
 //! - [`hidden_ground`] (`H^CVS`, approximate): cells of the view whose centre projects into an
 //!   obstacle, target or unknown pixel.
-//! - [`observe_map`] (OEM, approximate): an obstacle pixel marks the map cell under the midpoint
-//!   of its centre-ray interval as obstacle, at least as tall as that point; a map cell whose
-//!   centre projects into a ground pixel becomes ground.
+//! - [`observe_map`] (OEM, approximate): an obstacle pixel marks the map cell under its
+//!   obstacle point's estimate (the barycentre of its frustum's corners with `any`, the
+//!   midpoint of its centre-ray interval with `centre`) as obstacle, at least as tall as that
+//!   point; a map cell whose centre projects into a ground pixel becomes ground.
+//!
+//! The other rules read no depth direction: `P^g` reads labels only, and `X^m_j` takes each
+//! target pixel's whole frustum, so both hold under eq. (5) whatever the ray.
 
 use protocol::camera::{Camera, range_interval};
 use protocol::frame::{CvsFrame, Label, TargetBox};
+use protocol::scenario::RayAssumption;
 use sets::grid::GroundGrid;
-use sets::math::{Point2, Real, Vector3, convex_hull, floor_fast};
+use sets::math::{Point2, Point3, Real, Vector3, convex_hull, floor_fast};
 use sets::raster::{CellSet, Coverage};
 
 use crate::occupancy::OccupancyMap;
@@ -48,7 +70,9 @@ pub struct FrameView<'a> {
     frame: &'a CvsFrame,
     camera: Camera,
     projector: GroundProjector,
-    rays: CentreRays,
+    rays: PixelRays,
+    corners: PixelRays,
+    ray_assumption: RayAssumption,
     noise: [Real; 2],
     rows: u32,
     cols: u32,
@@ -60,7 +84,8 @@ impl<'a> FrameView<'a> {
     /// Views a frame the caller checked with [`CvsFrame::is_well_formed`]. `noise` are the depth
     /// noise bounds the estimator was configured with; the bounds used are the hull of these
     /// and the frame's, so a frame that under-reports its noise cannot shrink an outer set.
-    pub fn new(frame: &'a CvsFrame, noise: [Real; 2]) -> Self {
+    /// `ray_assumption` is what the rules may assume of the ray a depth was measured along.
+    pub fn new(frame: &'a CvsFrame, noise: [Real; 2], ray_assumption: RayAssumption) -> Self {
         let camera = frame.camera();
         let (rows, cols) = (frame.header.rows, frame.header.cols);
         let n = frame.pixel_count();
@@ -82,7 +107,9 @@ impl<'a> FrameView<'a> {
         Self {
             frame,
             camera,
-            rays: CentreRays::new(&projector, rows, cols),
+            rays: PixelRays::new(&projector, rows, cols, 0.5),
+            corners: PixelRays::new(&projector, rows + 1, cols + 1, 0.0),
+            ray_assumption,
             projector,
             noise: [noise[0].min(h[0]), noise[1].max(h[1])],
             rows,
@@ -110,6 +137,55 @@ impl<'a> FrameView<'a> {
     /// The range interval of pixel `(r, c)` under the noise bounds in use.
     fn range(&self, r: u32, c: u32) -> Option<(Real, Real)> {
         range_interval(self.frame.depth_at(r, c), self.noise)
+    }
+
+    /// Where obstacle pixel `(r, c)`'s obstacle point may be, given its range interval
+    /// `[lo, hi]`: a point `m` and a horizontal distance `e` such that the obstacle point is
+    /// within `e` of `m` horizontally (see the module docs for each [`RayAssumption`]).
+    fn obstacle_point(&self, r: u32, c: u32, lo: Real, hi: Real) -> (Point3, Real) {
+        let o = self.camera.pose.position;
+        // Each spread adds slack for the rounding of the ray directions and of the products.
+        match self.ray_assumption {
+            RayAssumption::Centre => {
+                let dir = self.rays.get(r, c);
+                let spread = (hi - lo) / 2.0 * dir.x.hypot(dir.y) + 1e-9 * hi + 1e-9;
+                (o + dir * ((lo + hi) / 2.0), spread)
+            }
+            RayAssumption::Any => {
+                let corners = self.frustum(r, c, lo, hi);
+                let m = corners
+                    .iter()
+                    .fold(Vector3::zeros(), |acc, p| acc + p.coords)
+                    / 8.0;
+                let spread = corners
+                    .iter()
+                    .map(|p| (p.x - m.x).hypot(p.y - m.y))
+                    .fold(0.0, Real::max);
+                (Point3::from(m), spread + 1e-9 * hi + 1e-9)
+            }
+        }
+    }
+
+    /// [`Camera::pixel_frustum`] of pixel `(r, c)` from the frame's precomputed rays: the 4
+    /// near corners then the 4 far corners of a convex polytope holding every point lit by the
+    /// pixel at a range in `[lo, hi]`.
+    fn frustum(&self, r: u32, c: u32, lo: Real, hi: Real) -> [Point3; 8] {
+        let axis = self.rays.get(r, c);
+        let rays = [
+            self.corners.get(r, c),
+            self.corners.get(r, c + 1),
+            self.corners.get(r + 1, c + 1),
+            self.corners.get(r + 1, c),
+        ];
+        let cos = rays.map(|d| axis.dot(&d));
+        let near = lo.max(0.0) * cos.iter().copied().fold(Real::INFINITY, Real::min);
+        let o = self.camera.pose.position;
+        let mut out = [o; 8];
+        for i in 0..4 {
+            out[i] = o + rays[i] * (near / cos[i]);
+            out[i + 4] = o + rays[i] * (hi / cos[i]);
+        }
+        out
     }
 
     /// The cells of `grid` worth examining: those touching the ground footprint of the image
@@ -241,9 +317,11 @@ impl GroundProjector {
     }
 }
 
-/// The centre rays of a frame's pixels (as [`Camera::centre_ray`]), with the term of each
-/// column and of each row computed once per frame.
-struct CentreRays {
+/// Rays through a lattice of image points, `(c + offset, r + offset)`: the pixels' centre rays
+/// (as [`Camera::centre_ray`], offset 0.5) or their corner rays (as [`Camera::corner_ray`],
+/// offset 0, one more row and column), with the term of each column and of each row computed
+/// once per frame.
+struct PixelRays {
     /// `right * x` per column.
     across: Vec<Vector3>,
     /// `down * y` per row.
@@ -251,20 +329,20 @@ struct CentreRays {
     forward: Vector3,
 }
 
-impl CentreRays {
-    fn new(p: &GroundProjector, rows: u32, cols: u32) -> Self {
+impl PixelRays {
+    fn new(p: &GroundProjector, rows: u32, cols: u32, offset: Real) -> Self {
         Self {
             across: (0..cols)
-                .map(|c| p.right * ((c as Real + 0.5 - p.cx) / p.f))
+                .map(|c| p.right * ((c as Real + offset - p.cx) / p.f))
                 .collect(),
             down: (0..rows)
-                .map(|r| p.down * ((r as Real + 0.5 - p.cy) / p.f))
+                .map(|r| p.down * ((r as Real + offset - p.cy) / p.f))
                 .collect(),
             forward: p.forward,
         }
     }
 
-    /// Unit world direction of the centre ray of pixel `(r, c)`.
+    /// Unit world direction of the ray of lattice point `(r, c)`.
     fn get(&self, r: u32, c: u32) -> Vector3 {
         (self.across[c as usize] + self.down[r as usize] + self.forward).normalize()
     }
@@ -561,7 +639,6 @@ pub fn add_obstacle_neighbourhood(
     out: &mut CellSet,
 ) {
     let stride = stride.max(1);
-    let o = view.camera.pose.position;
     let is_obstacle = |r: u32, c: u32| view.label(r, c) == Label::Obstacle;
     for r in 0..view.rows {
         for c in 0..view.cols {
@@ -583,17 +660,12 @@ pub fn add_obstacle_neighbourhood(
             let Some((lo, hi)) = view.range(r, c) else {
                 continue;
             };
-            let dir = view.rays.get(r, c);
-            let mid = (lo + hi) / 2.0;
-            let horizontal = dir.x.hypot(dir.y);
-            // Slack for the rounding of the ray direction and of the midpoint.
-            let spread = (hi - lo) / 2.0 * horizontal + 1e-9 * hi + 1e-9;
+            let (point, spread) = view.obstacle_point(r, c, lo, hi);
             let radius = safety_distance_m - spread;
             if radius <= 0.0 {
                 continue;
             }
-            let centre = Point2::new(o.x + dir.x * mid, o.y + dir.y * mid);
-            out.fill_disc(grid, centre, radius, Coverage::Inner);
+            out.fill_disc(grid, Point2::new(point.x, point.y), radius, Coverage::Inner);
         }
     }
 }
@@ -601,7 +673,6 @@ pub fn add_obstacle_neighbourhood(
 /// Folds the frame into the occupancy map (see the module docs). Returns the cells changed.
 pub fn observe_map(view: &FrameView<'_>, map: &mut OccupancyMap) -> usize {
     let mut changed = 0;
-    let o = view.camera.pose.position;
     for r in 0..view.rows {
         for c in 0..view.cols {
             if view.label(r, c) != Label::Obstacle {
@@ -610,7 +681,7 @@ pub fn observe_map(view: &FrameView<'_>, map: &mut OccupancyMap) -> usize {
             let Some((lo, hi)) = view.range(r, c) else {
                 continue;
             };
-            let p = o + view.rays.get(r, c) * ((lo + hi) / 2.0);
+            let (p, _) = view.obstacle_point(r, c, lo, hi);
             changed += map.observe_obstacle(&Point2::new(p.x, p.y), p.z) as usize;
         }
     }
@@ -700,9 +771,19 @@ mod tests {
                 _ => panic!("front tests disagree at ({x}, {y})"),
             }
         }
-        let rays = CentreRays::new(&p, 24, 32);
+        let rays = PixelRays::new(&p, 24, 32, 0.5);
+        let corners = PixelRays::new(&p, 25, 33, 0.0);
         for &(r, c) in &[(0, 0), (5, 17), (23, 31)] {
             assert!((rays.get(r, c) - cam.centre_ray(r, c)).norm() < 1e-12);
+            assert!((corners.get(r + 1, c + 1) - cam.corner_ray(r + 1, c + 1)).norm() < 1e-12);
+        }
+        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Any);
+        for (a, b) in view
+            .frustum(5, 17, 40.0, 41.0)
+            .iter()
+            .zip(cam.pixel_frustum(5, 17, 40.0, 41.0))
+        {
+            assert!((a - b).norm() < 1e-9);
         }
     }
 
@@ -751,7 +832,7 @@ mod tests {
             // A pixel with a bad depth counts as unknown, even when labelled ground.
             f.depth[40] = f32::NAN;
             f.labels[40] = Label::Ground as u8;
-            let view = FrameView::new(&f, [-0.01, 0.01]);
+            let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Any);
             assert_eq!(view.invalid_depth_pixels(), 1);
             let grid = GroundGrid::new(100.0, 1.0);
             let fast = free_ground(&view, &grid);
@@ -765,7 +846,7 @@ mod tests {
     fn free_ground_cells_project_only_onto_ground_pixels() {
         let mut f = small_frame(0.3);
         paint(&mut f, 9);
-        let view = FrameView::new(&f, [-0.01, 0.01]);
+        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Any);
         let grid = GroundGrid::new(100.0, 1.0);
         let free = free_ground(&view, &grid);
         let cam = view.camera();
@@ -801,7 +882,7 @@ mod tests {
                 f.labels[(r * 32 + c) as usize] = Label::Target as u8;
             }
         }
-        let view = FrameView::new(&f, [-0.01, 0.01]);
+        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Any);
         let grid = GroundGrid::new(100.0, 0.5);
         let radius = 2.5;
         let xm = target_measurement(&view, &grid, &b, radius).unwrap();
@@ -830,36 +911,33 @@ mod tests {
             c1: 1,
         };
         f.labels[0] = Label::Ground as u8;
-        let view = FrameView::new(&f, [-0.01, 0.01]);
+        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Any);
         assert!(target_measurement(&view, &grid, &empty, radius).is_none());
     }
 
-    #[test]
-    fn obstacle_discs_stay_within_the_safety_distance() {
-        let mut f = small_frame(-0.4);
-        paint(&mut f, 5);
-        let view = FrameView::new(&f, [-0.01, 0.01]);
-        let grid = GroundGrid::new(100.0, 0.5);
-        let rs = 3.0;
-        let so = obstacle_neighbourhood(&view, &grid, rs, 1);
-        assert!(so.count() > 0);
-        let cam = view.camera();
-        // Every S^o cell must be within r_s of the obstacle point of some obstacle pixel, at
-        // any range of its interval.
-        let mut points = Vec::new();
-        for r in 0..24 {
-            for c in 0..32 {
+    /// Every `S^o` cell of `so` is within `r_s` of the obstacle point of one obstacle pixel,
+    /// wherever that point is among `points(r, c, lo, hi)` (points of the pixel's depth ray(s)
+    /// at the ends of its range interval).
+    fn assert_within_safety_distance(
+        view: &FrameView<'_>,
+        grid: &GroundGrid,
+        so: &CellSet,
+        rs: Real,
+        points: impl Fn(u32, u32, Real, Real) -> Vec<Point3>,
+    ) {
+        let mut pixels = Vec::new();
+        for r in 0..view.rows {
+            for c in 0..view.cols {
                 if view.label(r, c) == Label::Obstacle {
                     let (lo, hi) = view.range(r, c).unwrap();
-                    let d = cam.centre_ray(r, c);
-                    points.push((cam.origin() + d * lo, cam.origin() + d * hi));
+                    pixels.push(points(r, c, lo, hi));
                 }
             }
         }
         for cell in so.iter() {
             let rect = grid.cell_rect(cell);
-            let ok = points.iter().any(|(a, b)| {
-                [*a, *b].iter().all(|p| {
+            let ok = pixels.iter().any(|pts| {
+                pts.iter().all(|p| {
                     rect.corners()
                         .iter()
                         .all(|q| (q.x - p.x).hypot(q.y - p.y) <= rs + 1e-9)
@@ -867,5 +945,117 @@ mod tests {
             });
             assert!(ok, "cell {cell:?} is not within r_s of one obstacle pixel");
         }
+    }
+
+    /// The centre-ray rule: within `r_s` of the centre ray's points.
+    #[test]
+    fn centre_ray_discs_stay_within_the_safety_distance_of_the_centre_ray() {
+        let mut f = small_frame(-0.4);
+        paint(&mut f, 5);
+        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Centre);
+        let grid = GroundGrid::new(100.0, 0.5);
+        let rs = 3.0;
+        let so = obstacle_neighbourhood(&view, &grid, rs, 1);
+        assert!(so.count() > 0);
+        let cam = view.camera();
+        assert_within_safety_distance(&view, &grid, &so, rs, |r, c, lo, hi| {
+            let d = cam.centre_ray(r, c);
+            vec![cam.origin() + d * lo, cam.origin() + d * hi]
+        });
+    }
+
+    /// The default rule (eq. 5): within `r_s` of every point of the pixel's frustum, so of the
+    /// obstacle point whichever ray of the pixel the depth was measured along.
+    #[test]
+    fn any_ray_discs_stay_within_the_safety_distance_of_every_ray_of_the_pixel() {
+        let mut f = small_frame(-0.4);
+        paint(&mut f, 5);
+        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Any);
+        let grid = GroundGrid::new(100.0, 0.5);
+        let rs = 3.0;
+        let so = obstacle_neighbourhood(&view, &grid, rs, 1);
+        assert!(so.count() > 0);
+        let cam = view.camera();
+        assert_within_safety_distance(&view, &grid, &so, rs, |r, c, lo, hi| {
+            let mut pts = Vec::new();
+            for k in 0..=4 {
+                for l in 0..=4 {
+                    let d = cam.ray(c as Real + k as Real / 4.0, r as Real + l as Real / 4.0);
+                    pts.extend([cam.origin() + d * lo, cam.origin() + d * hi]);
+                }
+            }
+            pts
+        });
+    }
+
+    /// The frustum rule on one pixel: obstacle pixel (12, 16) of the test camera (yaw 0, tilt
+    /// 0.9 rad, 32 x 24 pixels over pi/4) at range 40 m +- 1 %: its disc is centred on the
+    /// mean of the frustum's corners and shrunk by the farthest corner, which is the
+    /// centre-ray rule's spread plus about half the pixel's footprint.
+    #[test]
+    fn the_frustum_rule_shrinks_the_disc_by_the_farthest_corner() {
+        let f = small_frame(0.0);
+        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Any);
+        let (lo, hi) = (40.0 / 1.01, 40.0 / 0.99);
+        let (m, e) = view.obstacle_point(12, 16, lo, hi);
+        let corners = f.camera().pixel_frustum(12, 16, lo, hi);
+        let mean = corners.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / 8.0;
+        assert!((m.coords - mean).norm() < 1e-9);
+        let far = corners
+            .iter()
+            .map(|p| (p.x - mean.x).hypot(p.y - mean.y))
+            .fold(0.0, Real::max);
+        assert!(e >= far && e < far + 1e-6);
+        // The centre-ray rule's spread: half the interval along the centre ray, horizontally.
+        let centre = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Centre);
+        let (_, e_centre) = centre.obstacle_point(12, 16, lo, hi);
+        let dir = f.camera().centre_ray(12, 16);
+        let expected = (hi - lo) / 2.0 * dir.x.hypot(dir.y);
+        assert!((e_centre - expected).abs() < 1e-6);
+        // The frustum adds about half the pixel's footprint at 40 m: 40 * (pi/4) / 32 / 2.
+        let half_pixel = 40.0 * std::f64::consts::FRAC_PI_4 / 32.0 / 2.0;
+        assert!(
+            e > e_centre && e < e_centre + 1.5 * half_pixel,
+            "{e} vs {e_centre}"
+        );
+    }
+
+    /// Why the centre-ray rule needs a centre-ray source: depth measured along a corner ray of
+    /// an obstacle pixel (a ray eq. 5 allows) puts the obstacle point about half a pixel's
+    /// footprint from the centre ray's, and the centre-ray rule then claims ground more than
+    /// `r_s` from it, where the paper lets a car be. The frustum rule does not.
+    #[test]
+    fn the_centre_ray_rule_claims_ground_beyond_r_s_of_a_corner_ray_point() {
+        let (r, c) = (12, 16);
+        let mut f = small_frame(0.0);
+        f.header.depth_noise = [0.0, 0.0];
+        let n = f.pixel_count();
+        f.labels[..n].fill(Label::Unknown as u8);
+        let i = (r * f.header.cols + c) as usize;
+        f.labels[i] = Label::Obstacle as u8;
+        let cam = f.camera();
+        let range = 40.0;
+        f.depth[i] = range as f32;
+        let range = f.depth[i] as Real;
+        // The obstacle point, on the pixel's top-left corner ray.
+        let p = cam.origin() + cam.corner_ray(r, c) * range;
+        let m = cam.origin() + cam.centre_ray(r, c) * range;
+        let away = Vector3::new(m.x - p.x, m.y - p.y, 0.0);
+        let offset = away.norm();
+        assert!(
+            offset > 0.4,
+            "the corner's point is {offset} m from the centre's"
+        );
+        // A car's ground point beyond r_s from p, on the far side of the centre ray's point.
+        let rs = 3.0;
+        let q = p + away / offset * (rs + offset / 2.0);
+        let q = Point2::new(q.x, q.y);
+        let grid = GroundGrid::new(100.0, 0.1);
+        let cell = grid.cell_of(&q).unwrap();
+        let centre = FrameView::new(&f, [0.0, 0.0], RayAssumption::Centre);
+        assert!(obstacle_neighbourhood(&centre, &grid, rs, 1).contains(cell));
+        let any = FrameView::new(&f, [0.0, 0.0], RayAssumption::Any);
+        let so = obstacle_neighbourhood(&any, &grid, rs, 1);
+        assert!(so.count() > 0 && !so.contains(cell));
     }
 }

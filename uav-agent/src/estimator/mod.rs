@@ -33,7 +33,7 @@ use std::time::{Duration, Instant};
 
 use protocol::camera::CameraPose;
 use protocol::frame::CvsFrame;
-use protocol::scenario::{HiddenWindow, Scenario, SetGrowth};
+use protocol::scenario::{HiddenWindow, RayAssumption, Scenario, SetGrowth};
 use serde::{Deserialize, Serialize};
 use sets::grid::GroundGrid;
 use sets::math::Real;
@@ -88,6 +88,9 @@ pub struct EstimatorConfig {
     pub oem_full_every: u64,
     /// How the sets grow between observations (`estimator.sets`).
     pub sets: SetGrowth,
+    /// What `S^o` and the map assume of the ray a depth was measured along
+    /// (`estimator.depth_ray`).
+    pub depth_ray: RayAssumption,
 }
 
 impl EstimatorConfig {
@@ -109,6 +112,7 @@ impl EstimatorConfig {
             obstacle_pixel_stride: 3,
             oem_full_every: 20,
             sets: scenario.estimator.sets,
+            depth_ray: scenario.estimator.depth_ray,
         }
     }
 }
@@ -380,7 +384,7 @@ impl Estimator {
             ..StepReport::default()
         };
         let clock = predict_sets(cfg, st, &mut report);
-        let view = FrameView::new(frame, cfg.depth_noise);
+        let view = FrameView::new(frame, cfg.depth_noise, cfg.depth_ray);
         report.invalid_depth_pixels = view.invalid_depth_pixels();
         let measured = measure_frame(cfg, st, frame, &view, share.is_some(), &mut report);
         let shared = share.map(|uav| Measurement::of_frame(uav, frame, &measured, &cfg.grid));

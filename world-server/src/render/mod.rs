@@ -14,8 +14,13 @@
 //!    entirely farther than that object's farthest corner (nothing can then stand in front of
 //!    it inside the pixel, and its convex silhouette, containing the 4 corners, covers the
 //!    pixel); U otherwise, and for other UAVs.
-//! 4. Classifier doubt turns a random share of pixels U; depth is the centre ray's range times
-//!    `1 + w`, `w` uniform in the noise bounds, NaN (and the pixel U) when the centre ray hits nothing or starts inside a box.
+//! 4. Classifier doubt turns a random share of pixels U; depth is the range of the pixel's
+//!    depth ray times `1 + w`, `w` uniform in the noise bounds, NaN (and the pixel U) when
+//!    that ray hits nothing or starts inside a box. The depth ray is the centre ray, or with
+//!    `camera.depth_ray = "random"` the ray through a seeded random point of the pixel
+//!    ([`noise::RowRayPoints`]): the paper's eq. (5) leaves the ray unknown, and the estimator
+//!    must not rely on it. A G, T or O pixel is seen whole (rule 3), so any of its rays hits
+//!    what its label says.
 //! 5. A target is identified when enough pixels are labelled T with it; its box bounds every
 //!    pixel any of whose rays hit it.
 //!
@@ -32,12 +37,13 @@ mod reference;
 
 use protocol::camera::{Camera, CameraModel};
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, Label, TargetBox};
+use protocol::scenario::DepthRay;
 use rayon::prelude::*;
 use sets::math::{Point3, Real, Vector3};
 
 use boxes::RowTargets;
 use footprint::Footprint;
-use noise::RowNoise;
+use noise::{RowNoise, RowRayPoints};
 pub use objects::{ObjectKind, SceneObject, SeenFrom};
 use rays::{RayGrid, RowOf, RowRays, UnitRays};
 
@@ -67,6 +73,8 @@ pub struct FrameSpec {
     pub unknown_fraction: Real,
     /// T pixels needed to identify a target.
     pub min_pixels: u32,
+    /// The ray of each pixel its depth is measured along.
+    pub depth_ray: DepthRay,
 }
 
 /// An object the camera may see, with its footprint and distances from the camera.
@@ -278,6 +286,7 @@ fn centre_row(
         spec.unknown_fraction,
         spec.depth_noise,
     );
+    let mut ray_points = random_rays(spec, r);
     let entries = &row_entries[r as usize];
     let top = &corners[r as usize * corner_cols..(r as usize + 1) * corner_cols];
     let bottom = &corners[(r as usize + 1) * corner_cols..(r as usize + 2) * corner_cols];
@@ -314,9 +323,20 @@ fn centre_row(
         };
 
         let px = noise.next_pixel();
+        let (depth_code, range) = match ray_points.as_mut() {
+            None => (centre, range),
+            Some(points) => {
+                let dir = pixel_point_ray(grid, points, r, c);
+                if untouched {
+                    ground_only(&origin, dir.z, -origin.z / dir.z)
+                } else {
+                    cast(&origin, (&dir, &reciprocals(&dir)), touching(), visible)
+                }
+            }
+        };
         // A zero range means the camera is inside a box (a UAV flown into a building
         // by an explicit altitude): nothing can be measured there.
-        let measured = centre != HIT_NOTHING && range > 0.0;
+        let measured = depth_code != HIT_NOTHING && range > 0.0;
         let doubted = (px.doubt || !measured) && label != Label::Unknown;
         // Most pixels see only the ground or the sky: no target to note.
         if codes.iter().any(|&code| code < HIT_GROUND) {
@@ -340,6 +360,23 @@ fn centre_row(
         };
     }
     targets
+}
+
+/// The generator of row `r`'s depth-ray points, when depth is measured along random rays.
+fn random_rays(spec: &FrameSpec, r: u32) -> Option<RowRayPoints> {
+    (spec.depth_ray == DepthRay::Random)
+        .then(|| RowRayPoints::new(spec.seed, spec.step, spec.uav, r))
+}
+
+/// The unit ray through the next random point of pixel `(r, c)`.
+fn pixel_point_ray(grid: &RayGrid, points: &mut RowRayPoints, r: u32, c: u32) -> Vector3 {
+    let (du, dv) = points.next_point();
+    grid.ray(c as Real + du, r as Real + dv)
+}
+
+/// `[1 / dir.x, 1 / dir.y, 1 / dir.z]`, as [`RayGrid::unit_rays`] gives them.
+fn reciprocals(dir: &Vector3) -> [Real; 3] {
+    [1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z]
 }
 
 /// The header of a frame of `rows x cols` pixels drawn by `camera`, its boxes `found` (as many
@@ -568,6 +605,7 @@ mod tests {
                         depth_noise: scenario.camera.depth_noise,
                         unknown_fraction: [0.0, 0.05][k as usize % 2],
                         min_pixels: scenario.camera.min_pixels,
+                        depth_ray: [DepthRay::Centre, DepthRay::Random][k as usize / 2 % 2],
                     };
                     render(&camera, &objects, &spec, &mut fast);
                     reference::render(&camera, &objects, &spec, &mut reference);

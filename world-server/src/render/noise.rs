@@ -1,6 +1,8 @@
 //! The vision system's imperfections: classifier doubt and depth noise, drawn per row from a
 //! generator seeded by (scenario seed, step, UAV, row), so that rows render in any order, on
-//! any number of threads, to the same bits.
+//! any number of threads, to the same bits; and, with `camera.depth_ray = "random"`, the
+//! point of each pixel whose ray its depth is measured along ([`RowRayPoints`]), from a
+//! generator of its own, so that the centre-ray frames keep their bits.
 
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -35,12 +37,8 @@ impl RowNoise {
         unknown_fraction: f64,
         noise: [f64; 2],
     ) -> Self {
-        let mut h = splitmix(seed ^ 0x5EED_F1EE_7C0D_E000);
-        for part in [step, uav as u64, row as u64] {
-            h = splitmix(h ^ part);
-        }
         RowNoise {
-            rng: ChaCha8Rng::seed_from_u64(h),
+            rng: row_generator(seed ^ 0x5EED_F1EE_7C0D_E000, step, uav, row),
             unknown_fraction,
             w_lo: noise[0],
             w_span: noise[1] - noise[0],
@@ -57,6 +55,39 @@ impl RowNoise {
         let w = self.w_lo + self.w_span * unit(bits & 0xFFFF_FFFF);
         PixelNoise { doubt, w }
     }
+}
+
+/// The random points of one row's pixels through which their depth rays pass.
+pub struct RowRayPoints {
+    rng: ChaCha8Rng,
+}
+
+impl RowRayPoints {
+    /// The generator of row `row` of UAV `uav`'s frame at `step`.
+    pub fn new(seed: u64, step: u64, uav: u32, row: u32) -> Self {
+        RowRayPoints {
+            rng: row_generator(seed ^ 0xDE97_4A11_0F5E_7000, step, uav, row),
+        }
+    }
+
+    /// The next pixel's point `(du, dv)`, each uniform in `[0, 1)`: the depth ray passes
+    /// through image point `(c + du, r + dv)`, inside pixel `(r, c)`.
+    pub fn next_point(&mut self) -> (f64, f64) {
+        let bits = self.rng.next_u64();
+        (
+            (bits >> 32) as f64 / TWO_POW_32,
+            (bits & 0xFFFF_FFFF) as f64 / TWO_POW_32,
+        )
+    }
+}
+
+/// A generator seeded by `(base, step, uav, row)`.
+fn row_generator(base: u64, step: u64, uav: u32, row: u32) -> ChaCha8Rng {
+    let mut h = splitmix(base);
+    for part in [step, uav as u64, row as u64] {
+        h = splitmix(h ^ part);
+    }
+    ChaCha8Rng::seed_from_u64(h)
 }
 
 fn splitmix(mut z: u64) -> u64 {

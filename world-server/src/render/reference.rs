@@ -14,7 +14,7 @@ use super::boxes::{self, RowTargets};
 use super::noise::RowNoise;
 use super::{
     Entry, FrameSpec, HIT_GROUND, HIT_NOTHING, ObjectKind, SceneObject, Visible, classify,
-    corner_row_entries, frame_size, row_entries, visible_objects, write_header,
+    corner_row_entries, frame_size, random_rays, row_entries, visible_objects, write_header,
 };
 
 /// Renders `camera`'s view of the ground and `objects` into `frame`, in place.
@@ -100,6 +100,7 @@ fn centre_rows(
                 spec.unknown_fraction,
                 spec.depth_noise,
             );
+            let mut ray_points = random_rays(spec, r);
             let entries = &row_entries[r as usize];
             let top = &corners[r as usize * corner_cols..(r as usize + 1) * corner_cols];
             let bottom = &corners[(r as usize + 1) * corner_cols..(r as usize + 2) * corner_cols];
@@ -113,9 +114,17 @@ fn centre_rows(
                 let mut label = classify(&codes, touching(), visible);
 
                 let px = noise.next_pixel();
+                let (depth_code, range) = match ray_points.as_mut() {
+                    None => (centre, range),
+                    Some(points) => {
+                        let (du, dv) = points.next_point();
+                        let dir = camera.ray(c as Real + du, r as Real + dv);
+                        cast(&origin, &dir, touching(), visible)
+                    }
+                };
                 // A zero range means the camera is inside a box (a UAV flown into a building
                 // by an explicit altitude): nothing can be measured there.
-                let measured = centre != HIT_NOTHING && range > 0.0;
+                let measured = depth_code != HIT_NOTHING && range > 0.0;
                 let doubted = (px.doubt || !measured) && label != Label::Unknown;
                 for (k, &code) in codes.iter().enumerate() {
                     if code >= HIT_GROUND || codes[..k].contains(&code) {

@@ -1,10 +1,11 @@
 //! The static city: the road grid and the buildings, generated from the scenario's seed.
 //!
 //! Invariant the traffic relies on: every building footprint is at least
-//! [`RoadProfile::building_clearance`] (`r_s + r_t + margin`) away from every lane centreline,
-//! and a car's centre is always on the road network's lane lines (see [`crate::traffic`]), so
-//! a car's centre is always more than `r_s + r_t` from every building: more than `r_s`, with
-//! its whole target cylinder of radius `r_t` more than `r_s` clear too. The ground is flat at
+//! [`RoadProfile::building_clearance`] (`targets.building_clearance_m`, at least `r_s`; by
+//! default `r_s + r_t + margin`) away from every lane centreline, and a car's centre is always
+//! on the road network's lane lines (see [`crate::traffic`]), so a car's centre always keeps
+//! that clearance from every building: at least `r_s`, as the paper assumes, and by default
+//! more than `r_s + r_t`, with its whole target cylinder clear too. The ground is flat at
 //! `z = 0`.
 
 pub mod buildings;

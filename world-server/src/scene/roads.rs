@@ -86,10 +86,11 @@ impl RoadProfile {
     /// - cars keep `car_separation = max(r_s, car length) + margin` centre to centre, and the
     ///   two lanes of a road are more than that apart, so that cars passing each other in
     ///   opposite directions never come too close;
-    /// - a building keeps `building_clearance = r_s + r_t + margin` from every lane
-    ///   centreline, and a car's centre is always on a lane centreline (see
-    ///   [`crate::traffic`]), so the car's centre stays more than `r_s` (and its target
-    ///   cylinder of radius `r_t` stays clear) from every building.
+    /// - a building keeps `building_clearance = targets.building_clearance_m` (at least
+    ///   `r_s`; by default `r_s + r_t + margin`) from every lane centreline, and a car's centre
+    ///   is always on a lane centreline (see [`crate::traffic`]), so the car's centre stays
+    ///   that far from every building (by default its whole target cylinder of radius `r_t`
+    ///   stays clear too).
     pub fn for_scenario(scenario: &Scenario) -> RoadProfile {
         let t = &scenario.targets;
         let [length, width, _] = t.size_m;
@@ -99,7 +100,7 @@ impl RoadProfile {
         RoadProfile {
             lane_offset,
             half_width,
-            building_clearance: t.safety_distance_m + t.radius_m + SAFETY_MARGIN_M,
+            building_clearance: t.building_clearance_m,
             car_separation,
         }
     }
