@@ -370,17 +370,19 @@ pub struct GuidanceConfig {
 }
 
 /// How the MPC's `Φ_h` measures the predicted sets inside recently hidden ground
-/// (`guidance.hidden_resolution`). The MPC predicts its sets on a coarse planning grid
-/// (`uav_agent::guidance::coarse`); the choices differ in what a coarse cell counts.
+/// (`guidance.hidden_resolution`). The choices differ in what a coarse planning cell
+/// (`uav_agent::guidance::coarse`) counts.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum HiddenResolution {
-    /// A predicted coarse cell counts the area of its estimator cells that lie both in the
-    /// sets and in the hidden ground now: the overlap is measured at the estimator's
-    /// resolution, and a coarse cell can never count an overlap its fine cells do not have.
+    /// Estimator cells that lie both in the sets (those `guidance.hidden_sets` names) and in
+    /// the hidden ground are counted: the overlap is measured at the estimator's resolution,
+    /// and a coarse cell can never count an overlap its fine cells do not have. With the
+    /// sets predicted on planning cells (`guidance.set_resolution = "planning"`), each
+    /// predicted planning cell counts its estimator cells in the overlap.
     #[default]
     Estimator,
-    /// A predicted coarse cell counts whole when any of its estimator cells is hidden (the
+    /// A predicted planning cell counts whole when any of its estimator cells is hidden (the
     /// any-cell coarsening of both sets, which can count a set cell and a hidden cell that
     /// only share a coarse cell).
     Planning,

@@ -1,6 +1,9 @@
-//! The coarse planning grid: the MPC weighs hundreds of predicted sets per decision, so it
-//! plans on cells a whole number of times larger than the estimator's. A coarse cell belongs
-//! to a set when any of its fine cells does (the planning sets stay outer).
+//! The coarse planning grid: a planner weighs hundreds of predicted sets per decision, so the
+//! `setfleet` planner (and the paper's MPC with `guidance.set_resolution = "planning"`) plans
+//! on cells a whole number of times larger than the estimator's. A coarse cell belongs to a
+//! set when any of its fine cells does (the planning sets stay outer). The paper's MPC by
+//! default predicts on the estimator's cells themselves ([`CoarseGrid::identity`]; why counts
+//! per coarse cell cannot replace that is in [`paper`](super::paper)'s docs).
 //!
 //! Where an area must not be invented by the coarsening, a fine set is also counted per coarse
 //! cell ([`CoarseGrid::weights`]): [`CellWeights`] holds how many fine cells of each coarse cell
