@@ -408,23 +408,34 @@ pub struct GuidanceConfig {
     /// The paper's MPC: which predicted poses' fields of view it removes from the predicted
     /// sets: `"period_end"` (the default) or `"every_frame"` ([`PredictedViews`]).
     pub predicted_views: PredictedViews,
-    /// The square every planner keeps its plans in: `"geofence"` (the default) or
-    /// `"region"` ([`PlanBorder`]).
+    /// The square every planner keeps its plans in: `"region"` (the default) or
+    /// `"geofence"` ([`PlanBorder`]).
     pub border: PlanBorder,
+    /// The paper's MPC: the grid it predicts its sets on, and so measures `Φ_X` and `Φ_d` on:
+    /// `"estimator"` (the default) or `"planning"` ([`SetResolution`]).
+    pub set_resolution: SetResolution,
+    /// The paper's MPC: the point `Φ_d` is measured from: `"uav"` (the default) or
+    /// `"view_centre"` ([`DistanceFrom`]).
+    pub distance_from: DistanceFrom,
+    /// The paper's MPC: which sets `Φ_h` counts inside recently hidden ground: `"predicted"`
+    /// (the default) or `"current"` ([`HiddenSets`]).
+    pub hidden_sets: HiddenSets,
 }
 
 /// How the MPC's `Φ_h` measures the predicted sets inside recently hidden ground
-/// (`guidance.hidden_resolution`). The MPC predicts its sets on a coarse planning grid
-/// (`uav_agent::guidance::coarse`); the choices differ in what a coarse cell counts.
+/// (`guidance.hidden_resolution`). The choices differ in what a coarse planning cell
+/// (`uav_agent::guidance::coarse`) counts.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum HiddenResolution {
-    /// A predicted coarse cell counts the area of its estimator cells that lie both in the
-    /// sets and in the hidden ground now: the overlap is measured at the estimator's
-    /// resolution, and a coarse cell can never count an overlap its fine cells do not have.
+    /// Estimator cells that lie both in the sets (those `guidance.hidden_sets` names) and in
+    /// the hidden ground are counted: the overlap is measured at the estimator's resolution,
+    /// and a coarse cell can never count an overlap its fine cells do not have. With the
+    /// sets predicted on planning cells (`guidance.set_resolution = "planning"`), each
+    /// predicted planning cell counts its estimator cells in the overlap.
     #[default]
     Estimator,
-    /// A predicted coarse cell counts whole when any of its estimator cells is hidden (the
+    /// A predicted planning cell counts whole when any of its estimator cells is hidden (the
     /// any-cell coarsening of both sets, which can count a set cell and a hidden cell that
     /// only share a coarse cell).
     Planning,
@@ -475,18 +486,77 @@ impl PredictedViews {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PlanBorder {
-    /// The world's geofence ([`Scenario::geofence_half_extent`]), inside which the world
-    /// never overrides a command: a plan the MPC keeps is a plan the UAV flies.
+    /// The RoI, as the paper writes (sequences that would leave the RoI are excluded): plans
+    /// between the world's geofence and the RoI's edge are overridden by the world's turn back
+    /// to the centre.
     #[default]
-    Geofence,
-    /// The RoI: plans between the geofence and the RoI's edge are overridden by the world's
-    /// turn back to the centre.
     Region,
+    /// The world's geofence ([`Scenario::geofence_half_extent`]), inside which the world
+    /// never overrides a command: a plan the MPC keeps is a plan the UAV flies, but the outer
+    /// band of the RoI (26 m by default) is never planned over.
+    Geofence,
 }
 
 impl PlanBorder {
     /// Every choice's name, as written in a scenario.
-    pub const NAMES: [&'static str; 2] = ["geofence", "region"];
+    pub const NAMES: [&'static str; 2] = ["region", "geofence"];
+}
+
+/// The grid the paper's MPC predicts its sets on (`guidance.set_resolution`), and so the
+/// resolution of `Φ_X`, `Φ_d` and `Φ_h`'s sets (`uav_agent::guidance::paper`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SetResolution {
+    /// The estimator's grid (0.5 m cells by default): the sets as the estimator holds them,
+    /// dilated and cleared by the predicted views cell by cell; `Φ_X` counts their cells and
+    /// `Φ_d` reaches the nearest of them.
+    #[default]
+    Estimator,
+    /// The coarse planning grid (2.5 m cells by default): a planning cell is in the sets when
+    /// any of its estimator cells is, and counts whole.
+    Planning,
+}
+
+impl SetResolution {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["estimator", "planning"];
+}
+
+/// The point the paper's MPC measures `Φ_d` from (`guidance.distance_from`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DistanceFrom {
+    /// `p_g(x^u_{k+h})`, the UAV's predicted ground position at the end of the horizon (the
+    /// paper's definition of `Φ_d`).
+    #[default]
+    Uav,
+    /// The ground point the camera's optical axis meets from the predicted final pose.
+    ViewCentre,
+}
+
+impl DistanceFrom {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["uav", "view_centre"];
+}
+
+/// Which sets the paper's MPC counts inside recently hidden ground for `Φ_h`
+/// (`guidance.hidden_sets`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HiddenSets {
+    /// The predicted sets at the end of the horizon, `X̄^P_{k+h} ∪ X^P_{j,k+h}` (the paper's
+    /// definition of `Φ_h`, with eq. 28's hidden ground).
+    #[default]
+    Predicted,
+    /// Today's sets, counted where the predicted sets still hold them. With
+    /// `hidden_resolution = "planning"` this is the same as `Predicted`: the any-cell
+    /// coarsening of the hidden ground is counted on the predicted cells.
+    Current,
+}
+
+impl HiddenSets {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["predicted", "current"];
 }
 
 /// How the `setfleet` planner shares the search among the fleet (`guidance.sweep`).
@@ -727,7 +797,10 @@ impl Default for GuidanceConfig {
             hidden_resolution: HiddenResolution::Estimator,
             hidden_window: HiddenWindow::Frames,
             predicted_views: PredictedViews::PeriodEnd,
-            border: PlanBorder::Geofence,
+            border: PlanBorder::Region,
+            set_resolution: SetResolution::Estimator,
+            distance_from: DistanceFrom::Uav,
+            hidden_sets: HiddenSets::Predicted,
         }
     }
 }
@@ -775,7 +848,7 @@ impl Scenario {
     /// radii, a step's travel and a metre, but never below half the RoI. The world turns a UAV
     /// back toward the centre when its command would take it out of the fence within a step,
     /// and a UAV turning back at its largest rate from the fence never leaves the RoI; the
-    /// MPC keeps its plans inside the same square (`guidance.border = "geofence"`).
+    /// MPC keeps its plans inside the same square when `guidance.border = "geofence"`.
     pub fn geofence_half_extent(&self) -> f64 {
         let h = self.region.half_extent_m;
         let v = self.uavs.speed_mps;

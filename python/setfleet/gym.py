@@ -16,7 +16,8 @@ several learning UAVs (agents ``uav_{i}``). Each ``reset`` starts a new ``fleet 
   cannot tell overlapping sets apart).
 - ``"pose"``: ``Box(-inf, inf, (4,), float32)``: ``x / b``, ``y / b``, ``cos yaw``,
   ``sin yaw``, with ``b = border_half_m``, the half side of the square the plans stay in
-  (smaller than the region: ``|x / b| <= 1`` for a UAV inside the border).
+  (the region's by default, the world's geofence a little inside it with
+  ``guidance.border = "geofence"``: ``|x / b| <= 1`` for a UAV inside the border).
 
 **Action**: ``Discrete(len(increments))``, the index of the yaw increment applied now
 (default: the scenario's increments ``-π/3, -π/6, 0, π/6, π/3``).

@@ -144,9 +144,10 @@ mod tests {
         }
     }
 
-    /// A command that keeps a UAV inside the geofence (the square the MPC plans in by
-    /// default) is flown as given; one that would cross it is overridden, and the override is
-    /// what the truth reports ([`protocol::wire::UavTruth::geofence_override`]).
+    /// A command that keeps a UAV inside the geofence (the square the MPC plans in with
+    /// `guidance.border = "geofence"`) is flown as given; one that would cross it is
+    /// overridden, and the override is what the truth reports
+    /// ([`protocol::wire::UavTruth::geofence_override`]).
     #[test]
     fn only_commands_crossing_the_geofence_are_overridden() {
         let s = Scenario::default();

@@ -76,6 +76,9 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
         "guidance.hidden_window" => Some(&super::HiddenWindow::NAMES),
         "guidance.predicted_views" => Some(&super::PredictedViews::NAMES),
         "guidance.border" => Some(&super::PlanBorder::NAMES),
+        "guidance.set_resolution" => Some(&super::SetResolution::NAMES),
+        "guidance.distance_from" => Some(&super::DistanceFrom::NAMES),
+        "guidance.hidden_sets" => Some(&super::HiddenSets::NAMES),
         "guidance.sweep" => Some(&super::SweepPlan::NAMES),
         "comms.exchange" => Some(&super::Exchange::NAMES),
         "guidance.external_request" => Some(&super::ExternalRequest::NAMES),
@@ -952,32 +955,48 @@ mod tests {
     /// literal reading, write back as names, and refuse anything else naming the choices.
     #[test]
     fn the_readings_of_the_paper_are_one_of_their_names() {
-        use super::super::{HiddenResolution, HiddenWindow, PlanBorder, PredictedViews};
+        use super::super::{
+            DistanceFrom, HiddenResolution, HiddenSets, HiddenWindow, PlanBorder, PredictedViews,
+            SetResolution,
+        };
         let g = Scenario::default().guidance;
         assert_eq!(g.hidden_resolution, HiddenResolution::Estimator);
         assert_eq!(g.hidden_window, HiddenWindow::Frames);
         assert_eq!(g.predicted_views, PredictedViews::PeriodEnd);
-        assert_eq!(g.border, PlanBorder::Geofence);
+        assert_eq!(g.border, PlanBorder::Region);
+        assert_eq!(g.set_resolution, SetResolution::Estimator);
+        assert_eq!(g.distance_from, DistanceFrom::Uav);
+        assert_eq!(g.hidden_sets, HiddenSets::Predicted);
         let other = [
             "guidance.hidden_resolution=planning",
             "guidance.hidden_window=periods",
             "guidance.predicted_views=every_frame",
-            "guidance.border=region",
+            "guidance.border=geofence",
+            "guidance.set_resolution=planning",
+            "guidance.distance_from=view_centre",
+            "guidance.hidden_sets=current",
         ]
         .map(str::to_owned);
         let s = Scenario::load(None, &other).unwrap();
         assert_eq!(s.guidance.hidden_resolution, HiddenResolution::Planning);
         assert_eq!(s.guidance.hidden_window, HiddenWindow::Periods);
         assert_eq!(s.guidance.predicted_views, PredictedViews::EveryFrame);
-        assert_eq!(s.guidance.border, PlanBorder::Region);
+        assert_eq!(s.guidance.border, PlanBorder::Geofence);
+        assert_eq!(s.guidance.set_resolution, SetResolution::Planning);
+        assert_eq!(s.guidance.distance_from, DistanceFrom::ViewCentre);
+        assert_eq!(s.guidance.hidden_sets, HiddenSets::Current);
         let text = s.to_toml_string();
         assert!(text.contains("predicted_views = \"every_frame\""), "{text}");
+        assert!(text.contains("distance_from = \"view_centre\""), "{text}");
         assert_eq!(Scenario::from_toml_str(&text).unwrap(), s);
         for (bad, names) in [
             ("guidance.hidden_resolution=fine", "estimator, planning"),
             ("guidance.hidden_window=steps", "frames, periods"),
             ("guidance.predicted_views=all", "period_end, every_frame"),
-            ("guidance.border=1", "geofence, region"),
+            ("guidance.border=1", "region, geofence"),
+            ("guidance.set_resolution=fine", "estimator, planning"),
+            ("guidance.distance_from=camera", "uav, view_centre"),
+            ("guidance.hidden_sets=both", "predicted, current"),
         ] {
             let e = Scenario::load(None, &[bad.to_owned()])
                 .unwrap_err()

@@ -1,6 +1,9 @@
-//! The coarse planning grid: the MPC weighs hundreds of predicted sets per decision, so it
-//! plans on cells a whole number of times larger than the estimator's. A coarse cell belongs
-//! to a set when any of its fine cells does (the planning sets stay outer).
+//! The coarse planning grid: a planner weighs hundreds of predicted sets per decision, so the
+//! `setfleet` planner (and the paper's MPC with `guidance.set_resolution = "planning"`) plans
+//! on cells a whole number of times larger than the estimator's. A coarse cell belongs to a
+//! set when any of its fine cells does (the planning sets stay outer). The paper's MPC by
+//! default predicts on the estimator's cells themselves ([`CoarseGrid::identity`]; why counts
+//! per coarse cell cannot replace that is in [`paper`](super::paper)'s docs).
 //!
 //! Where an area must not be invented by the coarsening, a fine set is also counted per coarse
 //! cell ([`CoarseGrid::weights`]): [`CellWeights`] holds how many fine cells of each coarse cell
@@ -40,9 +43,24 @@ impl CoarseGrid {
         }
     }
 
+    /// The grid pair whose coarse grid is `fine` itself (`factor` 1): the paper's MPC at the
+    /// estimator's resolution (`guidance.set_resolution = "estimator"`), for which
+    /// [`CoarseGrid::downsample`] is the identity and [`CoarseGrid::weights`] counts each cell
+    /// once.
+    pub fn identity(fine: GroundGrid) -> Self {
+        Self {
+            fine,
+            coarse: fine,
+            factor: 1,
+        }
+    }
+
     /// The coarse set of every coarse cell holding a cell of `fine_set`
-    /// ([`CellSet::coarsen_any`] over the whole fine grid).
+    /// ([`CellSet::coarsen_any`] over the whole fine grid; a copy when `factor` is 1).
     pub fn downsample(&self, fine_set: &CellSet) -> CellSet {
+        if self.factor == 1 {
+            return fine_set.clone();
+        }
         let whole = CellBox {
             x0: 0,
             y0: 0,
@@ -54,6 +72,17 @@ impl CoarseGrid {
 
     /// How many cells of `fine_set` each coarse cell holds, as [`CellWeights`].
     pub fn weights(&self, fine_set: &CellSet) -> CellWeights {
+        if self.factor == 1 {
+            // Every count is 0 or 1: the one plane is the set.
+            return CellWeights {
+                planes: if fine_set.is_empty() {
+                    Vec::new()
+                } else {
+                    vec![fine_set.clone()]
+                },
+                unit_m2: self.fine.cell_area(),
+            };
+        }
         let f = self.factor as usize;
         let nx = self.coarse.nx as usize;
         let mut counts = vec![0u32; nx * self.coarse.ny as usize];
@@ -195,6 +224,27 @@ mod tests {
         // Counted whole, a coarse set is its cells' area.
         let whole = CellWeights::whole(cg.downsample(&s), cg.coarse.cell_area());
         assert_eq!(whole.area_in(&coarse), 3.0 * 6.25);
+    }
+
+    /// At factor 1 the coarse grid is the fine one: downsampling copies, and the weights
+    /// count every cell once, as the general count would.
+    #[test]
+    fn the_identity_pair_keeps_every_cell() {
+        let fine = GroundGrid::new(25.0, 0.5);
+        let id = CoarseGrid::identity(fine);
+        assert_eq!(id.coarse, fine);
+        let mut s = CellSet::empty(&fine);
+        for &c in &[(0, 0), (4, 4), (5, 0), (63, 10), (64, 10), (99, 99)] {
+            s.set(c, true);
+        }
+        assert_eq!(id.downsample(&s), s);
+        let mut probe = CellSet::empty(&fine);
+        probe.set((4, 4), true);
+        probe.set((64, 10), true);
+        probe.set((50, 50), true);
+        assert_eq!(id.weights(&s).area_in(&probe), 2.0 * 0.25);
+        assert_eq!(id.weights(&s).area_in(&CellSet::full(&fine)), 6.0 * 0.25);
+        assert_eq!(id.weights(&CellSet::empty(&fine)).area_in(&probe), 0.0);
     }
 
     #[test]

@@ -27,9 +27,12 @@ pub mod viewpoint;
 
 use protocol::camera::{CameraModel, CameraPose};
 use protocol::flight::{self, UavState};
-use protocol::scenario::{HiddenResolution, PlanBorder, Planner, PredictedViews, Scenario};
+use protocol::scenario::{
+    DistanceFrom, HiddenResolution, HiddenSets, PlanBorder, Planner, PredictedViews, Scenario,
+    SetResolution,
+};
 use protocol::wire::PlannedView;
-use sets::grid::{GroundGrid, Rect};
+use sets::grid::Rect;
 use sets::math::{Point2, Point3};
 use sets::raster::CellSet;
 
@@ -62,6 +65,13 @@ pub struct GuidanceParams {
     pub hidden_resolution: HiddenResolution,
     /// Which predicted poses' views clear the predicted sets (`guidance.predicted_views`).
     pub predicted_views: PredictedViews,
+    /// The grid the paper's MPC predicts its sets on (`guidance.set_resolution`).
+    pub set_resolution: SetResolution,
+    /// The point the paper's MPC measures `Φ_d` from (`guidance.distance_from`).
+    pub distance_from: DistanceFrom,
+    /// Which sets the paper's MPC counts inside recently hidden ground
+    /// (`guidance.hidden_sets`).
+    pub hidden_sets: HiddenSets,
     /// CVS steps per guidance period.
     pub steps_per_period: u32,
     /// CVS period, seconds.
@@ -107,6 +117,9 @@ impl GuidanceParams {
             use_map: s.guidance.use_map,
             hidden_resolution: s.guidance.hidden_resolution,
             predicted_views: s.guidance.predicted_views,
+            set_resolution: s.guidance.set_resolution,
+            distance_from: s.guidance.distance_from,
+            hidden_sets: s.guidance.hidden_sets,
             steps_per_period: s.steps_per_guidance() as u32,
             dt: s.timing.cvs_period_s,
             speed: s.uavs.speed_mps,
@@ -138,11 +151,6 @@ impl GuidanceParams {
             scale.adapt(&reference, &mut params.lambda, &mut params.setfleet);
         }
         params
-    }
-
-    /// The grid the planners predict the sets on.
-    fn planning_grid(&self) -> &GroundGrid {
-        &self.grids.coarse
     }
 }
 
@@ -261,6 +269,7 @@ mod tests {
     use super::paper::plan as paper_plan;
     use super::*;
     use protocol::flight;
+    use sets::grid::GroundGrid;
     use sets::raster::Coverage;
 
     /// The default scenario over a 300 m square.
@@ -395,9 +404,22 @@ mod tests {
             s.guidance.hidden_window = protocol::scenario::HiddenWindow::Periods;
             s.guidance.predicted_views = PredictedViews::EveryFrame;
             s.guidance.border = PlanBorder::Region;
+            s.guidance.set_resolution = SetResolution::Planning;
+            s.guidance.distance_from = DistanceFrom::ViewCentre;
+            s.guidance.hidden_sets = HiddenSets::Current;
+            s
+        };
+        // The defaults before issue 42's departures became keys: the same decisions as
+        // before (the previous defaults' fingerprints), so that those keys are the only change.
+        let before_42 = |mut s: Scenario| {
+            s.guidance.border = PlanBorder::Geofence;
+            s.guidance.set_resolution = SetResolution::Planning;
+            s.guidance.distance_from = DistanceFrom::ViewCentre;
+            s.guidance.hidden_sets = HiddenSets::Current;
             s
         };
         let paper = GuidanceParams::from_scenario(&earlier(scenario()));
+        let previous = GuidanceParams::from_scenario(&before_42(scenario()));
         let literal = GuidanceParams::from_scenario(&scenario());
         let mut s = earlier(scenario());
         // The `setfleet` variant's settings.
@@ -408,6 +430,7 @@ mod tests {
         let setfleet = GuidanceParams::from_scenario(&s);
         let mut rng = Xorshift(0x9e37_79b9_7f4a_7c15);
         let mut fingerprints = Vec::new();
+        let mut previous_fingerprints = Vec::new();
         let mut literal_fingerprints = Vec::new();
         for case in 0..6 {
             let fine = &paper.grids.fine;
@@ -453,6 +476,7 @@ mod tests {
             };
             fingerprints.push(fingerprint(&paper_plan(&paper, &input)));
             fingerprints.push(fingerprint(&setfleet::plan(&setfleet, &input)));
+            previous_fingerprints.push(fingerprint(&paper_plan(&previous, &input)));
             literal_fingerprints.push(fingerprint(&paper_plan(&literal, &input)));
         }
         // Paper, setfleet, for each case.
@@ -471,7 +495,8 @@ mod tests {
             0xe7ee_a741_f6fc_dff3,
         ];
         assert_eq!(fingerprints, recorded, "{fingerprints:#x?}");
-        // The paper's literal reading (the defaults), for each case.
+        // The defaults before issue 42 (plans in the geofence, sets on the planning grid, `Φ_d`
+        // from the view centre, `Φ_h` of today's sets), for each case.
         let recorded: [u64; 6] = [
             0x5f5d_52dd_dcf0_b195,
             0xf447_e6a4_cf18_dd69,
@@ -479,6 +504,19 @@ mod tests {
             0x663a_7931_13e1_13a3,
             0x6ac9_81cc_2c01_b72b,
             0x4056_88f6_40fe_5ea8,
+        ];
+        assert_eq!(
+            previous_fingerprints, recorded,
+            "{previous_fingerprints:#x?}"
+        );
+        // The paper's literal reading (the defaults), for each case.
+        let recorded: [u64; 6] = [
+            0x2698_ee0e_f751_56d0,
+            0xd323_11b1_e3a9_0c58,
+            0x8bf7_7d95_9af1_1a2e,
+            0xb9d2_5da7_ef7e_30a6,
+            0xd4ff_80bf_6583_952a,
+            0x9f90_eae6_68a3_3598,
         ];
         assert_eq!(literal_fingerprints, recorded, "{literal_fingerprints:#x?}");
     }

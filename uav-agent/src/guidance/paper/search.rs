@@ -7,7 +7,13 @@
 //!    bound's sets lie inside the true ones at every period (the dilation and the set
 //!    differences keep inclusions), and `J` cannot be smaller than the bound's (with
 //!    `λ, κ >= 0`, as the sets' areas only grow and `Φ_d >= 0`; rounded sums and products are
-//!    monotone). Prefixes are shared: the state after a prefix is computed once.
+//!    monotone). This holds under every reading of the module docs' table: the sets are
+//!    predicted on one grid (`guidance.set_resolution`), and on either `Φ_X` is a cell count,
+//!    `Φ_h` a sum of non-negative counts over the predicted cells (or over the planning cells
+//!    holding one), both monotone in the predicted sets whichever sets and resolution
+//!    `hidden_sets` and `hidden_resolution` choose, and `Φ_d` is a distance from whichever
+//!    point `distance_from` names. Prefixes are shared: the state after a prefix is computed
+//!    once.
 //! 2. **Exact costs, best bound first.** Sequences are visited by (stray, bound, order of the
 //!    increments); the true sets of a prefix (views less the shadows of known buildings,
 //!    rasterised only on the ground of the sets) are computed once, when the first sequence
@@ -25,13 +31,14 @@ use std::collections::BTreeMap;
 use protocol::camera::CameraPose;
 use protocol::flight::UavState;
 use protocol::wire::PlannedView;
+use sets::grid::GroundGrid;
 use sets::raster::CellSet;
 
-use super::{nearest_visible_distance, seen_by_others};
+use super::{HiddenMeasure, seen_by_others};
 use crate::guidance::view::{self, same_pose};
 use crate::guidance::{
-    CellWeights, Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput,
-    decision, fly_step, stray,
+    Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
+    fly_step, stray,
 };
 
 /// A sequence, simulated, with the lower bound of its cost.
@@ -58,30 +65,30 @@ struct Exact {
 /// The search's fixed inputs and buffers.
 struct Search<'a> {
     params: &'a GuidanceParams,
+    /// The grid the sets are predicted on (`guidance.set_resolution`).
+    grid: GroundGrid,
     obstacles: &'a [ObstacleCell],
     /// Ground the UAVs ahead in the token will see, per period.
     others_seen: Vec<CellSet>,
     /// Recently hidden ground as `Φ_h` counts it.
-    hidden: CellWeights,
+    hidden: HiddenMeasure,
     predictor: GroundPredictor,
 }
 
 /// Picks the best sequence of yaw increments: see the module docs.
 pub(super) fn plan(params: &GuidanceParams, input: &PlanningInput<'_>) -> Decision {
-    let grid = *params.planning_grid();
-    let mut sets = CellSet::empty(&grid);
-    for s in input.sets {
-        sets.or_assign(&params.grids.downsample(s));
-    }
+    let grid = params.paper_grids().coarse;
+    let sets = params.start_sets(input.sets);
     let obstacles = &view::tallest_first(if params.use_map { input.obstacles } else { &[] });
     // Every pose is predicted for the bounds, then again for the exact costs.
     let mut predictor = GroundPredictor::remembering_footprints(&grid);
     let others_seen = others_seen(params, input.others, &sets, obstacles, &mut predictor);
     let mut search = Search {
         params,
+        grid,
         obstacles,
         others_seen,
-        hidden: params.hidden_weights(input.sets, input.recently_hidden),
+        hidden: params.hidden_measure(input.sets, input.recently_hidden),
         predictor,
     };
     let bounded = [params.lambda, params.kappa]
@@ -110,7 +117,7 @@ fn others_seen(
     obstacles: &[ObstacleCell],
     predictor: &mut GroundPredictor,
 ) -> Vec<CellSet> {
-    let grid = *params.planning_grid();
+    let grid = params.paper_grids().coarse;
     let mut reachable = sets.clone();
     (0..params.horizon)
         .map(|period| {
@@ -137,9 +144,14 @@ fn growth_m(params: &GuidanceParams) -> f64 {
     params.target_max_speed * params.steps_per_period as f64 * params.dt
 }
 
-/// The cost of predicted sets with `Φ_d = distance_m`.
-fn terms(params: &GuidanceParams, sets: &CellSet, hidden: &CellWeights, distance_m: f64) -> Cost {
-    let grid = params.planning_grid();
+/// The cost of predicted sets `sets` (on `grid`) with `Φ_d = distance_m`.
+fn terms(
+    params: &GuidanceParams,
+    grid: &GroundGrid,
+    sets: &CellSet,
+    hidden: &HiddenMeasure,
+    distance_m: f64,
+) -> Cost {
     let area_m2 = sets.count() as f64 * grid.cell_area();
     let hidden_m2 = hidden.area_in(sets);
     Cost {
@@ -216,21 +228,15 @@ impl Search<'_> {
             let Some(sets) = self.exact_sets(&mut exact, &leaf.path) else {
                 continue;
             };
-            let optimistic = terms(params, sets, &self.hidden, 0.0);
+            let optimistic = terms(params, &self.grid, sets, &self.hidden, 0.0);
             if bounded && !beats((leaf.stray_m, optimistic.total, &leaf.path), best_key) {
                 continue;
             }
             let distance_m = match leaf.poses.last() {
-                Some(pose) => nearest_visible_distance(
-                    params.planning_grid(),
-                    sets,
-                    &params.camera,
-                    pose,
-                    self.obstacles,
-                ),
+                Some(pose) => params.distance_term(sets, pose, self.obstacles),
                 None => 0.0,
             };
-            let cost = terms(params, sets, &self.hidden, distance_m);
+            let cost = terms(params, &self.grid, sets, &self.hidden, distance_m);
             let key = (leaf.stray_m, cost.total, &leaf.path[..]);
             if beats(key, best.as_ref().map(|(key, ..)| key)) {
                 best = Some((key, cost, leaf));
@@ -272,14 +278,14 @@ impl Search<'_> {
         leaves: &mut Vec<Leaf>,
     ) {
         let params = self.params;
-        let grid = *params.planning_grid();
+        let grid = self.grid;
         let period = path.len();
         if period == params.horizon as usize {
             leaves.push(Leaf {
                 path: path.clone(),
                 poses: poses.clone(),
                 stray_m,
-                bound: terms(params, sets, &self.hidden, 0.0).total,
+                bound: terms(params, &grid, sets, &self.hidden, 0.0).total,
             });
             return;
         }
@@ -312,7 +318,7 @@ impl Search<'_> {
     /// The sets `sets` at the start of `period` grown over it, less what the UAVs ahead will
     /// see in it.
     fn grow(&self, sets: &CellSet, period: usize) -> CellSet {
-        let mut grown = sets.dilate(self.params.planning_grid(), growth_m(self.params));
+        let mut grown = sets.dilate(&self.grid, growth_m(self.params));
         if let Some(seen) = self.others_seen.get(period) {
             grown.and_not_assign(seen);
         }
@@ -327,7 +333,7 @@ impl Search<'_> {
         leaf: &Leaf,
     ) -> Option<f64> {
         let params = self.params;
-        let grid = *params.planning_grid();
+        let grid = self.grid;
         let k = leaf.path.len().checked_sub(1)?;
         let parent = exact.get_mut(&leaf.path[..k])?;
         let grown = parent
@@ -346,7 +352,7 @@ impl Search<'_> {
         }
         let mut sets = grown.clone();
         sets.and_not_assign(&footprints);
-        Some(terms(params, &sets, &self.hidden, 0.0).total)
+        Some(terms(params, &grid, &sets, &self.hidden, 0.0).total)
     }
 
     /// The true predicted sets at the end of the prefix `path`, computed (with those of its
@@ -358,7 +364,7 @@ impl Search<'_> {
         path: &[usize],
     ) -> Option<&'m CellSet> {
         let params = self.params;
-        let grid = *params.planning_grid();
+        let grid = self.grid;
         // The longest prefix already known; the root always is.
         let known = (0..=path.len())
             .rev()
