@@ -94,13 +94,13 @@ pub(super) const ROWS: [Row; 17] = [
     },
     Row {
         key: "target_set_area_mean",
-        label: "target-set area, mean (%)",
+        label: "target-set area, mean over the whole run (%)",
         scale: 100.0,
         source: Source::Summary(|s| s.target_set_area_mean),
     },
     Row {
         key: "loc_error_mean_m",
-        label: "localisation error, mean (m)",
+        label: "localisation error, mean over the whole run (m)",
         scale: 1.0,
         source: Source::Summary(|s| s.loc_error_mean_m),
     },

@@ -17,8 +17,9 @@
 //! ([`merge`]), so a suite swept in parts (seeds, variants or scenarios at a time) makes one
 //! `suite.md`.
 //!
-//! The suite the project keeps is `scenarios/suite/` (`scenarios/README.md` says what each
-//! scenario stresses): `fleet sweep --scenario scenarios/suite --variants paper,setfleet
+//! The project keeps a held-out suite, `scenarios/suite/`, and scenarios for tuning,
+//! `scenarios/tuning/` (`scenarios/README.md` says what each scenario stresses and which
+//! choices were made on which): `fleet sweep --scenario scenarios/suite --variants paper,setfleet
 //! --seeds 10 --jobs 2`.
 
 use std::fmt::Write as _;
@@ -360,18 +361,27 @@ mod tests {
         std::fs::remove_dir_all(&root).unwrap();
     }
 
-    /// The project's suite reads and every scenario of it loads with every variant.
+    /// The project's suites (held out and for tuning) read, share no scenario, and every
+    /// scenario of them loads with every variant.
     #[test]
-    fn the_projects_suite_loads_with_every_variant() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/suite");
-        let suite = Suite::read(&dir).unwrap();
-        assert!(suite.scenarios.len() >= 6, "{suite:?}");
-        for (name, file) in &suite.scenarios {
+    fn the_projects_suites_load_with_every_variant() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let held_out = Suite::read(&root.join("suite")).unwrap();
+        let tuning = Suite::read(&root.join("tuning")).unwrap();
+        assert!(held_out.scenarios.len() >= 5, "{held_out:?}");
+        assert!(tuning.scenarios.len() >= 2, "{tuning:?}");
+        for (name, file) in held_out.scenarios.iter().chain(&tuning.scenarios) {
             for variant in Variant::ALL {
                 let overrides = variant.with_user_overrides(&[]);
                 protocol::scenario::Scenario::load(Some(file), &overrides)
                     .unwrap_or_else(|e| panic!("{name} with {}: {e}", variant.name()));
             }
+        }
+        for (name, _) in &tuning.scenarios {
+            assert!(
+                held_out.scenarios.iter().all(|(other, _)| other != name),
+                "{name} is in both suites"
+            );
         }
     }
 }

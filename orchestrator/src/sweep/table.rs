@@ -112,9 +112,11 @@ impl Table {
         let mut md = String::new();
         let _ = writeln!(
             md,
-            "Final metrics, and four means over {} of simulated time, mean ± standard \
-             deviation over {} seeds ({}); the set metrics are each agent's own, averaged over \
-             agents unless marked worst agent.\n",
+            "Final metrics (UA, OA and explored at the end of the run; the target-set area \
+             and the localisation error as means over the whole run), and four means over {} \
+             of simulated time (the paper's steady state), mean ± standard deviation over {} \
+             seeds ({}); the set metrics are each agent's own, averaged over agents unless \
+             marked worst agent.\n",
             window_text(),
             self.seeds.len(),
             seed_range(&self.seeds)
