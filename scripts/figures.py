@@ -132,7 +132,11 @@ def run_entry(entry: dict, args: argparse.Namespace, commit: str, manifest: dict
     """Runs one entry's commands, copies its files and records them in the manifest."""
     name = entry["name"]
     stamp = utc_now().strftime("%Y%m%dT%H%M%SZ")
-    out = os.path.relpath(Path(args.scratch).resolve() / f"{name}-{stamp}", ROOT)
+    base = os.path.relpath(Path(args.scratch).resolve() / f"{name}-{stamp}", ROOT)
+    out, n = base, 1
+    while (ROOT / out).exists():  # the same entry again within the second
+        n += 1
+        out = f"{base}-{n}"
     filled = commands(entry, args.fleet, out, args.jobs)
     print(f"==> {name}: {entry['about']}", flush=True)
     for command in filled:
