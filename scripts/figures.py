@@ -132,7 +132,7 @@ def run_entry(entry: dict, args: argparse.Namespace, commit: str, manifest: dict
     """Runs one entry's commands, copies its files and records them in the manifest."""
     name = entry["name"]
     stamp = utc_now().strftime("%Y%m%dT%H%M%SZ")
-    base = os.path.relpath(Path(args.scratch).resolve() / f"{name}-{stamp}", ROOT)
+    base = os.path.relpath((ROOT / args.scratch).resolve() / f"{name}-{stamp}", ROOT)
     out, n = base, 1
     while (ROOT / out).exists():  # the same entry again within the second
         n += 1
@@ -186,7 +186,8 @@ def list_entries(entries: list[dict], manifest: dict) -> None:
 def parse_args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         description="Remake the tables, JSON files and pictures of README.md and docs/ "
-        "from docs/figures.toml, and record them in docs/manifest.json.",
+        "from docs/figures.toml, and record them in docs/manifest.json. Relative paths are "
+        "from the repository's root.",
     )
     parser.add_argument("--list", action="store_true", help="list the entries and their files")
     parser.add_argument("--only", metavar="NAME[,NAME]", help="run these entries only (default: all)")
