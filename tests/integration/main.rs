@@ -5,6 +5,7 @@ mod agents;
 mod bench;
 mod chaos;
 mod cli;
+mod docs_manifest;
 mod frames;
 mod hosts;
 mod planner;
