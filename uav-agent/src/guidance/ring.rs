@@ -343,6 +343,7 @@ impl TokenRing {
             holder: state.holder(me, live).unwrap_or(ROUND_COMPLETE),
             issued_by,
             plans: state.plans(),
+            pose: None,
         }
     }
 }
