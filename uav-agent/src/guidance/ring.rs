@@ -45,6 +45,11 @@
 //!   the same seed, as long as a token reaches every agent before any token sent because of
 //!   it (on one host a token is in every queue once sent; across hosts the bridges' in-order
 //!   links through one router keep that order).
+//! - **Once per round.** An agent decides at most once per round, and not in a round older
+//!   than one it decided in. An agent that comes back or joins late (the round complete
+//!   without it) is still the holder once the others have decided, and decides once, around
+//!   all the plans. An agent asked about a round older than the newest it has seen tokens of
+//!   decides at once around no plans (that round's plans were dropped with it).
 //! - **Passing.** [`TokenRing::pass`] adds this agent's plan to the merge and returns the
 //!   token to publish: every merged plan, the merged order, and as holder the next holder by
 //!   the rule above ([`ROUND_COMPLETE`] when nobody is left), for information only.
@@ -78,6 +83,7 @@
 //!   relay would carry it.
 //! - **Fleet.** The round's fleet ([`TokenRing::fleet`]) is the UAVs the agent knows live and
 //!   itself; the token's order is that fleet and its holder the next of them after the agent.
+//! - **Once per round**, older and newer rounds, as under the world's reading.
 //!
 //! When every agent hears every other (unlimited range, no loss, nobody dead, stalled or
 //! late) the two readings make the same decisions around the same plans, and send the same
@@ -453,26 +459,21 @@ impl TokenRing {
         };
         let issued_by = state.issuers.get(&me).copied().unwrap_or(me);
         let step = state.step.unwrap_or(step);
-        let mut plans = match liveness {
-            Liveness::World => Vec::new(),
-            Liveness::Radio => state.predecessors_plans(me, live),
-        };
+        // Under the radio's reading, what this agent decided around, before its own plan joins.
+        let decided_around =
+            (liveness == Liveness::Radio).then(|| state.predecessors_plans(me, live));
         state.plans.insert(me, view);
         state.named.extend(order.iter().copied());
         if order.len() > state.best_order.len() {
             state.best_order.clone_from(&order);
         }
-        let holder = match liveness {
-            Liveness::World => {
-                plans = state.plans();
-                state.holder(me, live)
-            }
-            Liveness::Radio => {
+        let (plans, holder) = match decided_around {
+            None => (state.plans(), state.holder(me, live)),
+            Some(mut plans) => {
                 plans.extend(state.plans.get(&me).cloned());
                 plans.sort_by_key(|p| p.uav);
-                live.range((Bound::Excluded(me), Bound::Unbounded))
-                    .next()
-                    .copied()
+                let next = live.range((Bound::Excluded(me), Bound::Unbounded)).next();
+                (plans, next.copied())
             }
         };
         GuidanceToken {
