@@ -54,24 +54,25 @@
 //! agent will not see: the ring skips it at once, as it does a holder whose wait ran out
 //! ([`TokenRing::receive`]), so a lossy run waits for nothing it will not get and stays
 //! reproducible. A token carries its sender's pose for the radio to judge; in lockstep a
-//! receiver reads it at the token's step, the pose it judges from its own.
+//! receiver reads it at the token's step, the pose it judges from its own. With loss,
+//! estimates carry whole sets, never deltas: a delta against a lost message could not be
+//! rebuilt, and each later one of the chain would fail until whole sets came (the map keeps
+//! its deltas: they only add knowledge, see [`message`]). An estimate of step `k` is fused at
+//! step `k + d` (`d` the latency in steps), dilated by `d` steps; the agent still awaits
+//! (bounded) every peer's step-`k` message at step `k`, so what it fuses at each step does not
+//! depend on timing.
 //!
 //! What an agent knows of its peers comes only through what the radio carried to it
-//! (`comms.liveness = "radio"`, the default; [`liveness`]): the UAVs it knows live at a step
-//! are the peers whose estimate it fused then, and the plans it plans around are those of the
-//! tokens it read (its predecessors' in the ring, [`crate::guidance::ring`]), which carry
-//! only what their senders read in turn. So with a finite range neither liveness nor plans of
-//! a UAV out of range reach an agent except relayed by a UAV in range, and the `setfleet`
+//! (`comms.liveness = "radio"`, the default; `agent/liveness.rs`): the UAVs it knows live at a
+//! step are the peers whose estimate it fused then, and the plans it plans around are those of
+//! the tokens it read (its predecessors' in the ring, [`crate::guidance::ring`]), which carry
+//! only what their senders read in turn. So with a finite range neither liveness nor plans of a
+//! UAV out of range reach an agent except relayed by a UAV in range, and the `setfleet`
 //! planner's range charge and lanes count only those. The frame's `served` mask and the node
 //! list still end the agent's waits (they say a message will never be sent: a peer the world
 //! does not serve sends no estimate, a dead holder no token) but never make a UAV live to it.
 //! `comms.liveness = "world"` gives the ring the served, alive peers instead, the same for
-//! every agent (the behaviour before the key). With loss, estimates carry whole sets, never deltas: a delta
-//! against a lost message could not be rebuilt, and each later one of the chain would fail
-//! until whole sets came (the map keeps its deltas: they only add knowledge, see
-//! [`message`]). An estimate of step `k` is fused at step `k + d` (`d` the latency in steps),
-//! dilated by `d` steps; the agent still awaits (bounded) every peer's step-`k` message at
-//! step `k`, so what it fuses at each step does not depend on timing.
+//! every agent (the behaviour before the key).
 
 pub mod checkpoint;
 mod links;
