@@ -11,12 +11,17 @@
 //! in.
 //!
 //! - **Range** (`comms.range_m`): an estimate is fused only when the sender's camera, as it
-//!   sent, is within range of the receiver's, as it fuses ([`in_comms_range`]).
+//!   sent, is within range of the receiver's, as it fuses ([`in_comms_range`]). A token
+//!   reaches a receiver only from a sender within range of it at the token's step
+//!   ([`Radio::carries_token`]; `comms.token_range = "unlimited"` lets every token through, as
+//!   before the key). In lockstep a receiver reads a round's tokens at the round's step:
+//!   the round's first decision waits for every estimate of that step, published once its
+//!   sender has its pose, and the world's next frame waits for the round's last decision.
 //! - **Loss** (`comms.loss`): each message on each link is lost with probability `loss`,
 //!   independently of every other (message kind, sender, receiver and step are all mixed into
 //!   the draw). The receiver knows at once (it decided), so a lost message is never waited
-//!   for: a lost estimate is not read at all, a lost token counts as its sender passing the
-//!   turn without the receiver learning its plan.
+//!   for: a lost estimate is not read at all, a lost token (to loss or to range) counts as its
+//!   sender passing the turn without the receiver learning its plan.
 //! - **Latency** (`comms.latency_ms`): an estimate of step `k` is fused at the receiver's first
 //!   step `k'` whose time reaches `t(k) + latency`, that is `k' = k + d` with
 //!   `d = ceil(latency / cvs_period_s)` ([`latency_steps`]), dilated by the `d` steps it lags
@@ -45,7 +50,7 @@
 //! ```
 
 use crate::camera::CameraPose;
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, TokenRange};
 
 /// The kinds of message a link carries, each drawn on its own (a lost estimate says nothing
 /// about the token of the same step).
@@ -74,16 +79,17 @@ pub struct Radio {
     loss: f64,
     latency_steps: u64,
     range_m: f64,
+    token_range: TokenRange,
 }
 
-/// One end of an estimate's link, as the radio judges it: an agent, one of its steps and its
-/// camera pose then (the sender's as it sent, the receiver's as it fuses; unknown before the
-/// agent's first frame).
+/// One end of a message's link, as the radio judges it: an agent, one of its steps and its
+/// camera pose then (the sender's as it sent, the receiver's as it fuses an estimate or reads
+/// a token; unknown before the agent's first frame).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Endpoint {
     /// The agent's UAV index.
     pub uav: u32,
-    /// The sender's step (that of the estimate) or the receiver's (that it fuses at).
+    /// The sender's step (that of the message) or the receiver's (that it fuses at).
     pub step: u64,
     /// The agent's camera pose at that step.
     pub pose: Option<CameraPose>,
@@ -93,24 +99,27 @@ pub struct Endpoint {
 const RADIO_DOMAIN: u64 = 0x7261_6469_6f6c_6f73; // "radiolos"
 
 impl Radio {
-    /// Perfect links: unlimited range, no loss, no latency.
+    /// Perfect links: unlimited range, no loss, no latency (a range set later limits tokens
+    /// too).
     pub fn perfect() -> Radio {
         Radio {
             seed: 0,
             loss: 0.0,
             latency_steps: 0,
             range_m: f64::INFINITY,
+            token_range: TokenRange::Radio,
         }
     }
 
-    /// The links of a (validated) scenario: its seed, `comms.range_m`, `comms.loss`, and
-    /// `comms.latency_ms` in whole CVS periods.
+    /// The links of a (validated) scenario: its seed, `comms.range_m`, `comms.loss`,
+    /// `comms.latency_ms` in whole CVS periods and `comms.token_range`.
     pub fn from_scenario(scenario: &Scenario) -> Radio {
         Radio {
             seed: scenario.seed,
             loss: scenario.comms.loss,
             latency_steps: latency_steps(scenario.comms.latency_ms, scenario.timing.cvs_period_s),
             range_m: scenario.comms.range_m,
+            token_range: scenario.comms.token_range,
         }
     }
 
@@ -133,6 +142,14 @@ impl Radio {
         Radio { range_m, ..self }
     }
 
+    /// These links with tokens limited by the range or not.
+    pub fn with_token_range(self, token_range: TokenRange) -> Radio {
+        Radio {
+            token_range,
+            ..self
+        }
+    }
+
     /// The probability that a message is lost on one link.
     pub fn loss(&self) -> f64 {
         self.loss
@@ -147,6 +164,13 @@ impl Radio {
     /// Whether a message can fail to reach a peer in time: some loss, or a finite range.
     pub fn loses_or_limits(&self) -> bool {
         self.is_lossy() || self.range_m().is_finite()
+    }
+
+    /// Whether the range can keep a token from a receiver: a finite range that limits tokens
+    /// (`comms.token_range = "radio"`). Only then does the radio read the poses of a token's
+    /// ends.
+    pub fn limits_tokens(&self) -> bool {
+        self.token_range == TokenRange::Radio && self.range_m.is_finite()
     }
 
     /// Steps between an estimate's step and the step it is fused at.
@@ -191,6 +215,17 @@ impl Radio {
             && self.delivers(LinkKind::Estimate, sender.uav, receiver.uav, sender.step)
             && self.arrived(sender.step, receiver.step)
             && self.in_range(receiver.pose, sender.pose)
+    }
+
+    /// Whether `receiver`, at the token's step, reads the token `sender` sent at its step: its
+    /// own always; another's when the radio delivered it ([`Radio::delivers`]) and, if the
+    /// range limits tokens ([`Radio::limits_tokens`]), the sender's camera as it sent was in
+    /// range of the receiver's ([`Radio::in_range`]). A token the receiver does not read is its
+    /// sender's turn passed with a plan the receiver will not see.
+    pub fn carries_token(&self, receiver: &Endpoint, sender: &Endpoint) -> bool {
+        sender.uav == receiver.uav
+            || (self.delivers(LinkKind::Token, sender.uav, receiver.uav, sender.step)
+                && (!self.limits_tokens() || self.in_range(receiver.pose, sender.pose)))
     }
 
     /// The estimates among `sent` that `receiver` fuses at its step `k` when every estimate
@@ -324,13 +359,85 @@ mod tests {
                 "comms.loss=0.25".to_owned(),
                 "comms.latency_ms=1200".to_owned(),
                 "comms.range_m=90".to_owned(),
+                "comms.token_range=unlimited".to_owned(),
             ],
         )
         .unwrap();
         let r = Radio::from_scenario(&s);
         assert_eq!((r.loss(), r.latency_steps(), r.range_m()), (0.25, 3, 90.0));
-        assert_eq!(r, lossy(5, 0.25).with_latency_steps(3).with_range(90.0));
-        assert_eq!(Radio::from_scenario(&Scenario::default()).loss(), 0.0);
+        let expected = lossy(5, 0.25)
+            .with_latency_steps(3)
+            .with_range(90.0)
+            .with_token_range(TokenRange::Unlimited);
+        assert_eq!(r, expected);
+        assert!(!r.limits_tokens());
+        let default = Radio::from_scenario(&Scenario::default());
+        assert_eq!(default.loss(), 0.0);
+        assert!(!default.limits_tokens(), "an infinite range limits nothing");
+        assert!(default.with_range(90.0).limits_tokens());
+    }
+
+    /// An agent at `(x, y)` (camera `z` m up: the range is horizontal), at `step`.
+    fn at_xy(uav: u32, step: u64, x: f64, y: f64, z: f64) -> Endpoint {
+        Endpoint {
+            uav,
+            step,
+            pose: Some(CameraPose {
+                position: Point3::new(x, y, z),
+                yaw: 0.0,
+            }),
+        }
+    }
+
+    /// Who reads whose token, by hand: four UAVs at different altitudes, 100 m of range.
+    /// 0 at (0, 0), 1 at (60, 80) (100 m from 0: in range, the bound included), 2 at (0, 101)
+    /// (101 m from 0; 63.6 m from 1), 3 at (-70, 0) (70 m from 0; 152.6 m from 1; 122.9 m from
+    /// 2). Unlimited tokens reach everyone; a sender whose pose is unknown reaches no one
+    /// under a finite range.
+    #[test]
+    fn a_token_reaches_the_receivers_in_range_of_its_sender() {
+        let radio = Radio::perfect().with_range(100.0);
+        let step = 12;
+        let uavs = [
+            at_xy(0, step, 0.0, 0.0, 60.0),
+            at_xy(1, step, 60.0, 80.0, 70.0),
+            at_xy(2, step, 0.0, 101.0, 80.0),
+            at_xy(3, step, -70.0, 0.0, 90.0),
+        ];
+        let readers = |radio: &Radio, sender: &Endpoint| -> Vec<u32> {
+            uavs.iter()
+                .filter(|r| radio.carries_token(r, sender))
+                .map(|r| r.uav)
+                .collect()
+        };
+        let expected: [&[u32]; 4] = [&[0, 1, 3], &[0, 1, 2], &[1, 2], &[0, 3]];
+        for (sender, expected) in uavs.iter().zip(expected) {
+            assert_eq!(readers(&radio, sender), expected, "token of {}", sender.uav);
+        }
+        let unlimited = radio.with_token_range(TokenRange::Unlimited);
+        for sender in &uavs {
+            assert_eq!(readers(&unlimited, sender), [0, 1, 2, 3]);
+        }
+        let nowhere = Endpoint {
+            pose: None,
+            ..at_xy(1, step, 0.0, 0.0, 0.0)
+        };
+        assert_eq!(readers(&radio, &nowhere), [1], "only itself");
+        assert_eq!(readers(&Radio::perfect(), &nowhere), [0, 1, 2, 3]);
+        // Loss on top of range: a token read is one delivered and in range.
+        let lossy = radio.with_loss(4, 0.5);
+        for sender in &uavs {
+            for receiver in &uavs {
+                let delivered = lossy.delivers(LinkKind::Token, sender.uav, receiver.uav, step);
+                assert_eq!(
+                    lossy.carries_token(receiver, sender),
+                    delivered && radio.carries_token(receiver, sender),
+                    "{} -> {}",
+                    sender.uav,
+                    receiver.uav
+                );
+            }
+        }
     }
 
     /// An agent at `x` metres along the x axis, at `step`.

@@ -627,10 +627,15 @@ impl ExternalRequest {
 /// | `range_m` | `inf` | `0 < value <= inf` | an estimate is fused only when the sender's camera (as it sent) is within this horizontal distance of the receiver's (as it fuses) |
 /// | `loss` | `0.0` | `0 <= value <= 1` | probability that the radio loses one message on one link (estimates and tokens alike), drawn from `seed`, the kind of message, the sender, the receiver and the step: the same seed loses the same messages |
 /// | `latency_ms` | `0.0` | `0 <= value <= 10000` | an estimate of step `k` is fused at the receiver's first step whose time is at least `t(k) + latency`, `ceil(latency / cvs_period_s)` steps later, dilated by that lag; tokens are not delayed (the ring's hops take no simulated time, like the planners' computing) |
-///
-/// | `exchange` | `"sets"` | `"sets"`, `"measurements"` | what estimates carry ([`Exchange`]) |
+/// | `token_range` | `"radio"` | `"radio"`, `"unlimited"` | whether `range_m` limits the guidance token as it limits estimates ([`TokenRange`]) |
+/// | `liveness` | `"radio"` | `"radio"`, `"world"` | where an agent learns which UAVs are live, for the token ring and the round's fleet ([`Liveness`]) |
+/// | `exchange` | `"measurements"` | `"sets"`, `"measurements"` | what estimates carry ([`Exchange`]) |
 /// | `whole_sets_every` | `20` | `1 <= value <= 10000` | under `exchange = "measurements"` with some `loss` or a finite `range_m`, an estimate also carries the sender's whole sets every this many messages, which relay what a lost message or the range kept from a receiver; on any links, whole sets also go in an agent's first message, after a peer joined late or restarted, and to a peer that missed a message |
 /// | `relay_hops` | `0` | `0 <= value <= 8` | under `exchange = "measurements"`, an agent forwards in its next estimate every peer measurement it applied that has been forwarded fewer than this many times, so a measurement reaches UAVs up to this many hops beyond the radio's range, a step later per hop (0: no forwarding) |
+///
+/// With the defaults (`range_m = inf`, no loss) every message reaches every agent, and the two
+/// readings of `token_range` and of `liveness` give the same runs, bit for bit, as long as no
+/// agent dies, stalls or misses a wait.
 ///
 /// `latency_ms` is bounded because every receiver, and the observer, holds the estimates in
 /// flight: 10 s is 20 steps of the default scenario's estimates.
@@ -643,12 +648,60 @@ pub struct CommsConfig {
     pub loss: f64,
     /// Delay of an estimate on a link, milliseconds (rounded up to whole CVS periods).
     pub latency_ms: f64,
+    /// Whether the radio's range limits the guidance token.
+    pub token_range: TokenRange,
+    /// Where an agent learns which UAVs are live.
+    pub liveness: Liveness,
     /// What estimates carry.
     pub exchange: Exchange,
     /// Under the measurement exchange, steps between two estimates with whole sets.
     pub whole_sets_every: u32,
     /// Under the measurement exchange, how many times a peer measurement is forwarded.
     pub relay_hops: u32,
+}
+
+/// Whether the radio's range (`comms.range_m`) limits the guidance token (`comms.token_range`).
+/// Loss (`comms.loss`) drops tokens under either reading.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TokenRange {
+    /// A token reaches an agent only from a sender within range of it, as an estimate does
+    /// (the sender's camera as it sent, the receiver's at the same step): a token out of range
+    /// is lost to that receiver (`protocol::radio::Radio::carries_token`).
+    #[default]
+    Radio,
+    /// Every token reaches every agent whatever the range (the behaviour before the key): the
+    /// plans of UAVs out of range still reach the agents, which no radio would carry.
+    Unlimited,
+}
+
+impl TokenRange {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["radio", "unlimited"];
+}
+
+/// Where an agent learns which UAVs are live (`comms.liveness`): whom the token ring waits
+/// for and skips, and which UAVs share the `setfleet` sweep's lanes (the round's fleet).
+/// Under either reading an agent's waits for the peers' messages of a step end when the
+/// world's frame says a peer is not served or the run's node list says it is dead: those only
+/// say that a message will never be sent, not what a message would have said.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Liveness {
+    /// From the messages the radio carried to it: at its step, an agent knows live exactly
+    /// the peers whose estimate it fuses then (delivered, arrived, sent from within range),
+    /// so a UAV out of range or whose estimate was lost is not waited for; each agent has its
+    /// own view (`uav_agent::guidance::ring`).
+    #[default]
+    Radio,
+    /// From the world: the frame's mask of the UAVs it serves, the same for every agent, and
+    /// the run's node list (the behaviour before the key).
+    World,
+}
+
+impl Liveness {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["radio", "world"];
 }
 
 /// What the agents' estimates carry (`comms.exchange`); both keep the guarantee.
@@ -811,6 +864,8 @@ impl Default for CommsConfig {
             range_m: f64::INFINITY,
             loss: 0.0,
             latency_ms: 0.0,
+            token_range: TokenRange::Radio,
+            liveness: Liveness::Radio,
             exchange: Exchange::Measurements,
             whole_sets_every: 20,
             relay_hops: 0,

@@ -11,12 +11,14 @@ use serde::{Deserialize, Serialize};
 use crate::camera::CameraPose;
 use sets::raster::delta::SetCode;
 
-/// Version of every message layout in this module and in [`crate::frame`]. 9: an estimate
+/// Version of every message layout in this module and in [`crate::frame`]. 11: the token
+/// carries its sender's camera pose ([`GuidanceToken::pose`]), by which the simulated radio
+/// judges its range. 9: an estimate
 /// carries the peer measurements its sender forwards ([`RelayedMeasurementMsg`]). 8: UAV masks
 /// ([`UavMask`]) are 64 bits wide, for fleets of up to 64 UAVs, and truth messages and frames
 /// hold 128 cars. 7: an estimate's sets are optional ([`SetsMsg`]) and it may carry its
 /// frame's measurement ([`MeasurementMsg`]); agents also send [`WireKind::State`] messages.
-pub const PROTOCOL_VERSION: u32 = 10;
+pub const PROTOCOL_VERSION: u32 = 11;
 /// Targets a truth message can hold: the cars of the largest fleet's region (64 UAVs over
 /// 2 x 2 km keep the default scenario's 8 cars per 4 UAVs).
 pub const TRUTH_MAX_TARGETS: usize = 128;
@@ -487,6 +489,10 @@ pub struct GuidanceToken {
     pub issued_by: u32,
     /// Plans of the UAVs that already decided this round.
     pub plans: Vec<PlannedView>,
+    /// The sending UAV's camera pose as it sent this token, which the simulated radio judges
+    /// the token's range by, as it judges an estimate's (`crate::radio::Radio::carries_token`;
+    /// `None`, unknown, is out of every finite range).
+    pub pose: Option<CameraPose>,
 }
 
 #[cfg(test)]

@@ -124,15 +124,19 @@ fn without_wall_clock(mut v: Value) -> Value {
 #[test]
 fn the_same_seed_in_lockstep_gives_the_same_results() {
     // `paper`, `kappa0` and `nomap` share the paper's planner; `setfleet` has its own. Lossy,
-    // slow links lose the same messages with the same seed (drawn from it, never from timing)
-    // and never wait for them. Both exchanges: measurements are applied in a fixed order
+    // slow, range-limited links lose the same messages with the same seed (drawn from it and
+    // the UAVs' poses, never from timing) and never wait for them. Both exchanges: measurements are applied in a fixed order
     // whatever order they came in.
     let lossy = ["--set", "comms.loss=0.3", "--set", "comms.latency_ms=700"];
     let measurements = ["--set", "comms.exchange=measurements"];
     let lossy_measurements = [&lossy[..], &measurements[..]].concat();
+    // The 2 UAVs start 133 m apart: beyond range until they meet, tokens and liveness through
+    // the radio only (the readings' defaults).
+    let limited = ["--set", "comms.range_m=80"];
     for (variant, links) in [
         ("paper", &[][..]),
         ("setfleet", &[]),
+        ("setfleet", &limited[..]),
         ("paper", &lossy[..]),
         ("paper", &measurements[..]),
         ("paper", &lossy_measurements[..]),

@@ -1,4 +1,6 @@
-//! The token ring ([`uav_agent::guidance::ring`]) in a simulated fleet: N = 2..6 agents over
+//! The token ring ([`uav_agent::guidance::ring`]) under the world's reading of who is live
+//! (`comms.liveness = "world"`: every agent given the same live set; the radio's reading is
+//! checked in `ring_loss_props`) in a simulated fleet: N = 2..6 agents over
 //! several rounds, driven by a seeded event queue with random deaths, message delays,
 //! duplicated, reordered and late (older-round) tokens, and stalled agents whose waiters time
 //! out. Each agent follows the agent loop's protocol (`Agent::decide`): drain the tokens, ask
@@ -21,6 +23,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use proptest::prelude::*;
 use protocol::camera::CameraPose;
+use protocol::scenario::Liveness;
 use protocol::wire::{GuidanceToken, PlannedView};
 use sets::math::Point3;
 use uav_agent::guidance::{TokenRing, Turn};
@@ -164,7 +167,7 @@ impl Sim {
             queue: BTreeMap::new(),
             agents: (0..n)
                 .map(|i| Agent {
-                    ring: TokenRing::new(i),
+                    ring: TokenRing::new(i, Liveness::World),
                     phase: Phase::Idle,
                     live: all.clone(),
                     stalled: false,

@@ -19,6 +19,7 @@ use protocol::camera::CameraPose;
 use protocol::codec;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, RunNode, WakeEvent};
+use protocol::scenario::Liveness;
 use protocol::service::RunId;
 use protocol::wire::{GuidanceToken, PlannedView, WireHeader, WireKind, unix_now_ns};
 use sets::math::Point3;
@@ -519,7 +520,7 @@ fn token(run: &RunId, args: &BenchChildArgs) -> anyhow::Result<ChildReport> {
         ],
     };
     let run_tag = run.tag();
-    let mut ring = TokenRing::new(me);
+    let mut ring = TokenRing::new(me, Liveness::default());
     let mut report = ChildReport::default();
     // Reads every token received; returns when the round `complete` came back complete.
     let drain = |ring: &mut TokenRing, report: &mut ChildReport, complete: Option<u64>| {
@@ -538,7 +539,7 @@ fn token(run: &RunId, args: &BenchChildArgs) -> anyhow::Result<ChildReport> {
                     if Some(t.round) == complete && t.holder == ROUND_COMPLETE {
                         completed_at = Some(at);
                     }
-                    ring.observe(t);
+                    ring.receive(t, h.sender, true);
                 }
                 Err(_) => report.corrupt += 1,
             }
@@ -558,7 +559,9 @@ fn token(run: &RunId, args: &BenchChildArgs) -> anyhow::Result<ChildReport> {
             }
         }
         let started = monotonic_ns();
-        let token = ring.pass(round, round, &live, view.clone());
+        let mut token = ring.pass(round, round, &live, view.clone());
+        // As an agent's: the sender's pose, which the radio judges the token's range by.
+        token.pose = view.poses.first().copied();
         let bytes = codec::encode(&token)?;
         let mut sample = publisher.loan_slice_uninit(bytes.len())?;
         let len = u32::try_from(bytes.len())?;

@@ -81,6 +81,8 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
         "guidance.hidden_sets" => Some(&super::HiddenSets::NAMES),
         "guidance.sweep" => Some(&super::SweepPlan::NAMES),
         "comms.exchange" => Some(&super::Exchange::NAMES),
+        "comms.token_range" => Some(&super::TokenRange::NAMES),
+        "comms.liveness" => Some(&super::Liveness::NAMES),
         "guidance.external_request" => Some(&super::ExternalRequest::NAMES),
         _ => None,
     }
@@ -1007,6 +1009,35 @@ mod tests {
         let s = Scenario::load(None, &["region.lot_size_m=40".to_owned()]).unwrap();
         assert_eq!(s.region.lot_size_m, 40.0);
         assert!(Scenario::load(None, &["region.lot_size_m=2".to_owned()]).is_err());
+    }
+
+    /// What the radio would not carry is a reading of its own: by default only what the radio
+    /// carries reaches an agent; the earlier behaviour is one name away.
+    #[test]
+    fn the_readings_of_the_radio_are_one_of_their_names() {
+        use super::super::{Liveness, TokenRange};
+        let c = Scenario::default().comms;
+        assert_eq!(
+            (c.token_range, c.liveness),
+            (TokenRange::Radio, Liveness::Radio)
+        );
+        let other = ["comms.token_range=unlimited", "comms.liveness=world"].map(str::to_owned);
+        let s = Scenario::load(None, &other).unwrap();
+        assert_eq!(s.comms.token_range, TokenRange::Unlimited);
+        assert_eq!(s.comms.liveness, Liveness::World);
+        let text = s.to_toml_string();
+        assert!(text.contains("liveness = \"world\""), "{text}");
+        assert_eq!(Scenario::from_toml_str(&text).unwrap(), s);
+        for (bad, names) in [
+            ("comms.token_range=ideal", "radio, unlimited"),
+            ("comms.liveness=true", "radio, world"),
+        ] {
+            let e = Scenario::load(None, &[bad.to_owned()])
+                .unwrap_err()
+                .to_string();
+            let key = bad.split('=').next().unwrap();
+            assert!(e.contains(key) && e.contains(names), "{bad}: {e}");
+        }
     }
 
     #[test]

@@ -22,9 +22,11 @@
 //!    the agents exchange and fuse step `k`. The next frame waits in the agent's buffer
 //!    until the step is done, so every estimator step still folds the same fused state.
 //!
-//! Every wait is bounded, by the run's [`Timeouts`]. An agent awaits the peers the world
-//! serves at that step (the frame's `served` mask, the same for every agent) whose iceoryx2
-//! node is alive (a SIGKILLed peer shows up dead at once and its resources are cleaned).
+//! Every wait is bounded, by the run's [`Timeouts`]. An agent awaits the estimates of the peers
+//! the world serves at that step (the frame's `served` mask, the same for every agent) whose
+//! iceoryx2 node is alive (a SIGKILLed peer shows up dead at once and its resources are
+//! cleaned), whatever the radio then does with them: only once every message of the step is in
+//! does what it fuses not depend on timing.
 //! Listing the nodes costs milliseconds of CPU, so it is done when the served mask names a
 //! peer not known alive, and while waiting at most once per `liveness_scan_period` (250 ms per
 //! 4 UAVs of the fleet), not at every step and every wake-up (the world drops a peer that died
@@ -46,19 +48,35 @@
 //! The radio between agents is simulated by the receiver ([`protocol::radio`]): every estimate and
 //! token crosses the IPC, and the receiving agent decides from the scenario's seed whether the
 //! radio lost it (`comms.loss`), when it arrives (`comms.latency_ms`) and whether its sender
-//! was in range (`comms.range_m`). A lost estimate is not read and not awaited: the agent
-//! knows at once that it will not come. A lost token is taken as its sender having passed the
-//! turn with a plan this agent will not see: the ring skips it at once, as it does a holder
-//! whose wait ran out ([`TokenRing::receive`]), so a lossy run waits for nothing it will not
-//! get and stays reproducible. With loss, estimates carry whole sets, never deltas: a delta
-//! against a lost message could not be rebuilt, and each later one of the chain would fail
-//! until whole sets came (the map keeps its deltas: they only add knowledge, see
-//! [`message`]). An estimate of step `k` is fused at step `k + d` (`d` the latency in steps),
-//! dilated by `d` steps; the agent still awaits (bounded) every peer's step-`k` message at
-//! step `k`, so what it fuses at each step does not depend on timing.
+//! was in range (`comms.range_m`; for tokens unless `comms.token_range = "unlimited"`). A lost
+//! estimate is not read and not awaited: the agent knows at once that it will not come. A
+//! token lost or out of range is taken as its sender having passed the turn with a plan this
+//! agent will not see: the ring skips it at once, as it does a holder whose wait ran out
+//! ([`TokenRing::receive`]), so a lossy run waits for nothing it will not get and stays
+//! reproducible. A token carries its sender's pose for the radio to judge; in lockstep a
+//! receiver reads it at the token's step, the pose it judges from its own. With loss,
+//! estimates carry whole sets, never deltas: a delta against a lost message could not be
+//! rebuilt, and each later one of the chain would fail until whole sets came (the map keeps
+//! its deltas: they only add knowledge, see [`message`]). An estimate of step `k` is fused at
+//! step `k + d` (`d` the latency in steps), dilated by `d` steps; the agent still awaits
+//! (bounded) every peer's step-`k` message at step `k`, so what it fuses at each step does not
+//! depend on timing.
+//!
+//! What an agent knows of its peers comes only through what the radio carried to it
+//! (`comms.liveness = "radio"`, the default; `agent/liveness.rs`): the UAVs it knows live at a
+//! step are the peers whose estimate it fused then, and the plans it plans around are those of
+//! the tokens it read (its predecessors' in the ring, [`crate::guidance::ring`]), which carry
+//! only what their senders read in turn. So with a finite range neither liveness nor plans of a
+//! UAV out of range reach an agent except relayed by a UAV in range, and the `setfleet`
+//! planner's range charge and lanes count only those. The frame's `served` mask and the node
+//! list still end the agent's waits (they say a message will never be sent: a peer the world
+//! does not serve sends no estimate, a dead holder no token) but never make a UAV live to it.
+//! `comms.liveness = "world"` gives the ring the served, alive peers instead, the same for
+//! every agent (the behaviour before the key).
 
 pub mod checkpoint;
 mod links;
+mod liveness;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
@@ -90,6 +108,7 @@ use crate::guidance::external::{self, Asked, ExternalPlanner, ExternalReport, Fa
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use checkpoint::{CheckpointFile, CheckpointFlusher, Owner};
 use links::{LinkError, Links};
+use liveness::LiveView;
 
 /// How an agent runs.
 #[derive(Clone, Debug)]
@@ -233,7 +252,8 @@ pub struct AgentReport {
     pub estimates_out_of_range: u64,
     /// Peer estimates the simulated radio lost (`comms.loss`), not read.
     pub estimates_lost: u64,
-    /// Tokens the simulated radio lost: their senders were skipped at once.
+    /// Tokens the simulated radio lost (`comms.loss`) or that came from out of range
+    /// (`comms.range_m` with `comms.token_range = "radio"`): their senders were skipped at once.
     pub tokens_lost: u64,
     /// Peer measurements applied from a copy another agent forwarded (`comms.relay_hops`),
     /// not from their sender.
@@ -423,7 +443,8 @@ pub fn run(config: AgentConfig, shutdown: &AtomicBool) -> Result<AgentReport, Ag
         checkpoint,
         served: UavMask::MAX,
         guidance: GuidanceParams::from_scenario(&config.scenario),
-        ring: TokenRing::new(config.uav),
+        ring: TokenRing::new(config.uav, config.scenario.comms.liveness),
+        live_view: LiveView::new(config.scenario.comms.liveness),
         peers: BTreeMap::new(),
         full_map_from: None,
         live: BTreeSet::new(),
@@ -588,6 +609,8 @@ struct Agent<'a> {
     full_map_from: Option<u64>,
     guidance: GuidanceParams,
     ring: TokenRing,
+    /// Whom the agent knows live at its step, for the ring (`comms.liveness`).
+    live_view: LiveView,
     peers: BTreeMap<u32, PeerInfo>,
     /// Live peers (this agent excluded), from the run's node list.
     live: BTreeSet<u32>,
@@ -923,6 +946,12 @@ impl Agent<'_> {
             .collect()
     }
 
+    /// The UAVs this agent knows live at its step, itself included, as `comms.liveness` reads
+    /// it: what the token ring waits for and the round's fleet.
+    fn ring_live(&self) -> BTreeSet<u32> {
+        self.live_view.live(self.config.uav, self.awaited_peers())
+    }
+
     fn publish_estimate(&mut self, k: u64) -> Result<(), AgentError> {
         if self.full_map_from.is_some_and(|from| k >= from) {
             self.outbox.request_full();
@@ -991,6 +1020,7 @@ impl Agent<'_> {
         if newcomer {
             self.refresh_live();
         }
+        self.live_view.start_step();
         let deadline = Instant::now() + self.config.timeouts.peer_wait;
         loop {
             let before = self.clock.enter(phase::FUSE);
@@ -1184,7 +1214,7 @@ impl Agent<'_> {
                     continue;
                 }
                 info.fused_step = Some(p.step);
-                if radio.fuses(&me, &p.endpoint()) {
+                if self.live_view.fuses(&radio, &me, &p.endpoint()) {
                     if let Some(m) = &p.measurement {
                         relay.apply(&mut self.estimator, m, 0);
                     }
@@ -1242,18 +1272,37 @@ impl Agent<'_> {
             drop(sample);
             match parsed {
                 Ok(token) => {
-                    let (sender, me) = (header.sender, self.config.uav);
-                    let delivered = self
-                        .radio
-                        .delivers(LinkKind::Token, sender, me, header.step);
+                    let sender = Endpoint {
+                        uav: header.sender,
+                        step: header.step,
+                        pose: token.pose,
+                    };
+                    let delivered = self.radio.carries_token(&self.token_receiver(), &sender);
                     if !delivered {
                         self.report.tokens_lost += 1;
-                        tracing::debug!(round = token.round, sender, "token lost by the radio");
+                        tracing::debug!(
+                            round = token.round,
+                            sender = sender.uav,
+                            "token lost by the radio or out of range"
+                        );
                     }
-                    self.ring.receive(token, sender, delivered);
+                    self.ring.receive(token, sender.uav, delivered);
                 }
                 Err(e) => self.drop_message(DropReason::Malformed, "token", &e.to_string()),
             }
+        }
+    }
+
+    /// This agent as the receiving end of a token: its current step and pose. In lockstep a
+    /// token of step `k` is read at step `k` (see [`protocol::radio`]); a token read at
+    /// another step (a late or stalled agent, or realtime stepping) is judged from the pose the
+    /// agent has.
+    fn token_receiver(&self) -> Endpoint {
+        let state = self.estimator.state();
+        Endpoint {
+            uav: self.config.uav,
+            step: state.step,
+            pose: state.pose,
         }
     }
 
@@ -1271,8 +1320,7 @@ impl Agent<'_> {
         }
         loop {
             self.drain_tokens();
-            let mut live = self.awaited_peers();
-            live.insert(self.config.uav);
+            let live = self.ring_live();
             match self.ring.turn(round, &live) {
                 Turn::Done => return Ok(None),
                 Turn::Decide { others } => {
@@ -1292,6 +1340,14 @@ impl Agent<'_> {
                 Turn::Wait { holder } => {
                     if self.stopping() || self.end_of_run {
                         return Ok(None);
+                    }
+                    // A UAV heard at the step (the radio's reading) whose process died since,
+                    // or that the world no longer serves, sends no token: give up on it at
+                    // once. (Under the world's reading the holder is one of these peers.)
+                    if !self.awaited_peers().contains(&holder) {
+                        tracing::debug!(round, holder, "token holder gone: skipping it");
+                        self.ring.holder_silent(round, holder);
+                        continue;
                     }
                     let deadline = match waiting_for {
                         Some((h, deadline)) if h == holder => deadline,
@@ -1356,7 +1412,8 @@ impl Agent<'_> {
             None => guidance::decide(&self.guidance, &input),
         };
         self.report.decisions += 1;
-        let token = self.ring.pass(round, k, live, decision.view);
+        let mut token = self.ring.pass(round, k, live, decision.view);
+        token.pose = Some(pose);
         let bytes = codec::encode(&token)?;
         self.links
             .send_wire(WireKind::Token, self.run_tag, self.config.uav, k, &bytes)?;
@@ -1471,9 +1528,7 @@ impl Agent<'_> {
         let Some(mut planner) = self.external.take() else {
             return;
         };
-        let mut live = self.awaited_peers();
-        live.insert(self.config.uav);
-        let fleet = self.ring.fleet(round, &live);
+        let fleet = self.ring.fleet(round, &self.ring_live());
         let state = self.estimator.state();
         let hidden = state.hidden_history.recently_hidden();
         let asked = planner.ask(&Request {

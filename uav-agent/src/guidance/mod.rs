@@ -170,7 +170,9 @@ pub struct PlanningInput<'a> {
     pub unseen: &'a CellSet,
     /// Known buildings (ignored unless `use_map`).
     pub obstacles: &'a [ObstacleCell],
-    /// Plans of the UAVs that decided before this one in the round.
+    /// Plans of the UAVs that decided before this one in the round, as the ring gives them
+    /// ([`Turn::Decide`]; under `comms.liveness = "radio"`, those carried by the tokens the
+    /// agent read from the UAVs before it that it heard).
     pub others: &'a [PlannedView],
     /// The round's fleet, which the `setfleet` sweep's lanes are shared among
     /// ([`TokenRing::fleet`]).

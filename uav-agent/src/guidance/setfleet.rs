@@ -37,7 +37,11 @@
 //!   learns nothing of the ground that one sees, about `W V` m² per second (`W` the
 //!   footprint's width, `V` the speed), and `d` metres beyond range take `d / V` seconds to
 //!   close: a sequence is charged `W` m² per metre its UAV ends beyond range of each other UAV
-//!   (at the same CVS step of their plans), so the agents keep meeting and fusing.
+//!   (at the same CVS step of their plans), so the agents keep meeting and fusing. The others
+//!   are those whose plans the ring gives it ([`PlanningInput::others`]): under
+//!   `comms.token_range = "radio"` and `comms.liveness = "radio"` (the defaults) only plans
+//!   carried by tokens its radio read, so it is charged for drifting from the UAVs it knows
+//!   of, never from one only the world could tell it about.
 //! - `kappa` keeps the paper's meaning: the area of the final sets inside ground occluded in
 //!   the last periods is charged `kappa` m² per m².
 //! - **The fleet's share of the search** ([`super::sweep`]): the round's fleet (the token's
