@@ -947,18 +947,29 @@ mod tests {
         }
     }
 
-    /// The centre-ray rule: within `r_s` of the centre ray's points.
-    #[test]
-    fn centre_ray_discs_stay_within_the_safety_distance_of_the_centre_ray() {
+    /// Draws the test frame's `S^o` under `rule` and checks it against `points` (see
+    /// [`assert_within_safety_distance`]).
+    fn check_rule(
+        rule: RayAssumption,
+        points: impl Fn(&Camera, u32, u32, Real, Real) -> Vec<Point3>,
+    ) {
         let mut f = small_frame(-0.4);
         paint(&mut f, 5);
-        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Centre);
+        let view = FrameView::new(&f, [-0.01, 0.01], rule);
         let grid = GroundGrid::new(100.0, 0.5);
         let rs = 3.0;
         let so = obstacle_neighbourhood(&view, &grid, rs, 1);
         assert!(so.count() > 0);
         let cam = view.camera();
         assert_within_safety_distance(&view, &grid, &so, rs, |r, c, lo, hi| {
+            points(cam, r, c, lo, hi)
+        });
+    }
+
+    /// The centre-ray rule: within `r_s` of the centre ray's points.
+    #[test]
+    fn centre_ray_discs_stay_within_the_safety_distance_of_the_centre_ray() {
+        check_rule(RayAssumption::Centre, |cam, r, c, lo, hi| {
             let d = cam.centre_ray(r, c);
             vec![cam.origin() + d * lo, cam.origin() + d * hi]
         });
@@ -968,15 +979,7 @@ mod tests {
     /// obstacle point whichever ray of the pixel the depth was measured along.
     #[test]
     fn any_ray_discs_stay_within_the_safety_distance_of_every_ray_of_the_pixel() {
-        let mut f = small_frame(-0.4);
-        paint(&mut f, 5);
-        let view = FrameView::new(&f, [-0.01, 0.01], RayAssumption::Any);
-        let grid = GroundGrid::new(100.0, 0.5);
-        let rs = 3.0;
-        let so = obstacle_neighbourhood(&view, &grid, rs, 1);
-        assert!(so.count() > 0);
-        let cam = view.camera();
-        assert_within_safety_distance(&view, &grid, &so, rs, |r, c, lo, hi| {
+        check_rule(RayAssumption::Any, |cam, r, c, lo, hi| {
             let mut pts = Vec::new();
             for k in 0..=4 {
                 for l in 0..=4 {

@@ -255,9 +255,7 @@ fn nearest_visible_distance(
     if sets.is_empty() {
         return 0.0;
     }
-    let clamp = |v: f64, n: u32| v.clamp(0.0, n as f64 - 1.0) as i64;
-    let cx = clamp(((from.x - grid.origin.x) / grid.cell_m).floor(), grid.nx);
-    let cy = clamp(((from.y - grid.origin.y) / grid.cell_m).floor(), grid.ny);
+    let (cx, cy) = ring_centre(grid, from);
     let mut best = f64::INFINITY;
     let max_ring = grid.nx.max(grid.ny) as i64;
     for ring in 0..=max_ring {
@@ -265,18 +263,9 @@ fn nearest_visible_distance(
         if best <= (ring as f64 - 0.75) * grid.cell_m {
             break;
         }
-        for (x, y) in ring_cells(cx, cy, ring) {
-            if x < 0 || y < 0 || x >= grid.nx as i64 || y >= grid.ny as i64 {
-                continue;
-            }
-            let cell = (x as u32, y as u32);
-            if !sets.contains(cell) {
-                continue;
-            }
-            let p = grid.cell_centre(cell);
-            let d = (p - from).norm();
-            if d < best && !view::hidden_by(eye, &p, obstacles) {
-                best = d;
+        for cell in ring_cells(cx, cy, ring).filter_map(|c| on_grid(grid, c)) {
+            if sets.contains(cell) {
+                best = closer_if_visible(best, grid.cell_centre(cell), from, eye, obstacles);
             }
         }
     }
@@ -307,38 +296,22 @@ fn nearest_visible_fine(
     }
     let (fine, coarse, f) = (&grids.fine, &grids.coarse, grids.factor);
     let blocks = grids.downsample(sets);
-    let clamp = |v: f64, n: u32| v.clamp(0.0, n as f64 - 1.0) as i64;
-    let cx = clamp(
-        ((from.x - coarse.origin.x) / coarse.cell_m).floor(),
-        coarse.nx,
-    );
-    let cy = clamp(
-        ((from.y - coarse.origin.y) / coarse.cell_m).floor(),
-        coarse.ny,
-    );
+    let (cx, cy) = ring_centre(coarse, from);
     let mut best = f64::INFINITY;
     let max_ring = coarse.nx.max(coarse.ny) as i64;
     for ring in 0..=max_ring {
         if best <= (ring as f64 - 1.0) * coarse.cell_m {
             break;
         }
-        for (x, y) in ring_cells(cx, cy, ring) {
-            if x < 0 || y < 0 || x >= coarse.nx as i64 || y >= coarse.ny as i64 {
-                continue;
-            }
-            let (x, y) = (x as u32, y as u32);
+        for (x, y) in ring_cells(cx, cy, ring).filter_map(|c| on_grid(coarse, c)) {
             if !blocks.contains((x, y)) {
                 continue;
             }
             for fy in y * f..((y + 1) * f).min(fine.ny) {
                 for fx in x * f..((x + 1) * f).min(fine.nx) {
-                    if !sets.contains((fx, fy)) {
-                        continue;
-                    }
-                    let p = fine.cell_centre((fx, fy));
-                    let d = (p - from).norm();
-                    if d < best && !view::hidden_by(eye, &p, obstacles) {
-                        best = d;
+                    if sets.contains((fx, fy)) {
+                        let p = fine.cell_centre((fx, fy));
+                        best = closer_if_visible(best, p, from, eye, obstacles);
                     }
                 }
             }
@@ -352,6 +325,38 @@ fn nearest_visible_fine(
 }
 
 /// `Φ_d` when every cell of the sets is hidden: as far as anything can be on `grid`.
+/// The cell of `grid` nearest `from` (clamped into the grid), where the rings start.
+fn ring_centre(grid: &GroundGrid, from: Point2) -> (i64, i64) {
+    let clamp = |v: f64, n: u32| v.clamp(0.0, n as f64 - 1.0) as i64;
+    (
+        clamp(((from.x - grid.origin.x) / grid.cell_m).floor(), grid.nx),
+        clamp(((from.y - grid.origin.y) / grid.cell_m).floor(), grid.ny),
+    )
+}
+
+/// Cell `(x, y)` of a ring, if it lies on `grid`.
+fn on_grid(grid: &GroundGrid, (x, y): (i64, i64)) -> Option<(u32, u32)> {
+    let inside = x >= 0 && y >= 0 && x < grid.nx as i64 && y < grid.ny as i64;
+    inside.then_some((x as u32, y as u32))
+}
+
+/// `best`, or the distance from `from` to `p` when that is smaller and the known buildings do
+/// not hide `p` from `eye`.
+fn closer_if_visible(
+    best: f64,
+    p: Point2,
+    from: Point2,
+    eye: &Point3,
+    obstacles: &[ObstacleCell],
+) -> f64 {
+    let d = (p - from).norm();
+    if d < best && !view::hidden_by(eye, &p, obstacles) {
+        d
+    } else {
+        best
+    }
+}
+
 fn all_hidden_distance(grid: &GroundGrid) -> f64 {
     (grid.nx.max(grid.ny) as f64) * grid.cell_m * std::f64::consts::SQRT_2
 }
