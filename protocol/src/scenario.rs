@@ -208,6 +208,33 @@ pub struct TargetsConfig {
     /// 6 m, is `r_s + r_t` plus a 0.5 m margin for the default cars, which keeps the whole
     /// target cylinder clear of the walls. `r_s` lets cars come as close as the paper allows.
     pub building_clearance_m: f64,
+    /// When a car's cruise speed is drawn: `"per_car"` (the default, once per run) or
+    /// `"per_step"` (again at every CVS period) ([`SpeedDraw`]).
+    pub speed_draw: SpeedDraw,
+    /// Stops a moving car starts per minute, on average (`0 <= value <= 60`; 0, the default:
+    /// no stops). At each CVS period a moving car stops with probability
+    /// `stops_per_min * T / 60` and stands still for a time uniform in `stop_s`.
+    pub stops_per_min: f64,
+    /// Range `[lo, hi]` of a stop's length, seconds (`0 <= lo <= hi <= 600`).
+    pub stop_s: [f64; 2],
+}
+
+/// When each car's cruise speed `v_max (1 - cruise_spread u)`, `u` uniform in `[0, 1)`, is
+/// drawn (`targets.speed_draw`). The paper says only that the speeds are "randomly chosen but
+/// bounded"; every choice keeps a car's displacement per period within `v_max T`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SpeedDraw {
+    /// Once per car, at placement: the car cruises at that speed for the whole run.
+    #[default]
+    PerCar,
+    /// Again at every CVS period, for every car.
+    PerStep,
+}
+
+impl SpeedDraw {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 2] = ["per_car", "per_step"];
 }
 
 /// `[uavs]`.
@@ -772,6 +799,9 @@ impl Default for TargetsConfig {
             safety_distance_m: 3.0,
             cruise_spread: 0.8,
             building_clearance_m: 6.0,
+            speed_draw: SpeedDraw::PerCar,
+            stops_per_min: 0.0,
+            stop_s: [5.0, 30.0],
         }
     }
 }

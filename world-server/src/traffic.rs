@@ -1,5 +1,11 @@
 //! The cars: placed on lanes, driving at their own cruise speed, turning at random at
-//! intersections, keeping their distances.
+//! intersections, keeping their distances, and stopping at random if the scenario asks.
+//!
+//! A car's cruise speed is `v_max (1 - cruise_spread u)`, `u` uniform in `[0, 1)`, drawn once
+//! per car or again at every step (`targets.speed_draw`). With `targets.stops_per_min > 0`
+//! a moving car stops at each step with probability `stops_per_min * dt / 60` and stands still
+//! for a time uniform in `targets.stop_s`. Speeds and stops come from a random stream of
+//! their own, so the default (speeds per car, no stops) draws exactly what it always drew.
 //!
 //! Guarantees, by construction:
 //! - a car's centre is always on a lane centreline, or, during a U-turn, on the straight
@@ -16,7 +22,7 @@
 
 use std::collections::VecDeque;
 
-use protocol::scenario::Scenario;
+use protocol::scenario::{Scenario, SpeedDraw};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use sets::math::{Point2, Real};
@@ -56,6 +62,8 @@ pub struct Car {
     lane: Lane,
     path: VecDeque<Waypoint>,
     stalled_steps: u32,
+    /// Time left of the car's current stop, seconds (0: not stopped).
+    stop_left_s: Real,
 }
 
 impl Car {
@@ -108,23 +116,50 @@ impl Car {
     }
 }
 
-/// Every car of the run, and the random source of their decisions.
+/// How the cars' speeds are drawn and when they stop (`[targets]`).
+#[derive(Clone, Copy, Debug)]
+struct SpeedModel {
+    max_speed: Real,
+    spread: Real,
+    draw: SpeedDraw,
+    stops_per_min: Real,
+    stop_s: [Real; 2],
+}
+
+impl SpeedModel {
+    fn cruise(&self, rng: &mut ChaCha8Rng) -> Real {
+        self.max_speed * (1.0 - self.spread * rng.random::<Real>())
+    }
+}
+
+/// Every car of the run, and the random sources of their decisions.
 #[derive(Clone, Debug)]
 pub struct Traffic {
     cars: Vec<Car>,
     rng: ChaCha8Rng,
-    max_speed: Real,
+    speeds: ChaCha8Rng,
+    model: SpeedModel,
 }
 
 impl Traffic {
     /// Places `targets.count` cars at random on the lanes, at least the car separation apart,
-    /// each with a cruise speed uniform in `(0.2 v_max, v_max]`.
+    /// each with a cruise speed `v_max (1 - cruise_spread u)`. `rng` draws the placements,
+    /// the cruise speeds per car and the turns; `speeds`, an independent source, the speeds
+    /// per step and the stops.
     pub fn place(
         roads: &RoadGrid,
         scenario: &Scenario,
         mut rng: ChaCha8Rng,
+        speeds: ChaCha8Rng,
     ) -> Result<Traffic, WorldBuildError> {
         let t = &scenario.targets;
+        let model = SpeedModel {
+            max_speed: t.max_speed_mps,
+            spread: t.cruise_spread,
+            draw: t.speed_draw,
+            stops_per_min: t.stops_per_min,
+            stop_s: t.stop_s,
+        };
         let sep = roads.profile.car_separation;
         let mut cars: Vec<Car> = Vec::with_capacity(t.count as usize);
         for id in 0..t.count {
@@ -147,12 +182,12 @@ impl Traffic {
                         id,
                         position: p,
                         heading: h.y.atan2(h.x),
-                        cruise_mps: t.max_speed_mps
-                            * (1.0 - t.cruise_spread * rng.random::<Real>()),
+                        cruise_mps: model.cruise(&mut rng),
                         speed_mps: 0.0,
                         lane,
                         path: VecDeque::new(),
                         stalled_steps: 0,
+                        stop_left_s: 0.0,
                     });
                     break;
                 }
@@ -171,7 +206,8 @@ impl Traffic {
         Ok(Traffic {
             cars,
             rng,
-            max_speed: t.max_speed_mps,
+            speeds,
+            model,
         })
     }
 
@@ -184,7 +220,10 @@ impl Traffic {
     pub fn step(&mut self, roads: &RoadGrid, dt: Real) {
         let profile = roads.profile;
         for i in 0..self.cars.len() {
-            let budget = (self.cars[i].cruise_mps.min(self.max_speed) * dt).max(0.0);
+            if self.stands_still(i, dt) {
+                continue;
+            }
+            let budget = (self.cars[i].cruise_mps.min(self.model.max_speed) * dt).max(0.0);
             if self.cars[i].stalled_steps >= DEADLOCK_STEPS {
                 self.turn_around(roads, i);
             }
@@ -215,6 +254,29 @@ impl Traffic {
                 }
             }
         }
+    }
+
+    /// Draws car `i`'s speed for this step and whether it stops; true if it stands still
+    /// this step (a stop is not a blockage: it does not count towards turning around).
+    fn stands_still(&mut self, i: usize, dt: Real) -> bool {
+        let model = self.model;
+        let car = &mut self.cars[i];
+        if model.draw == SpeedDraw::PerStep {
+            car.cruise_mps = model.cruise(&mut self.speeds);
+        }
+        if car.stop_left_s <= 0.0
+            && model.stops_per_min > 0.0
+            && self.speeds.random::<Real>() < model.stops_per_min * dt / 60.0
+        {
+            let [lo, hi] = model.stop_s;
+            car.stop_left_s = lo + (hi - lo) * self.speeds.random::<Real>();
+        }
+        if car.stop_left_s > 0.0 {
+            car.stop_left_s -= dt;
+            car.speed_mps = 0.0;
+            return true;
+        }
+        false
     }
 
     fn keeps_clear(&self, i: usize, p: &Point2, profile: &RoadProfile) -> bool {

@@ -24,6 +24,7 @@ pub const UAV_BODY_M: [Real; 3] = [1.0, 1.0, 0.3];
 /// changes another.
 const CITY_STREAM: u64 = 1;
 const TRAFFIC_STREAM: u64 = 2;
+const SPEED_STREAM: u64 = 3;
 
 /// The whole simulated world of one run. Deterministic: the same scenario gives the same
 /// city, the same trajectories and the same frames, bit for bit. A clone shares the static
@@ -48,7 +49,9 @@ impl World {
         let city = City::generate(scenario, &mut city_rng)?;
         let mut traffic_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
         traffic_rng.set_stream(TRAFFIC_STREAM);
-        let traffic = Traffic::place(&city.roads, scenario, traffic_rng)?;
+        let mut speed_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+        speed_rng.set_stream(SPEED_STREAM);
+        let traffic = Traffic::place(&city.roads, scenario, traffic_rng, speed_rng)?;
         let fleet = Fleet::launch(scenario, city.tallest())?;
         Ok(World {
             scenario: scenario.clone(),

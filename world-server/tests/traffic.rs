@@ -99,6 +99,67 @@ fn cars_may_come_as_close_to_walls_as_the_paper_allows() {
     assert!(closest < s.targets.safety_distance_m + 0.5, "{closest}");
 }
 
+/// Each car's speed at every step of a 300 s run (`targets.speed_draw`, `stops_per_min`).
+fn speeds(s: &Scenario) -> Vec<Vec<Real>> {
+    let mut world = World::new(s).expect("scenario builds");
+    let mut out = vec![Vec::new(); world.targets().len()];
+    for _ in 0..s.steps() {
+        world.advance();
+        for (v, car) in out.iter_mut().zip(world.targets()) {
+            v.push(car.speed_mps);
+        }
+    }
+    out
+}
+
+/// The speed models keep every bound (the paper's `v_max`, the distances), and do what they
+/// say: a speed drawn per step varies from step to step where a speed per car does not, and
+/// stops leave cars standing for about the share of time they ask for.
+#[test]
+fn every_speed_model_keeps_the_bounds_and_does_what_it_says() {
+    use protocol::scenario::SpeedDraw;
+    let base = Scenario {
+        seed: 6,
+        ..Scenario::default()
+    };
+    let mut per_step = base.clone();
+    per_step.targets.speed_draw = SpeedDraw::PerStep;
+    let mut stops = base.clone();
+    stops.targets.stops_per_min = 2.0;
+    stops.targets.stop_s = [10.0, 10.0];
+    let mut both = per_step.clone();
+    both.targets.stops_per_min = 1.0;
+    both.targets.building_clearance_m = both.targets.safety_distance_m;
+    for s in [&per_step, &stops, &both] {
+        let (driven, _) = run_and_check(s, s.steps());
+        assert!(driven > 300.0, "{:?}: {driven}", s.targets);
+    }
+    // Distinct speeds of a car's unhindered moves (speed > 0), counted per car, summed.
+    let distinct = |v: &[Vec<Real>]| -> usize {
+        v.iter()
+            .map(|car| {
+                let mut moving: Vec<u64> =
+                    car.iter().filter(|&&x| x > 0.0).map(|x| x.to_bits()).collect();
+                moving.sort_unstable();
+                moving.dedup();
+                moving.len()
+            })
+            .sum()
+    };
+    let standing = |v: &[Vec<Real>]| -> Real {
+        let all: Vec<Real> = v.iter().flatten().copied().collect();
+        all.iter().filter(|&&x| x == 0.0).count() as Real / all.len() as Real
+    };
+    let (b, p, st) = (speeds(&base), speeds(&per_step), speeds(&stops));
+    // Per car: the cruise speed, and shortened moves (0.75, 0.5, 0.25 of it) near other cars.
+    assert!(distinct(&b) <= 4 * b.len(), "{}", distinct(&b));
+    assert!(distinct(&p) > 100 * p.len(), "{}", distinct(&p));
+    // 2 stops of 10 s a minute: about a quarter of the time standing, on top of blockages.
+    let (sb, ss) = (standing(&b), standing(&st));
+    assert!(ss > sb + 0.15, "standing {sb} without stops, {ss} with");
+    assert!(ss < sb + 0.40, "standing {sb} without stops, {ss} with");
+}
+
 #[test]
 fn crowded_small_city_keeps_distances_and_moves() {
     let mut s = Scenario {

@@ -72,6 +72,7 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
         "estimator.sets" => Some(&super::SetGrowth::NAMES),
         "estimator.depth_ray" => Some(&super::RayAssumption::NAMES),
         "camera.depth_ray" => Some(&super::DepthRay::NAMES),
+        "targets.speed_draw" => Some(&super::SpeedDraw::NAMES),
         "guidance.hidden_resolution" => Some(&super::HiddenResolution::NAMES),
         "guidance.hidden_window" => Some(&super::HiddenWindow::NAMES),
         "guidance.predicted_views" => Some(&super::PredictedViews::NAMES),
@@ -456,6 +457,14 @@ impl Scenario {
             ),
         )?;
         Interval::POSITIVE.check("targets.safety_distance_m", targets.safety_distance_m)?;
+        Interval::closed(0.0, 60.0).check("targets.stops_per_min", targets.stops_per_min)?;
+        let [lo, hi] = targets.stop_s;
+        require(
+            lo >= 0.0 && lo <= hi && hi <= 600.0,
+            "targets.stop_s",
+            targets.stop_s,
+            "[lo, hi] with 0 <= lo <= hi <= 600",
+        )?;
         let clearance = targets.building_clearance_m;
         require(
             clearance.is_finite() && clearance >= targets.safety_distance_m && clearance <= 100.0,
@@ -770,6 +779,11 @@ mod tests {
             ("targets.building_clearance_m", |s| {
                 s.targets.building_clearance_m = 2.9
             }),
+            ("targets.stops_per_min", |s| s.targets.stops_per_min = -1.0),
+            ("targets.stops_per_min", |s| s.targets.stops_per_min = 61.0),
+            ("targets.stop_s", |s| s.targets.stop_s = [10.0, 5.0]),
+            ("targets.stop_s", |s| s.targets.stop_s = [f64::NAN, 5.0]),
+            ("targets.stop_s", |s| s.targets.stop_s = [0.0, 601.0]),
             ("targets.building_clearance_m", |s| {
                 s.targets.building_clearance_m = f64::NAN
             }),
@@ -909,6 +923,7 @@ mod tests {
         assert_eq!(s.estimator.depth_ray, RayAssumption::Centre);
         assert_eq!(s.targets.building_clearance_m, 3.0);
         for (bad, names) in [
+            ("targets.speed_draw=\"per_minute\"", "per_car, per_step"),
             ("camera.depth_ray=\"corner\"", "centre, random"),
             ("estimator.depth_ray=\"random\"", "any, centre"),
         ] {
