@@ -411,3 +411,27 @@ fn the_shipped_calibrated_scenario_changes_only_an_unstated_choice() {
     expected.uavs.speed_mps = 15.0;
     assert_eq!(calibrated, expected);
 }
+
+/// The second calibration (`scenarios/paper-fit.toml`, docs/results/calibration.md, "The
+/// second calibration") loads, and departs from the paper's scenario only in what the paper
+/// leaves unstated: the roofs' heights, how the cars' speeds are drawn and their stops, the
+/// UAVs' speed (at least 5 times the cars' top speed) and altitudes (distinct, above every
+/// roof), and the camera's tilt.
+#[test]
+fn the_shipped_fit_changes_only_unstated_choices() {
+    use protocol::scenario::SpeedDraw;
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/paper-fit.toml");
+    let fit = Scenario::load(Some(&path), &[]).expect("the fitted scenario loads");
+    assert!(fit.uavs.speed_mps >= 5.0 * fit.targets.max_speed_mps);
+    let roof = fit.region.building_height_m[1];
+    assert!(fit.uavs.altitudes_m.iter().all(|&a| a > roof));
+    let mut expected = Scenario::default();
+    expected.region.building_height_m = [10.0, 20.0];
+    expected.targets.speed_draw = SpeedDraw::PerStep;
+    expected.targets.stops_per_min = 2.0;
+    expected.targets.stop_s = [30.0, 120.0];
+    expected.uavs.speed_mps = 20.0;
+    expected.uavs.altitudes_m = vec![80.0, 90.0, 100.0, 110.0];
+    expected.camera.tilt_rad = 35f64.to_radians();
+    assert_eq!(fit, expected);
+}

@@ -138,8 +138,11 @@ fn every_speed_model_keeps_the_bounds_and_does_what_it_says() {
     let distinct = |v: &[Vec<Real>]| -> usize {
         v.iter()
             .map(|car| {
-                let mut moving: Vec<u64> =
-                    car.iter().filter(|&&x| x > 0.0).map(|x| x.to_bits()).collect();
+                let mut moving: Vec<u64> = car
+                    .iter()
+                    .filter(|&&x| x > 0.0)
+                    .map(|x| x.to_bits())
+                    .collect();
                 moving.sort_unstable();
                 moving.dedup();
                 moving.len()
