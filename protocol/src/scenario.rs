@@ -211,9 +211,9 @@ pub struct TargetsConfig {
     /// When a car's cruise speed is drawn: `"per_car"` (the default, once per run) or
     /// `"per_step"` (again at every CVS period) ([`SpeedDraw`]).
     pub speed_draw: SpeedDraw,
-    /// Stops a moving car starts per minute, on average (`0 <= value <= 60`; 0, the default:
-    /// no stops). At each CVS period a moving car stops with probability
-    /// `stops_per_min * T / 60` and stands still for a time uniform in `stop_s`.
+    /// Stops a car starts per minute it is not stopped, on average (`0 <= value <= 60`; 0,
+    /// the default: no stops). At each CVS period a car not already stopped stops with
+    /// probability `stops_per_min * T / 60` and stands still for a time uniform in `stop_s`.
     pub stops_per_min: f64,
     /// Range `[lo, hi]` of a stop's length, seconds (`0 <= lo <= hi <= 600`).
     pub stop_s: [f64; 2],

@@ -3,9 +3,10 @@
 //!
 //! A car's cruise speed is `v_max (1 - cruise_spread u)`, `u` uniform in `[0, 1)`, drawn once
 //! per car or again at every step (`targets.speed_draw`). With `targets.stops_per_min > 0`
-//! a moving car stops at each step with probability `stops_per_min * dt / 60` and stands still
-//! for a time uniform in `targets.stop_s`. Speeds and stops come from a random stream of
-//! their own, so the default (speeds per car, no stops) draws exactly what it always drew.
+//! a car not already stopped stops at each step with probability `stops_per_min * dt / 60`
+//! and stands still for a time uniform in `targets.stop_s`. Speeds and stops come from a
+//! random stream of their own, so the default (speeds per car, no stops) draws exactly what
+//! it always drew.
 //!
 //! Guarantees, by construction:
 //! - a car's centre is always on a lane centreline, or, during a U-turn, on the straight
