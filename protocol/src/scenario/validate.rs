@@ -1015,15 +1015,20 @@ mod tests {
             ("guidance.distance_from=camera", "uav, view_centre"),
             ("guidance.hidden_sets=both", "predicted, current"),
         ] {
-            let e = Scenario::load(None, &[bad.to_owned()])
-                .unwrap_err()
-                .to_string();
-            let key = bad.split('=').next().unwrap();
-            assert!(e.contains(key) && e.contains(names), "{bad}: {e}");
+            assert_refused_naming_the_choices(bad, names);
         }
         let s = Scenario::load(None, &["region.lot_size_m=40".to_owned()]).unwrap();
         assert_eq!(s.region.lot_size_m, 40.0);
         assert!(Scenario::load(None, &["region.lot_size_m=2".to_owned()]).is_err());
+    }
+
+    /// `bad` (`KEY=VALUE`) is refused with an error naming the key and every accepted name.
+    fn assert_refused_naming_the_choices(bad: &str, names: &str) {
+        let e = Scenario::load(None, &[bad.to_owned()])
+            .unwrap_err()
+            .to_string();
+        let key = bad.split('=').next().unwrap();
+        assert!(e.contains(key) && e.contains(names), "{bad}: {e}");
     }
 
     /// What the radio would not carry is a reading of its own: by default only what the radio
@@ -1047,11 +1052,7 @@ mod tests {
             ("comms.token_range=ideal", "radio, unlimited"),
             ("comms.liveness=true", "radio, world"),
         ] {
-            let e = Scenario::load(None, &[bad.to_owned()])
-                .unwrap_err()
-                .to_string();
-            let key = bad.split('=').next().unwrap();
-            assert!(e.contains(key) && e.contains(names), "{bad}: {e}");
+            assert_refused_naming_the_choices(bad, names);
         }
     }
 
