@@ -7,7 +7,9 @@
 
 The entries, their `fleet` commands and the files they write are in docs/figures.toml. Each
 entry runs its commands from the repository's root into a scratch directory of its own
-(target/figures/NAME-<UTC time>/); only when every command succeeded are its files copied into
+(target/figures/NAME-<UTC time>/); its sweeps share a run cache (target/figures/cache,
+`fleet sweep --cache`), so a run that several figures show runs once per build. Only when
+every command succeeded are its files copied into
 docs/, and docs/manifest.json then records for each file the commands, the commit, the UTC
 date and the entry, with "remade": true. The commit is `git rev-parse HEAD` when the script
 starts, with "-dirty" if tracked files other than the figures and the manifest had
@@ -95,9 +97,15 @@ def utc_now() -> datetime.datetime:
     return datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0)
 
 
-def commands(entry: dict, fleet: str, out: str, jobs: int) -> list[str]:
-    """The entry's commands with `{fleet}`, `{out}` and `{jobs}` filled in, shell-quoted."""
-    values = {"{fleet}": shlex.quote(fleet), "{out}": shlex.quote(out), "{jobs}": str(jobs)}
+def commands(entry: dict, args: argparse.Namespace, out: str) -> list[str]:
+    """The entry's commands with `{fleet}`, `{out}`, `{jobs}` and `{cache}` filled in,
+    shell-quoted."""
+    values = {
+        "{fleet}": shlex.quote(args.fleet),
+        "{out}": shlex.quote(out),
+        "{jobs}": str(args.jobs),
+        "{cache}": shlex.quote(args.cache),
+    }
     filled = []
     for command in entry["commands"]:
         for key, value in values.items():
@@ -137,7 +145,7 @@ def run_entry(entry: dict, args: argparse.Namespace, commit: str, manifest: dict
     while (ROOT / out).exists():  # the same entry again within the second
         n += 1
         out = f"{base}-{n}"
-    filled = commands(entry, args.fleet, out, args.jobs)
+    filled = commands(entry, args, out)
     print(f"==> {name}: {entry['about']}", flush=True)
     for command in filled:
         print(f"    $ {command}", flush=True)
@@ -197,6 +205,11 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
         help="the fleet binary, with its sibling binaries (default: target/release/fleet)",
     )
     parser.add_argument("--jobs", type=int, default=2, metavar="N", help="runs at once in each sweep (default: 2)")
+    parser.add_argument(
+        "--cache", default="target/figures/cache", metavar="DIR",
+        help="the sweeps' run cache (`fleet sweep --cache`): a run that an earlier sweep of "
+        "the same binaries made is taken from it (default: target/figures/cache)",
+    )
     parser.add_argument(
         "--scratch", default="target/figures", metavar="DIR",
         help="where each entry's runs go, in a directory of its own (default: target/figures)",

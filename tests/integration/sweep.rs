@@ -1,5 +1,6 @@
-//! `fleet sweep` end to end: a sweep, the same sweep split into shards and merged, and the
-//! same sweep with `--jobs 2` give the same table and the same runs; an interrupted
+//! `fleet sweep` end to end: a sweep, the same sweep split into shards and merged, the
+//! same sweep with `--jobs 2` and the same sweep taken from `--cache` give the same table and
+//! the same runs; an interrupted
 //! `--jobs` sweep stops every run and leaves nothing; an axis sweep and a suite sweep compare
 //! the values of a key and the variants on each scenario.
 
@@ -126,8 +127,15 @@ fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
     t.write("scenario.toml", SCENARIO);
 
     let single = t.dir.join("single");
-    let out = sweep(&t, &single, &[]);
+    let cache = t.dir.join("cache");
+    let cache_arg = cache.to_str().expect("utf-8 path");
+    let out = sweep(&t, &single, &["--cache", cache_arg]);
     assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("0 of 4 run(s) taken from the cache"),
+        "{}",
+        stderr(&out)
+    );
     let whole = results(std::slice::from_ref(&single), &single);
     assert_eq!(whole.0["seeds"], serde_json::json!([1, 2]));
     assert_eq!(
@@ -178,6 +186,39 @@ fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
     assert_eq!(
         parallel.0, whole.0,
         "the --jobs 2 table differs from the sweep's"
+    );
+
+    // The same sweep again runs nothing: every run comes from the cache, with its files.
+    let again = t.dir.join("again");
+    let out = sweep(&t, &again, &["--cache", cache_arg, "--jobs", "2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("4 of 4 run(s) taken from the cache"),
+        "{}",
+        stderr(&out)
+    );
+    let cached = results(std::slice::from_ref(&again), &again);
+    assert_eq!(cached, whole, "the cached sweep differs from the sweep");
+    // An axis whose first value is the scenario's own runs only the other value.
+    let axis = t.dir.join("axis");
+    let args = [
+        "--seeds",
+        "1",
+        "--variants",
+        "paper",
+        "--duration",
+        "4",
+        "--axis",
+        "comms.loss=0,0.25",
+        "--cache",
+        cache_arg,
+    ];
+    let out = sweep_with(&t, &axis, &args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("1 of 2 run(s) taken from the cache"),
+        "{}",
+        stderr(&out)
     );
 }
 

@@ -1,5 +1,8 @@
 //! Running a sweep's runs, up to `--jobs` of them at once.
 //!
+//! With `--cache`, a run found in the store ([`RunCache`]) is taken from it instead of run,
+//! and a run that completes is stored.
+//!
 //! Every run is the whole of `fleet run` ([`execute`], then [`write_results`]) with its own
 //! run id (so its own iceoryx2 prefix: runs never see each other's services or files), its
 //! own output, log and checkpoint directories, and its own processes. The runs of a sweep
@@ -22,7 +25,7 @@ use std::task::{Context, Poll};
 use anyhow::Context as _;
 use tokio::signal::unix::{SignalKind, signal};
 
-use super::PlannedRun;
+use super::{PlannedRun, RunCache};
 use crate::Outcome;
 use crate::run::{execute, outcome, write_results};
 use fleet_observe::results::summary::Summary;
@@ -37,6 +40,8 @@ pub(super) enum RunEnd {
         interrupted: bool,
         /// It did not complete (a process failed, or it was interrupted).
         failed: bool,
+        /// It was taken from the run cache, not run.
+        cached: bool,
     },
     /// It could not run, or its results could not be written.
     Error(anyhow::Error),
@@ -50,6 +55,7 @@ struct Pool<'a> {
     waiting: std::iter::Enumerate<std::slice::Iter<'a, PlannedRun>>,
     running: Vec<Running<'a>>,
     jobs: usize,
+    cache: Option<&'a RunCache>,
     /// Whether runs may still start.
     open: bool,
 }
@@ -60,7 +66,9 @@ impl<'a> Pool<'a> {
     fn poll_next(&mut self, cx: &mut Context<'_>) -> Poll<Option<(usize, RunEnd)>> {
         while self.open && self.running.len() < self.jobs {
             match self.waiting.next() {
-                Some((index, run)) => self.running.push(Box::pin(one_run(index, run))),
+                Some((index, run)) => {
+                    self.running.push(Box::pin(one_run(index, run, self.cache)));
+                }
                 None => self.open = false,
             }
         }
@@ -79,8 +87,24 @@ impl<'a> Pool<'a> {
     }
 }
 
-/// One run: executes it and writes its results.
-async fn one_run(index: usize, run: &PlannedRun) -> (usize, RunEnd) {
+/// One run: takes it from the cache, or executes it, writes its results and stores it.
+async fn one_run(index: usize, run: &PlannedRun, cache: Option<&RunCache>) -> (usize, RunEnd) {
+    let key = cache.and_then(|c| c.key(&run.config));
+    if let (Some(cache), Some(key)) = (cache, &key) {
+        match cache.take(key, &run.config) {
+            Ok(Some(summary)) => {
+                let end = RunEnd::Done {
+                    summary: Box::new(summary),
+                    interrupted: false,
+                    failed: false,
+                    cached: true,
+                };
+                return (index, end);
+            }
+            Ok(None) => {}
+            Err(e) => eprintln!("fleet: [{}] not taken from the cache: {e:#}", run.label),
+        }
+    }
     let end = match execute(&run.config, &run.label).await {
         Ok(record) => {
             let interrupted = record.interrupted;
@@ -90,6 +114,7 @@ async fn one_run(index: usize, run: &PlannedRun) -> (usize, RunEnd) {
                     summary: Box::new(summary),
                     interrupted,
                     failed,
+                    cached: false,
                 },
                 Ok(Err(e)) => RunEnd::Error(e),
                 Err(e) => RunEnd::Error(anyhow::anyhow!("writing the results failed: {e}")),
@@ -97,15 +122,29 @@ async fn one_run(index: usize, run: &PlannedRun) -> (usize, RunEnd) {
         }
         Err(e) => RunEnd::Error(e),
     };
+    if let (
+        Some(cache),
+        Some(key),
+        RunEnd::Done {
+            failed: false,
+            interrupted: false,
+            ..
+        },
+    ) = (cache, &key, &end)
+        && let Err(e) = cache.store(key, &run.config.out)
+    {
+        eprintln!("fleet: [{}] not stored in the cache: {e:#}", run.label);
+    }
     (index, end)
 }
 
-/// Runs `runs`, at most `jobs` at once, in list order as places free up; `done` is called
-/// with each run's place in `runs` and its end as it finishes. Returns whether a signal
-/// stopped the sweep.
+/// Runs `runs`, at most `jobs` at once, in list order as places free up, each taken from
+/// `cache` when it holds it; `done` is called with each run's place in `runs` and its end as
+/// it finishes. Returns whether a signal stopped the sweep.
 pub(super) async fn run_all(
     runs: &[PlannedRun],
     jobs: usize,
+    cache: Option<&RunCache>,
     mut done: impl FnMut(usize, RunEnd),
 ) -> anyhow::Result<bool> {
     let mut sigint = signal(SignalKind::interrupt()).context("cannot handle SIGINT")?;
@@ -114,6 +153,7 @@ pub(super) async fn run_all(
         waiting: runs.iter().enumerate(),
         running: Vec::new(),
         jobs: jobs.max(1),
+        cache,
         open: true,
     };
     let mut interrupted = false;

@@ -43,6 +43,7 @@
 //! Table I columns) and `setfleet` (the project's planner).
 
 pub mod axis;
+pub mod cache;
 pub mod collect;
 pub mod jobs;
 pub mod paired;
@@ -62,6 +63,7 @@ use crate::run::config::{RunConfig, check_faults, new_run_id};
 use crate::run::hosts::HostLayout;
 use crate::run::runtime;
 pub use axis::Axis;
+pub use cache::RunCache;
 pub use collect::MergeConfig;
 use collect::{FoundRuns, assemble, read_run, write_table};
 use fleet_observe::faults::Fault;
@@ -135,8 +137,14 @@ pub struct SweepArgs {
     /// Runs nothing: builds the table and picture from the runs of these sweep directories.
     /// With `--axis KEY=V1,...`, each value's runs are read under `DIR/KEY=V/`; suite sweeps
     /// (`--scenario DIR`, each with its `suite.json`) merge scenario by scenario.
-    #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration", "variants", "scenario", "overrides", "jobs", "shard", "faults"])]
+    #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["seeds", "duration", "variants", "scenario", "overrides", "jobs", "shard", "faults", "cache"])]
     pub merge: Vec<PathBuf>,
+    /// Keeps every finished run in this directory, by a hash of the binaries, the resolved
+    /// scenario, the variant and the faults, and takes a run found there instead of running
+    /// it again (lockstep runs are deterministic). Runs with a pause or a restart are never
+    /// kept nor taken.
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
 }
 
 /// One run of a sweep.
@@ -176,6 +184,8 @@ pub struct SweepConfig {
     pub total_runs: usize,
     /// Output directory.
     pub out: PathBuf,
+    /// Where finished runs are kept and taken from (`--cache`).
+    pub cache: Option<PathBuf>,
 }
 
 impl SweepArgs {
@@ -259,6 +269,7 @@ impl SweepArgs {
             shard: self.shard,
             total_runs,
             out,
+            cache: self.cache.clone(),
         })
     }
 
@@ -358,10 +369,12 @@ pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
             config.total_runs
         );
     }
+    let cache = config.cache.as_deref().map(RunCache::open).transpose()?;
     let levels = level_count(config.suite.as_ref(), config.axis.as_ref());
     let mut found: Vec<FoundRuns> = (0..levels).map(|_| FoundRuns::new()).collect();
     let mut failed: Vec<(usize, String)> = Vec::new();
-    let interrupted = runtime()?.block_on(jobs::run_all(&config.runs, config.jobs, |i, end| {
+    let mut taken = 0;
+    let all = jobs::run_all(&config.runs, config.jobs, cache.as_ref(), |i, end| {
         let run = &config.runs[i];
         let name = format!("{}/seed-{}", run.variant.name(), run.seed);
         let ok = match end {
@@ -369,14 +382,20 @@ pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
                 summary,
                 interrupted,
                 failed,
+                cached,
             } => {
+                taken += usize::from(cached);
                 eprintln!(
-                    "[{}] UA {} OA {} violations {} ({:.0} s wall){}",
+                    "[{}] UA {} OA {} violations {} ({}){}",
                     run.label,
                     percent(summary.ua_final),
                     percent(summary.oa_final),
                     summary.violations,
-                    summary.wall_s,
+                    if cached {
+                        "from the cache".to_owned()
+                    } else {
+                        format!("{:.0} s wall", summary.wall_s)
+                    },
                     if interrupted { ", interrupted" } else { "" }
                 );
                 match read_run(&run.config.out, run.variant, run.seed) {
@@ -398,7 +417,14 @@ pub fn command(config: &SweepConfig) -> anyhow::Result<Outcome> {
         if !ok {
             failed.push((i, name));
         }
-    }))?;
+    });
+    let interrupted = runtime()?.block_on(all)?;
+    if cache.is_some() {
+        eprintln!(
+            "fleet: {taken} of {} run(s) taken from the cache",
+            config.runs.len()
+        );
+    }
     failed.sort();
     let code = if failed.is_empty() && !interrupted {
         Outcome::Success
@@ -529,11 +555,16 @@ mod tests {
         sweep: SweepArgs,
     }
 
+    /// The validated `fleet sweep ARGS`.
+    pub(in crate::sweep) fn parse(args: &[&str]) -> SweepConfig {
+        let w = Wrap::try_parse_from(["x"].iter().chain(args)).unwrap();
+        w.sweep.validate().unwrap()
+    }
+
     /// The (variant, seed, index) of every run of `fleet sweep ARGS`.
     fn planned(args: &[&str]) -> Vec<(Variant, u64, usize)> {
-        let w = Wrap::try_parse_from(["x"].iter().chain(args)).unwrap();
-        let c = w.sweep.validate().unwrap();
-        c.runs
+        parse(args)
+            .runs
             .iter()
             .map(|r| (r.variant, r.seed, r.index))
             .collect()
