@@ -68,6 +68,12 @@ fn assert_nothing_left(t: &TestRun) {
     );
 }
 
+/// The sweep said it took `taken` of its `runs` runs from its `--cache`.
+fn assert_taken(out: &Output, taken: usize, runs: usize) {
+    let said = format!("{taken} of {runs} run(s) taken from the cache");
+    assert!(stderr(out).contains(&said), "{}", stderr(out));
+}
+
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
@@ -131,11 +137,7 @@ fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
     let cache_arg = cache.to_str().expect("utf-8 path");
     let out = sweep(&t, &single, &["--cache", cache_arg]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("0 of 4 run(s) taken from the cache"),
-        "{}",
-        stderr(&out)
-    );
+    assert_taken(&out, 0, 4);
     let whole = results(std::slice::from_ref(&single), &single);
     assert_eq!(whole.0["seeds"], serde_json::json!([1, 2]));
     assert_eq!(
@@ -192,11 +194,7 @@ fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
     let again = t.dir.join("again");
     let out = sweep(&t, &again, &["--cache", cache_arg, "--jobs", "2"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("4 of 4 run(s) taken from the cache"),
-        "{}",
-        stderr(&out)
-    );
+    assert_taken(&out, 4, 4);
     let cached = results(std::slice::from_ref(&again), &again);
     assert_eq!(cached, whole, "the cached sweep differs from the sweep");
     // An axis whose first value is the scenario's own runs only the other value.
@@ -215,11 +213,7 @@ fn a_sweep_its_shards_merged_and_its_jobs_give_the_same_table() {
     ];
     let out = sweep_with(&t, &axis, &args);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("1 of 2 run(s) taken from the cache"),
-        "{}",
-        stderr(&out)
-    );
+    assert_taken(&out, 1, 2);
 }
 
 /// The sweep's two variants compared seed by seed: on both seeds for the summary's values,
