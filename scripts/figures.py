@@ -163,6 +163,10 @@ def run_entry(entry: dict, args: argparse.Namespace, commit: str, manifest: dict
     for copy in entry["copy"]:
         copy_output(ROOT / out / copy["from"], copy)
     date = utc_now().isoformat().replace("+00:00", "Z")
+    # Read again: another entry (another invocation of this script) may have been recorded
+    # since this one started, and its records must stay.
+    manifest.clear()
+    manifest.update(load_manifest())
     for path in outputs(entry):
         manifest["outputs"][path] = {
             "entry": name,
