@@ -36,7 +36,6 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use sha2::{Digest as _, Sha256};
 
-use super::collect::read_run;
 use crate::run::children::Binaries;
 use crate::run::config::RunConfig;
 use fleet_observe::faults::FaultKind;
@@ -120,16 +119,25 @@ impl RunCache {
     /// has no such run. A stored run that is not `run`'s variant and seed is an error.
     pub fn take(&self, key: &str, run: &RunConfig) -> anyhow::Result<Option<Summary>> {
         let stored = self.dir.join(key);
-        if !stored.join("summary.json").is_file() {
+        let file = stored.join("summary.json");
+        if !file.is_file() {
             return Ok(None);
         }
-        read_run(&stored, run.variant, run.scenario.seed)
-            .with_context(|| format!("the run cache's {}", stored.display()))?;
+        let text = std::fs::read_to_string(&file)
+            .with_context(|| format!("cannot read {}", file.display()))?;
+        let summary: Summary = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a run's summary", file.display()))?;
+        anyhow::ensure!(
+            summary.variant == run.variant.name() && summary.seed == run.scenario.seed,
+            "the run cache's {} is of variant {} seed {}, not {} seed {}",
+            stored.display(),
+            summary.variant,
+            summary.seed,
+            run.variant.name(),
+            run.scenario.seed
+        );
+        // The sweep reads the run back from `out` as it reads every run (its time series too).
         link_tree(&stored, &run.out)?;
-        let text = std::fs::read_to_string(run.out.join("summary.json"))
-            .with_context(|| format!("cannot read {}/summary.json", run.out.display()))?;
-        let summary = serde_json::from_str(&text)
-            .with_context(|| format!("{}/summary.json", run.out.display()))?;
         Ok(Some(summary))
     }
 
