@@ -29,6 +29,8 @@ pub enum FleetCommand {
     Sweep(crate::sweep::SweepArgs),
     /// Render one UAV's camera frame at a given time as pictures.
     Render(crate::render::RenderArgs),
+    /// Import a real city from an OpenStreetMap PBF file: its scene and a picture of it.
+    City(crate::city::CityArgs),
     /// Measure a part of the system and write a JSON report.
     Bench(BenchArgs),
 }

@@ -12,6 +12,7 @@
 //!   `fleet certs`.
 //! - [`sweep`]: `fleet sweep`, every variant on several seeds, the paper's Table I.
 //! - [`render`]: `fleet render`, one frame as pictures.
+//! - [`city`]: `fleet city`, a real city imported from OpenStreetMap.
 //! - [`scale`]: `fleet bench scale`, whole runs per fleet size; the other benchmarks are the
 //!   `fleet-bench` crate's.
 //!
@@ -28,6 +29,7 @@
 
 #![warn(missing_docs)]
 
+pub mod city;
 pub mod cli;
 pub mod host;
 pub mod render;
@@ -82,6 +84,10 @@ pub fn dispatch(cli: Cli) -> Outcome {
                 Ok(config) => return finish(sweep::command(&config)),
                 Err(e) => return bad_input(e),
             },
+        },
+        FleetCommand::City(args) => match args.validate() {
+            Ok(config) => return finish(city::command(&config)),
+            Err(e) => return bad_input(e),
         },
         FleetCommand::Render(args) => match args.validate() {
             Ok(config) => render::command(&config),

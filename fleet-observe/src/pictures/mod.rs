@@ -1,6 +1,7 @@
 //! Pictures drawn with plotters (bitmap backend, no system fonts): the font is the DejaVu Sans
 //! shipped in `assets/`, registered once at start-up by [`register_fonts`].
 
+pub mod city;
 pub mod frame;
 pub mod topview;
 

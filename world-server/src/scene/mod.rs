@@ -16,7 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use sets::math::Real;
 
 pub use buildings::Building;
-pub use roads::{Axis, Lane, RoadGrid, RoadProfile};
+pub use roads::{Axis, Lane, RING_BORDER_GAP_M, RoadGrid, RoadProfile};
 
 use crate::error::WorldBuildError;
 

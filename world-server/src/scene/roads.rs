@@ -13,7 +13,7 @@ const TYPICAL_ROAD_SPACING_M: Real = 58.0;
 /// Largest random shift of an inner road from its regular position.
 const ROAD_JITTER_M: Real = 4.0;
 /// Gap kept between the ring road's edge and the RoI border.
-const RING_BORDER_GAP_M: Real = 2.0;
+pub const RING_BORDER_GAP_M: Real = 2.0;
 /// Extra distance, beyond what the rules ask, between cars and between a car and a building.
 pub const SAFETY_MARGIN_M: Real = 0.5;
 
