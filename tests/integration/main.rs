@@ -4,6 +4,7 @@
 mod agents;
 mod bench;
 mod chaos;
+mod city;
 mod cli;
 mod docs_manifest;
 mod frames;
