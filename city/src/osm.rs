@@ -105,7 +105,7 @@ impl OsmData {
 /// Reads a PBF file, keeping the positions of the nodes that `keep` accepts (every way and
 /// relation is kept; a way's node outside `keep` is then missing, as at an extract's edge).
 ///
-/// A file that is not PBF, or that is damaged, gives [`CityImportError::Read`]. The reader
+/// A file that is not PBF, or that is damaged, gives [`crate::error::CityImportError::Read`]. The reader
 /// crate can panic on some malformed blocks; such a panic is caught and reported the same way.
 #[cfg(feature = "import")]
 pub fn read_pbf(

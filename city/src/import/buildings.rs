@@ -28,7 +28,8 @@ pub struct BuildingCounts {
     pub parts: usize,
     /// Buildings skipped because a node or a ring was missing (at the extract's edge).
     pub incomplete: usize,
-    /// Buildings whose rings cross themselves or each other (see [`AREA_RATIO_TOLERANCE`]).
+    /// Buildings whose rings cross themselves or each other: their parts cover their rings' area
+    /// to worse than 1 %.
     pub broken: usize,
 }
 
