@@ -4,7 +4,8 @@
 //!
 //! The roads must fit the scenario's cars: each lane runs the road profile's lane offset from
 //! its road's centreline, and every lane point keeps `targets.building_clearance_m` from every
-//! building, as the generated city's lanes do.
+//! building, as the generated city's lanes do. Roads end the profile's half width plus 2 m
+//! inside the region's border, as the generated city's ring road runs.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -84,7 +85,9 @@ impl CityArgs {
                 roads: RoadRules {
                     lane_offset_m: profile.lane_offset,
                     clearance_m: profile.building_clearance,
-                    border_gap_m: RING_BORDER_GAP_M,
+                    // As the ring road of the generated city: a car's whole body stays 2 m
+                    // inside the region.
+                    border_gap_m: profile.half_width + RING_BORDER_GAP_M,
                 },
             },
             storey_height_m: self.storey_height,

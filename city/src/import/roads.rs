@@ -58,7 +58,8 @@ pub struct RoadRules {
     /// The least distance every lane point keeps from every building, metres.
     pub clearance_m: f64,
     /// Roads are clipped to the square `[-h, h]²` with `h` the region's half-extent less this,
-    /// metres, so that a car stays inside the region.
+    /// metres: at least the lane offset plus half a car's width, so that a car stays inside the
+    /// region.
     pub border_gap_m: f64,
 }
 
