@@ -31,6 +31,7 @@ pub mod boxes;
 pub mod footprint;
 pub mod noise;
 pub mod objects;
+pub mod prism;
 pub mod rays;
 #[cfg(test)]
 mod reference;
