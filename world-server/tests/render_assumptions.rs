@@ -37,7 +37,8 @@ fn first_hit(objects: &[(SceneObject, Point3, Real)], o: &Point3, d: &Vector3) -
         if (oc - d * along).norm() > *radius || along + radius < 0.0 {
             continue;
         }
-        if let Some(t) = obj.shape.cast_ray(&obj.pose, &Ray::new(*o, *d), best, true)
+        let cuboid = obj.as_cuboid().expect("the generated city is boxes");
+        if let Some(t) = cuboid.cast_ray(&obj.pose, &Ray::new(*o, *d), best, true)
             && t <= best
         {
             best = t;
@@ -85,7 +86,12 @@ fn check_frame(world: &World, uav: usize, frame: &CvsFrame, rng: &mut ChaCha8Rng
         .into_iter()
         .map(|o| {
             let c = Point3::from(o.pose.translation.vector);
-            (o, c, o.shape.half_extents.norm() + 1e-6)
+            let r = o
+                .as_cuboid()
+                .expect("the generated city is boxes")
+                .half_extents
+                .norm();
+            (o, c, r + 1e-6)
         })
         .collect();
     let o = camera.origin();
@@ -198,7 +204,8 @@ fn check_frame(world: &World, uav: usize, frame: &CvsFrame, rng: &mut ChaCha8Rng
             let g = Point3::new(car.position.x, car.position.y, 0.0);
             let seg = g - o;
             let ray = Ray::new(o, seg);
-            assert!(body.shape.cast_ray(&body.pose, &ray, 1.0, true).is_some());
+            let cuboid = body.as_cuboid().expect("a car is a box");
+            assert!(cuboid.cast_ray(&body.pose, &ray, 1.0, true).is_some());
         }
     }
 }

@@ -1,6 +1,7 @@
-//! The exact image footprint of a box: which pixels it can appear in.
+//! The exact image footprint of an object (a box or a convex prism): which pixels it can
+//! appear in.
 //!
-//! The box is clipped against the camera's near plane, its remaining vertices are projected,
+//! The object is clipped against the camera's near plane, its remaining vertices are projected,
 //! and the 2D convex hull of the projections is the box's silhouette (the projection of a
 //! convex polytope is the hull of its projected vertices). For each image row, the footprint
 //! keeps the span of columns whose closed pixel rectangle the silhouette touches, widened by
@@ -38,11 +39,11 @@ impl Footprint {
 /// The footprint of `object` in `camera`'s image, or `None` if it touches no pixel.
 pub fn footprint(camera: &Camera, object: &SceneObject) -> Option<Footprint> {
     let verts = object.vertices();
-    let depth = verts.map(|v| camera.axial_depth(&v));
+    let depth: Vec<Real> = verts.iter().map(|v| camera.axial_depth(v)).collect();
     if depth.iter().all(|&z| z < NEAR_PLANE_M) {
         return None;
     }
-    let mut pts: Vec<Point2> = Vec::with_capacity(16);
+    let mut pts: Vec<Point2> = Vec::with_capacity(2 * verts.len());
     let mut push = |p: &Point3| {
         if let Some((u, v)) = camera.project(p) {
             pts.push(Point2::new(u, v));
@@ -53,21 +54,14 @@ pub fn footprint(camera: &Camera, object: &SceneObject) -> Option<Footprint> {
             push(v);
         }
     }
-    // The 12 edges of a box join vertices differing in exactly one index bit.
-    for a in 0..8usize {
-        for bit in [1usize, 2, 4] {
-            let b = a | bit;
-            if b == a {
-                continue;
-            }
-            let (za, zb) = (depth[a], depth[b]);
-            if (za < NEAR_PLANE_M) != (zb < NEAR_PLANE_M) {
-                // Nudge the cut slightly to the far side, so that its depth is surely above
-                // the projection's own cut-off.
-                let t = (za - 2.0 * NEAR_PLANE_M) / (za - zb);
-                let t = t.clamp(0.0, 1.0);
-                push(&(verts[a] + (verts[b] - verts[a]) * t));
-            }
+    for (a, b) in object.edges() {
+        let (za, zb) = (depth[a], depth[b]);
+        if (za < NEAR_PLANE_M) != (zb < NEAR_PLANE_M) {
+            // Nudge the cut slightly to the far side, so that its depth is surely above
+            // the projection's own cut-off.
+            let t = (za - 2.0 * NEAR_PLANE_M) / (za - zb);
+            let t = t.clamp(0.0, 1.0);
+            push(&(verts[a] + (verts[b] - verts[a]) * t));
         }
     }
     let hull = convex_hull(&pts);

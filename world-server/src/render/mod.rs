@@ -40,7 +40,7 @@ use protocol::camera::{Camera, CameraModel};
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, FRAME_MAX_PIXELS, Label, TargetBox};
 use protocol::scenario::DepthRay;
 use rayon::prelude::*;
-use sets::math::{Point3, Real, Vector3};
+use sets::math::{Point2, Point3, Real, Vector3};
 
 use boxes::RowTargets;
 use footprint::Footprint;
@@ -146,7 +146,7 @@ fn visible_objects(camera: &Camera, objects: &[SceneObject], origin: &Point3) ->
         .filter_map(|o| {
             let fp = footprint::footprint(camera, o)?;
             Some(Visible {
-                object: *o,
+                object: o.clone(),
                 seen: o.seen_from(origin),
                 footprint: fp,
                 nearest: o.nearest_distance(origin),
@@ -320,7 +320,19 @@ fn centre_row(
                 Label::Unknown
             }
         } else {
-            classify(&codes, touching(), visible)
+            let corners = || {
+                [
+                    grid.corner_ray(r, c),
+                    grid.corner_ray(r, c + 1),
+                    grid.corner_ray(r + 1, c + 1),
+                    grid.corner_ray(r + 1, c),
+                ]
+            };
+            let pixel = PixelRays {
+                origin,
+                corners: &corners,
+            };
+            classify(&codes, touching(), visible, &pixel)
         };
 
         let px = noise.next_pixel();
@@ -505,18 +517,37 @@ fn cast<'a>(
     (code, best)
 }
 
+/// The rays of one pixel that a label may need beyond its 5 codes: the camera's centre and,
+/// computed only when asked, the unit rays through the pixel's 4 corners in the codes' order.
+pub(crate) struct PixelRays<'a> {
+    origin: Point3,
+    corners: &'a dyn Fn() -> [Vector3; 4],
+}
+
 /// Rule 3: the label of a pixel from its 5 ray codes and the objects touching it.
+///
+/// The parts of one imported building (prisms of the same [`ObjectKind::Obstacle`]) count as
+/// one building:
+/// - when the 5 rays hit the same part, a sibling part in front of it inside the pixel is the
+///   same building, so it does not stop the pixel being O;
+/// - when they hit different parts, no one convex silhouette covers the pixel, and the pixel
+///   is O only through its roof ([`roof_covers`]).
 fn classify<'a>(
     codes: &[u32; 5],
-    mut touching: impl Iterator<Item = &'a Entry>,
+    touching: impl Iterator<Item = &'a Entry> + Clone,
     visible: &[Visible],
+    pixel: &PixelRays<'_>,
 ) -> Label {
     let first = codes[0];
     if codes.iter().any(|&c| c != first) {
-        return Label::Unknown;
+        return if roof_covers(codes, touching, visible, pixel) {
+            Label::Obstacle
+        } else {
+            Label::Unknown
+        };
     }
     if first == HIT_GROUND {
-        return if touching.next().is_none() {
+        return if touching.clone().next().is_none() {
             Label::Ground
         } else {
             Label::Unknown
@@ -532,8 +563,108 @@ fn classify<'a>(
         ObjectKind::Uav(_) => return Label::Unknown,
     };
     let limit = hit.farthest * (1.0 + DISTANCE_SLACK) + DISTANCE_SLACK;
-    let clear = touching.all(|e| e.visible == first || visible[e.visible as usize].nearest > limit);
+    let clear = touching.into_iter().all(|e| {
+        let other = &visible[e.visible as usize];
+        e.visible == first || sibling(other, hit) || other.nearest > limit
+    });
     if clear { label } else { Label::Unknown }
+}
+
+/// Whether `a` and `b` are parts of the same imported building.
+fn sibling(a: &Visible, b: &Visible) -> bool {
+    matches!((a.object.kind, b.object.kind), (ObjectKind::Obstacle(x), ObjectKind::Obstacle(y)) if x == y)
+        && a.object.as_prism().is_some()
+        && b.object.as_prism().is_some()
+}
+
+/// Whether a pixel whose 5 rays hit different parts of one imported building sees only that
+/// building's roof.
+///
+/// The rays through the pixel form a convex pyramid; the roof's plane `z = h` cuts it in the
+/// convex quadrilateral `Q` whose corners are where the 4 corner rays meet that plane. With
+/// the camera above the roof, every ray through the pixel meets the plane inside `Q`; if `Q`
+/// lies inside the building's footprint, the first point of the building on that ray is on its
+/// roof (nothing of it stands above `h`). `Q` lies inside the footprint when its corners do and
+/// no edge of the footprint's outline meets it: a point of `Q` outside would be joined to a
+/// corner by a segment crossing the outline. Every other object touching the pixel must then
+/// be entirely farther than the building's parts that touch it, as in the single-object rule.
+fn roof_covers<'a>(
+    codes: &[u32; 5],
+    touching: impl Iterator<Item = &'a Entry> + Clone,
+    visible: &[Visible],
+    pixel: &PixelRays<'_>,
+) -> bool {
+    if codes.iter().any(|&c| c >= HIT_GROUND) {
+        return false;
+    }
+    let hit = &visible[codes[0] as usize];
+    let (ObjectKind::Obstacle(_), Some(first)) = (hit.object.kind, hit.object.as_prism()) else {
+        return false;
+    };
+    let h = first.height;
+    if !codes
+        .iter()
+        .all(|&c| sibling(&visible[c as usize], hit) || c == codes[0])
+    {
+        return false;
+    }
+    let parts: Vec<&Visible> = touching
+        .clone()
+        .map(|e| &visible[e.visible as usize])
+        .filter(|v| v.object.kind == hit.object.kind && v.object.as_prism().is_some())
+        .collect();
+    if pixel.origin.z <= h
+        || parts
+            .iter()
+            .any(|v| v.object.as_prism().is_some_and(|p| p.height != h))
+    {
+        return false;
+    }
+    let o = pixel.origin;
+    let mut quad = [Point2::origin(); 4];
+    for (q, dir) in quad.iter_mut().zip((pixel.corners)()) {
+        if dir.z >= 0.0 {
+            return false;
+        }
+        let t = (h - o.z) / dir.z;
+        *q = Point2::new(o.x + t * dir.x, o.y + t * dir.y);
+    }
+    let prisms = || parts.iter().filter_map(|v| v.object.as_prism());
+    if !quad.iter().all(|q| prisms().any(|p| p.contains(q))) {
+        return false;
+    }
+    if prisms().any(|p| {
+        p.outline_edges()
+            .any(|(a, b)| segment_meets_quad(&a, &b, &quad))
+    }) {
+        return false;
+    }
+    let farthest = parts.iter().map(|v| v.farthest).fold(0.0, Real::max);
+    let limit = farthest * (1.0 + DISTANCE_SLACK) + DISTANCE_SLACK;
+    touching.into_iter().all(|e| {
+        let other = &visible[e.visible as usize];
+        sibling(other, hit) || other.nearest > limit
+    })
+}
+
+/// Whether the segment `a b` meets the convex quadrilateral `quad` (closed; either winding).
+fn segment_meets_quad(a: &Point2, b: &Point2, quad: &[Point2; 4]) -> bool {
+    let turn = |p: &Point2, q: &Point2, r: &Point2| (q - p).perp(&(r - p));
+    let inside = |p: &Point2| {
+        let sides: Vec<Real> = (0..4)
+            .map(|i| turn(&quad[i], &quad[(i + 1) % 4], p))
+            .collect();
+        sides.iter().all(|&s| s >= 0.0) || sides.iter().all(|&s| s <= 0.0)
+    };
+    if inside(a) || inside(b) {
+        return true;
+    }
+    (0..4).any(|i| {
+        let (c, d) = (&quad[i], &quad[(i + 1) % 4]);
+        let (d1, d2) = (turn(a, b, c), turn(a, b, d));
+        let (d3, d4) = (turn(c, d, a), turn(c, d, b));
+        d1 * d2 <= 0.0 && d3 * d4 <= 0.0
+    })
 }
 
 #[cfg(test)]
@@ -627,5 +758,159 @@ mod tests {
         assert!(obstacle_px > 100_000, "{obstacle_px} O pixels");
         assert!(boxes > 5, "{boxes} boxes");
         assert!(horizon_px > 100_000, "{horizon_px} pixels without depth");
+    }
+
+    /// Buildings in parts, as an import makes them: an L of two parts, a courtyard of four,
+    /// a lone rectangle; two cars between them.
+    fn parts_scene() -> Vec<SceneObject> {
+        use std::sync::Arc;
+
+        use super::prism::Prism;
+        let p = |x: Real, y: Real| Point2::new(x, y);
+        let rect = |x0: Real, y0: Real, x1: Real, y1: Real| {
+            vec![p(x0, y0), p(x1, y0), p(x1, y1), p(x0, y1)]
+        };
+        let buildings: Vec<(Vec<Vec<Point2>>, Real)> = vec![
+            // An L: a wing along x and a wing along y sharing the edge x = -30 ... -20 at y = -10.
+            (
+                vec![
+                    rect(-40.0, -40.0, -10.0, -30.0),
+                    vec![
+                        p(-40.0, -30.0),
+                        p(-30.0, -30.0),
+                        p(-30.0, 0.0),
+                        p(-40.0, 0.0),
+                    ],
+                ],
+                25.0,
+            ),
+            // A courtyard: four wings around a 20 m square, cut along their corners' diagonals.
+            (
+                vec![
+                    vec![p(10.0, 10.0), p(50.0, 10.0), p(40.0, 20.0), p(20.0, 20.0)],
+                    vec![p(50.0, 10.0), p(50.0, 50.0), p(40.0, 40.0), p(40.0, 20.0)],
+                    vec![p(50.0, 50.0), p(10.0, 50.0), p(20.0, 40.0), p(40.0, 40.0)],
+                    vec![p(10.0, 50.0), p(10.0, 10.0), p(20.0, 20.0), p(20.0, 40.0)],
+                ],
+                18.0,
+            ),
+            (vec![rect(-40.0, 20.0, -20.0, 35.0)], 40.0),
+        ];
+        let mut objects = Vec::new();
+        for (i, (parts, h)) in buildings.into_iter().enumerate() {
+            for prism in Prism::building(parts, h) {
+                objects.push(SceneObject::prism(
+                    ObjectKind::Obstacle(i as u32),
+                    Arc::new(prism),
+                ));
+            }
+        }
+        objects.push(SceneObject::new(
+            ObjectKind::Target(0),
+            Point3::new(0.0, -10.0, 0.75),
+            [2.3, 0.9, 0.75],
+            0.3,
+        ));
+        objects.push(SceneObject::new(
+            ObjectKind::Target(1),
+            Point3::new(30.0, 30.0, 0.75),
+            [2.3, 0.9, 0.75],
+            1.2,
+        ));
+        objects
+    }
+
+    /// The first thing the unit ray `dir` from `origin` meets: an object's kind, or `None` for
+    /// the ground or the sky.
+    fn first_hit(
+        objects: &[SceneObject],
+        origin: &Point3,
+        dir: &Vector3,
+    ) -> (Option<ObjectKind>, Option<usize>) {
+        let mut best = if dir.z < 0.0 {
+            -origin.z / dir.z
+        } else {
+            Real::INFINITY
+        };
+        let mut hit = (None, None);
+        for (i, o) in objects.iter().enumerate() {
+            if let Some(t) = o.cast(origin, dir, best)
+                && t <= best
+            {
+                best = t;
+                hit = (Some(o.kind), Some(i));
+            }
+        }
+        hit
+    }
+
+    #[test]
+    fn buildings_in_parts_render_as_the_reference_does_and_o_pixels_see_only_their_building() {
+        let scenario = Scenario::default();
+        let objects = parts_scene();
+        let mut rng = ChaCha8Rng::seed_from_u64(43);
+        let mut fast = CvsFrame::new_boxed();
+        let mut reference = CvsFrame::new_boxed();
+        let (mut obstacle_px, mut seam_px) = (0usize, 0usize);
+        for k in 0..24u32 {
+            let mut model = scenario.camera_model();
+            model.rows = 120;
+            model.cols = 160;
+            model.tilt_rad = rng.random_range(0.5..1.5);
+            let position = Point3::new(
+                rng.random_range(-60.0..60.0),
+                rng.random_range(-60.0..60.0),
+                rng.random_range(45.0..120.0),
+            );
+            // Look toward the buildings.
+            let yaw = (-position.y).atan2(-position.x) + rng.random_range(-0.5..0.5);
+            let camera = Camera::new(model, CameraPose { position, yaw });
+            let spec = FrameSpec {
+                run_tag: 1,
+                seed: 7,
+                step: k as u64,
+                time_s: 0.0,
+                uav: k,
+                depth_noise: [0.0, 0.0],
+                unknown_fraction: 0.0,
+                min_pixels: 5,
+                depth_ray: [DepthRay::Centre, DepthRay::Random][k as usize % 2],
+            };
+            render(&camera, &objects, &spec, &mut fast);
+            reference::render(&camera, &objects, &spec, &mut reference);
+            assert_same(&fast, &reference, &format!("camera {k}"));
+            // Every O pixel sees its building and nothing else: sample rays across it.
+            let origin = camera.origin();
+            for r in 0..model.rows {
+                for c in 0..model.cols {
+                    if fast.labels[(r * model.cols + c) as usize] != Label::Obstacle as u8 {
+                        continue;
+                    }
+                    obstacle_px += 1;
+                    let mut kinds = Vec::new();
+                    let mut parts = Vec::new();
+                    for i in 0..5 {
+                        for j in 0..5 {
+                            let dir = camera
+                                .ray(c as Real + i as Real / 4.0, r as Real + j as Real / 4.0);
+                            let (kind, part) = first_hit(&objects, &origin, &dir);
+                            kinds.push(kind);
+                            parts.push(part);
+                        }
+                    }
+                    assert!(
+                        matches!(kinds[0], Some(ObjectKind::Obstacle(_)))
+                            && kinds.iter().all(|k| *k == kinds[0]),
+                        "camera {k}, pixel ({r}, {c}): {kinds:?}"
+                    );
+                    parts.sort();
+                    parts.dedup();
+                    seam_px += usize::from(parts.len() > 1);
+                }
+            }
+        }
+        assert!(obstacle_px > 10_000, "{obstacle_px} O pixels");
+        // Pixels across the seams between parts are O too.
+        assert!(seam_px > 100, "{seam_px} O pixels across seams");
     }
 }

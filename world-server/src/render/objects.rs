@@ -1,13 +1,18 @@
-//! What a camera can see besides the ground: boxes, each with what it is.
+//! What a camera can see besides the ground: boxes and upright convex prisms (the parts of an
+//! imported building, [`super::prism`]), each with what it is.
 //!
 //! [`SceneObject::cast`] is parry3d's ray cast against the posed cuboid. A frame casts every
 //! ray from the same optical centre, so [`SceneObject::seen_from`] does once per frame the
 //! part of that cast that depends on the origin only, and [`SeenFrom::cast`] the rest, with
 //! parry3d's arithmetic operation for operation: both give the same floats (a test pins it).
 
+use std::sync::Arc;
+
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::Cuboid;
 use sets::math::{Isometry3, Point3, Real, Vector3};
+
+use super::prism::Prism;
 
 /// What an object is, for labelling.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -20,13 +25,23 @@ pub enum ObjectKind {
     Uav(u32),
 }
 
-/// A box in the scene: a cuboid posed in the world.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The shape of a scene object.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Shape {
+    /// A box centred on the object's pose (the generated city's buildings, cars, UAVs).
+    Cuboid(Cuboid),
+    /// An upright convex prism in world coordinates (a part of an imported building); the
+    /// object's pose is the identity.
+    Prism(Arc<Prism>),
+}
+
+/// An object in the scene: a shape posed in the world.
+#[derive(Clone, Debug, PartialEq)]
 pub struct SceneObject {
     /// What it is.
     pub kind: ObjectKind,
     /// Its shape, centred on its local origin.
-    pub shape: Cuboid,
+    pub shape: Shape,
     /// Where it is: the world pose of its centre.
     pub pose: Isometry3,
 }
@@ -37,43 +52,98 @@ impl SceneObject {
         let [hx, hy, hz] = half_extents;
         SceneObject {
             kind,
-            shape: Cuboid::new(Vector3::new(hx, hy, hz)),
+            shape: Shape::Cuboid(Cuboid::new(Vector3::new(hx, hy, hz))),
             pose: Isometry3::new(centre.coords, Vector3::z() * yaw),
         }
     }
 
-    /// The eight corners in the world frame.
-    pub fn vertices(&self) -> [Point3; 8] {
-        let h = self.shape.half_extents;
-        let mut out = [Point3::origin(); 8];
-        for (i, v) in out.iter_mut().enumerate() {
-            let sx = if i & 1 == 0 { -h.x } else { h.x };
-            let sy = if i & 2 == 0 { -h.y } else { h.y };
-            let sz = if i & 4 == 0 { -h.z } else { h.z };
-            *v = self.pose * Point3::new(sx, sy, sz);
+    /// A part of a building: an upright convex prism in world coordinates.
+    pub fn prism(kind: ObjectKind, prism: Arc<Prism>) -> Self {
+        SceneObject {
+            kind,
+            shape: Shape::Prism(prism),
+            pose: Isometry3::identity(),
         }
-        out
     }
 
-    /// Distance along the unit ray `dir` from `origin` to the first point of the box, if the
-    /// ray meets it within `max_range` (0 if `origin` is inside).
+    /// The corners in the world frame: a box's eight, a prism's floor then roof.
+    pub fn vertices(&self) -> Vec<Point3> {
+        match &self.shape {
+            Shape::Cuboid(cuboid) => {
+                let h = cuboid.half_extents;
+                (0..8)
+                    .map(|i| {
+                        let sx = if i & 1 == 0 { -h.x } else { h.x };
+                        let sy = if i & 2 == 0 { -h.y } else { h.y };
+                        let sz = if i & 4 == 0 { -h.z } else { h.z };
+                        self.pose * Point3::new(sx, sy, sz)
+                    })
+                    .collect()
+            }
+            Shape::Prism(prism) => prism.vertices().collect(),
+        }
+    }
+
+    /// The edges, as pairs of indices into [`SceneObject::vertices`].
+    pub fn edges(&self) -> Vec<(usize, usize)> {
+        match &self.shape {
+            // The 12 edges of a box join vertices differing in exactly one index bit.
+            Shape::Cuboid(_) => (0..8usize)
+                .flat_map(|a| [1usize, 2, 4].map(|bit| (a, a | bit)))
+                .filter(|&(a, b)| a != b)
+                .collect(),
+            Shape::Prism(prism) => prism.vertex_edges().collect(),
+        }
+    }
+
+    /// The cuboid, for a box.
+    pub fn as_cuboid(&self) -> Option<&Cuboid> {
+        match &self.shape {
+            Shape::Cuboid(cuboid) => Some(cuboid),
+            Shape::Prism(_) => None,
+        }
+    }
+
+    /// The prism, for a part of an imported building.
+    pub fn as_prism(&self) -> Option<&Prism> {
+        match &self.shape {
+            Shape::Prism(prism) => Some(prism),
+            Shape::Cuboid(_) => None,
+        }
+    }
+
+    /// Distance along the unit ray `dir` from `origin` to the first point of the object, if
+    /// the ray meets it within `max_range` (0 if `origin` is inside).
     pub fn cast(&self, origin: &Point3, dir: &Vector3, max_range: Real) -> Option<Real> {
-        self.shape
-            .cast_ray(&self.pose, &Ray::new(*origin, *dir), max_range, true)
+        match &self.shape {
+            Shape::Cuboid(cuboid) => {
+                cuboid.cast_ray(&self.pose, &Ray::new(*origin, *dir), max_range, true)
+            }
+            Shape::Prism(prism) => prism.cast(origin, dir, max_range).map(|(t, _)| t),
+        }
     }
 
-    /// The box as rays from `origin` see it: [`SeenFrom::cast`] is [`SceneObject::cast`] from
-    /// `origin`.
+    /// The object as rays from `origin` see it: [`SeenFrom::cast`] is [`SceneObject::cast`]
+    /// from `origin`.
     pub fn seen_from(&self, origin: &Point3) -> SeenFrom {
+        let cuboid = match &self.shape {
+            Shape::Cuboid(cuboid) => cuboid,
+            Shape::Prism(prism) => {
+                return SeenFrom::Prism {
+                    prism: Arc::clone(prism),
+                    origin: *origin,
+                };
+            }
+        };
         // parry3d-f64 0.25 casts a ray against a posed cuboid (`RayCast::cast_ray`) by moving
         // the ray into the box's frame (`Ray::inverse_transform_by`) and clipping it against
         // the box's slabs (`Aabb::cast_local_ray`, the box `[-h, h]`); the slab bounds'
         // offsets from the moved origin are the same for every ray of the frame.
         let local = self.pose.inverse_transform_point(origin);
-        let maxs = Point3::from(self.shape.half_extents);
-        let mins = Point3::from(-self.shape.half_extents);
+        let maxs = Point3::from(cuboid.half_extents);
+        let mins = Point3::from(-cuboid.half_extents);
         let q = &self.pose.rotation;
-        SeenFrom {
+        SeenFrom::Box(BoxSeen {
             pose: self.pose,
             square: q.i == 0.0 && q.j == 0.0 && q.k == 0.0 && q.w.is_finite(),
             origin: local,
@@ -81,13 +151,16 @@ impl SceneObject {
             maxs,
             to_mins: [0, 1, 2].map(|i| mins[i] - local[i]),
             to_maxs: [0, 1, 2].map(|i| maxs[i] - local[i]),
-        }
+        })
     }
 
-    /// Distance from `p` to the nearest point of the box (0 inside).
+    /// Distance from `p` to the nearest point of the object (0 inside).
     pub fn nearest_distance(&self, p: &Point3) -> Real {
+        let h = match &self.shape {
+            Shape::Cuboid(cuboid) => cuboid.half_extents,
+            Shape::Prism(prism) => return prism.nearest_distance(p),
+        };
         let local = self.pose.inverse_transform_point(p);
-        let h = self.shape.half_extents;
         let d = Vector3::new(
             (local.x.abs() - h.x).max(0.0),
             (local.y.abs() - h.y).max(0.0),
@@ -96,7 +169,7 @@ impl SceneObject {
         d.norm()
     }
 
-    /// Distance from `p` to the farthest corner of the box (so to every point of it).
+    /// Distance from `p` to the farthest corner of the object (so to every point of it).
     pub fn farthest_distance(&self, p: &Point3) -> Real {
         self.vertices()
             .iter()
@@ -106,8 +179,22 @@ impl SceneObject {
 }
 
 /// A [`SceneObject`] as the rays from one fixed origin see it ([`SceneObject::seen_from`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum SeenFrom {
+    /// A box, with what every ray's slab test shares.
+    Box(BoxSeen),
+    /// A prism and the rays' origin.
+    Prism {
+        /// The prism.
+        prism: Arc<Prism>,
+        /// The rays' origin.
+        origin: Point3,
+    },
+}
+
+/// A box as the rays from one fixed origin see it.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SeenFrom {
+pub struct BoxSeen {
     /// The box's world pose.
     pose: Isometry3,
     /// Whether the pose does not turn the box (its rotation's vector part is zero).
@@ -126,32 +213,45 @@ pub struct SeenFrom {
 
 impl SeenFrom {
     /// [`SceneObject::cast`] from the origin this view was made for: distance along the unit
-    /// ray `dir` to the first point of the box, if the ray meets it within `max_range`.
+    /// ray `dir` to the first point of the object, if the ray meets it within `max_range`.
     ///
-    /// The operations are those of parry3d-f64 0.25.3's `Aabb::cast_local_ray` (solid) on the
-    /// ray moved into the box's frame, in the same order, so the result is the same float.
+    /// For a box, the operations are those of parry3d-f64 0.25.3's `Aabb::cast_local_ray`
+    /// (solid) on the ray moved into the box's frame, in the same order, so the result is the
+    /// same float.
     #[inline]
     pub fn cast(&self, dir: &Vector3, max_range: Real) -> Option<Real> {
-        let d = self.pose.inverse_transform_vector(dir);
-        self.clip(&d, &[1.0 / d.x, 1.0 / d.y, 1.0 / d.z], max_range)
+        match self {
+            SeenFrom::Box(b) => {
+                let d = b.pose.inverse_transform_vector(dir);
+                b.clip(&d, &[1.0 / d.x, 1.0 / d.y, 1.0 / d.z], max_range)
+            }
+            SeenFrom::Prism { prism, origin } => prism.cast(origin, dir, max_range).map(|(t, _)| t),
+        }
     }
 
-    /// Whether the box is not turned: a square box sees a ray with the world direction.
+    /// Whether the object is a box that is not turned: a square box sees a ray with the world
+    /// direction.
     pub fn is_square(&self) -> bool {
-        self.square
+        matches!(self, SeenFrom::Box(b) if b.square)
     }
 
     /// [`SeenFrom::cast`] of a square box ([`SeenFrom::is_square`]), given the direction's
-    /// reciprocals `inv = [1 / dir.x, 1 / dir.y, 1 / dir.z]`, shared by every square box.
+    /// reciprocals `inv = [1 / dir.x, 1 / dir.y, 1 / dir.z]`, shared by every square box;
+    /// any other object is cast as [`SeenFrom::cast`] casts it.
     ///
     /// The rotation parry3d applies to the direction multiplies the quaternion's vector part,
     /// here zeros, into zeros and adds them to each component: a nonzero component comes out
     /// unchanged and a zero one zero, which are all the slab test looks at.
     #[inline]
     pub fn cast_square(&self, dir: &Vector3, inv: &[Real; 3], max_range: Real) -> Option<Real> {
-        self.clip(dir, inv, max_range)
+        match self {
+            SeenFrom::Box(b) => b.clip(dir, inv, max_range),
+            SeenFrom::Prism { .. } => self.cast(dir, max_range),
+        }
     }
+}
 
+impl BoxSeen {
     /// `Aabb::cast_local_ray` of the box against the direction `d` in its frame, with `inv`
     /// the reciprocals of `d`'s components (used only where they are nonzero).
     #[inline]

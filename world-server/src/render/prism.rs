@@ -23,19 +23,68 @@ pub enum Face {
     Inside,
 }
 
-/// An upright prism over a convex counter-clockwise footprint, from `z = 0` to `z = height`.
+/// An upright prism over a convex counter-clockwise footprint, from `z = 0` to `z = height`:
+/// one part of a building.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prism {
     /// The footprint's corners, counter-clockwise, strictly convex.
     pub footprint: Vec<Point2>,
     /// The roof's height, metres.
     pub height: Real,
+    /// Per footprint edge `i` (corner `i` to `i + 1`): whether it lies on the building's
+    /// outline, rather than against another part of the same building.
+    pub outline: Vec<bool>,
 }
 
 impl Prism {
-    /// The prism over `footprint` (counter-clockwise, strictly convex) up to `height`.
+    /// The prism over `footprint` (counter-clockwise, strictly convex) up to `height`, a
+    /// building of its own: every edge is on the outline.
     pub fn new(footprint: Vec<Point2>, height: Real) -> Prism {
-        Prism { footprint, height }
+        let outline = vec![true; footprint.len()];
+        Prism {
+            footprint,
+            height,
+            outline,
+        }
+    }
+
+    /// The parts of one building, each edge on the outline unless another part has the same
+    /// edge reversed (the parts of a convex decomposition share their inner edges exactly).
+    pub fn building(parts: Vec<Vec<Point2>>, height: Real) -> Vec<Prism> {
+        let key = |p: &Point2| (p.x.to_bits(), p.y.to_bits());
+        let mut edges = std::collections::HashSet::new();
+        for part in &parts {
+            let n = part.len();
+            for i in 0..n {
+                edges.insert((key(&part[i]), key(&part[(i + 1) % n])));
+            }
+        }
+        parts
+            .into_iter()
+            .map(|footprint| {
+                let n = footprint.len();
+                let outline = (0..n)
+                    .map(|i| !edges.contains(&(key(&footprint[(i + 1) % n]), key(&footprint[i]))))
+                    .collect();
+                Prism {
+                    footprint,
+                    height,
+                    outline,
+                }
+            })
+            .collect()
+    }
+
+    /// The footprint's edges on the building's outline.
+    pub fn outline_edges(&self) -> impl Iterator<Item = (Point2, Point2)> + '_ {
+        self.edges()
+            .zip(&self.outline)
+            .filter_map(|(e, &on)| on.then_some(e))
+    }
+
+    /// Whether the ground point `p` lies inside or on the footprint.
+    pub fn contains(&self, p: &Point2) -> bool {
+        self.edges().all(|(a, b)| (b - a).perp(&(p - a)) >= 0.0)
     }
 
     /// The corners: the footprint at the floor, then at the roof.
@@ -45,8 +94,18 @@ impl Prism {
             .flat_map(move |z| self.footprint.iter().map(move |p| Point3::new(p.x, p.y, z)))
     }
 
+    /// The prism's edges as pairs of indices into [`Prism::vertices`]: the floor's, the
+    /// roof's, then the vertical ones.
+    pub fn vertex_edges(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let n = self.footprint.len();
+        (0..n)
+            .map(move |i| (i, (i + 1) % n))
+            .chain((0..n).map(move |i| (n + i, n + (i + 1) % n)))
+            .chain((0..n).map(move |i| (i, n + i)))
+    }
+
     /// The footprint's edges as (start, end) corners.
-    fn edges(&self) -> impl Iterator<Item = (Point2, Point2)> + '_ {
+    pub fn edges(&self) -> impl Iterator<Item = (Point2, Point2)> + '_ {
         let n = self.footprint.len();
         (0..n).map(move |i| (self.footprint[i], self.footprint[(i + 1) % n]))
     }

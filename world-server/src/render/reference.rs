@@ -13,8 +13,9 @@ use sets::math::{Point3, Real, Vector3};
 use super::boxes::{self, RowTargets};
 use super::noise::RowNoise;
 use super::{
-    Entry, FrameSpec, HIT_GROUND, HIT_NOTHING, ObjectKind, SceneObject, Visible, classify,
-    corner_row_entries, frame_size, random_rays, row_entries, visible_objects, write_header,
+    Entry, FrameSpec, HIT_GROUND, HIT_NOTHING, ObjectKind, PixelRays, SceneObject, Visible,
+    classify, corner_row_entries, frame_size, random_rays, row_entries, visible_objects,
+    write_header,
 };
 
 /// Renders `camera`'s view of the ground and `objects` into `frame`, in place.
@@ -111,7 +112,19 @@ fn centre_rows(
                 let dir = camera.centre_ray(r, c);
                 let (centre, range) = cast(&origin, &dir, touching(), visible);
                 let codes = [top[ci], top[ci + 1], bottom[ci + 1], bottom[ci], centre];
-                let mut label = classify(&codes, touching(), visible);
+                let corners = || {
+                    [
+                        camera.corner_ray(r, c),
+                        camera.corner_ray(r, c + 1),
+                        camera.corner_ray(r + 1, c + 1),
+                        camera.corner_ray(r + 1, c),
+                    ]
+                };
+                let pixel = PixelRays {
+                    origin,
+                    corners: &corners,
+                };
+                let mut label = classify(&codes, touching(), visible, &pixel);
 
                 let px = noise.next_pixel();
                 let (depth_code, range) = match ray_points.as_mut() {
