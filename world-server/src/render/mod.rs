@@ -13,7 +13,10 @@
 //!    rays hit the same target (building) and every other object whose footprint touches it is
 //!    entirely farther than that object's farthest corner (nothing can then stand in front of
 //!    it inside the pixel, and its convex silhouette, containing the 4 corners, covers the
-//!    pixel); U otherwise, and for other UAVs.
+//!    pixel); U otherwise, and for other UAVs. An imported building is several convex prisms
+//!    ([`prism`]) of one [`ObjectKind::Obstacle`]: a part of the same building in front of the
+//!    one hit is still that building, and a pixel whose rays hit different parts is O when its
+//!    section by the roof's plane lies inside the building's outline (`roof_covers`).
 //! 4. Classifier doubt turns a random share of pixels U; depth is the range of the pixel's
 //!    depth ray times `1 + w`, `w` uniform in the noise bounds, NaN (and the pixel U) when
 //!    that ray hits nothing or starts inside a box. The depth ray is the centre ray, or with
