@@ -15,7 +15,7 @@
 //!   inside the RoI (the ring road runs inside the border);
 //! - a car never travels more than `cruise * dt <= v_max * dt` along its path in a step, so
 //!   its displacement per step never exceeds `v_max * dt`;
-//! - at every step, any two cars' centres are at least [`RoadProfile::car_separation`]
+//! - at every step, any two cars' centres are at least [`crate::scene::RoadProfile::car_separation`]
 //!   (`max(r_s, car length) + margin`) apart: cars move one after the other, and a car only
 //!   takes a move (full, or shortened) that keeps that distance to every other car's latest
 //!   position, otherwise it waits. A car blocked for [`DEADLOCK_STEPS`] steps turns around
@@ -27,6 +27,9 @@
 //! and 5 stand so from 57 s to the end of the run. Nothing the estimator proves depends on the
 //! cars moving; that seed's metrics see two parked cars.
 
+/// Cars on an imported city's road network.
+pub mod network;
+
 use std::collections::VecDeque;
 
 use protocol::scenario::{Scenario, SpeedDraw};
@@ -35,7 +38,7 @@ use rand_chacha::ChaCha8Rng;
 use sets::math::{Point2, Real};
 
 use crate::error::WorldBuildError;
-use crate::scene::{Axis, Lane, RoadGrid, RoadProfile};
+use crate::scene::{Axis, Lane, RoadGrid};
 
 /// Steps a car waits, blocked, before turning around.
 pub const DEADLOCK_STEPS: u32 = 20;
@@ -48,14 +51,15 @@ const EPS: Real = 1e-6;
 
 /// A point of a car's planned path, and the lane the car is on once it gets there.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct Waypoint {
+struct Waypoint<L> {
     point: Point2,
-    lane: Lane,
+    lane: L,
 }
 
-/// One car.
+/// One car, on the lanes `L` of its road model: the grid's [`Lane`]s, or a road network's
+/// ([`network`]).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Car {
+pub struct Car<L = Lane> {
     /// Target id (its index).
     pub id: u32,
     /// Ground point under the car's centre.
@@ -66,21 +70,36 @@ pub struct Car {
     pub cruise_mps: Real,
     /// Distance travelled along its path in the last step divided by the step, m/s.
     pub speed_mps: Real,
-    lane: Lane,
-    path: VecDeque<Waypoint>,
+    lane: L,
+    path: VecDeque<Waypoint<L>>,
     stalled_steps: u32,
     /// Time left of the car's current stop, seconds (0: not stopped).
     stop_left_s: Real,
 }
 
-impl Car {
+impl<L: Copy> Car<L> {
+    /// A car standing at `position` on `lane`, heading `heading`, with nothing planned.
+    fn standing(id: u32, position: Point2, heading: Real, cruise_mps: Real, lane: L) -> Car<L> {
+        Car {
+            id,
+            position,
+            heading,
+            cruise_mps,
+            speed_mps: 0.0,
+            lane,
+            path: VecDeque::new(),
+            stalled_steps: 0,
+            stop_left_s: 0.0,
+        }
+    }
+
     /// The lane the car is on (during a turn, the lane it is leaving).
-    pub fn lane(&self) -> Lane {
+    pub fn lane(&self) -> L {
         self.lane
     }
 
     /// Where the path ahead ends and on which lane.
-    fn path_end(&self) -> (Point2, Lane) {
+    fn path_end(&self) -> (Point2, L) {
         self.path
             .back()
             .map_or((self.position, self.lane), |w| (w.point, w.lane))
@@ -97,7 +116,7 @@ impl Car {
     }
 
     /// The car after travelling `dist` along its path (the path must be long enough).
-    fn travelled(&self, dist: Real) -> Car {
+    fn travelled(&self, dist: Real) -> Car<L> {
         let mut car = self.clone();
         let mut left = dist;
         while left > 0.0 {
@@ -134,21 +153,50 @@ struct SpeedModel {
 }
 
 impl SpeedModel {
+    /// The scenario's `[targets]` speeds and stops.
+    fn of(scenario: &Scenario) -> SpeedModel {
+        let t = &scenario.targets;
+        SpeedModel {
+            max_speed: t.max_speed_mps,
+            spread: t.cruise_spread,
+            draw: t.speed_draw,
+            stops_per_min: t.stops_per_min,
+            stop_s: t.stop_s,
+        }
+    }
+
     fn cruise(&self, rng: &mut ChaCha8Rng) -> Real {
         self.max_speed * (1.0 - self.spread * rng.random::<Real>())
     }
 }
 
+/// What a road model tells the cars that drive on it: where to go next, how to turn around
+/// when blocked, and how far apart to keep.
+pub trait RoadModel<L> {
+    /// Smallest centre-to-centre distance between two cars.
+    fn car_separation(&self) -> Real;
+    /// Extends a car's path to its next decision.
+    fn plan(&self, car: &mut Car<L>, rng: &mut ChaCha8Rng);
+    /// Replaces a blocked car's path by a crossing onto its road's other lane, right where it
+    /// is; `others` are the other cars' positions.
+    fn turn_around(&self, car: &mut Car<L>, others: &[Point2]);
+    /// Whether car `i` of `cars` may move to `to`, beyond keeping its distance (a junction
+    /// taken one car at a time); every move by default.
+    fn admits(&self, _cars: &[Car<L>], _i: usize, _to: &Point2) -> bool {
+        true
+    }
+}
+
 /// Every car of the run, and the random sources of their decisions.
 #[derive(Clone, Debug)]
-pub struct Traffic {
-    cars: Vec<Car>,
+pub struct Traffic<L = Lane> {
+    cars: Vec<Car<L>>,
     rng: ChaCha8Rng,
     speeds: ChaCha8Rng,
     model: SpeedModel,
 }
 
-impl Traffic {
+impl Traffic<Lane> {
     /// Places `targets.count` cars at random on the lanes, at least the car separation apart,
     /// each with a cruise speed `v_max (1 - cruise_spread u)`. `rng` draws the placements,
     /// the cruise speeds per car and the turns; `speeds`, an independent source, the speeds
@@ -160,13 +208,7 @@ impl Traffic {
         speeds: ChaCha8Rng,
     ) -> Result<Traffic, WorldBuildError> {
         let t = &scenario.targets;
-        let model = SpeedModel {
-            max_speed: t.max_speed_mps,
-            spread: t.cruise_spread,
-            draw: t.speed_draw,
-            stops_per_min: t.stops_per_min,
-            stop_s: t.stop_s,
-        };
+        let model = SpeedModel::of(scenario);
         let sep = roads.profile.car_separation;
         let mut cars: Vec<Car> = Vec::with_capacity(t.count as usize);
         for id in 0..t.count {
@@ -185,17 +227,8 @@ impl Traffic {
                 let p = roads.point_on_lane(lane, rng.random_range(lo..=hi));
                 if cars.iter().all(|c| (c.position - p).norm() >= sep + EPS) {
                     let h = lane.heading();
-                    placed = Some(Car {
-                        id,
-                        position: p,
-                        heading: h.y.atan2(h.x),
-                        cruise_mps: model.cruise(&mut rng),
-                        speed_mps: 0.0,
-                        lane,
-                        path: VecDeque::new(),
-                        stalled_steps: 0,
-                        stop_left_s: 0.0,
-                    });
+                    let cruise = model.cruise(&mut rng);
+                    placed = Some(Car::standing(id, p, h.y.atan2(h.x), cruise, lane));
                     break;
                 }
             }
@@ -217,31 +250,46 @@ impl Traffic {
             model,
         })
     }
+}
 
+impl<L: Copy> Traffic<L> {
     /// The cars, by id.
-    pub fn cars(&self) -> &[Car] {
+    pub fn cars(&self) -> &[Car<L>] {
         &self.cars
     }
 
     /// Advances every car by `dt` seconds, in id order.
-    pub fn step(&mut self, roads: &RoadGrid, dt: Real) {
-        let profile = roads.profile;
+    pub fn step(&mut self, roads: &impl RoadModel<L>, dt: Real) {
+        let separation = roads.car_separation();
         for i in 0..self.cars.len() {
             if self.stands_still(i, dt) {
                 continue;
             }
             let budget = (self.cars[i].cruise_mps.min(self.model.max_speed) * dt).max(0.0);
             if self.cars[i].stalled_steps >= DEADLOCK_STEPS {
-                self.turn_around(roads, i);
+                let others: Vec<Point2> = (self.cars.iter().enumerate())
+                    .filter(|&(j, _)| j != i)
+                    .map(|(_, c)| c.position)
+                    .collect();
+                let car = &mut self.cars[i];
+                tracing::debug!(
+                    car = car.id,
+                    "car blocked for {} steps turns around",
+                    car.stalled_steps
+                );
+                roads.turn_around(car, &others);
+                car.stalled_steps = 0;
             }
             while self.cars[i].path_length() < budget + EPS {
                 let car = &mut self.cars[i];
-                plan(roads, car, &mut self.rng);
+                roads.plan(car, &mut self.rng);
             }
             let mut moved = None;
             for share in MOVE_SHARES {
                 let cand = self.cars[i].travelled(budget * share);
-                if self.keeps_clear(i, &cand.position, &profile) {
+                if self.keeps_clear(i, &cand.position, separation)
+                    && roads.admits(&self.cars, i, &cand.position)
+                {
                     moved = Some((cand, budget * share));
                     break;
                 }
@@ -286,29 +334,31 @@ impl Traffic {
         false
     }
 
-    fn keeps_clear(&self, i: usize, p: &Point2, profile: &RoadProfile) -> bool {
+    fn keeps_clear(&self, i: usize, p: &Point2, separation: Real) -> bool {
         self.cars
             .iter()
             .enumerate()
-            .all(|(j, c)| j == i || (c.position - p).norm() >= profile.car_separation + EPS)
+            .all(|(j, c)| j == i || (c.position - p).norm() >= separation + EPS)
+    }
+}
+
+impl RoadModel<Lane> for RoadGrid {
+    fn car_separation(&self) -> Real {
+        self.profile.car_separation
     }
 
-    /// Replaces car `i`'s path by a crossing onto its road's other lane, right where it is.
-    fn turn_around(&mut self, roads: &RoadGrid, i: usize) {
-        let car = &mut self.cars[i];
+    fn plan(&self, car: &mut Car, rng: &mut ChaCha8Rng) {
+        plan(self, car, rng);
+    }
+
+    fn turn_around(&self, car: &mut Car, _others: &[Point2]) {
         let opposite = car.lane.opposite();
         let s = RoadGrid::along(car.lane.axis, &car.position);
-        tracing::debug!(
-            car = car.id,
-            "car blocked for {} steps turns around",
-            car.stalled_steps
-        );
         car.path.clear();
         car.path.push_back(Waypoint {
-            point: roads.point_on_lane(opposite, s),
+            point: self.point_on_lane(opposite, s),
             lane: opposite,
         });
-        car.stalled_steps = 0;
     }
 }
 
@@ -330,7 +380,7 @@ fn plan(roads: &RoadGrid, car: &mut Car, rng: &mut ChaCha8Rng) {
         push_u_turn(roads, car, lane, s);
         return;
     };
-    let mut options: [Option<Waypoint>; 3] = [None; 3];
+    let mut options: [Option<Waypoint<Lane>>; 3] = [None; 3];
     let continues = if lane.dir > 0 {
         m + 1 < cs.len()
     } else {

@@ -1,0 +1,611 @@
+//! Cars on an imported city's road network (`city::scene::RoadNetwork`): the built-in
+//! traffic model of a real city.
+//!
+//! Every road has a lane each way, `RoadNetwork::lane_offset_m` to the right of its
+//! centreline (the model drives both ways on every road; `oneway` tags are the SUMO model's
+//! to keep). A car drives to the end of its lane, then straight to the start of a lane that
+//! leaves the same point, chosen at random among the roads that continue there; at a dead end
+//! it turns around onto the other lane of its road. Speeds, stops and the separation are the
+//! grid's ([`crate::traffic::Traffic::step`]).
+//!
+//! **Zones.** Where two lanes come closer than the separation (at junctions, at sharp bends,
+//! between roads that meet at a narrow angle), two cars could block each other for good. The
+//! network finds those places from its geometry (`Zones`) and lets one car at a time into
+//! each, besides the cars that follow it. Outside the zones a car can only be held up by the
+//! car ahead of it on its way. A blocked car waits: it never turns around in the road.
+//!
+//! Guarantees, by construction:
+//! - **Clearance.** A lane point is the lane offset from a point of its road's centreline, and
+//!   a connector joins two lane ends that are each the lane offset from the same network
+//!   point, so every point a car's centre reaches is within the lane offset of the centreline
+//!   network (a disc is convex). The importer keeps every centreline the lane offset plus
+//!   `targets.building_clearance_m` from every building part, so a car's centre keeps the
+//!   clearance. The region's border is kept the same way: centrelines end the road's half
+//!   width plus 2 m inside it.
+//! - **Speed and separation** are the grid's: a car moves at most `v_max dt` along its path
+//!   in a step, and only to a point the car separation away from every other car.
+//!
+//! Cars keep moving on the tests' network (8 cars on 1.4 km of road with a dead end and roads
+//! meeting at 16°, seeds 1 to 12, 1,000 s each); that is measured, not guaranteed.
+
+use city::scene::RoadNetwork;
+use protocol::scenario::Scenario;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use sets::math::{Point2, Real, Vector2};
+
+use super::{Car, EPS, PLACEMENT_TRIES, RoadModel, SpeedModel, Traffic, Waypoint};
+use crate::error::WorldBuildError;
+
+/// A lane: edge `edge` of the network, driven from its point `a` to `b` (`forward`) or back.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct NetLane {
+    /// Index of the edge.
+    pub edge: u32,
+    /// Whether the lane runs from the edge's `a` to its `b`.
+    pub forward: bool,
+}
+
+impl NetLane {
+    /// The lane of the same road the other way.
+    pub fn opposite(self) -> NetLane {
+        NetLane {
+            forward: !self.forward,
+            ..self
+        }
+    }
+}
+
+/// The road network as the cars drive it.
+#[derive(Clone, Debug)]
+pub struct LaneNetwork {
+    points: Vec<Point2>,
+    edges: Vec<[u32; 2]>,
+    /// Per point, the edges that meet there.
+    incident: Vec<Vec<u32>>,
+    lane_offset: Real,
+    car_separation: Real,
+    /// Where cars on different lanes can come closer than the separation.
+    zones: Zones,
+}
+
+impl LaneNetwork {
+    /// The network of an imported city, for cars kept `car_separation` apart.
+    pub fn new(net: &RoadNetwork, car_separation: Real) -> LaneNetwork {
+        let points: Vec<Point2> = net.points.iter().map(|p| Point2::new(p[0], p[1])).collect();
+        let mut incident = vec![Vec::new(); points.len()];
+        let mut edges = Vec::with_capacity(net.edges.len());
+        for e in &net.edges {
+            let k = edges.len() as u32;
+            incident[e.a as usize].push(k);
+            incident[e.b as usize].push(k);
+            edges.push([e.a, e.b]);
+        }
+        LaneNetwork {
+            points,
+            edges,
+            incident,
+            lane_offset: net.lane_offset_m,
+            car_separation,
+            zones: Zones::default(),
+        }
+        .with_zones()
+    }
+
+    /// The network with its conflict zones found ([`Zones`]).
+    fn with_zones(mut self) -> LaneNetwork {
+        self.zones = Zones::find(&self.paths(), self.car_separation + ZONE_MARGIN_M);
+        self
+    }
+
+    /// Every path a car can follow: each lane, and each connector from a lane's end to the
+    /// start of a lane leaving the same point (the other lane of the same road only at a
+    /// dead end), with the paths each leads into.
+    fn paths(&self) -> Vec<Path> {
+        let mut paths = Vec::new();
+        let mut lane_index = std::collections::HashMap::new();
+        for edge in 0..self.edges.len() as u32 {
+            for forward in [true, false] {
+                let lane = NetLane { edge, forward };
+                lane_index.insert(lane, paths.len());
+                paths.push(Path {
+                    from: self.lane_point(lane, 0.0),
+                    to: self.lane_point(lane, Real::INFINITY),
+                    next: Vec::new(),
+                });
+            }
+        }
+        for edge in 0..self.edges.len() as u32 {
+            for forward in [true, false] {
+                let lane = NetLane { edge, forward };
+                for next in self.next_lanes(lane) {
+                    let k = paths.len();
+                    paths.push(Path {
+                        from: self.lane_point(lane, Real::INFINITY),
+                        to: self.lane_point(next, 0.0),
+                        next: vec![lane_index[&next]],
+                    });
+                    paths[lane_index[&lane]].next.push(k);
+                }
+            }
+        }
+        paths
+    }
+
+    /// The lanes a car at the end of `lane` may take: the other roads at that point, or the
+    /// other lane of its road at a dead end.
+    fn next_lanes(&self, lane: NetLane) -> Vec<NetLane> {
+        let (_, node) = self.ends(lane);
+        let options: Vec<NetLane> = self.incident[node as usize]
+            .iter()
+            .filter(|&&edge| edge != lane.edge)
+            .map(|&edge| NetLane {
+                edge,
+                forward: self.edges[edge as usize][0] == node,
+            })
+            .collect();
+        if options.is_empty() {
+            vec![lane.opposite()]
+        } else {
+            options
+        }
+    }
+
+    /// The conflict zone holding `p`, if any.
+    fn zone_at(&self, p: &Point2) -> Option<u32> {
+        self.zones.at(p)
+    }
+
+    /// The points a lane runs from and to.
+    fn ends(&self, lane: NetLane) -> (u32, u32) {
+        let [a, b] = self.edges[lane.edge as usize];
+        if lane.forward { (a, b) } else { (b, a) }
+    }
+
+    /// The lane's centreline: start, unit direction, length.
+    fn centreline(&self, lane: NetLane) -> (Point2, Vector2, Real) {
+        let (from, to) = self.ends(lane);
+        let (p, q) = (self.points[from as usize], self.points[to as usize]);
+        let d = q - p;
+        let len = d.norm();
+        let dir = if len > 0.0 { d / len } else { Vector2::x() };
+        (p, dir, len)
+    }
+
+    /// The lane's point `s` metres from its start (clamped to the lane).
+    fn lane_point(&self, lane: NetLane, s: Real) -> Point2 {
+        let (p, dir, len) = self.centreline(lane);
+        let right = Vector2::new(dir.y, -dir.x);
+        p + dir * s.clamp(0.0, len) + right * self.lane_offset
+    }
+
+    /// The lane's length.
+    fn length(&self, lane: NetLane) -> Real {
+        self.centreline(lane).2
+    }
+
+    /// Places `targets.count` cars at random on the lanes (edges drawn by length), at least the
+    /// car separation apart, with cruise speeds drawn as on the grid. `rng` draws the
+    /// placements, the cruise speeds per car and the turns; `speeds` the speeds per step and
+    /// the stops.
+    pub fn place(
+        &self,
+        scenario: &Scenario,
+        mut rng: ChaCha8Rng,
+        speeds: ChaCha8Rng,
+    ) -> Result<Traffic<NetLane>, WorldBuildError> {
+        let t = &scenario.targets;
+        let model = SpeedModel::of(scenario);
+        let lengths: Vec<Real> = (0..self.edges.len() as u32)
+            .map(|edge| {
+                self.length(NetLane {
+                    edge,
+                    forward: true,
+                })
+            })
+            .collect();
+        let total: Real = lengths.iter().sum();
+        if total.is_nan() || total <= 0.0 {
+            return Err(WorldBuildError::Placement(
+                "the road network has no length".into(),
+            ));
+        }
+        let sep = self.car_separation;
+        let mut cars: Vec<Car<NetLane>> = Vec::with_capacity(t.count as usize);
+        for id in 0..t.count {
+            let mut placed = None;
+            for _ in 0..PLACEMENT_TRIES {
+                let mut at = rng.random::<Real>() * total;
+                let edge = lengths
+                    .iter()
+                    .position(|&l| {
+                        at -= l;
+                        at < 0.0
+                    })
+                    .unwrap_or(lengths.len() - 1) as u32;
+                let lane = NetLane {
+                    edge,
+                    forward: rng.random_bool(0.5),
+                };
+                let (_, dir, len) = self.centreline(lane);
+                let p = self.lane_point(lane, rng.random_range(0.0..=len));
+                if self.zone_at(&p).is_none()
+                    && cars.iter().all(|c| (c.position - p).norm() >= sep + EPS)
+                {
+                    let cruise = model.cruise(&mut rng);
+                    placed = Some(Car::standing(id, p, dir.y.atan2(dir.x), cruise, lane));
+                    break;
+                }
+            }
+            match placed {
+                Some(c) => cars.push(c),
+                None => {
+                    return Err(WorldBuildError::Placement(format!(
+                        "cannot place car {id} of targets.count = {} on the city's {:.0} m of road \
+                         at least {sep:.2} m from the others",
+                        t.count, total
+                    )));
+                }
+            }
+        }
+        Ok(Traffic {
+            cars,
+            rng,
+            speeds,
+            model,
+        })
+    }
+}
+
+impl RoadModel<NetLane> for LaneNetwork {
+    fn car_separation(&self) -> Real {
+        self.car_separation
+    }
+
+    /// To the end of the lane, then to the start of a lane leaving that point: one of the other
+    /// roads there at random, or the other lane of the same road at a dead end.
+    fn plan(&self, car: &mut Car<NetLane>, rng: &mut ChaCha8Rng) {
+        let (_, lane) = car.path_end();
+        car.path.push_back(Waypoint {
+            point: self.lane_point(lane, Real::INFINITY),
+            lane,
+        });
+        let options = self.next_lanes(lane);
+        let next = options[rng.random_range(0..options.len())];
+        car.path.push_back(Waypoint {
+            point: self.lane_point(next, 0.0),
+            lane: next,
+        });
+    }
+
+    /// A car enters a conflict zone only when no other car is in it: outside the zones, a car
+    /// can only come too close to the car ahead of it on its own lane.
+    fn admits(&self, cars: &[Car<NetLane>], i: usize, to: &Point2) -> bool {
+        let Some(j) = self.zone_at(to) else {
+            return true;
+        };
+        if self.zone_at(&cars[i].position) == Some(j) {
+            return true;
+        }
+        // A car behind this one on its way (its planned path runs through this car) only
+        // follows it, and never keeps it out.
+        let me = cars[i].position;
+        cars.iter()
+            .enumerate()
+            .all(|(k, c)| k == i || self.zone_at(&c.position) != Some(j) || path_passes(c, &me))
+    }
+
+    /// A blocked car waits rather than turning around in the road: a car halfway across its
+    /// road blocks both lanes, and cars turning around in a queue block each other.
+    fn turn_around(&self, _car: &mut Car<NetLane>, _others: &[Point2]) {}
+}
+
+/// Whether `p` lies on the path `car` has planned, from where it is on.
+fn path_passes(car: &Car<NetLane>, p: &Point2) -> bool {
+    let mut from = car.position;
+    car.path.iter().any(|w| {
+        let (a, b) = (from, w.point);
+        from = b;
+        let ab = b - a;
+        let len2 = ab.norm_squared();
+        let t = if len2 > 0.0 {
+            ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (a + ab * t - p).norm() < 1e-6
+    })
+}
+
+/// Conflicts are taken this much beyond the separation, metres.
+const ZONE_MARGIN_M: Real = 0.25;
+/// Spacing of the samples along the paths that find the zones, metres.
+const SAMPLE_M: Real = 0.25;
+
+/// A piece a car can drive: a lane or a connector, straight from `from` to `to`.
+#[derive(Clone, Debug)]
+struct Path {
+    from: Point2,
+    to: Point2,
+    /// The paths it leads into.
+    next: Vec<usize>,
+}
+
+/// The conflict zones: where two cars that are not following each other on one path can come
+/// closer than the separation.
+///
+/// Every path is sampled every [`SAMPLE_M`]. Two samples conflict when they are closer than
+/// `reach` unless one can follow the other within `reach` along the paths (a car and the car
+/// behind it, which the separation keeps apart without any zone). Conflicting samples, and
+/// samples within a spacing of each other on one path, are joined into zones.
+#[derive(Clone, Debug, Default)]
+struct Zones {
+    /// Conflicting samples by grid cell of side `reach`: point and zone.
+    cells: std::collections::HashMap<(i64, i64), Vec<(Point2, u32)>>,
+    reach: Real,
+}
+
+impl Zones {
+    fn find(paths: &[Path], reach: Real) -> Zones {
+        // Samples: (point, path, distance along it).
+        let mut samples: Vec<(Point2, usize, Real)> = Vec::new();
+        for (k, p) in paths.iter().enumerate() {
+            let len = (p.to - p.from).norm();
+            let n = (len / SAMPLE_M).ceil().max(1.0) as usize;
+            for i in 0..=n {
+                let s = len * i as Real / n as Real;
+                let t = if len > 0.0 { s / len } else { 0.0 };
+                samples.push((p.from + (p.to - p.from) * t, k, s));
+            }
+        }
+        let lengths: Vec<Real> = paths.iter().map(|p| (p.to - p.from).norm()).collect();
+        let cell = |p: &Point2| ((p.x / reach).floor() as i64, (p.y / reach).floor() as i64);
+        let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+        for (i, (p, _, _)) in samples.iter().enumerate() {
+            grid.entry(cell(p)).or_default().push(i);
+        }
+        // The distance along the paths from sample x forward to sample y, if under `reach`.
+        let along = |x: &(Point2, usize, Real), y: &(Point2, usize, Real)| -> Real {
+            if x.1 == y.1 && y.2 >= x.2 {
+                return y.2 - x.2;
+            }
+            let mut best = Real::INFINITY;
+            let mut stack = vec![(x.1, lengths[x.1] - x.2)];
+            while let Some((k, done)) = stack.pop() {
+                for &n in &paths[k].next {
+                    if n == y.1 {
+                        best = best.min(done + y.2);
+                    }
+                    if done + lengths[n] < reach {
+                        stack.push((n, done + lengths[n]));
+                    }
+                }
+            }
+            best
+        };
+        // Whether one of the two can follow the other within `reach` along the paths (a car
+        // and the car behind it, which the separation keeps apart without any zone).
+        let follows = |a: &(Point2, usize, Real), b: &(Point2, usize, Real)| {
+            along(a, b).min(along(b, a)) < reach
+        };
+        let mut parent: Vec<usize> = (0..samples.len()).collect();
+        fn root(parent: &mut [usize], mut x: usize) -> usize {
+            while parent[x] != x {
+                parent[x] = parent[parent[x]];
+                x = parent[x];
+            }
+            x
+        }
+        let mut conflict = vec![false; samples.len()];
+        for (i, a) in samples.iter().enumerate() {
+            let (cx, cy) = cell(&a.0);
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    let Some(near) = grid.get(&(cx + dx, cy + dy)) else {
+                        continue;
+                    };
+                    for &j in near {
+                        if j <= i {
+                            continue;
+                        }
+                        let b = &samples[j];
+                        if (a.0 - b.0).norm() < reach && !follows(a, b) {
+                            conflict[i] = true;
+                            conflict[j] = true;
+                            let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
+                            parent[ri] = rj;
+                        }
+                    }
+                }
+            }
+        }
+        // Conflicting samples next to each other on a path are one zone.
+        for i in 1..samples.len() {
+            if conflict[i] && conflict[i - 1] && samples[i].1 == samples[i - 1].1 {
+                let (ri, rj) = (root(&mut parent, i), root(&mut parent, i - 1));
+                parent[ri] = rj;
+            }
+        }
+        let mut ids = std::collections::HashMap::new();
+        let mut cells: std::collections::HashMap<(i64, i64), Vec<(Point2, u32)>> =
+            Default::default();
+        for i in 0..samples.len() {
+            if !conflict[i] {
+                continue;
+            }
+            let r = root(&mut parent, i);
+            let next = ids.len() as u32;
+            let id = *ids.entry(r).or_insert(next);
+            cells
+                .entry(cell(&samples[i].0))
+                .or_default()
+                .push((samples[i].0, id));
+        }
+        Zones { cells, reach }
+    }
+
+    /// The zone of the conflicting sample nearest `p` within half a sample spacing, if any.
+    fn at(&self, p: &Point2) -> Option<u32> {
+        if self.reach <= 0.0 {
+            return None;
+        }
+        let (cx, cy) = (
+            (p.x / self.reach).floor() as i64,
+            (p.y / self.reach).floor() as i64,
+        );
+        let mut best: Option<(Real, u32)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for (q, id) in self.cells.get(&(cx + dx, cy + dy)).into_iter().flatten() {
+                    let d = (q - p).norm();
+                    if d <= SAMPLE_M / 2.0 + 1e-9 && best.is_none_or(|(bd, _)| d < bd) {
+                        best = Some((d, *id));
+                    }
+                }
+            }
+        }
+        best.map(|(_, id)| id)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use city::scene::{Oneway, RoadEdge};
+    use rand::SeedableRng;
+
+    use super::*;
+
+    /// A loop of four roads, a diagonal across it, a spur to a dead end and a crooked road
+    /// leaving a corner at 16°, as an import makes them (one edge per piece of way).
+    fn network() -> RoadNetwork {
+        // About 1.4 km of road, as much as the shipped Helsinki square keeps.
+        let points = vec![
+            [-120.0, -120.0],
+            [120.0, -120.0],
+            [120.0, 120.0],
+            [-120.0, 120.0],
+            [200.0, 120.0],
+            [20.0, 160.0],
+            [-40.0, 190.0],
+        ];
+        let pairs = [
+            (0, 1),
+            (1, 2),
+            (2, 3),
+            (3, 0),
+            (0, 2),
+            (2, 4),
+            (3, 5),
+            (5, 6),
+        ];
+        RoadNetwork {
+            lane_offset_m: 2.8,
+            centreline_clearance_m: 8.8,
+            points,
+            edges: pairs
+                .iter()
+                .enumerate()
+                .map(|(k, &(a, b))| RoadEdge {
+                    a,
+                    b,
+                    way: k as i64,
+                    highway: "residential".into(),
+                    oneway: Oneway::No,
+                })
+                .collect(),
+        }
+    }
+
+    fn distance_to_network(net: &RoadNetwork, p: &Point2) -> Real {
+        net.edges
+            .iter()
+            .map(|e| {
+                let (a, b) = (net.points[e.a as usize], net.points[e.b as usize]);
+                city::geometry::point_segment_distance([p.x, p.y], a, b)
+            })
+            .fold(Real::INFINITY, Real::min)
+    }
+
+    fn traffic(seed: u64, count: u32) -> Result<(LaneNetwork, Traffic<NetLane>), WorldBuildError> {
+        let mut scenario = Scenario::default();
+        scenario.targets.count = count;
+        let lanes = LaneNetwork::new(&network(), 5.1);
+        let rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut speeds = ChaCha8Rng::seed_from_u64(seed);
+        speeds.set_stream(3);
+        let traffic = lanes.place(&scenario, rng, speeds)?;
+        Ok((lanes, traffic))
+    }
+
+    #[test]
+    fn cars_keep_to_the_lanes_their_speed_and_their_distance() {
+        for seed in 1..=12 {
+            drive(seed, 8);
+        }
+        drive(3, 12);
+    }
+
+    fn drive(seed: u64, count: u32) {
+        let net = network();
+        let (lanes, mut traffic) = traffic(seed, count).unwrap();
+        let dt = 0.5;
+        let v_max = Scenario::default().targets.max_speed_mps;
+        let start: Vec<Point2> = traffic.cars().iter().map(|c| c.position).collect();
+        let mut travelled = vec![0.0; count as usize];
+        for _ in 0..2_000 {
+            let before: Vec<Point2> = traffic.cars().iter().map(|c| c.position).collect();
+            traffic.step(&lanes, dt);
+            let cars = traffic.cars();
+            for (i, c) in cars.iter().enumerate() {
+                let moved = (c.position - before[i]).norm();
+                assert!(moved <= v_max * dt + 1e-9, "car {i} moved {moved} m");
+                travelled[i] += moved;
+                let off = distance_to_network(&net, &c.position);
+                assert!(
+                    off <= net.lane_offset_m + 1e-9,
+                    "car {i} is {off} m from every centreline"
+                );
+                for d in &cars[i + 1..] {
+                    assert!(
+                        (c.position - d.position).norm() >= 5.1,
+                        "cars {i} and {} too close",
+                        d.id
+                    );
+                }
+            }
+        }
+        // Every car got somewhere: the spur's dead end and the junctions do not trap them.
+        for (i, t) in travelled.iter().enumerate() {
+            assert!(
+                *t > 200.0,
+                "seed {seed}: car {i} travelled {t} m from {:?}",
+                start[i]
+            );
+        }
+    }
+
+    #[test]
+    fn the_same_seed_drives_the_same_cars() {
+        let run = |seed| {
+            let (lanes, mut traffic) = traffic(seed, 6).unwrap();
+            for _ in 0..300 {
+                traffic.step(&lanes, 0.5);
+            }
+            traffic
+                .cars()
+                .iter()
+                .map(|c| (c.position, c.heading))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(run(11), run(11));
+        assert_ne!(run(11), run(12));
+    }
+
+    #[test]
+    fn more_cars_than_the_roads_hold_apart_are_refused() {
+        match traffic(1, 2_000) {
+            Err(WorldBuildError::Placement(m)) => assert!(m.contains("cannot place car"), "{m}"),
+            other => panic!("{:?}", other.map(|_| ())),
+        }
+    }
+}
