@@ -77,6 +77,16 @@ impl CityArgs {
             }
         }
         let profile = RoadProfile::for_scenario(&scenario);
+        // As the ring road of the generated city: a car's whole body stays 2 m inside the
+        // region.
+        let border_gap_m = profile.half_width + RING_BORDER_GAP_M;
+        if half_extent_m <= 4.0 * border_gap_m {
+            return Err(UsageError(format!(
+                "--half-extent {half_extent_m}: must be more than {:.1} m, four times the gap \
+                 roads keep from the border ({border_gap_m:.1} m for the scenario's cars)",
+                4.0 * border_gap_m
+            )));
+        }
         Ok(CityConfig {
             import: ImportOptions {
                 osm: self.osm.clone(),
@@ -85,9 +95,7 @@ impl CityArgs {
                 roads: RoadRules {
                     lane_offset_m: profile.lane_offset,
                     clearance_m: profile.building_clearance,
-                    // As the ring road of the generated city: a car's whole body stays 2 m
-                    // inside the region.
-                    border_gap_m: profile.half_width + RING_BORDER_GAP_M,
+                    border_gap_m,
                 },
             },
             storey_height_m: self.storey_height,

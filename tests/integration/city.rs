@@ -49,7 +49,7 @@ fn the_shipped_extract_imports_into_a_scene_that_reads_back() {
 fn bad_input_exits_with_code_2_and_says_why() {
     let t = TestRun::new("city-bad");
     let not_pbf = t.write("map.osm.pbf", "<osm version=\"0.6\"></osm>\n");
-    let cases: [(&std::path::Path, &[&str], &str); 4] = [
+    let cases: [(&std::path::Path, &[&str], &str); 5] = [
         (
             &not_pbf,
             &["--center", "60.1716,24.9443"],
@@ -61,10 +61,15 @@ fn bad_input_exits_with_code_2_and_says_why() {
             "lies outside the file's data",
         ),
         (&extract(), &["--center", "60.1716"], "expected LAT,LON"),
-        // A square of 10 m in the middle of a block: no road reaches into it.
         (
             &extract(),
             &["--center", "60.1730,24.9410", "--half-extent", "10"],
+            "--half-extent 10: must be more than",
+        ),
+        // A square of 30 m in the middle of a block: no road reaches into it.
+        (
+            &extract(),
+            &["--center", "60.1730,24.9410", "--half-extent", "30"],
             "no drivable road",
         ),
     ];
