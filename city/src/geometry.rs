@@ -92,6 +92,22 @@ pub fn segment_convex_distance(a: Xy, b: Xy, poly: &[Xy]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// Whether `p` lies inside the ring `ring` of any shape (the even-odd rule; a point on an edge
+/// may fall either way).
+pub fn ring_contains(ring: &[Xy], p: Xy) -> bool {
+    let n = ring.len();
+    let mut inside = false;
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + n - 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1])
+            && p[0] < a[0] + (p[1] - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
+        {
+            inside = !inside;
+        }
+    }
+    inside
+}
+
 /// Whether `p` lies inside or on the convex counter-clockwise polygon `poly`.
 pub fn convex_contains(poly: &[Xy], p: Xy) -> bool {
     let n = poly.len();

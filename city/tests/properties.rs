@@ -3,8 +3,8 @@
 
 use city::convex::decompose;
 use city::geometry::{
-    Xy, convex_contains, is_convex_ccw, lerp, point_convex_distance, segment_near_convex,
-    signed_area,
+    Xy, convex_contains, is_convex_ccw, lerp, point_convex_distance, ring_contains,
+    segment_near_convex, signed_area,
 };
 use proptest::prelude::*;
 
@@ -20,21 +20,6 @@ fn star(radii: &[f64]) -> Vec<Xy> {
             [r * a.cos(), r * a.sin()]
         })
         .collect()
-}
-
-/// Whether `p` lies inside the ring (even-odd rule).
-fn ring_contains(ring: &[Xy], p: Xy) -> bool {
-    let n = ring.len();
-    let mut inside = false;
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + n - 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1])
-            && p[0] < a[0] + (p[1] - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
-        {
-            inside = !inside;
-        }
-    }
-    inside
 }
 
 proptest! {

@@ -4,7 +4,7 @@
 use std::collections::{HashMap, HashSet};
 
 use crate::convex::decompose;
-use crate::geometry::{Xy, clip_convex_to_square, signed_area, simplify_ring};
+use crate::geometry::{Xy, clip_convex_to_square, ring_contains, signed_area, simplify_ring};
 use crate::osm::{OsmData, Tags, Way};
 use crate::projection::LocalFrame;
 use crate::scene::SceneBuilding;
@@ -206,21 +206,6 @@ fn assemble_rings(mut pieces: Vec<Vec<i64>>) -> Option<Vec<Vec<i64>>> {
         }
     }
     Some(rings)
-}
-
-/// Whether `p` lies inside the ring (even-odd rule).
-fn ring_contains(ring: &[Xy], p: Xy) -> bool {
-    let n = ring.len();
-    let mut inside = false;
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + n - 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1])
-            && p[0] < a[0] + (p[1] - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
-        {
-            inside = !inside;
-        }
-    }
-    inside
 }
 
 fn ccw(mut ring: Vec<Xy>) -> Vec<Xy> {
