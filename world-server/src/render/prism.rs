@@ -172,7 +172,7 @@ impl Prism {
 }
 
 /// Distance from `p` to the segment `a b`.
-fn segment_distance(p: &Point2, a: &Point2, b: &Point2) -> Real {
+pub(crate) fn segment_distance(p: &Point2, a: &Point2, b: &Point2) -> Real {
     let ab = b - a;
     let len2 = ab.norm_squared();
     let t = if len2 > 0.0 {

@@ -36,6 +36,7 @@ use sets::math::{Point2, Real, Vector2};
 
 use super::{Car, EPS, PLACEMENT_TRIES, RoadModel, SpeedModel, Traffic, Waypoint};
 use crate::error::WorldBuildError;
+use crate::render::prism::segment_distance;
 
 /// A lane: edge `edge` of the network, driven from its point `a` to `b` (`forward`) or back.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -306,14 +307,7 @@ fn path_passes(car: &Car<NetLane>, p: &Point2) -> bool {
     car.path.iter().any(|w| {
         let (a, b) = (from, w.point);
         from = b;
-        let ab = b - a;
-        let len2 = ab.norm_squared();
-        let t = if len2 > 0.0 {
-            ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        (a + ab * t - p).norm() < 1e-6
+        segment_distance(p, &a, &b) < 1e-6
     })
 }
 
