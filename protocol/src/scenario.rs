@@ -150,6 +150,8 @@ pub struct Scenario {
     pub duration_s: f64,
     /// The city.
     pub region: RegionConfig,
+    /// An imported city, instead of the generated one.
+    pub city: CityConfig,
     /// The cars.
     pub targets: TargetsConfig,
     /// The fleet.
@@ -181,6 +183,23 @@ pub struct RegionConfig {
     /// the road grid is cut into lots of about this side, at most one building per lot, each
     /// building 45 % to 100 % of its lot's sides. The paper shows its city, not its lots.
     pub lot_size_m: f64,
+}
+
+/// `[city]`: an imported city (`fleet city` writes it) in place of the one generated from
+/// the seed. With a scene, the world takes its buildings and roads from the scene file, and
+/// `[region]` keeps only `half_extent_m` (which must be the scene's) and `building_height_m`
+/// (the roofs' range, for the pictures' colours and the fleet's nominal altitude).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CityConfig {
+    /// The scene file (`city.json`); empty: the generated city. A relative path is taken from
+    /// the folder of the scenario file that names it ([`Scenario::load`] makes it absolute).
+    pub scene: String,
+    /// Height of a storey, for buildings mapped with `building:levels` and no `height`,
+    /// metres (`1 <= value <= 10`).
+    pub storey_height_m: f64,
+    /// Height of a building mapped with neither, metres (`1 <= value <= 500`).
+    pub default_height_m: f64,
 }
 
 /// `[targets]`.
@@ -766,6 +785,7 @@ impl Default for Scenario {
             seed: 1,
             duration_s: 300.0,
             region: RegionConfig::default(),
+            city: CityConfig::default(),
             targets: TargetsConfig::default(),
             uavs: UavsConfig::default(),
             camera: CameraConfig::default(),
@@ -784,6 +804,16 @@ impl Default for RegionConfig {
             building_fraction: 0.05,
             building_height_m: [10.0, 60.0],
             lot_size_m: 21.0,
+        }
+    }
+}
+
+impl Default for CityConfig {
+    fn default() -> Self {
+        Self {
+            scene: String::new(),
+            storey_height_m: 3.0,
+            default_height_m: 12.0,
         }
     }
 }
@@ -999,7 +1029,9 @@ impl Scenario {
                     path: path.to_path_buf(),
                     source,
                 })?;
-                parse_document(&text, &path.display().to_string())?
+                let mut table = parse_document(&text, &path.display().to_string())?;
+                anchor_scene(&mut table, path.parent().unwrap_or(Path::new("")));
+                table
             }
             None => Table::new(),
         };
@@ -1007,7 +1039,15 @@ impl Scenario {
         for text in overrides {
             Override::parse(text)?.apply(&mut table, &schema)?;
         }
-        resolve(table, &schema)
+        let mut scenario = resolve(table, &schema)?;
+        if !scenario.city.scene.is_empty() {
+            // An override's relative path is the working directory's; every process of a run
+            // gets the same absolute path, wherever it starts.
+            if let Ok(absolute) = std::path::absolute(&scenario.city.scene) {
+                scenario.city.scene = absolute.to_string_lossy().into_owned();
+            }
+        }
+        Ok(scenario)
     }
 
     /// The scenario as TOML, every key written: what the orchestrator stores next to the
@@ -1024,6 +1064,53 @@ impl Scenario {
                 "# This scenario cannot be written as TOML: {error}\nunwritable_scenario = true\n"
             ),
         }
+    }
+
+    /// The keys whose values differ from the paper's scenario, as TOML: a short scenario file
+    /// that loads back to this scenario (missing keys take the paper's values), and follows
+    /// the defaults where it does not set them.
+    pub fn to_toml_changes(&self) -> String {
+        let (Ok(mine), Ok(paper)) = (Table::try_from(self), Table::try_from(Scenario::default()))
+        else {
+            return self.to_toml_string();
+        };
+        let changes = table_changes(mine, &paper);
+        toml::to_string(&changes).unwrap_or_else(|_| self.to_toml_string())
+    }
+}
+
+/// The entries of `mine` that differ from `base`, sub-tables compared key by key.
+fn table_changes(mine: Table, base: &Table) -> Table {
+    let mut out = Table::new();
+    for (key, value) in mine {
+        match (value, base.get(&key)) {
+            (Value::Table(inner), Some(Value::Table(base_inner))) => {
+                let inner = table_changes(inner, base_inner);
+                if !inner.is_empty() {
+                    out.insert(key, Value::Table(inner));
+                }
+            }
+            (value, Some(b)) if &value == b => {}
+            (value, _) => {
+                out.insert(key, value);
+            }
+        }
+    }
+    out
+}
+
+/// Takes a relative `city.scene` of a scenario file from the file's folder `dir`, so that a
+/// scenario and its scene move together.
+fn anchor_scene(table: &mut Table, dir: &Path) {
+    let scene = table
+        .get_mut("city")
+        .and_then(Value::as_table_mut)
+        .and_then(|city| city.get_mut("scene"));
+    if let Some(Value::String(path)) = scene
+        && !path.is_empty()
+        && Path::new(path.as_str()).is_relative()
+    {
+        *path = dir.join(path.as_str()).to_string_lossy().into_owned();
     }
 }
 

@@ -339,6 +339,47 @@ fn missing_file_is_a_read_error_naming_the_path() {
 }
 
 #[test]
+fn the_changes_alone_load_back_to_the_scenario() {
+    assert_eq!(Scenario::default().to_toml_changes(), "");
+    let changed = with_overrides(&[
+        "seed=7",
+        "comms.range_m=inf",
+        "region.building_height_m=[3, 54]",
+        "city.storey_height_m=3.5",
+        "uavs.altitudes_m=[61.5, 70, 80.25, 90]",
+    ])
+    .unwrap();
+    let text = changed.to_toml_changes();
+    assert!(!text.contains("cvs_period_s"), "{text}");
+    assert!(text.contains("storey_height_m = 3.5"), "{text}");
+    assert_eq!(Scenario::from_toml_str(&text).unwrap(), changed);
+}
+
+#[test]
+fn a_city_scene_is_taken_from_the_scenario_files_folder() {
+    let file = TempFile::new(
+        "city-scenario.toml",
+        "[city]\nscene = \"helsinki/city.json\"\n",
+    );
+    let loaded = Scenario::load(Some(file.path()), &[]).unwrap();
+    let folder = std::path::absolute(file.path().parent().unwrap()).unwrap();
+    assert_eq!(
+        Path::new(&loaded.city.scene),
+        folder.join("helsinki/city.json")
+    );
+    // An override's relative path is the working directory's, made absolute.
+    let set = with_overrides(&["city.scene=\"a/city.json\""]).unwrap();
+    assert_eq!(
+        Path::new(&set.city.scene),
+        std::env::current_dir().unwrap().join("a/city.json")
+    );
+    // An absolute path stays as it is, and the generated city has none.
+    let abs = with_overrides(&["city.scene=\"/srv/city.json\""]).unwrap();
+    assert_eq!(abs.city.scene, "/srv/city.json");
+    assert_eq!(Scenario::load(None, &[]).unwrap().city.scene, "");
+}
+
+#[test]
 fn resolved_scenario_round_trips() {
     let default = Scenario::default();
     let text = default.to_toml_string();

@@ -14,4 +14,7 @@ pub enum WorldBuildError {
     /// roads hold with their safety distances).
     #[error("cannot build the world: {0}")]
     Placement(String),
+    /// The imported city's scene file cannot be read, or does not fit the scenario.
+    #[error("cannot build the world: {0}")]
+    Scene(String),
 }

@@ -1,7 +1,9 @@
 //! The simulated world: scene, cars and UAVs advanced together, one CVS period at a time.
 
+use std::path::Path;
 use std::sync::Arc;
 
+use city::scene::CityScene;
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, TargetBox};
@@ -15,7 +17,7 @@ use crate::error::WorldBuildError;
 use crate::fleet::{Fleet, Uav};
 use crate::render::{self, FrameSpec, ObjectKind, SceneObject};
 use crate::scene::City;
-use crate::traffic::{Car, Traffic};
+use crate::traffic::{CarPose, Cars};
 
 /// Size of a UAV's body as the other cameras see it: length, width, height, metres.
 pub const UAV_BODY_M: [Real; 3] = [1.0, 1.0, 0.3];
@@ -33,7 +35,7 @@ const SPEED_STREAM: u64 = 3;
 pub struct World {
     scenario: Scenario,
     city: Arc<City>,
-    traffic: Traffic,
+    cars: Cars,
     fleet: Fleet,
     step: u64,
 }
@@ -41,22 +43,29 @@ pub struct World {
 impl World {
     /// Builds the city, the cars and the fleet from the scenario's seed, once the scenario is
     /// found valid ([`Scenario::validate`]: a scenario built in code is held to the ranges of
-    /// one read from a file).
+    /// one read from a file). The city is generated from the seed, or imported from
+    /// `city.scene` ([`City::import`]).
     pub fn new(scenario: &Scenario) -> Result<World, WorldBuildError> {
         scenario.validate()?;
-        let mut city_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
-        city_rng.set_stream(CITY_STREAM);
-        let city = City::generate(scenario, &mut city_rng)?;
+        let city = if scenario.city.scene.is_empty() {
+            let mut city_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+            city_rng.set_stream(CITY_STREAM);
+            City::generate(scenario, &mut city_rng)?
+        } else {
+            let scene = CityScene::read(Path::new(&scenario.city.scene))
+                .map_err(|e| WorldBuildError::Scene(format!("city.scene: {e}")))?;
+            City::import(&scene, scenario)?
+        };
         let mut traffic_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
         traffic_rng.set_stream(TRAFFIC_STREAM);
         let mut speed_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
         speed_rng.set_stream(SPEED_STREAM);
-        let traffic = Traffic::place(&city.roads, scenario, traffic_rng, speed_rng)?;
+        let cars = Cars::place(&city.roads, scenario, traffic_rng, speed_rng)?;
         let fleet = Fleet::launch(scenario, city.tallest())?;
         Ok(World {
             scenario: scenario.clone(),
             city: Arc::new(city),
-            traffic,
+            cars,
             fleet,
             step: 0,
         })
@@ -90,7 +99,7 @@ impl World {
     /// Advances cars and UAVs by one CVS period.
     pub fn advance(&mut self) {
         let dt = self.scenario.timing.cvs_period_s;
-        self.traffic.step(&self.city.roads, dt);
+        self.cars.step(dt);
         self.fleet.step(dt);
         self.step += 1;
     }
@@ -134,7 +143,7 @@ impl World {
         out.run_tag = run_tag;
         out.step = self.step;
         out.time_s = self.time_s();
-        let cars = self.traffic.cars();
+        let cars = self.cars.poses();
         out.target_count = cars.len().min(TRUTH_MAX_TARGETS) as u32;
         for (slot, car) in out.targets.iter_mut().zip(cars) {
             *slot = TargetTruth {
@@ -165,9 +174,9 @@ impl World {
         &self.city
     }
 
-    /// The cars, by target id.
-    pub fn targets(&self) -> &[Car] {
-        self.traffic.cars()
+    /// Where the cars are, by target id.
+    pub fn targets(&self) -> Vec<CarPose> {
+        self.cars.poses()
     }
 
     /// The UAVs, by index.
@@ -199,7 +208,7 @@ impl World {
     }
 
     /// The box of a car as the cameras see it: standing on the ground, along its heading.
-    pub fn target_object(&self, car: &Car) -> SceneObject {
+    pub fn target_object(&self, car: &CarPose) -> SceneObject {
         let [l, w, h] = self.scenario.targets.size_m;
         SceneObject::new(
             ObjectKind::Target(car.id),
@@ -209,22 +218,31 @@ impl World {
         )
     }
 
-    /// Every box in the scene at the current step: buildings, cars, and the UAVs other than
-    /// `viewer` (a camera does not see its own UAV).
+    /// Every object in the scene at the current step: buildings (a box, or the convex parts of
+    /// an imported one), cars, and the UAVs other than `viewer` (a camera does not see its own
+    /// UAV).
     pub fn scene_objects(&self, viewer: Option<usize>) -> Vec<SceneObject> {
-        let mut out = Vec::with_capacity(
-            self.city.buildings.len() + self.traffic.cars().len() + self.uav_count(),
-        );
+        let parts: usize = self
+            .city
+            .buildings
+            .iter()
+            .map(|b| b.parts.len().max(1))
+            .sum();
+        let mut out = Vec::with_capacity(parts + self.cars.len() + self.uav_count());
         for (k, b) in self.city.buildings.iter().enumerate() {
-            out.push(SceneObject::new(
-                ObjectKind::Obstacle(k as u32),
-                b.centre(),
-                b.half_extents(),
-                0.0,
-            ));
+            let kind = ObjectKind::Obstacle(k as u32);
+            if b.parts.is_empty() {
+                out.push(SceneObject::new(kind, b.centre(), b.half_extents(), 0.0));
+            } else {
+                out.extend(
+                    b.parts
+                        .iter()
+                        .map(|part| SceneObject::prism(kind, Arc::clone(part))),
+                );
+            }
         }
-        for car in self.traffic.cars() {
-            out.push(self.target_object(car));
+        for car in self.cars.poses() {
+            out.push(self.target_object(&car));
         }
         let [l, w, h] = UAV_BODY_M;
         for (i, u) in self.fleet.uavs().iter().enumerate() {

@@ -200,7 +200,7 @@ fn check_frame(world: &World, uav: usize, frame: &CvsFrame, rng: &mut ChaCha8Rng
         if b.is_some() {
             // Assumption 11: the segment from the camera to the target's ground point crosses
             // the car's body.
-            let body = world.target_object(car);
+            let body = world.target_object(&car);
             let g = Point3::new(car.position.x, car.position.y, 0.0);
             let seg = g - o;
             let ray = Ray::new(o, seg);

@@ -36,7 +36,7 @@ fn run_and_check(s: &Scenario, steps: u64) -> (Real, Real) {
                 car.id
             );
             assert!(car.speed_mps <= t.max_speed_mps + 1e-12);
-            assert!(city.roads.is_on_road(&p), "car {} off road at {p}", car.id);
+            assert!(city.is_on_road(&p), "car {} off road at {p}", car.id);
             // The whole body inside the RoI.
             let reach = length.hypot(t.size_m[1]) / 2.0;
             assert!(

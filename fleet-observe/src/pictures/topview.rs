@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use plotters::prelude::*;
-use sets::math::Point2;
+use sets::math::{Point2, Vector2};
 use world_server::World;
 
 use super::{FONT, palette};
@@ -29,6 +29,22 @@ fn car_outline(centre: Point2, heading: f64, length: f64, width: f64) -> Vec<(f6
     [(hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw)]
         .into_iter()
         .map(|(a, b)| (centre.x + a * c - b * s, centre.y + a * s + b * c))
+        .collect()
+}
+
+/// The paved strip of half width `hw` along the centreline `a b`, squared off a half width
+/// beyond each end so that roads meeting at an angle join without a gap.
+fn road_quad(a: Point2, b: Point2, hw: f64) -> Vec<(f64, f64)> {
+    let d = b - a;
+    let len = d.norm();
+    let (u, n) = if len > 0.0 {
+        (d / len * hw, Vector2::new(-d.y, d.x) / len * hw)
+    } else {
+        (Vector2::new(hw, 0.0), Vector2::new(0.0, hw))
+    };
+    [a - u + n, a - u - n, b + u - n, b + u + n]
+        .iter()
+        .map(|p| (p.x, p.y))
         .collect()
 }
 
@@ -63,27 +79,19 @@ pub fn draw_topview(world: &World, focus: usize, path: &Path) -> anyhow::Result<
         [(-h, -h), (h, h)],
         RGBColor(232, 240, 222).filled(),
     )))?;
-    let hw = city.roads.profile.half_width;
+    let hw = city.profile.half_width;
     let road = RGBColor(160, 160, 160).filled();
     chart.draw_series(
-        city.roads
-            .xs
-            .iter()
-            .map(|&x| Rectangle::new([(x - hw, -h), (x + hw, h)], road)),
-    )?;
-    chart.draw_series(
-        city.roads
-            .ys
-            .iter()
-            .map(|&y| Rectangle::new([(-h, y - hw), (h, y + hw)], road)),
+        (city.roads.centrelines(h).into_iter())
+            .map(|(a, b)| Polygon::new(road_quad(a, b, hw), road)),
     )?;
     let [lo, hi] = world.scenario().region.building_height_m;
-    chart.draw_series(city.buildings.iter().map(|b| {
-        Rectangle::new(
-            [(b.min.x, b.min.y), (b.max.x, b.max.y)],
-            building_shade(b.height, lo, hi).filled(),
-        )
-    }))?;
+    for b in &city.buildings {
+        let shade = building_shade(b.height, lo, hi).filled();
+        chart.draw_series(b.footprint().into_iter().map(|part| {
+            Polygon::new(part.iter().map(|p| (p.x, p.y)).collect::<Vec<_>>(), shade)
+        }))?;
+    }
 
     // The focused UAV's footprint, under the cars so they stay visible.
     if let Some(footprint) = world.camera(focus).and_then(|c| c.image_ground_footprint()) {

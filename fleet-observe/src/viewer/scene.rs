@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 
 use foxglove::messages::{
     ArrowPrimitive, Color, CubePrimitive, FrameTransform, FrameTransforms, LinePrimitive, Point3,
-    Pose, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, TextPrimitive, Timestamp, Vector3,
-    line_primitive,
+    Pose, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, TextPrimitive, Timestamp,
+    TriangleListPrimitive, Vector3, line_primitive,
 };
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
 use protocol::camera::{Camera, CameraModel, CameraPose};
@@ -52,10 +52,10 @@ pub fn uav_colour(uav: u32) -> Color {
     }
 }
 
-/// The buildings as boxes, one entity.
+/// The buildings, one entity: a generated building as a box, an imported one as triangles
+/// (each convex part's roof, and its walls on the building's outline).
 pub fn city(buildings: &[Building], stamp: Timestamp) -> SceneUpdate {
-    let cubes = buildings
-        .iter()
+    let cubes = (buildings.iter().filter(|b| b.parts.is_empty()))
         .map(|b| CubePrimitive {
             pose: Some(pose(
                 [
@@ -73,8 +73,39 @@ pub fn city(buildings: &[Building], stamp: Timestamp) -> SceneUpdate {
             color: Some(BUILDING),
         })
         .collect();
+    let mut points = Vec::new();
+    for b in buildings {
+        for part in &b.parts {
+            let at = |p: &sets::math::Point2, z: f64| Point3 { x: p.x, y: p.y, z };
+            let f = &part.footprint;
+            // The roof, as a fan from the first corner (the part is convex).
+            for w in f[1..].windows(2) {
+                points.extend([
+                    at(&f[0], b.height),
+                    at(&w[0], b.height),
+                    at(&w[1], b.height),
+                ]);
+            }
+            // Each outer wall as two triangles.
+            for (a, c) in part.outline_edges() {
+                points.extend([at(&a, 0.0), at(&c, 0.0), at(&c, b.height)]);
+                points.extend([at(&a, 0.0), at(&c, b.height), at(&a, b.height)]);
+            }
+        }
+    }
+    let triangles = if points.is_empty() {
+        Vec::new()
+    } else {
+        vec![TriangleListPrimitive {
+            pose: Some(pose([0.0, 0.0, 0.0], 0.0)),
+            points,
+            color: Some(BUILDING),
+            ..Default::default()
+        }]
+    };
     single(SceneEntity {
         cubes,
+        triangles,
         ..entity("buildings", stamp)
     })
 }

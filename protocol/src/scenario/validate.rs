@@ -399,6 +399,7 @@ impl Scenario {
         check_integer("seed", i128::from(self.seed))?;
         Interval::open_closed(0.0, MAX_DURATION_S).check("duration_s", self.duration_s)?;
         self.validate_region()?;
+        self.validate_city()?;
         self.validate_targets()?;
         self.validate_uavs()?;
         self.validate_camera()?;
@@ -429,6 +430,12 @@ impl Scenario {
             region.building_height_m,
             "[lo, hi] with 0 < lo <= hi <= 500",
         )
+    }
+
+    fn validate_city(&self) -> Result<(), ScenarioError> {
+        let city = &self.city;
+        Interval::closed(1.0, 10.0).check("city.storey_height_m", city.storey_height_m)?;
+        Interval::closed(1.0, 500.0).check("city.default_height_m", city.default_height_m)
     }
 
     fn validate_targets(&self) -> Result<(), ScenarioError> {

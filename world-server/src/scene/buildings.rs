@@ -1,4 +1,7 @@
-//! Buildings: axis-aligned prisms standing on the ground inside the blocks of the road grid.
+//! Buildings: the generated city's axis-aligned boxes, standing on the ground inside the blocks
+//! of the road grid, and an imported city's footprints cut into convex parts.
+
+use std::sync::Arc;
 
 use rand::Rng;
 use rand::seq::SliceRandom;
@@ -7,6 +10,7 @@ use sets::math::{Point2, Point3, Real};
 
 use super::roads::RoadGrid;
 use crate::error::WorldBuildError;
+use crate::render::prism::Prism;
 
 /// Gap between neighbouring lots of a block.
 const LOT_GAP_M: Real = 3.0;
@@ -15,31 +19,116 @@ const MIN_LOT_SIDE_M: Real = 2.0;
 /// Smallest share of a lot's side a building takes in the first pass.
 const MIN_SIDE_SHARE: Real = 0.45;
 
-/// An axis-aligned box standing on the ground: footprint `[min, max]`, height `height`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// A building standing on the ground, up to `height`: the box over `[min, max]` (a generated
+/// building), or the union of convex upright prisms `parts` (an imported one, whose bounding
+/// box is `[min, max]`).
+#[derive(Clone, Debug, PartialEq)]
 pub struct Building {
-    /// South-west corner of the footprint.
+    /// South-west corner of the footprint (of its bounding box, for parts).
     pub min: Point2,
-    /// North-east corner of the footprint.
+    /// North-east corner of the footprint (of its bounding box, for parts).
     pub max: Point2,
     /// Height of the roof, metres.
     pub height: Real,
+    /// The convex parts that tile an imported footprint, each up to `height`; empty for a box.
+    pub parts: Vec<Arc<Prism>>,
 }
 
 impl Building {
+    /// The box over `[min, max]` up to `height`.
+    pub fn boxed(min: Point2, max: Point2, height: Real) -> Building {
+        Building {
+            min,
+            max,
+            height,
+            parts: Vec::new(),
+        }
+    }
+
+    /// The building whose footprint the convex counter-clockwise `parts` tile, up to `height`
+    /// (none if `parts` is empty).
+    pub fn from_parts(parts: Vec<Vec<Point2>>, height: Real) -> Option<Building> {
+        let corners = parts.iter().flatten();
+        let min = corners
+            .clone()
+            .copied()
+            .reduce(|a, b| Point2::new(a.x.min(b.x), a.y.min(b.y)))?;
+        let max = corners
+            .copied()
+            .reduce(|a, b| Point2::new(a.x.max(b.x), a.y.max(b.y)))?;
+        Some(Building {
+            min,
+            max,
+            height,
+            parts: Prism::building(parts, height)
+                .into_iter()
+                .map(Arc::new)
+                .collect(),
+        })
+    }
+
+    /// The footprint as convex counter-clockwise polygons: the box's rectangle, or the parts.
+    pub fn footprint(&self) -> Vec<Vec<Point2>> {
+        if self.parts.is_empty() {
+            let (a, b) = (self.min, self.max);
+            vec![vec![a, Point2::new(b.x, a.y), b, Point2::new(a.x, b.y)]]
+        } else {
+            self.parts.iter().map(|p| p.footprint.clone()).collect()
+        }
+    }
+
+    /// The footprint's outline as segments: the box's four sides, or the parts' edges that no
+    /// other part shares.
+    pub fn outline(&self) -> Vec<(Point2, Point2)> {
+        if self.parts.is_empty() {
+            let f = &self.footprint()[0];
+            return (0..4).map(|i| (f[i], f[(i + 1) % 4])).collect();
+        }
+        (self.parts.iter())
+            .flat_map(|part| part.outline_edges())
+            .collect()
+    }
+
     /// Footprint area, m².
     pub fn area(&self) -> Real {
-        (self.max.x - self.min.x) * (self.max.y - self.min.y)
+        if self.parts.is_empty() {
+            return (self.max.x - self.min.x) * (self.max.y - self.min.y);
+        }
+        self.parts
+            .iter()
+            .map(|p| {
+                let f = &p.footprint;
+                let n = f.len();
+                (0..n)
+                    .map(|i| f[i].coords.perp(&f[(i + 1) % n].coords))
+                    .sum::<Real>()
+                    / 2.0
+            })
+            .sum()
     }
 
     /// Horizontal distance from a ground point to the footprint (0 inside).
     pub fn footprint_distance(&self, p: &Point2) -> Real {
-        let dx = (self.min.x - p.x).max(p.x - self.max.x).max(0.0);
-        let dy = (self.min.y - p.y).max(p.y - self.max.y).max(0.0);
-        dx.hypot(dy)
+        if self.parts.is_empty() {
+            let dx = (self.min.x - p.x).max(p.x - self.max.x).max(0.0);
+            let dy = (self.min.y - p.y).max(p.y - self.max.y).max(0.0);
+            return dx.hypot(dy);
+        }
+        let ground = Point3::new(p.x, p.y, 0.0);
+        self.parts
+            .iter()
+            .map(|part| part.nearest_distance(&ground))
+            .fold(Real::INFINITY, Real::min)
     }
 
-    /// Centre of the box.
+    /// Whether a ground point lies on the footprint (its border included).
+    pub fn covers(&self, p: &Point2) -> bool {
+        let in_box =
+            p.x >= self.min.x && p.x <= self.max.x && p.y >= self.min.y && p.y <= self.max.y;
+        in_box && (self.parts.is_empty() || self.parts.iter().any(|part| part.contains(p)))
+    }
+
+    /// Centre of the box (of the bounding box, for parts).
     pub fn centre(&self) -> Point3 {
         Point3::new(
             (self.min.x + self.max.x) / 2.0,
@@ -48,7 +137,7 @@ impl Building {
         )
     }
 
-    /// Half extents of the box.
+    /// Half extents of the box (of the bounding box, for parts).
     pub fn half_extents(&self) -> [Real; 3] {
         [
             (self.max.x - self.min.x) / 2.0,
@@ -118,11 +207,7 @@ pub fn generate(
         let x0 = lot.min.x + rng.random_range(0.0..=1.0) * (lw - w);
         let y0 = lot.min.y + rng.random_range(0.0..=1.0) * (lh - h);
         let height = rng.random_range(heights[0]..=heights[1]);
-        let b = Building {
-            min: Point2::new(x0, y0),
-            max: Point2::new(x0 + w, y0 + h),
-            height,
-        };
+        let b = Building::boxed(Point2::new(x0, y0), Point2::new(x0 + w, y0 + h), height);
         total += b.area();
         placed.push((b, *lot));
     }
@@ -130,11 +215,13 @@ pub fn generate(
     // Second pass, for large fractions: grow buildings toward their whole lot.
     let mut i = 0;
     while wanted - total > 1e-6 * wanted && i < placed.len() {
-        let (b, lot) = placed[i];
-        let grown = |t: Real| Building {
-            min: b.min + (lot.min - b.min) * t,
-            max: b.max + (lot.max - b.max) * t,
-            height: b.height,
+        let (b, lot) = (placed[i].0.clone(), placed[i].1);
+        let grown = |t: Real| {
+            Building::boxed(
+                b.min + (lot.min - b.min) * t,
+                b.max + (lot.max - b.max) * t,
+                b.height,
+            )
         };
         let full_gain = lot.area() - b.area();
         let need = wanted - total;

@@ -31,6 +31,7 @@
 pub mod network;
 
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 use protocol::scenario::{Scenario, SpeedDraw};
 use rand::Rng;
@@ -38,7 +39,8 @@ use rand_chacha::ChaCha8Rng;
 use sets::math::{Point2, Real};
 
 use crate::error::WorldBuildError;
-use crate::scene::{Axis, Lane, RoadGrid};
+use crate::scene::{Axis, Lane, RoadGrid, Roads};
+use network::{LaneNetwork, NetLane};
 
 /// Steps a car waits, blocked, before turning around.
 pub const DEADLOCK_STEPS: u32 = 20;
@@ -77,7 +79,30 @@ pub struct Car<L = Lane> {
     stop_left_s: Real,
 }
 
+/// Where a car is, whichever road model drives it: what the cameras and the truth see.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CarPose {
+    /// Target id.
+    pub id: u32,
+    /// Ground point under the car's centre.
+    pub position: Point2,
+    /// Heading, radians counter-clockwise from east.
+    pub heading: Real,
+    /// Distance travelled in the last step divided by the step, m/s.
+    pub speed_mps: Real,
+}
+
 impl<L: Copy> Car<L> {
+    /// Where the car is.
+    pub fn pose(&self) -> CarPose {
+        CarPose {
+            id: self.id,
+            position: self.position,
+            heading: self.heading,
+            speed_mps: self.speed_mps,
+        }
+    }
+
     /// A car standing at `position` on `lane`, heading `heading`, with nothing planned.
     fn standing(id: u32, position: Point2, heading: Real, cruise_mps: Real, lane: L) -> Car<L> {
         Car {
@@ -339,6 +364,65 @@ impl<L: Copy> Traffic<L> {
             .iter()
             .enumerate()
             .all(|(j, c)| j == i || (c.position - p).norm() >= separation + EPS)
+    }
+}
+
+/// The cars of a run on their roads, whichever the road model: the grid's or an imported
+/// network's.
+#[derive(Clone, Debug)]
+pub enum Cars {
+    /// Cars on the generated city's grid.
+    Grid(Traffic<Lane>, Arc<RoadGrid>),
+    /// Cars on an imported city's network.
+    Network(Traffic<NetLane>, Arc<LaneNetwork>),
+}
+
+impl Cars {
+    /// Places the scenario's cars on `roads` ([`Traffic::place`], [`LaneNetwork::place`]).
+    pub fn place(
+        roads: &Roads,
+        scenario: &Scenario,
+        rng: ChaCha8Rng,
+        speeds: ChaCha8Rng,
+    ) -> Result<Cars, WorldBuildError> {
+        Ok(match roads {
+            Roads::Grid(grid) => Cars::Grid(
+                Traffic::place(grid, scenario, rng, speeds)?,
+                Arc::clone(grid),
+            ),
+            Roads::Network(net) => {
+                Cars::Network(net.place(scenario, rng, speeds)?, Arc::clone(net))
+            }
+        })
+    }
+
+    /// Advances every car by `dt` seconds.
+    pub fn step(&mut self, dt: Real) {
+        match self {
+            Cars::Grid(traffic, grid) => traffic.step(grid.as_ref(), dt),
+            Cars::Network(traffic, net) => traffic.step(net.as_ref(), dt),
+        }
+    }
+
+    /// Where the cars are, by id.
+    pub fn poses(&self) -> Vec<CarPose> {
+        match self {
+            Cars::Grid(traffic, _) => traffic.cars().iter().map(Car::pose).collect(),
+            Cars::Network(traffic, _) => traffic.cars().iter().map(Car::pose).collect(),
+        }
+    }
+
+    /// The number of cars.
+    pub fn len(&self) -> usize {
+        match self {
+            Cars::Grid(traffic, _) => traffic.cars().len(),
+            Cars::Network(traffic, _) => traffic.cars().len(),
+        }
+    }
+
+    /// Whether there are no cars.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 }
 

@@ -93,6 +93,11 @@ impl LaneNetwork {
         .with_zones()
     }
 
+    /// The roads' centrelines: each edge's two ends.
+    pub fn centrelines(&self) -> impl Iterator<Item = (Point2, Point2)> + '_ {
+        (self.edges.iter()).map(|&[a, b]| (self.points[a as usize], self.points[b as usize]))
+    }
+
     /// The network with its conflict zones found ([`Zones`]).
     fn with_zones(mut self) -> LaneNetwork {
         self.zones = Zones::find(&self.paths(), self.car_separation + ZONE_MARGIN_M);

@@ -17,7 +17,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use protocol::camera::{Camera, CameraModel, CameraPose};
 use protocol::scenario::Scenario;
 use protocol::wire::TruthState;
-use sets::math::Point3;
+use sets::math::{Point2, Point3};
 use sets::raster::CellSet;
 use world_server::scene::Building;
 
@@ -118,7 +118,15 @@ impl Animation {
             if let (Some((x0, x1)), Some((y0, y1))) = (xs, ys) {
                 for py in y0..=y1 {
                     for px in x0..=x1 {
-                        mask[(py * SIDE + px) as usize] = true;
+                        // A box marks every pixel it touches; parts, the pixels whose centre
+                        // they cover.
+                        let centre = Point2::new(
+                            (f64::from(px) + 0.5) * mpp - half,
+                            half - (f64::from(py) + 0.5) * mpp,
+                        );
+                        if b.parts.is_empty() || b.covers(&centre) {
+                            mask[(py * SIDE + px) as usize] = true;
+                        }
                     }
                 }
             }

@@ -86,12 +86,10 @@ pub(super) fn draw_outlines(
     chart: &mut Chart<'_, '_>,
     buildings: &[Building],
 ) -> anyhow::Result<()> {
-    chart.draw_series(buildings.iter().map(|b| {
-        Rectangle::new(
-            [(b.min.x, b.min.y), (b.max.x, b.max.y)],
-            OUTLINE.stroke_width(1),
-        )
-    }))?;
+    chart.draw_series(
+        (buildings.iter().flat_map(Building::outline))
+            .map(|(a, b)| PathElement::new(vec![(a.x, a.y), (b.x, b.y)], OUTLINE.stroke_width(1))),
+    )?;
     Ok(())
 }
 

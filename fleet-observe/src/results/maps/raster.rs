@@ -4,6 +4,7 @@
 use anyhow::Context as _;
 use plotters::prelude::*;
 use sets::grid::GroundGrid;
+use sets::math::Point2;
 use sets::raster::CellSet;
 use world_server::scene::Building;
 
@@ -188,7 +189,7 @@ impl Pixels {
     }
 
     /// Paints the pixels whose centres lie on building `b`'s footprint.
-    pub(super) fn fill_rect(&mut self, raster: &PlotRaster, b: &Building, c: [u8; 3]) {
+    pub(super) fn fill_footprint(&mut self, raster: &PlotRaster, b: &Building, c: [u8; 3]) {
         let (Some((x0, x1)), Some((y0, y1))) = (
             raster.columns_in(b.min.x, b.max.x),
             raster.rows_in(b.min.y, b.max.y),
@@ -197,7 +198,10 @@ impl Pixels {
         };
         for py in y0..=y1 {
             for px in x0..=x1 {
-                self.put(px, py, c);
+                let centre = Point2::new(raster.x_centre(px), raster.y_centre(py));
+                if b.parts.is_empty() || b.covers(&centre) {
+                    self.put(px, py, c);
+                }
             }
         }
     }

@@ -135,7 +135,7 @@ fn paint_ground(raster: &PlotRaster, scenario: &Scenario, buildings: &[Building]
         }
     }
     for b in buildings {
-        pixels.fill_rect(raster, b, rgb(building_shade(b.height, lo, hi)));
+        pixels.fill_footprint(raster, b, rgb(building_shade(b.height, lo, hi)));
     }
     pixels
 }
