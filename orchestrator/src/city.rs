@@ -88,13 +88,6 @@ impl CityArgs {
                 )));
             }
         }
-        scenario.region.half_extent_m = half_extent_m;
-        scenario.city.storey_height_m = storey_height_m;
-        scenario.city.default_height_m = default_height_m;
-        scenario.city.scene = SCENE_FILE.into();
-        scenario
-            .validate()
-            .map_err(|e| UsageError(format!("the city's scenario: {e}")))?;
         let profile = RoadProfile::for_scenario(&scenario);
         // As the ring road of the generated city: a car's whole body stays 2 m inside the
         // region.
@@ -106,6 +99,13 @@ impl CityArgs {
                 4.0 * border_gap_m
             )));
         }
+        scenario.region.half_extent_m = half_extent_m;
+        scenario.city.storey_height_m = storey_height_m;
+        scenario.city.default_height_m = default_height_m;
+        scenario.city.scene = SCENE_FILE.into();
+        scenario
+            .validate()
+            .map_err(|e| UsageError(format!("the city's scenario: {e}")))?;
         Ok(CityConfig {
             import: ImportOptions {
                 osm: self.osm.clone(),

@@ -1,14 +1,29 @@
-//! `fleet city` imports the shipped extract into a scene the `city` crate reads back, and
-//! refuses bad input with exit code 2 and a message that says what is wrong.
+//! `fleet city` imports the shipped extract into the shipped scenario, byte for byte; the
+//! imported city flies with every target in its sets; and bad input (a file, an option, a
+//! scene that does not fit the scenario) exits with code 2 and a message that says what is
+//! wrong.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use city::scene::CityScene;
-use tests::{TestRun, binary, run_to_end};
+use serde_json::Value;
+use tests::{ChildGuard, EXIT_TIMEOUT, TestRun, binary, fleet_run, run_to_end};
 
 fn extract() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/cities/helsinki.osm.pbf")
+}
+
+/// The shipped scenario `scenarios/cities/helsinki`.
+fn shipped(file: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios/cities/helsinki")
+        .join(file)
+}
+
+fn summary(out: &Path) -> Value {
+    let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
+    serde_json::from_str(&text).expect("summary.json is JSON")
 }
 
 fn fleet_city(t: &TestRun, osm: &std::path::Path, extra: &[&str]) -> std::process::Output {
@@ -38,11 +53,81 @@ fn the_shipped_extract_imports_into_a_scene_that_reads_back() {
         stdout.contains("cut") && stdout.contains("tunnels"),
         "{stdout}"
     );
+    assert!(
+        stdout.contains("the world builds: 78 buildings, 8 cars"),
+        "{stdout}"
+    );
     let scene = CityScene::read(&t.dir.join("out/city.json")).unwrap();
     assert_eq!(scene.buildings.len(), 78);
     assert_eq!(scene.half_extent_m, 250.0);
     assert!(scene.roads.length_m() > 1000.0);
     assert!(t.dir.join("out/city.png").is_file());
+    // The import is deterministic, and the shipped scenario is what it makes.
+    for file in ["city.json", "scenario.toml"] {
+        let made = std::fs::read(t.dir.join("out").join(file)).unwrap();
+        let kept = std::fs::read(shipped(file)).unwrap();
+        assert!(
+            made == kept,
+            "scenarios/cities/helsinki/{file} is not what `fleet city` makes: import it again \
+             (docs/cities.md)"
+        );
+    }
+}
+
+#[test]
+fn the_imported_city_flies_with_every_target_in_its_set() {
+    let t = TestRun::new("city-run");
+    for variant in ["paper", "setfleet"] {
+        let out_dir = t.dir.join(variant);
+        let extra = ["--duration", "40", "--variant", variant, "--strict"];
+        let mut run = ChildGuard::spawn(&mut fleet_run(
+            &t,
+            &shipped("scenario.toml"),
+            &out_dir,
+            &extra,
+        ));
+        let out = run.wait_timeout(EXIT_TIMEOUT * 3).expect("the run ends");
+        assert!(
+            out.status.success(),
+            "{variant}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let s = summary(&out_dir);
+        assert_eq!(s["violations"], 0, "{variant}: {s}");
+        assert_eq!(s["steps"], 80, "{variant}: {s}");
+        assert!(
+            s["identified_final"].as_f64().unwrap() >= 1.0,
+            "{variant}: {s}"
+        );
+        assert!(out_dir.join("sets.png").is_file());
+    }
+}
+
+#[test]
+fn a_scene_that_does_not_fit_the_run_is_refused_before_it_starts() {
+    let t = TestRun::new("city-misfit");
+    let cases: [(&[&str], &str); 3] = [
+        (
+            &["--set", "targets.building_clearance_m=9"],
+            "import the city again with this scenario",
+        ),
+        (
+            &["--set", "region.half_extent_m=300"],
+            "half extent of 250 m",
+        ),
+        (&["--set", "city.scene=\"missing.json\""], "city.scene"),
+    ];
+    for (flags, message) in cases {
+        let out = run_to_end(&mut fleet_run(
+            &t,
+            &shipped("scenario.toml"),
+            &t.dir.join("out"),
+            flags,
+        ));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flags:?}: {stderr}");
+        assert!(stderr.contains(message), "{flags:?}: {stderr}");
+    }
 }
 
 #[test]

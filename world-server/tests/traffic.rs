@@ -86,6 +86,26 @@ fn cars_keep_their_distances_for_a_whole_run() {
     }
 }
 
+/// The shipped Helsinki scenario (`scenarios/cities/helsinki`): its cars keep every distance
+/// on a road network and around buildings that no generator made.
+#[test]
+fn cars_keep_their_distances_in_an_imported_city() {
+    let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios/cities/helsinki/scenario.toml");
+    for seed in 1..=3 {
+        let mut s = Scenario::load(Some(&file), &[]).expect("the shipped scenario loads");
+        s.seed = seed;
+        assert!(
+            !World::new(&s).unwrap().scene().buildings[0]
+                .parts
+                .is_empty()
+        );
+        let (driven, closest) = run_and_check(&s, s.steps());
+        assert!(driven > 500.0, "seed {seed}: {driven}");
+        assert!(closest.is_finite(), "seed {seed}");
+    }
+}
+
 /// With `targets.building_clearance_m = r_s`, the cars come as close to the walls as the paper
 /// allows, and some do.
 #[test]

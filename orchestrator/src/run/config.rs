@@ -215,10 +215,13 @@ pub struct RunConfig {
 }
 
 impl RunArgs {
-    /// Loads the scenario, applies the overrides and checks the faults against the fleet and
-    /// the run's duration.
+    /// Loads the scenario, applies the overrides, checks that the world builds from it, and
+    /// checks the faults against the fleet and the run's duration.
     pub fn validate(&self) -> Result<RunConfig, UsageError> {
         let scenario = self.choice.resolve()?;
+        // A city its blocks cannot hold, or an imported scene that is missing or does not fit
+        // the scenario, is the user's to fix: said here, before any process starts.
+        world_server::World::new(&scenario).map_err(|e| UsageError(e.to_string()))?;
         let mode = match self.mode {
             ModeArg::Lockstep => StepMode::Lockstep,
             ModeArg::Realtime => {

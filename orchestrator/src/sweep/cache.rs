@@ -13,7 +13,9 @@
 //!   older build's runs, even when its source did not change;
 //! - the resolved scenario as its `scenario.toml` is written, which holds every key and the
 //!   seed;
-//! - the variant, the step mode, the host layout and the faults.
+//! - the variant, the step mode, the host layout and the faults;
+//! - for an imported city, the SHA-256 of its scene file (`city.scene`), which the scenario
+//!   names by path only.
 //!
 //! Runs with a pause fault (a process stopped for wall-clock seconds) or a restart (the new
 //! process joins when it has started) depend on the wall clock, so they are never stored nor
@@ -112,6 +114,13 @@ impl RunCache {
         );
         hash.update(head.as_bytes());
         hash.update(run.scenario.to_toml_string().as_bytes());
+        let scene = &run.scenario.city.scene;
+        if !scene.is_empty() {
+            // A scene that cannot be read makes the run fail; it is not stored either way.
+            let bytes = std::fs::read(scene).ok()?;
+            hash.update(b"\nscene ");
+            hash.update(hex(&Sha256::digest(&bytes)).as_bytes());
+        }
         Some(hex(&hash.finalize()))
     }
 
@@ -276,6 +285,22 @@ mod tests {
             origin: fleet_observe::faults::FaultOrigin::Chaos,
         });
         assert_eq!(cache.key(&chaos), None);
+
+        // An imported city's scene file is part of the key by its contents, not its path.
+        let scene = dir.join("city.json");
+        let with_scene = |bytes: &str| {
+            std::fs::write(&scene, bytes).expect("scene");
+            let mut run = base.clone();
+            run.scenario.city.scene = scene.to_string_lossy().into_owned();
+            cache.key(&run)
+        };
+        let (a, a_again, b) = (with_scene("one"), with_scene("one"), with_scene("two"));
+        assert!(a.is_some() && a != Some(key.clone()) && a != b);
+        assert_eq!(a, a_again);
+        std::fs::remove_file(&scene).expect("remove the scene");
+        let mut missing = base.clone();
+        missing.scenario.city.scene = scene.to_string_lossy().into_owned();
+        assert_eq!(cache.key(&missing), None, "a scene that cannot be read");
         let _ = std::fs::remove_dir_all(dir);
     }
 

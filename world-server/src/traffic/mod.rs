@@ -210,7 +210,16 @@ pub trait RoadModel<L> {
     fn admits(&self, _cars: &[Car<L>], _i: usize, _to: &Point2) -> bool {
         true
     }
+    /// Whether a car's path must reach further before it can decide its next move (beyond
+    /// the step's travel, which is always planned); never by default.
+    fn plans_further(&self, _car: &Car<L>) -> bool {
+        false
+    }
 }
+
+/// The most decisions planned for one car in one step beyond its step's travel
+/// ([`RoadModel::plans_further`]).
+const MAX_PLANS_AHEAD: usize = 64;
 
 /// Every car of the run, and the random sources of their decisions.
 #[derive(Clone, Debug)]
@@ -308,6 +317,12 @@ impl<L: Copy> Traffic<L> {
             while self.cars[i].path_length() < budget + EPS {
                 let car = &mut self.cars[i];
                 roads.plan(car, &mut self.rng);
+            }
+            for _ in 0..MAX_PLANS_AHEAD {
+                if !roads.plans_further(&self.cars[i]) {
+                    break;
+                }
+                roads.plan(&mut self.cars[i], &mut self.rng);
             }
             let mut moved = None;
             for share in MOVE_SHARES {
