@@ -454,46 +454,42 @@ fn fill_short_gaps(
     }
     // Distance along the paths to the nearest zone sample ahead and behind, up to `gap`.
     let (mut ahead, mut behind) = (vec![Real::INFINITY; n], vec![Real::INFINITY; n]);
-    let cap = |d: Real| if d < gap { d } else { Real::INFINITY };
+    // One pass along a path's samples in `order`, `d` coming in from the path before: each
+    // sample's distance is the least of its own and the last one's plus the spacing (0 on a
+    // zone sample). Whether any shrank.
+    let relax = |dist: &mut [Real], order: &mut dyn Iterator<Item = usize>, mut d: Real| {
+        let (mut changed, mut last_i): (bool, Option<usize>) = (false, None);
+        for i in order {
+            if let Some(j) = last_i {
+                let step: Real = samples[i].2 - samples[j].2;
+                d += step.abs();
+                if d >= gap {
+                    d = Real::INFINITY;
+                }
+            }
+            if conflict[i] {
+                d = 0.0;
+            }
+            if d < dist[i] {
+                dist[i] = d;
+                changed = true;
+            }
+            d = dist[i];
+            last_i = Some(i);
+        }
+        changed
+    };
     let mut changed = true;
     while changed {
         changed = false;
         for (k, p) in paths.iter().enumerate() {
             let (a, b) = (first[k], last(k));
-            let mut d = p
-                .next
-                .iter()
-                .map(|&m| ahead[first[m]])
-                .fold(Real::INFINITY, Real::min);
-            for i in (a..=b).rev() {
-                if i < b {
-                    d = cap(d + (samples[i + 1].2 - samples[i].2));
-                }
-                if conflict[i] {
-                    d = 0.0;
-                }
-                if d < ahead[i] {
-                    ahead[i] = d;
-                    changed = true;
-                }
-                d = ahead[i];
-            }
-            let mut d = (predecessors[k].iter())
-                .map(|&m| behind[last(m)])
-                .fold(Real::INFINITY, Real::min);
-            for i in a..=b {
-                if i > a {
-                    d = cap(d + (samples[i].2 - samples[i - 1].2));
-                }
-                if conflict[i] {
-                    d = 0.0;
-                }
-                if d < behind[i] {
-                    behind[i] = d;
-                    changed = true;
-                }
-                d = behind[i];
-            }
+            let from_next = (p.next.iter()).map(|&m| ahead[first[m]]);
+            let d = from_next.fold(Real::INFINITY, Real::min);
+            changed |= relax(&mut ahead, &mut (a..=b).rev(), d);
+            let from_previous = (predecessors[k].iter()).map(|&m| behind[last(m)]);
+            let d = from_previous.fold(Real::INFINITY, Real::min);
+            changed |= relax(&mut behind, &mut (a..=b), d);
         }
     }
     for i in 0..n {
