@@ -238,44 +238,59 @@ impl Traffic<Lane> {
     pub fn place(
         roads: &RoadGrid,
         scenario: &Scenario,
-        mut rng: ChaCha8Rng,
+        rng: ChaCha8Rng,
         speeds: ChaCha8Rng,
     ) -> Result<Traffic, WorldBuildError> {
+        let sep = roads.profile.car_separation;
+        Traffic::place_with(scenario, sep, "the roads", rng, speeds, |rng| {
+            let axis = if rng.random_bool(0.5) {
+                Axis::X
+            } else {
+                Axis::Y
+            };
+            let road = rng.random_range(0..roads.roads(axis).len());
+            let dir = if rng.random_bool(0.5) { 1 } else { -1 };
+            let lane = Lane { axis, road, dir };
+            let cs = roads.crossings(axis);
+            let (lo, hi) = (cs[0], cs[cs.len() - 1]);
+            let p = roads.point_on_lane(lane, rng.random_range(lo..=hi));
+            let h = lane.heading();
+            Some((p, h.y.atan2(h.x), lane))
+        })
+    }
+}
+
+impl<L: Copy> Traffic<L> {
+    /// Places `targets.count` cars, each at the first of up to [`PLACEMENT_TRIES`] spots
+    /// `draw` gives (point, heading, lane; none for a spot the road model refuses) that is
+    /// `sep` from every car placed before, with a cruise speed drawn after it. `roads` names
+    /// the roads in the error.
+    fn place_with(
+        scenario: &Scenario,
+        sep: Real,
+        roads: &str,
+        mut rng: ChaCha8Rng,
+        speeds: ChaCha8Rng,
+        mut draw: impl FnMut(&mut ChaCha8Rng) -> Option<(Point2, Real, L)>,
+    ) -> Result<Traffic<L>, WorldBuildError> {
         let t = &scenario.targets;
         let model = SpeedModel::of(scenario);
-        let sep = roads.profile.car_separation;
-        let mut cars: Vec<Car> = Vec::with_capacity(t.count as usize);
+        let mut cars: Vec<Car<L>> = Vec::with_capacity(t.count as usize);
         for id in 0..t.count {
-            let mut placed = None;
-            for _ in 0..PLACEMENT_TRIES {
-                let axis = if rng.random_bool(0.5) {
-                    Axis::X
-                } else {
-                    Axis::Y
-                };
-                let road = rng.random_range(0..roads.roads(axis).len());
-                let dir = if rng.random_bool(0.5) { 1 } else { -1 };
-                let lane = Lane { axis, road, dir };
-                let cs = roads.crossings(axis);
-                let (lo, hi) = (cs[0], cs[cs.len() - 1]);
-                let p = roads.point_on_lane(lane, rng.random_range(lo..=hi));
-                if cars.iter().all(|c| (c.position - p).norm() >= sep + EPS) {
-                    let h = lane.heading();
-                    let cruise = model.cruise(&mut rng);
-                    placed = Some(Car::standing(id, p, h.y.atan2(h.x), cruise, lane));
-                    break;
-                }
-            }
-            match placed {
-                Some(c) => cars.push(c),
-                None => {
-                    return Err(WorldBuildError::Placement(format!(
-                        "cannot place car {id} of targets.count = {} on the roads at least \
-                         {sep:.2} m from the others",
-                        t.count
-                    )));
-                }
-            }
+            let placed = (0..PLACEMENT_TRIES).find_map(|_| {
+                let (p, heading, lane) = draw(&mut rng)?;
+                cars.iter()
+                    .all(|c| (c.position - p).norm() >= sep + EPS)
+                    .then(|| Car::standing(id, p, heading, model.cruise(&mut rng), lane))
+            });
+            let Some(car) = placed else {
+                return Err(WorldBuildError::Placement(format!(
+                    "cannot place car {id} of targets.count = {} on {roads} at least {sep:.2} m \
+                     from the others",
+                    t.count
+                )));
+            };
+            cars.push(car);
         }
         Ok(Traffic {
             cars,
@@ -284,9 +299,7 @@ impl Traffic<Lane> {
             model,
         })
     }
-}
 
-impl<L: Copy> Traffic<L> {
     /// The cars, by id.
     pub fn cars(&self) -> &[Car<L>] {
         &self.cars

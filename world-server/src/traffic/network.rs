@@ -45,7 +45,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use sets::math::{Point2, Real, Vector2};
 
-use super::{Car, EPS, PLACEMENT_TRIES, RoadModel, SpeedModel, Traffic, Waypoint};
+use super::{Car, EPS, RoadModel, Traffic, Waypoint};
 use crate::error::WorldBuildError;
 
 /// A lane: edge `edge` of the network, driven from its point `a` to `b` (`forward`) or back.
@@ -207,11 +207,9 @@ impl LaneNetwork {
     pub fn place(
         &self,
         scenario: &Scenario,
-        mut rng: ChaCha8Rng,
+        rng: ChaCha8Rng,
         speeds: ChaCha8Rng,
     ) -> Result<Traffic<NetLane>, WorldBuildError> {
-        let t = &scenario.targets;
-        let model = SpeedModel::of(scenario);
         let lengths: Vec<Real> = (0..self.edges.len() as u32)
             .map(|edge| {
                 self.length(NetLane {
@@ -226,49 +224,25 @@ impl LaneNetwork {
                 "the road network has no length".into(),
             ));
         }
-        let sep = self.car_separation;
-        let mut cars: Vec<Car<NetLane>> = Vec::with_capacity(t.count as usize);
-        for id in 0..t.count {
-            let mut placed = None;
-            for _ in 0..PLACEMENT_TRIES {
-                let mut at = rng.random::<Real>() * total;
-                let edge = lengths
-                    .iter()
-                    .position(|&l| {
-                        at -= l;
-                        at < 0.0
-                    })
-                    .unwrap_or(lengths.len() - 1) as u32;
-                let lane = NetLane {
-                    edge,
-                    forward: rng.random_bool(0.5),
-                };
-                let (_, dir, len) = self.centreline(lane);
-                let p = self.lane_point(lane, rng.random_range(0.0..=len));
-                if self.zone_at(&p).is_none()
-                    && cars.iter().all(|c| (c.position - p).norm() >= sep + EPS)
-                {
-                    let cruise = model.cruise(&mut rng);
-                    placed = Some(Car::standing(id, p, dir.y.atan2(dir.x), cruise, lane));
-                    break;
-                }
-            }
-            match placed {
-                Some(c) => cars.push(c),
-                None => {
-                    return Err(WorldBuildError::Placement(format!(
-                        "cannot place car {id} of targets.count = {} on the city's {:.0} m of road \
-                         at least {sep:.2} m from the others",
-                        t.count, total
-                    )));
-                }
-            }
-        }
-        Ok(Traffic {
-            cars,
-            rng,
-            speeds,
-            model,
+        let roads = format!("the city's {total:.0} m of road");
+        Traffic::place_with(scenario, self.car_separation, &roads, rng, speeds, |rng| {
+            let mut at = rng.random::<Real>() * total;
+            let edge = lengths
+                .iter()
+                .position(|&l| {
+                    at -= l;
+                    at < 0.0
+                })
+                .unwrap_or(lengths.len() - 1) as u32;
+            let lane = NetLane {
+                edge,
+                forward: rng.random_bool(0.5),
+            };
+            let (_, dir, len) = self.centreline(lane);
+            let p = self.lane_point(lane, rng.random_range(0.0..=len));
+            self.zone_at(&p)
+                .is_none()
+                .then(|| (p, dir.y.atan2(dir.x), lane))
         })
     }
 }
