@@ -41,6 +41,7 @@ pub mod security;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
+use std::time::Duration;
 
 use zenoh::Wait;
 use zenoh::sample::{Locality, Sample, SampleKind};
@@ -71,49 +72,83 @@ pub enum BridgeError {
     Panicked,
 }
 
-/// Runs the bridge of `plan`'s host with the Zenoh configuration `zenoh` until `shutdown` is
-/// raised or a termination signal arrives; returns what it forwarded.
-pub fn run(
-    plan: &HostPlan,
-    zenoh: zenoh::Config,
-    shutdown: &AtomicBool,
-) -> Result<Counters, BridgeError> {
-    let session = zenoh::open(zenoh).wait().map_err(BridgeError::Session)?;
-    tracing::info!(host = %plan.host, zid = %session.zid(), "Zenoh session open");
-    // The local subscribers exist before anything from the other hosts is published here:
-    // what this host's processes publish in answer (the first estimates answer the first
-    // frames, which answer the remote hellos) is never sent before the bridge listens.
-    let outbound = Outbound::open(plan, &session)?;
-    let (arrivals, queue) = mpsc::channel();
-    let _subscribers = subscribe(&session, plan, &arrivals)?;
-    drop(arrivals);
-    let result = std::thread::scope(|scope| {
-        let (ready_tx, ready_rx) = mpsc::channel();
-        let inbound = scope.spawn(|| {
-            inbound::run(
-                plan,
-                queue,
-                move |r| {
-                    let _ = ready_tx.send(r);
-                },
-                shutdown,
-            )
-        });
-        let started = match ready_rx.recv() {
-            Ok(Ok(())) => Ok(outbound.run(shutdown)),
-            Ok(Err(e)) => Err(BridgeError::Inbound(e)),
-            Err(_) => Err(BridgeError::Panicked),
-        };
-        shutdown.store(true, Ordering::Relaxed);
-        let inbound = inbound.join().map_err(|_| BridgeError::Panicked);
-        let mut counters = started?;
-        counters.merge(inbound?);
-        Ok(counters)
-    });
-    if let Err(e) = session.close().wait() {
-        tracing::debug!(error = %e, "closing the Zenoh session");
+/// How long closing the Zenoh session may take. Zenoh's own bound is 10 s, which is as long as
+/// `fleet run` waits for a bridge after SIGTERM; a close that hangs (a link already gone, a
+/// QUIC close handshake that never ends) must not cost the bridge its report.
+pub const CLOSE_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// One host's bridge: its open Zenoh session.
+///
+/// [`Bridge::forward`] runs it until it is told to stop and returns what it forwarded, which
+/// the caller reports before [`Bridge::close`], since closing a Zenoh session can take up to
+/// [`CLOSE_TIMEOUT`].
+pub struct Bridge {
+    session: zenoh::Session,
+}
+
+impl Bridge {
+    /// Opens the Zenoh session of configuration `zenoh` (as the router, or as a client that
+    /// connects to it).
+    pub fn open(zenoh: zenoh::Config) -> Result<Self, BridgeError> {
+        let session = zenoh::open(zenoh).wait().map_err(BridgeError::Session)?;
+        Ok(Self { session })
     }
-    result
+
+    /// Forwards `plan`'s host's share of the run until `shutdown` is raised or a termination
+    /// signal arrives; returns what it forwarded.
+    pub fn forward(&self, plan: &HostPlan, shutdown: &AtomicBool) -> Result<Counters, BridgeError> {
+        let session = &self.session;
+        tracing::info!(host = %plan.host, zid = %session.zid(), "Zenoh session open");
+        // The local subscribers exist before anything from the other hosts is published
+        // here: what this host's processes publish in answer (the first estimates answer the
+        // first frames, which answer the remote hellos) is never sent before the bridge
+        // listens.
+        let outbound = Outbound::open(plan, session)?;
+        let (arrivals, queue) = mpsc::channel();
+        let _subscribers = subscribe(session, plan, &arrivals)?;
+        drop(arrivals);
+        std::thread::scope(|scope| {
+            let (ready_tx, ready_rx) = mpsc::channel();
+            let inbound = scope.spawn(|| {
+                inbound::run(
+                    plan,
+                    queue,
+                    move |r| {
+                        let _ = ready_tx.send(r);
+                    },
+                    shutdown,
+                )
+            });
+            let started = match ready_rx.recv() {
+                Ok(Ok(())) => Ok(outbound.run(shutdown)),
+                Ok(Err(e)) => Err(BridgeError::Inbound(e)),
+                Err(_) => Err(BridgeError::Panicked),
+            };
+            shutdown.store(true, Ordering::Relaxed);
+            let inbound = inbound.join().map_err(|_| BridgeError::Panicked);
+            let mut counters = started?;
+            counters.merge(inbound?);
+            Ok(counters)
+        })
+    }
+
+    /// Closes the Zenoh session, waiting at most [`CLOSE_TIMEOUT`]: a close that does not end
+    /// in time is logged and left to its thread, since the process is about to exit.
+    pub fn close(self) {
+        let (done_tx, done_rx) = mpsc::channel();
+        let session = self.session;
+        std::thread::spawn(move || {
+            let _ = done_tx.send(session.close().wait());
+        });
+        match done_rx.recv_timeout(CLOSE_TIMEOUT) {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => tracing::warn!(error = %e, "closing the Zenoh session"),
+            Err(_) => tracing::warn!(
+                timeout_s = CLOSE_TIMEOUT.as_secs(),
+                "the Zenoh session did not close in time: left open"
+            ),
+        }
+    }
 }
 
 /// The Zenoh subscribers of `plan`'s host, which queue what arrives for the inbound thread.

@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
 
+use bridge::Bridge;
 use bridge::plan::{self, HostPlan, HostShare};
 use bridge::security::{HostName, HostTlsFiles, LinkMode, LinkPlan, zenoh_config};
 use clap::Parser;
@@ -56,8 +57,17 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    let bridge = match Bridge::open(config) {
+        Ok(bridge) => bridge,
+        Err(e) => {
+            eprintln!("fleet-bridge: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
     let shutdown = AtomicBool::new(false);
-    match bridge::run(&plan, config, &shutdown) {
+    let forwarded = bridge.forward(&plan, &shutdown);
+    // The report goes out before the session closes, which may take a while.
+    let code = match forwarded {
         Ok(report) => {
             match serde_json::to_string(&report) {
                 Ok(json) => println!("{json}"),
@@ -69,7 +79,9 @@ fn main() -> ExitCode {
             eprintln!("fleet-bridge: {e}");
             ExitCode::FAILURE
         }
-    }
+    };
+    bridge.close();
+    code
 }
 
 /// The host's plan and its Zenoh configuration, or what is wrong with the arguments.
