@@ -200,6 +200,32 @@ pub struct CityConfig {
     pub storey_height_m: f64,
     /// Height of a building mapped with neither, metres (`1 <= value <= 500`).
     pub default_height_m: f64,
+    /// Who drives the cars of an imported city ([`CityTraffic`]; `"roads"`, the default: the
+    /// world's own model).
+    pub traffic: CityTraffic,
+    /// The trace file of `traffic = "trace"` (CSV: `time_s,car,x_m,y_m,heading_rad`). A
+    /// relative path is taken from the scenario file's folder, as `scene` is.
+    pub trace: String,
+}
+
+/// Who drives the cars of an imported city (`city.traffic`). Whichever it is, the world checks
+/// every car's every step: at most `v_max T` long, and `targets.building_clearance_m` from
+/// every building, inside the region.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CityTraffic {
+    /// The world's own model on the scene's roads (both ways on every road).
+    #[default]
+    Roads,
+    /// SUMO, run ahead of the world from the seed on the scene's roads (one-way streets kept).
+    Sumo,
+    /// A recorded trace, `city.trace`.
+    Trace,
+}
+
+impl CityTraffic {
+    /// Every choice's name, as written in a scenario.
+    pub const NAMES: [&'static str; 3] = ["roads", "sumo", "trace"];
 }
 
 /// `[targets]`.
@@ -814,6 +840,8 @@ impl Default for CityConfig {
             scene: String::new(),
             storey_height_m: 3.0,
             default_height_m: 12.0,
+            traffic: CityTraffic::Roads,
+            trace: String::new(),
         }
     }
 }
@@ -1040,11 +1068,13 @@ impl Scenario {
             Override::parse(text)?.apply(&mut table, &schema)?;
         }
         let mut scenario = resolve(table, &schema)?;
-        if !scenario.city.scene.is_empty() {
-            // An override's relative path is the working directory's; every process of a run
-            // gets the same absolute path, wherever it starts.
-            if let Ok(absolute) = std::path::absolute(&scenario.city.scene) {
-                scenario.city.scene = absolute.to_string_lossy().into_owned();
+        // An override's relative path is the working directory's; every process of a run
+        // gets the same absolute path, wherever it starts.
+        for path in [&mut scenario.city.scene, &mut scenario.city.trace] {
+            if !path.is_empty()
+                && let Ok(absolute) = std::path::absolute(&*path)
+            {
+                *path = absolute.to_string_lossy().into_owned();
             }
         }
         Ok(scenario)
@@ -1099,18 +1129,22 @@ fn table_changes(mine: Table, base: &Table) -> Table {
     out
 }
 
-/// Takes a relative `city.scene` of a scenario file from the file's folder `dir`, so that a
-/// scenario and its scene move together.
+/// The keys of `[city]` that name files.
+const CITY_FILES: [&str; 2] = ["scene", "trace"];
+
+/// Takes a relative `city.scene` or `city.trace` of a scenario file from the file's folder
+/// `dir`, so that a scenario and its files move together.
 fn anchor_scene(table: &mut Table, dir: &Path) {
-    let scene = table
-        .get_mut("city")
-        .and_then(Value::as_table_mut)
-        .and_then(|city| city.get_mut("scene"));
-    if let Some(Value::String(path)) = scene
-        && !path.is_empty()
-        && Path::new(path.as_str()).is_relative()
-    {
-        *path = dir.join(path.as_str()).to_string_lossy().into_owned();
+    let Some(city) = table.get_mut("city").and_then(Value::as_table_mut) else {
+        return;
+    };
+    for key in CITY_FILES {
+        if let Some(Value::String(path)) = city.get_mut(key)
+            && !path.is_empty()
+            && Path::new(path.as_str()).is_relative()
+        {
+            *path = dir.join(path.as_str()).to_string_lossy().into_owned();
+        }
     }
 }
 

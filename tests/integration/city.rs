@@ -1,7 +1,8 @@
 //! `fleet city` imports the shipped extract into the shipped scenario, byte for byte; the
-//! imported city flies with every target in its sets; and bad input (a file, an option, a
-//! scene that does not fit the scenario) exits with code 2 and a message that says what is
-//! wrong.
+//! imported city flies with every target in its sets, its cars driven by the world's model or
+//! by SUMO; and bad input (a file, an option, a scene that does not fit the scenario, a trace
+//! that breaks the estimator's assumptions, SUMO missing) exits with code 2 and a message that
+//! says what is wrong.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -101,6 +102,106 @@ fn the_imported_city_flies_with_every_target_in_its_set() {
         );
         assert!(out_dir.join("sets.png").is_file());
     }
+}
+
+/// SUMO drives the cars (`city.traffic = "sumo"`): the fleet flies them with every target in
+/// its set. `.ci/run` installs SUMO; where it is missing this test fails, saying how to
+/// install it.
+#[test]
+fn sumo_drives_the_imported_city_with_every_target_in_its_set() {
+    let t = TestRun::new("city-sumo");
+    for variant in ["paper", "setfleet"] {
+        let out_dir = t.dir.join(variant);
+        let extra = [
+            "--duration",
+            "30",
+            "--variant",
+            variant,
+            "--strict",
+            "--set",
+            "city.traffic=\"sumo\"",
+        ];
+        let out = ChildGuard::spawn(&mut fleet_run(
+            &t,
+            &shipped("scenario.toml"),
+            &out_dir,
+            &extra,
+        ))
+        .wait_timeout(EXIT_TIMEOUT * 3)
+        .expect("the run ends");
+        assert!(
+            out.status.success(),
+            "{variant}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let s = summary(&out_dir);
+        assert_eq!(s["violations"], 0, "{variant}: {s}");
+        assert_eq!(s["steps"], 60, "{variant}: {s}");
+        assert!(
+            s["identified_final"].as_f64().unwrap() >= 1.0,
+            "{variant}: {s}"
+        );
+    }
+}
+
+/// A trace that breaks the estimator's assumptions, and SUMO where it is missing, stop the run
+/// before it starts (exit 2), saying which car when, or how to install SUMO.
+#[test]
+fn a_bad_trace_or_a_missing_sumo_is_refused_before_the_run_starts() {
+    let t = TestRun::new("city-trace");
+    // A road point of the scene (8.8 m or more from every building), and a car that jumps 5 m
+    // from it at 0.5 s.
+    let scene: Value =
+        serde_json::from_str(&std::fs::read_to_string(shipped("city.json")).unwrap()).unwrap();
+    let p = &scene["roads"]["points"][0];
+    let (x, y) = (p[0].as_f64().unwrap(), p[1].as_f64().unwrap());
+    let inward = if x > 0.0 { -5.0 } else { 5.0 };
+    let trace = t.write(
+        "jump.csv",
+        &format!(
+            "time_s,car,x_m,y_m,heading_rad\n0,0,{x},{y},0\n0.5,0,{},{y},0\n1,0,{},{y},0\n",
+            x + inward,
+            x + inward
+        ),
+    );
+    let trace_key = format!("city.trace={:?}", trace.display().to_string());
+    let out = run_to_end(&mut fleet_run(
+        &t,
+        &shipped("scenario.toml"),
+        &t.dir.join("out"),
+        &[
+            "--duration",
+            "1",
+            "--set",
+            "targets.count=1",
+            "--set",
+            "city.traffic=\"trace\"",
+            "--set",
+            &trace_key,
+        ],
+    ));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("car 0 moves 5.000000 m from 0 s to 0.5 s"),
+        "{stderr}"
+    );
+    let out = run_to_end(
+        fleet_run(
+            &t,
+            &shipped("scenario.toml"),
+            &t.dir.join("out"),
+            &["--set", "city.traffic=\"sumo\""],
+        )
+        .env("SUMO_HOME", t.dir.join("no-sumo"))
+        .env("PATH", "/usr/bin:/bin"),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("pip install eclipse-sumo==1.28.0"),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -1,5 +1,5 @@
 //! Why a world could not be built: the one error of [`World::new`](crate::World::new) and of
-//! the generators it calls (city, traffic, fleet).
+//! the generators it calls (city, traffic, fleet) and of the traces it replays.
 
 use protocol::scenario::ScenarioError;
 
@@ -17,4 +17,10 @@ pub enum WorldBuildError {
     /// The imported city's scene file cannot be read, or does not fit the scenario.
     #[error("cannot build the world: {0}")]
     Scene(String),
+    /// The cars' trace is refused ([`crate::traffic::trace::Trace::check`]).
+    #[error("cannot build the world: {0}")]
+    Trace(#[from] crate::traffic::trace::TraceError),
+    /// SUMO could not drive the cars (missing, failed, or too many cars for the roads).
+    #[error("cannot build the world: {0}")]
+    Sumo(#[from] crate::traffic::sumo::SumoError),
 }

@@ -7,7 +7,7 @@ use city::scene::CityScene;
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
 use protocol::frame::{CvsFrame, FRAME_MAX_BOXES, TargetBox};
-use protocol::scenario::Scenario;
+use protocol::scenario::{CityTraffic, Scenario};
 use protocol::wire::{MAX_UAVS, TRUTH_MAX_TARGETS, TargetTruth, TruthState, UavTruth};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -17,6 +17,8 @@ use crate::error::WorldBuildError;
 use crate::fleet::{Fleet, Uav};
 use crate::render::{self, FrameSpec, ObjectKind, SceneObject};
 use crate::scene::City;
+use crate::traffic::sumo::SumoTools;
+use crate::traffic::trace::{Trace, TraceCars};
 use crate::traffic::{CarPose, Cars};
 
 /// Size of a UAV's body as the other cameras see it: length, width, height, metres.
@@ -44,23 +46,40 @@ impl World {
     /// Builds the city, the cars and the fleet from the scenario's seed, once the scenario is
     /// found valid ([`Scenario::validate`]: a scenario built in code is held to the ranges of
     /// one read from a file). The city is generated from the seed, or imported from
-    /// `city.scene` ([`City::import`]).
+    /// `city.scene` ([`City::import`]); an imported city's cars are driven by the world's
+    /// model, by SUMO or by a trace (`city.traffic`), a trace checked whole first
+    /// ([`Trace::check`]).
     pub fn new(scenario: &Scenario) -> Result<World, WorldBuildError> {
         scenario.validate()?;
-        let city = if scenario.city.scene.is_empty() {
+        let mut traffic_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+        traffic_rng.set_stream(TRAFFIC_STREAM);
+        let (city, cars) = if scenario.city.scene.is_empty() {
             let mut city_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
             city_rng.set_stream(CITY_STREAM);
-            City::generate(scenario, &mut city_rng)?
+            let city = City::generate(scenario, &mut city_rng)?;
+            let cars = Self::place_cars(&city, scenario, traffic_rng)?;
+            (city, cars)
         } else {
             let scene = CityScene::read(Path::new(&scenario.city.scene))
                 .map_err(|e| WorldBuildError::Scene(format!("city.scene: {e}")))?;
-            City::import(&scene, scenario)?
+            let city = City::import(&scene, scenario)?;
+            let period = scenario.timing.cvs_period_s;
+            let trace = match scenario.city.traffic {
+                CityTraffic::Roads => None,
+                CityTraffic::Sumo => {
+                    Some(SumoTools::locate()?.drive(&scene.roads, scenario, &mut traffic_rng)?)
+                }
+                CityTraffic::Trace => Some(Trace::read(Path::new(&scenario.city.trace), period)?),
+            };
+            let cars = match trace {
+                Some(trace) => {
+                    trace.check(&city, scenario)?;
+                    Cars::Trace(TraceCars::new(trace))
+                }
+                None => Self::place_cars(&city, scenario, traffic_rng)?,
+            };
+            (city, cars)
         };
-        let mut traffic_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
-        traffic_rng.set_stream(TRAFFIC_STREAM);
-        let mut speed_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
-        speed_rng.set_stream(SPEED_STREAM);
-        let cars = Cars::place(&city.roads, scenario, traffic_rng, speed_rng)?;
         let fleet = Fleet::launch(scenario, city.tallest())?;
         Ok(World {
             scenario: scenario.clone(),
@@ -69,6 +88,17 @@ impl World {
             fleet,
             step: 0,
         })
+    }
+
+    /// The world's own traffic model's cars on `city`'s roads.
+    fn place_cars(
+        city: &City,
+        scenario: &Scenario,
+        traffic_rng: ChaCha8Rng,
+    ) -> Result<Cars, WorldBuildError> {
+        let mut speed_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+        speed_rng.set_stream(SPEED_STREAM);
+        Cars::place(&city.roads, scenario, traffic_rng, speed_rng)
     }
 
     /// The scenario the world was built from.

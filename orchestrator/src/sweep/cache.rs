@@ -114,12 +114,14 @@ impl RunCache {
         );
         hash.update(head.as_bytes());
         hash.update(run.scenario.to_toml_string().as_bytes());
-        let scene = &run.scenario.city.scene;
-        if !scene.is_empty() {
-            // A scene that cannot be read makes the run fail; it is not stored either way.
-            let bytes = std::fs::read(scene).ok()?;
-            hash.update(b"\nscene ");
-            hash.update(hex(&Sha256::digest(&bytes)).as_bytes());
+        let city = &run.scenario.city;
+        for (name, file) in [("scene", &city.scene), ("trace", &city.trace)] {
+            if !file.is_empty() {
+                // A file that cannot be read makes the run fail; it is not stored either way.
+                let bytes = std::fs::read(file).ok()?;
+                hash.update(format!("\n{name} ").as_bytes());
+                hash.update(hex(&Sha256::digest(&bytes)).as_bytes());
+            }
         }
         Some(hex(&hash.finalize()))
     }

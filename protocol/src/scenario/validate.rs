@@ -73,6 +73,7 @@ pub(super) fn string_choices(key: &str) -> Option<&'static [&'static str]> {
         "estimator.depth_ray" => Some(&super::RayAssumption::NAMES),
         "camera.depth_ray" => Some(&super::DepthRay::NAMES),
         "targets.speed_draw" => Some(&super::SpeedDraw::NAMES),
+        "city.traffic" => Some(&super::CityTraffic::NAMES),
         "guidance.hidden_resolution" => Some(&super::HiddenResolution::NAMES),
         "guidance.hidden_window" => Some(&super::HiddenWindow::NAMES),
         "guidance.predicted_views" => Some(&super::PredictedViews::NAMES),
@@ -435,7 +436,21 @@ impl Scenario {
     fn validate_city(&self) -> Result<(), ScenarioError> {
         let city = &self.city;
         Interval::closed(1.0, 10.0).check("city.storey_height_m", city.storey_height_m)?;
-        Interval::closed(1.0, 500.0).check("city.default_height_m", city.default_height_m)
+        Interval::closed(1.0, 500.0).check("city.default_height_m", city.default_height_m)?;
+        if city.traffic != super::CityTraffic::Roads {
+            require(
+                !city.scene.is_empty(),
+                "city.traffic",
+                format!("{:?}", city.traffic).to_lowercase(),
+                "\"roads\" without city.scene: SUMO and traces drive an imported city's cars",
+            )?;
+        }
+        require(
+            (city.traffic == super::CityTraffic::Trace) != city.trace.is_empty(),
+            "city.trace",
+            &city.trace,
+            "a file exactly when city.traffic = \"trace\"",
+        )
     }
 
     fn validate_targets(&self) -> Result<(), ScenarioError> {

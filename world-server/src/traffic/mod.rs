@@ -29,6 +29,10 @@
 
 /// Cars on an imported city's road network.
 pub mod network;
+/// Cars driven by SUMO.
+pub mod sumo;
+/// Cars driven by a recorded trace.
+pub mod trace;
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -41,6 +45,7 @@ use sets::math::{Point2, Real};
 use crate::error::WorldBuildError;
 use crate::scene::{Axis, Lane, RoadGrid, Roads};
 use network::{LaneNetwork, NetLane};
+use trace::TraceCars;
 
 /// Steps a car waits, blocked, before turning around.
 pub const DEADLOCK_STEPS: u32 = 20;
@@ -395,14 +400,16 @@ impl<L: Copy> Traffic<L> {
     }
 }
 
-/// The cars of a run on their roads, whichever the road model: the grid's or an imported
-/// network's.
+/// The cars of a run, whichever drives them: the world's model on the grid or on an
+/// imported network, or a checked trace (SUMO's, or a file's).
 #[derive(Clone, Debug)]
 pub enum Cars {
     /// Cars on the generated city's grid.
     Grid(Traffic<Lane>, Arc<RoadGrid>),
     /// Cars on an imported city's network.
     Network(Traffic<NetLane>, Arc<LaneNetwork>),
+    /// Cars replaying a trace ([`trace`]).
+    Trace(TraceCars),
 }
 
 impl Cars {
@@ -429,6 +436,7 @@ impl Cars {
         match self {
             Cars::Grid(traffic, grid) => traffic.step(grid.as_ref(), dt),
             Cars::Network(traffic, net) => traffic.step(net.as_ref(), dt),
+            Cars::Trace(cars) => cars.step(),
         }
     }
 
@@ -437,6 +445,7 @@ impl Cars {
         match self {
             Cars::Grid(traffic, _) => traffic.cars().iter().map(Car::pose).collect(),
             Cars::Network(traffic, _) => traffic.cars().iter().map(Car::pose).collect(),
+            Cars::Trace(cars) => cars.poses(),
         }
     }
 
@@ -445,6 +454,7 @@ impl Cars {
         match self {
             Cars::Grid(traffic, _) => traffic.cars().len(),
             Cars::Network(traffic, _) => traffic.cars().len(),
+            Cars::Trace(cars) => cars.len(),
         }
     }
 
