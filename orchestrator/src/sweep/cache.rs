@@ -14,8 +14,9 @@
 //! - the resolved scenario as its `scenario.toml` is written, which holds every key and the
 //!   seed;
 //! - the variant, the step mode, the host layout and the faults;
-//! - for an imported city, the SHA-256 of its scene file (`city.scene`), which the scenario
-//!   names by path only.
+//! - for an imported city, the SHA-256 of its scene file (`city.scene`) and of its trace file
+//!   (`city.trace`), which the scenario names by path only, and for cars SUMO drives, SUMO's
+//!   version (no SUMO found: no key).
 //!
 //! Runs with a pause fault (a process stopped for wall-clock seconds) or a restart (the new
 //! process joins when it has started) depend on the wall clock, so they are never stored nor
@@ -34,6 +35,7 @@
 
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use anyhow::Context as _;
 use sha2::{Digest as _, Sha256};
@@ -42,6 +44,8 @@ use crate::run::children::Binaries;
 use crate::run::config::RunConfig;
 use fleet_observe::faults::FaultKind;
 use fleet_observe::results::summary::Summary;
+use protocol::scenario::CityTraffic;
+use world_server::traffic::sumo::SumoTools;
 
 /// Bumped whenever what a key covers changes, so that old entries stop matching.
 const FORMAT: &str = "setfleet run cache 1";
@@ -52,6 +56,8 @@ pub struct RunCache {
     dir: PathBuf,
     /// The hex SHA-256 of the binaries a run executes.
     build: String,
+    /// SUMO's version, looked up for the first run SUMO drives (`None`: no SUMO found).
+    sumo_version: OnceLock<Option<String>>,
 }
 
 impl RunCache {
@@ -88,6 +94,7 @@ impl RunCache {
         Ok(RunCache {
             dir: dir.to_owned(),
             build: hex(&hash.finalize()),
+            sumo_version: OnceLock::new(),
         })
     }
 
@@ -122,6 +129,13 @@ impl RunCache {
                 hash.update(format!("\n{name} ").as_bytes());
                 hash.update(hex(&Sha256::digest(&bytes)).as_bytes());
             }
+        }
+        if run.scenario.city.traffic == CityTraffic::Sumo {
+            // SUMO drives the cars: another SUMO, other drives.
+            let version = self
+                .sumo_version
+                .get_or_init(|| SumoTools::locate().and_then(|tools| tools.version()).ok());
+            hash.update(format!("\nsumo {}", version.as_deref()?).as_bytes());
         }
         Some(hex(&hash.finalize()))
     }
@@ -303,6 +317,17 @@ mod tests {
         let mut missing = base.clone();
         missing.scenario.city.scene = scene.to_string_lossy().into_owned();
         assert_eq!(cache.key(&missing), None, "a scene that cannot be read");
+        // So is a trace file.
+        let trace = dir.join("drive.csv");
+        let with_trace = |bytes: &str| {
+            std::fs::write(&trace, bytes).expect("trace");
+            let mut run = base.clone();
+            run.scenario.city.trace = trace.to_string_lossy().into_owned();
+            cache.key(&run)
+        };
+        let (a, a_again, b) = (with_trace("one"), with_trace("one"), with_trace("two"));
+        assert!(a.is_some() && a != Some(key.clone()) && a != b);
+        assert_eq!(a, a_again);
         let _ = std::fs::remove_dir_all(dir);
     }
 

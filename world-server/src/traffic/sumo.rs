@@ -139,6 +139,25 @@ impl SumoTools {
         })
     }
 
+    /// The first line `sumo --version` prints, e.g. `Eclipse SUMO sumo 1.28.0` (what the run
+    /// cache keys SUMO's runs by).
+    pub fn version(&self) -> Result<String, SumoError> {
+        let out = Command::new(&self.sumo)
+            .arg("--version")
+            .stdin(Stdio::null())
+            .output()
+            .map_err(|e| io("sumo --version", e))?;
+        let text = String::from_utf8_lossy(&out.stdout);
+        match text.lines().next() {
+            Some(line) if out.status.success() => Ok(line.trim().to_owned()),
+            _ => Err(SumoError::Tool {
+                tool: "sumo",
+                status: out.status.to_string(),
+                stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+            }),
+        }
+    }
+
     /// SUMO's drive of `scenario`'s cars over `roads`, routes drawn from `rng` (module docs).
     pub fn drive(
         &self,
