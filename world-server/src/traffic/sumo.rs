@@ -2,8 +2,9 @@
 //! an imported city's cars, ahead of the world, from the run's seed.
 //!
 //! **Ahead, not in lockstep.** Nothing in the world acts on the cars (the UAVs only watch), so
-//! SUMO can drive the whole run before the world starts and hand over a [`Trace`], which the
-//! world checks whole ([`Trace::check`]) and replays. A lockstep link (TraCI) would add a
+//! SUMO can drive the whole run before the world starts and hand over a [`Trace`](crate::traffic::trace::Trace), which the
+//! world checks whole ([`Trace::check`](crate::traffic::trace::Trace::check)) and
+//! replays. A lockstep link (TraCI) would add a
 //! socket round trip to every step of every run and a second process to keep alive, and would
 //! find a car that breaks the estimator's assumptions only when it happens, mid-run; a trace
 //! is refused before any agent sees a frame. The cost is one SUMO run at the start, well
@@ -23,7 +24,7 @@
 //!    `v_max (1 - 10^-4)` (SUMO rounds lane lengths; the margin keeps every step within
 //!    `v_max T`), teleports off, its own random numbers seeded from the run's seed. The cars
 //!    enter where SUMO finds room; the trace starts at the first period all of them are in
-//!    (at most [`WARMUP_S`]).
+//!    (at most [`WARMUP_S`](crate::traffic::sumo::WARMUP_S)).
 //!
 //! A car's position is where SUMO puts its front bumper: the car drives exactly SUMO's lanes,
 //! and SUMO's gaps keep the boxes apart.

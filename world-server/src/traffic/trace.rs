@@ -1,9 +1,10 @@
 //! Cars driven by a recorded trace: a pose for every car at every CVS period, from a file
-//! (`city.traffic = "trace"`) or from SUMO ([`super::sumo`]).
+//! (`city.traffic = "trace"`) or from SUMO ([`crate::traffic::sumo`]).
 //!
-//! A trace is not trusted. Before a world drives its cars by one, [`Trace::check`] holds every
-//! car's every step to what the estimator assumes of a target, and refuses the trace with an
-//! error naming the car and the time otherwise:
+//! A trace is not trusted. Before a world drives its cars by one,
+//! [`Trace::check`](crate::traffic::trace::Trace::check) holds every car's every step to
+//! what the estimator assumes of a target, and refuses the trace with an error naming the car
+//! and the time otherwise:
 //! - a car moves at most `v_max T` from one period to the next (exactly: no tolerance);
 //! - its centre stays `targets.building_clearance_m` or more from every building;
 //! - it stays inside the region.
