@@ -50,35 +50,29 @@ impl World {
     /// model, by SUMO or by a trace (`city.traffic`), a trace checked whole first
     /// ([`Trace::check`]).
     pub fn new(scenario: &Scenario) -> Result<World, WorldBuildError> {
-        scenario.validate()?;
+        let (city, scene) = Self::build_city(scenario)?;
         let mut traffic_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
         traffic_rng.set_stream(TRAFFIC_STREAM);
-        let (city, cars) = if scenario.city.scene.is_empty() {
-            let mut city_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
-            city_rng.set_stream(CITY_STREAM);
-            let city = City::generate(scenario, &mut city_rng)?;
-            let cars = Self::place_cars(&city, scenario, traffic_rng)?;
-            (city, cars)
-        } else {
-            let scene = CityScene::read(Path::new(&scenario.city.scene))
-                .map_err(|e| WorldBuildError::Scene(format!("city.scene: {e}")))?;
-            let city = City::import(&scene, scenario)?;
-            let period = scenario.timing.cvs_period_s;
-            let trace = match scenario.city.traffic {
-                CityTraffic::Roads => None,
-                CityTraffic::Sumo => {
-                    Some(SumoTools::locate()?.drive(&scene.roads, scenario, &mut traffic_rng)?)
-                }
-                CityTraffic::Trace => Some(Trace::read(Path::new(&scenario.city.trace), period)?),
-            };
-            let cars = match trace {
-                Some(trace) => {
-                    trace.check(&city, scenario)?;
-                    Cars::Trace(TraceCars::new(trace))
-                }
-                None => Self::place_cars(&city, scenario, traffic_rng)?,
-            };
-            (city, cars)
+        let trace = match (&scene, scenario.city.traffic) {
+            (None, _) | (Some(_), CityTraffic::Roads) => None,
+            (Some(scene), CityTraffic::Sumo) => {
+                Some(SumoTools::locate()?.drive(&scene.roads, scenario, &mut traffic_rng)?)
+            }
+            (Some(_), CityTraffic::Trace) => Some(Trace::read(
+                Path::new(&scenario.city.trace),
+                scenario.timing.cvs_period_s,
+            )?),
+        };
+        let cars = match trace {
+            Some(trace) => {
+                trace.check(&city, scenario)?;
+                Cars::Trace(TraceCars::new(trace))
+            }
+            None => {
+                let mut speed_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+                speed_rng.set_stream(SPEED_STREAM);
+                Cars::place(&city.roads, scenario, traffic_rng, speed_rng)?
+            }
         };
         let fleet = Fleet::launch(scenario, city.tallest())?;
         Ok(World {
@@ -90,15 +84,25 @@ impl World {
         })
     }
 
-    /// The world's own traffic model's cars on `city`'s roads.
-    fn place_cars(
-        city: &City,
-        scenario: &Scenario,
-        traffic_rng: ChaCha8Rng,
-    ) -> Result<Cars, WorldBuildError> {
-        let mut speed_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
-        speed_rng.set_stream(SPEED_STREAM);
-        Cars::place(&city.roads, scenario, traffic_rng, speed_rng)
+    /// The city a world of `scenario` stands in, alone: the same buildings and roads as
+    /// [`World::new`]'s, without placing cars (so without running SUMO) or launching UAVs, for
+    /// what only draws the city.
+    pub fn city(scenario: &Scenario) -> Result<City, WorldBuildError> {
+        Ok(Self::build_city(scenario)?.0)
+    }
+
+    /// The valid scenario's city, and the scene file it was imported from, if any.
+    fn build_city(scenario: &Scenario) -> Result<(City, Option<CityScene>), WorldBuildError> {
+        scenario.validate()?;
+        if scenario.city.scene.is_empty() {
+            let mut city_rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+            city_rng.set_stream(CITY_STREAM);
+            return Ok((City::generate(scenario, &mut city_rng)?, None));
+        }
+        let scene = CityScene::read(Path::new(&scenario.city.scene))
+            .map_err(|e| WorldBuildError::Scene(format!("city.scene: {e}")))?;
+        let city = City::import(&scene, scenario)?;
+        Ok((city, Some(scene)))
     }
 
     /// The scenario the world was built from.

@@ -357,9 +357,9 @@ fn observe(
     let node = RunNode::new(&config.run, RunNode::OBSERVER, SignalHandlingMode::Disabled)
         .context("cannot create the observer's iceoryx2 node")?;
     // The city, for the sinks (the same the world builds).
-    let world = world_server::World::new(&config.scenario)
+    let city = world_server::World::city(&config.scenario)
         .context("cannot rebuild the city for the run's views")?;
-    let buildings = &world.scene().buildings;
+    let buildings = &city.buildings;
     let mut sinks = Vec::new();
     for make in makers {
         if let Some(sink) = make(&config.scenario, buildings).map_err(|e| anyhow::anyhow!(e))? {
@@ -371,7 +371,7 @@ fn observe(
     };
     // The spawner waits for this; it is gone only if the spawner is.
     let _ = ready.send(started);
-    drop(world);
+    drop(city);
     let camera = sinks.iter().find_map(|s| s.camera());
     let ports = Ports::open(&node, uavs, camera).context("cannot open the observer's ports")?;
     let waitset = node.waitset()?;

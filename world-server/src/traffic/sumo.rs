@@ -33,7 +33,7 @@
 //! eclipse-sumo==1.28.0` gives both (`SUMO_HOME` is `python -c "import sumo;
 //! print(sumo.SUMO_HOME)"`).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -246,6 +246,7 @@ fn run(tool: &'static str, cmd: &mut Command, dir: &Path) -> Result<(), SumoErro
     let started = Instant::now();
     let status = loop {
         match child.try_wait().map_err(|e| io(tool, e))? {
+            Some(status) if status.success() => return Ok(()),
             Some(status) => break status.to_string(),
             None if started.elapsed() > TOOL_TIMEOUT => {
                 let _ = child.kill();
@@ -255,9 +256,6 @@ fn run(tool: &'static str, cmd: &mut Command, dir: &Path) -> Result<(), SumoErro
             None => std::thread::sleep(Duration::from_millis(10)),
         }
     };
-    if status == "exit status: 0" {
-        return Ok(());
-    }
     let printed = std::fs::read_to_string(&log_path).unwrap_or_default();
     let tail: String = printed
         .lines()
@@ -425,7 +423,7 @@ impl Network {
         rng: &mut ChaCha8Rng,
     ) -> Result<Vec<Vec<String>>, SumoError> {
         let loop_edges = self.loop_edges();
-        let on_loop: BTreeMap<&str, ()> = loop_edges.iter().map(|e| (e.as_str(), ())).collect();
+        let on_loop: BTreeSet<&str> = loop_edges.iter().map(String::as_str).collect();
         if loop_edges.len() < 2 {
             return Err(SumoError::NoLoop);
         }
@@ -457,7 +455,7 @@ impl Network {
             let mut driven = length(edge);
             while driven < need {
                 let next: Vec<&String> = (self.edges[route[route.len() - 1].as_str()].1.iter())
-                    .filter(|n| on_loop.contains_key(n.as_str()))
+                    .filter(|n| on_loop.contains(n.as_str()))
                     .collect();
                 let e = next[rng.random_range(0..next.len())];
                 driven += length(e);

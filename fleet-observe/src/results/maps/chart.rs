@@ -50,9 +50,9 @@ pub(super) fn write_picture(
     scenario: &Scenario,
     paint: impl FnOnce(&Area<'_>, &[Building]) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
-    let world = World::new(scenario).with_context(|| format!("rebuilding the city for {what}"))?;
+    let city = World::city(scenario).with_context(|| format!("rebuilding the city for {what}"))?;
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
-    paint(&root, &world.scene().buildings)?;
+    paint(&root, &city.buildings)?;
     root.present()
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
