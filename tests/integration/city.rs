@@ -1,8 +1,8 @@
 //! `fleet city` imports the shipped extract into the shipped scenario, byte for byte; the
 //! imported city flies with every target in its sets, its cars driven by the world's model or
 //! by SUMO; and bad input (a file, an option, a scene that does not fit the scenario, a trace
-//! that breaks the estimator's assumptions, SUMO missing) exits with code 2 and a message that
-//! says what is wrong.
+//! that breaks the estimator's assumptions, SUMO missing, more cars than the roads hold apart)
+//! exits with code 2 and a message that says what is wrong.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -253,4 +253,48 @@ fn bad_input_exits_with_code_2_and_says_why() {
         assert_eq!(out.status.code(), Some(2), "{flags:?}: {stderr}");
         assert!(stderr.contains(message), "{flags:?}: {stderr}");
     }
+}
+
+/// More cars than the roads hold apart: `fleet city` refuses a square whose roads cannot
+/// place them all under the world's model, and `fleet run` refuses the drive when SUMO cannot
+/// fit them in, both with exit code 2 and a message that says so. The 60 m square around the
+/// centre has 333 m of road: the world's model places 58 cars 5.1 m apart (cars 0 to 57), SUMO fewer.
+#[test]
+fn more_cars_than_the_roads_hold_apart_are_refused() {
+    let t = TestRun::new("city-crowd");
+    let square = ["--center", "60.1716,24.9443", "--half-extent", "60"];
+    let out = fleet_city(
+        &t,
+        &extract(),
+        &[&square[..], &["--set", "targets.count=128"]].concat(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("cannot place car 58 of targets.count = 128"),
+        "{stderr}"
+    );
+
+    let out = fleet_city(
+        &t,
+        &extract(),
+        &[&square[..], &["--set", "targets.count=40"]].concat(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = run_to_end(&mut fleet_run(
+        &t,
+        &t.dir.join("out/scenario.toml"),
+        &t.dir.join("run"),
+        &["--duration", "1", "--set", "city.traffic=\"sumo\""],
+    ));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("of the 40 cars in") && stderr.contains("lower targets.count"),
+        "{stderr}"
+    );
 }
