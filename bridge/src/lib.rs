@@ -28,8 +28,6 @@
 //! priority), so a run over several hosts folds the same messages in the same steps as on
 //! one host and gives the same results, byte for byte.
 
-#![warn(missing_docs)]
-
 pub mod endpoint;
 pub mod envelope;
 pub mod inbound;

@@ -34,8 +34,6 @@
 //! # Ok::<(), city::error::CityImportError>(())
 //! ```
 
-#![warn(missing_docs)]
-
 pub mod error;
 pub mod geometry;
 pub mod osm;

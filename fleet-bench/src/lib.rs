@@ -8,8 +8,6 @@
 //! the top level of the JSON), one [`BenchCase`] per configuration measured, the machine, the
 //! command line and the date.
 
-#![warn(missing_docs)]
-
 pub mod estimator;
 pub mod guidance;
 pub mod ipc;

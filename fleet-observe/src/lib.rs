@@ -25,8 +25,6 @@
 //! assert_eq!((s.min, s.median, s.max), (1.0, 2.0, 3.0));
 //! ```
 
-#![warn(missing_docs)]
-
 pub mod clock;
 pub mod faults;
 pub mod observe;

@@ -27,8 +27,6 @@
 //! assert_eq!(code, orchestrator::Outcome::Success);
 //! ```
 
-#![warn(missing_docs)]
-
 pub mod city;
 pub mod cli;
 pub mod host;

@@ -25,8 +25,6 @@
 //!   error of bad input.
 //! - [`variant`]: the guidance variants, named sets of scenario settings.
 
-#![warn(missing_docs)]
-
 pub mod camera;
 pub mod codec;
 pub mod flight;

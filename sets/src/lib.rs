@@ -31,8 +31,6 @@
 //! assert!(seen.is_subset_of(&seen.dilate(&grid, 1.0)));
 //! ```
 
-#![warn(missing_docs)]
-
 pub mod grid;
 pub mod math;
 pub mod raster;

@@ -17,8 +17,6 @@
 //!   so the child is gone before the run's files are removed.
 //! - Every wait takes a timeout ([`ChildGuard::wait_timeout`]).
 
-#![warn(missing_docs)]
-
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};

@@ -27,8 +27,6 @@
 //! }
 //! ```
 
-#![warn(missing_docs)]
-
 pub mod agent;
 pub mod estimator;
 pub mod guidance;

@@ -30,8 +30,6 @@
 //! # Ok::<(), world_server::WorldBuildError>(())
 //! ```
 
-#![warn(missing_docs)]
-
 pub mod error;
 pub mod fleet;
 pub mod render;
