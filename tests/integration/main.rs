@@ -6,6 +6,7 @@ mod bench;
 mod chaos;
 mod city;
 mod cli;
+mod design_graph;
 mod docs_manifest;
 mod frames;
 mod hosts;
