@@ -14,9 +14,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Args;
+use estimator::StepTimings;
 use protocol::scenario::{Planner, Scenario};
 use sim::{Fleet, FleetOptions, Steering, StepSample};
-use uav_agent::estimator::StepTimings;
 use uav_agent::guidance::GuidanceParams;
 
 use super::{BenchCase, BenchReport, Metrics, Stats};

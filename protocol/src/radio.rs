@@ -156,7 +156,7 @@ impl Radio {
     }
 
     /// Whether some message may be lost: then estimates must carry whole sets, since a delta
-    /// against a lost message rebuilds nothing (see `uav_agent::estimator::message`).
+    /// against a lost message rebuilds nothing (see `estimator::message`).
     pub fn is_lossy(&self) -> bool {
         self.loss > 0.0
     }

@@ -10,10 +10,10 @@ use std::time::Duration;
 
 use divan::Bencher;
 use divan::counter::BytesCount;
+use estimator::{Estimator, Measurement, PeerEstimate, StepTimings};
 use protocol::frame::CvsFrame;
 use protocol::scenario::Scenario;
 use sim::{Fleet, FleetOptions};
-use uav_agent::estimator::{Estimator, Measurement, PeerEstimate, StepTimings};
 
 /// Steps run before measuring, so the sets look like a run's rather than a fresh start's.
 const WARMUP_STEPS: u64 = 100;
@@ -108,7 +108,7 @@ fn fixture() -> &'static Fixture {
 type Phase = fn(&StepTimings) -> Duration;
 
 /// Medians of the phases of a step over repeated runs on the same frame, from the
-/// [`uav_agent::estimator::StepReport`] timings.
+/// [`estimator::StepReport`] timings.
 fn print_phase_medians(estimator: &Estimator, frame: &CvsFrame) {
     let runs: Vec<StepTimings> = (0..41)
         .filter_map(|_| estimator.clone().step(frame).ok().map(|r| r.timings))

@@ -7,6 +7,7 @@
 use std::sync::OnceLock;
 
 use divan::Bencher;
+use estimator::Estimator;
 use protocol::camera::CameraPose;
 use protocol::flight::UavState;
 use protocol::scenario::Scenario;
@@ -14,7 +15,6 @@ use protocol::variant::Variant;
 use protocol::wire::PlannedView;
 use sets::raster::CellSet;
 use sim::{Fleet, FleetOptions, Steering};
-use uav_agent::estimator::Estimator;
 use uav_agent::guidance::{self, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput};
 
 /// Steps flown before measuring, so the sets and the maps are a run's.

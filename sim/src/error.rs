@@ -1,7 +1,7 @@
 //! Why a fleet could not be built or could not step.
 
+use estimator::{EstimateReadError, EstimatorStepError};
 use protocol::codec::EncodeError;
-use uav_agent::estimator::{EstimateReadError, EstimatorStepError};
 use world_server::WorldBuildError;
 
 /// Why [`crate::Fleet::new`] failed.

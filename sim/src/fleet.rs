@@ -2,13 +2,13 @@
 
 use std::time::{Duration, Instant};
 
+use estimator::message::{self, EstimateOutbox, PeerMessage};
+use estimator::{
+    ApplyReport, Estimator, EstimatorConfig, FuseReport, Measurement, StepReport, StepTimings,
+};
 use protocol::frame::CvsFrame;
 use protocol::scenario::{Exchange, Scenario};
 use protocol::wire::PlannedView;
-use uav_agent::estimator::message::{self, EstimateOutbox, PeerMessage};
-use uav_agent::estimator::{
-    ApplyReport, Estimator, EstimatorConfig, FuseReport, Measurement, StepReport, StepTimings,
-};
 use uav_agent::guidance::{self, Decision, GuidanceParams};
 use world_server::World;
 

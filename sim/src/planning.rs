@@ -1,9 +1,9 @@
 //! What one UAV's planner looks at, gathered from its estimator.
 
+use estimator::Estimator;
 use protocol::flight::UavState;
 use protocol::wire::PlannedView;
 use sets::raster::CellSet;
-use uav_agent::estimator::Estimator;
 use uav_agent::guidance::{ObstacleCell, PlanningInput};
 
 use crate::FleetStepError;

@@ -11,12 +11,12 @@
 //!
 //! `docs/design.md` §3 reports what it printed.
 
+use estimator::measure::{self, FrameView};
 use protocol::frame::CvsFrame;
 use protocol::scenario::{DepthRay, RayAssumption, Scenario};
 use protocol::wire::TruthState;
 use sets::math::Point2;
 use sim::{Fleet, FleetOptions};
-use uav_agent::estimator::measure::{self, FrameView};
 
 const RULES: [RayAssumption; 2] = [RayAssumption::Any, RayAssumption::Centre];
 

@@ -5,12 +5,12 @@
 //! - when every measurement arrives in its step, each agent's sets lie inside the sets the
 //!   same agent holds under the intersection fusion of the set exchange.
 
+use estimator::{EstimatorState, Measurement};
 use proptest::prelude::*;
 use protocol::scenario::{Exchange, Scenario};
 use protocol::wire::TruthState;
 use sets::math::Point2;
 use sim::{Fleet, FleetOptions};
-use uav_agent::estimator::{EstimatorState, Measurement};
 
 const RUN_TAG: u64 = 0x0e8c_4a17;
 

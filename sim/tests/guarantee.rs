@@ -2,14 +2,14 @@
 //! every agent (and after fusing the agents' estimates), every target is in `X̄`, every
 //! identified target is in its `X_j`, and no proven-free cell (`P^g`, `S^o`) holds a target.
 
+use estimator::measure::{self, FrameView};
+use estimator::{EstimatorConfig, EstimatorState};
 use protocol::frame::CvsFrame;
 use protocol::scenario::{DepthRay, RayAssumption, Scenario};
 use protocol::wire::TruthState;
 use sets::grid::GroundGrid;
 use sets::math::Point2;
 use sim::{Fleet, FleetOptions};
-use uav_agent::estimator::measure::{self, FrameView};
-use uav_agent::estimator::{EstimatorConfig, EstimatorState};
 
 const RUN_TAG: u64 = 0x5e7f_1ee7;
 

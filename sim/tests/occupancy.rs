@@ -1,9 +1,9 @@
 //! The occupancy elevation map built from real frames, compared with the world's buildings.
 
+use estimator::occupancy::OemStatus;
 use protocol::scenario::Scenario;
 use sets::grid::Rect;
 use sim::{Fleet, FleetOptions};
-use uav_agent::occupancy::OemStatus;
 
 /// Height tolerance of obstacle cells: the depth noise moves a roof point by at most
 /// `|w| * range` along its ray, under 2 m at the ranges of the default camera; 3 m leaves room.

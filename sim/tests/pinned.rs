@@ -10,11 +10,11 @@
 //! `SETFLEET_PRINT_DIGESTS=1 cargo test -p sim --test pinned -- --nocapture` prints the
 //! digests a run computes (to record them after a deliberate change of the results).
 
+use estimator::EstimatorState;
+use estimator::occupancy::OccupancyMap;
 use protocol::scenario::{Exchange, Scenario, SetGrowth};
 use sets::raster::{CellSet, ReachSet};
 use sim::{Fleet, FleetOptions};
-use uav_agent::estimator::EstimatorState;
-use uav_agent::occupancy::OccupancyMap;
 
 const RUN_TAG: u64 = 0x0b17_1de7;
 

@@ -35,15 +35,15 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
+use estimator::fusion::SharedSet;
+use estimator::message::{self, EstimateInbox};
+use estimator::occupancy::OccupancyMap;
+use estimator::{EstimateReadError, EstimatorConfig, PeerEstimate, Unseen};
 use protocol::radio::Radio;
 use protocol::wire::{AgentStats, TargetTruth};
 use sets::grid::{CellIndex, GroundGrid};
 use sets::math::Point2;
 use sets::raster::CellSet;
-use uav_agent::estimator::fusion::SharedSet;
-use uav_agent::estimator::message::{self, EstimateInbox};
-use uav_agent::estimator::{EstimateReadError, EstimatorConfig, PeerEstimate, Unseen};
-use uav_agent::occupancy::OccupancyMap;
 
 /// What the observer keeps of one agent's estimate of one step.
 #[derive(Clone, Debug, PartialEq)]
@@ -469,12 +469,12 @@ pub fn identified_ids<'a>(
 pub(crate) mod tests {
     use std::sync::Arc;
 
+    use estimator::EstimatorState;
     use protocol::camera::CameraPose;
     use protocol::radio::LinkKind;
     use protocol::scenario::Scenario;
     use sets::math::Point3;
     use sets::raster::ReachSet;
-    use uav_agent::estimator::EstimatorState;
 
     use super::*;
 

@@ -46,6 +46,11 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
+use estimator::EstimateReadError;
+use estimator::EstimatorConfig;
+use estimator::fusion::SharedSet;
+use estimator::message::{self, EstimateInbox, PeerMessage};
+use estimator::occupancy::OccupancyMap;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -66,11 +71,6 @@ use protocol::wire::{
     UavCommand, UavMask, WireHeader, WireKind, unix_now_ns,
 };
 use tokio::sync::mpsc::UnboundedSender;
-use uav_agent::estimator::EstimateReadError;
-use uav_agent::estimator::EstimatorConfig;
-use uav_agent::estimator::fusion::SharedSet;
-use uav_agent::estimator::message::{self, EstimateInbox, PeerMessage};
-use uav_agent::occupancy::OccupancyMap;
 
 use metrics::{
     AgentSpread, EstimateObserveError, FusedSets, ObservedEstimate, SetMetrics, identified_ids,

@@ -7,10 +7,10 @@
 
 use std::collections::BTreeMap;
 
+use estimator::occupancy::OccupancyMap;
 use protocol::frame::CvsFrame;
 use protocol::scenario::Scenario;
 use protocol::wire::{PlannedView, TruthState};
-use uav_agent::occupancy::OccupancyMap;
 use world_server::scene::Building;
 
 use super::StepMetrics;

@@ -6,6 +6,7 @@
 //! looks smaller than it is; a target set `X_j` is sent at the estimator's own resolution
 //! over its bounding box (coarsened too only if that box is wider than [`MAX_SIDE`] cells).
 
+use estimator::occupancy::OccupancyMap;
 use foxglove::messages::{
     Grid, PackedElementField, Pose, Quaternion, Timestamp, Vector2, Vector3,
     packed_element_field::NumericType,
@@ -13,7 +14,6 @@ use foxglove::messages::{
 use sets::grid::GroundGrid;
 use sets::math::Point2;
 use sets::raster::{CellBox, CellSet};
-use uav_agent::occupancy::OccupancyMap;
 
 use super::topics::WORLD_FRAME;
 

@@ -35,7 +35,7 @@ use protocol::codec::{self, DecodeError, EncodeError};
 use protocol::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 
-use crate::estimator::{Estimator, EstimatorConfig, EstimatorState};
+use estimator::{Estimator, EstimatorConfig, EstimatorState};
 
 /// First bytes of every checkpoint file (format version included: 02 since the state keeps
 /// its frame's `P^g` and the step's news of the fleet's `H̄`), so a checkpoint of an older

@@ -4,7 +4,7 @@
 //! 1. the estimator folds the frame in (predict, correct);
 //! 2. the agent publishes its estimate on `{run}/uav/{i}/estimate`: its corrected sets
 //!    (`comms.exchange = "sets"`), or its frame's measurement (`"measurements"`,
-//!    [`crate::estimator::exchange`]) with its whole sets for a peer that joined late or
+//!    [`estimator::exchange`]) with its whole sets for a peer that joined late or
 //!    asked, in its first message when it resumed from a checkpoint, and every
 //!    `comms.whole_sets_every` messages on lossy or range-limited links; with
 //!    `comms.relay_hops` it also forwards the peers' measurements it applied at the last step;
@@ -100,13 +100,13 @@ use protocol::wire::{
 };
 use serde::Serialize;
 
-use crate::estimator::message::PeerMessage;
-use crate::estimator::{
-    Estimator, EstimatorConfig, EstimatorStepError, Measurement, Relayed, StepReport, message,
-};
 use crate::guidance::external::{self, Asked, ExternalPlanner, ExternalReport, Fallback, Request};
 use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 use checkpoint::{CheckpointFile, CheckpointFlusher, Owner};
+use estimator::message::PeerMessage;
+use estimator::{
+    Estimator, EstimatorConfig, EstimatorStepError, Measurement, Relayed, StepReport, message,
+};
 use links::{LinkError, Links};
 use liveness::LiveView;
 

@@ -25,8 +25,8 @@ use protocol::wire::PlannedView;
 use serde::Serialize;
 use sets::raster::{CellBox, CellSet};
 
-use crate::estimator::EstimatorState;
 use crate::guidance::{CoarseGrid, Cost, Decision, GuidanceParams, PlanningInput};
+use estimator::EstimatorState;
 
 /// Initial size of a request sample; it grows (powers of two) for a larger request.
 const REQUEST_INITIAL_BYTES: usize = 256 * 1024;

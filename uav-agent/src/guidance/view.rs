@@ -8,7 +8,7 @@ use sets::grid::{GroundGrid, Rect};
 use sets::math::{Point2, Point3, convex_hull_into};
 use sets::raster::{CellSet, Coverage};
 
-use crate::occupancy::{OccupancyMap, OemStatus};
+use estimator::occupancy::{OccupancyMap, OemStatus};
 
 /// A known obstacle for planning: an OEM cell marked occupied, with its estimated height.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
+use estimator::occupancy::{OccupancyMap, OemStatus};
 use plotters::prelude::*;
 use protocol::scenario::Scenario;
 use sets::math::Point2;
-use uav_agent::occupancy::{OccupancyMap, OemStatus};
 use world_server::scene::Building;
 
 use super::chart::{
@@ -156,7 +156,7 @@ fn draw_colour_bar(area: &Area<'_>, scale: &HeightScale) -> anyhow::Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use uav_agent::occupancy::OemCell;
+    use estimator::occupancy::OemCell;
 
     use super::super::fixtures::{OutDir, assert_png, colour_at, paint_in_memory, small_scenario};
     use super::*;

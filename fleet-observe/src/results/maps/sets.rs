@@ -342,8 +342,8 @@ pub(super) fn target_colour(id: u32) -> RGBColor {
 
 #[cfg(test)]
 mod tests {
+    use estimator::occupancy::OccupancyMap;
     use protocol::radio::Radio;
-    use uav_agent::occupancy::OccupancyMap;
     use world_server::World;
 
     use super::super::fixtures::{
@@ -413,7 +413,7 @@ mod tests {
     fn real_case_pictures() {
         use crate::observe::metrics::ObservedEstimate;
         use crate::observe::metrics::tests::guided_fleet as fleet;
-        use uav_agent::estimator::EstimatorConfig;
+        use estimator::EstimatorConfig;
 
         register_fonts().unwrap();
         let scenario = Scenario::load(

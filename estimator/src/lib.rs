@@ -1,4 +1,27 @@
-//! The guaranteed set-membership estimator (docs/design.md §3, "Estimator step").
+//! # estimator
+//!
+//! What one UAV knows, and how it evolves: the guaranteed set-membership estimator
+//! (docs/design.md §3, "Estimator step") and the occupancy elevation map ([`occupancy`]). The
+//! crate knows nothing of processes, radios or guidance: an agent (`uav-agent`), the
+//! in-process fleet (`sim`), the observer that decodes estimates (`fleet-observe`) and the
+//! benches all drive the same types.
+//!
+//! ```no_run
+//! // One estimator step per frame, then what the peers sent is fused in.
+//! use estimator::{Estimator, EstimatorConfig};
+//! use protocol::frame::CvsFrame;
+//! use protocol::scenario::Scenario;
+//!
+//! let scenario = Scenario::default();
+//! let mut estimator = Estimator::new(EstimatorConfig::from_scenario(&scenario));
+//! let frame = CvsFrame::new_boxed(); // in the agent: the sample received from the world
+//! match estimator.step(&frame) {
+//!     Ok(report) => println!("X̄ covers {:.0} m²", report.undetected_area_m2),
+//!     Err(e) => eprintln!("frame refused: {e}"),
+//! }
+//! ```
+//!
+//! ## The estimator step
 //!
 //! An [`Estimator`] pairs an [`EstimatorConfig`] with an explicit [`EstimatorState`]; one call
 //! to [`Estimator::step`] folds one CVS frame into the state and returns a [`StepReport`]:
@@ -18,13 +41,15 @@
 //! the guarantee). Removing proven-free ground raises those bounds to the exact gap between
 //! each freed cell and the nearest cell that is not free, over the frame's window; a
 //! measurement raises them around the measured target ([`TARGET_REACH_MARGIN_M`]).
-//! Fusion with peers is in [`fusion`], messages in [`message`].
+//! Fusion with peers is in [`fusion`], messages in [`message`], the exchange of measurements
+//! in [`exchange`].
 
 pub mod exchange;
 pub mod fusion;
 mod hidden;
 pub mod measure;
 pub mod message;
+pub mod occupancy;
 pub mod predict;
 mod snapshot;
 

@@ -825,7 +825,7 @@ mod tests {
     use sets::raster::{EncodedSet, ReachSet};
 
     use super::*;
-    use crate::estimator::fusion::tests::{config, peer_strategy};
+    use crate::fusion::tests::{config, peer_strategy};
 
     fn state_from(p: &PeerEstimate) -> EstimatorState {
         let cfg = config();
