@@ -20,7 +20,7 @@ use sim::{Fleet, FleetOptions, Steering, StepSample};
 use uav_agent::guidance::GuidanceParams;
 
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use protocol::usage::{ScenarioArgs, UsageError};
+use fleet_process::usage::{ScenarioArgs, UsageError};
 
 /// `fleet bench estimator`.
 #[derive(Debug, Args)]

@@ -27,7 +27,7 @@ use uav_agent::guidance::{self, Decision, GuidanceParams};
 
 use super::estimator::{fleet, paper_guidance};
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use protocol::usage::{ScenarioArgs, UsageError};
+use fleet_process::usage::{ScenarioArgs, UsageError};
 use protocol::variant::Variant;
 
 /// Most plans of other UAVs put in the token.

@@ -20,7 +20,7 @@ use std::path::Path;
 use serde::Serialize;
 use serde::ser::SerializeMap;
 
-pub use fleet_observe::stats::Stats;
+pub use fleet_process::stats::Stats;
 
 /// The machine a benchmark ran on.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -132,7 +132,7 @@ impl BenchReport {
         BenchReport {
             kind: kind.to_owned(),
             command: std::env::args().collect::<Vec<_>>().join(" "),
-            date: fleet_observe::clock::utc_now_rfc3339(),
+            date: fleet_process::clock::utc_now_rfc3339(),
             machine: MachineInfo::detect(),
             summary: BTreeMap::new(),
             cases: Vec::new(),

@@ -11,7 +11,7 @@ use world_server::World;
 use world_server::render::rays_per_frame;
 
 use super::{BenchCase, BenchReport, Metrics, Stats};
-use protocol::usage::{ScenarioArgs, UsageError};
+use fleet_process::usage::{ScenarioArgs, UsageError};
 
 /// Frames rendered before measuring (caches, page faults, the pool's threads).
 const WARM_UP_FRAMES: u32 = 5;

@@ -13,23 +13,18 @@
 //! - [`pictures`]: plotters drawings with the bundled font.
 //! - [`faults`]: the faults a run injects, as the command line writes them and as the
 //!   summary reports them.
-//! - [`stats`] (`protocol::stats`, re-exported) and [`clock`]: order statistics and the UTC
-//!   clock the reports use.
 //!
 //! The `fleet` command (the `orchestrator` crate) runs the processes and hands this crate
 //! what it needs; nothing here spawns a process.
 //!
 //! ```
-//! use fleet_observe::stats::Stats;
-//! let s = Stats::from_samples(&[3.0, 1.0, 2.0]).expect("a sample");
-//! assert_eq!((s.min, s.median, s.max), (1.0, 2.0, 3.0));
+//! use fleet_observe::faults::{Fault, FaultKind};
+//! let fault: Fault = "kill:1@30".parse().expect("a fault");
+//! assert_eq!((fault.kind, fault.uav, fault.at_s), (FaultKind::Kill, 1, 30.0));
 //! ```
 
-pub mod clock;
 pub mod faults;
 pub mod observe;
 pub mod pictures;
 pub mod results;
-/// Order statistics, shared with the agents: [`protocol::stats`].
-pub use protocol::stats;
 pub mod viewer;

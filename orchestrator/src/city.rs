@@ -18,8 +18,8 @@ use city::import::{ImportOptions, RoadRules, import};
 use city::osm::LatLon;
 use city::scene::CityScene;
 use clap::Args;
+use fleet_process::usage::{ScenarioArgs, UsageError};
 use protocol::scenario::Scenario;
-use protocol::usage::{ScenarioArgs, UsageError};
 use world_server::scene::{RING_BORDER_GAP_M, RoadProfile};
 
 use crate::Outcome;

@@ -2,7 +2,7 @@
 //! command validates its own arguments into a config whose errors ([`UsageError`]) name the
 //! flag or scenario key and the accepted range.
 //!
-//! [`UsageError`]: protocol::usage::UsageError
+//! [`UsageError`]: fleet_process::usage::UsageError
 
 use clap::{Args, Parser, Subcommand};
 

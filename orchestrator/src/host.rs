@@ -24,7 +24,7 @@ use crate::run::children::{Binaries, Children};
 use crate::run::config::{RunScenarioArgs, default_out_dir};
 use crate::run::hosts::HostLayout;
 use crate::run::lifecycle::{RunDirs, Signals, clean_run_files, stop_agents_and_bridges};
-use protocol::usage::UsageError;
+use fleet_process::usage::UsageError;
 
 /// `fleet host`.
 #[derive(Debug, Args)]

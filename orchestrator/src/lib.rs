@@ -36,7 +36,7 @@ pub mod scale;
 pub mod sweep;
 
 use cli::{BenchKind, Cli, FleetCommand};
-use protocol::usage::UsageError;
+use fleet_process::usage::UsageError;
 
 /// How a `fleet` command ended, and its exit code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,11 +2,11 @@
 
 use std::process::ExitCode;
 
+use fleet_process::startup::{self, Role};
 use orchestrator::cli::Cli;
-use protocol::process::{self, Role};
 
 fn main() -> ExitCode {
-    let cli: Cli = match process::start(Role::Command) {
+    let cli: Cli = match startup::start(Role::Command) {
         Ok(cli) => cli,
         Err(code) => return code,
     };

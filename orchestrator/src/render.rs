@@ -10,7 +10,7 @@ use world_server::World;
 
 use fleet_observe::pictures::frame::{draw_depth, draw_labels};
 use fleet_observe::pictures::topview::draw_topview;
-use protocol::usage::{ScenarioArgs, UsageError};
+use fleet_process::usage::{ScenarioArgs, UsageError};
 
 /// `fleet render`.
 #[derive(Debug, Args)]

@@ -25,8 +25,8 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use fleet_process::startup::ChildArgs;
 use protocol::ipc;
-use protocol::process::ChildArgs;
 use protocol::service::RunId;
 
 /// The binaries the tests run, the packages that build them and the features the tests need

@@ -6,7 +6,7 @@
 //!
 //! - [`scene`]: the city, a road grid with a ring road and prism buildings in its blocks.
 //! - [`traffic`]: the cars, driving on the lanes and keeping their safety distances.
-//! - [`fleet`]: the UAVs, flying [`protocol::flight::advance`] behind a geofence.
+//! - [`airspace`]: the UAVs in the air, flying [`protocol::flight::advance`] behind a geofence.
 //! - [`render`]: the CVS frame of a camera, with the paper's assumptions built in.
 //! - [`world`]: the [`World`] that holds them and steps them together; [`WorldBuildError`]
 //!   ([`error`]) is why one could not be built.
@@ -30,8 +30,8 @@
 //! # Ok::<(), world_server::WorldBuildError>(())
 //! ```
 
+pub mod airspace;
 pub mod error;
-pub mod fleet;
 pub mod render;
 pub mod scene;
 pub mod server;

@@ -40,11 +40,11 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use fleet_process::resources::{CpuClock, PhaseClock, PhaseTimes, own_peak_rss_kb};
 use iceoryx2::prelude::*;
 use iceoryx2::sample_mut::SampleMut;
 use protocol::frame::CvsFrame;
 use protocol::ipc::{self, EventService, Ipc, IpcOpenError, PubSubService, RunNode, WakeEvent};
-use protocol::resources::{CpuClock, PhaseClock, PhaseTimes, own_peak_rss_kb};
 use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;

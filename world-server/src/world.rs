@@ -13,8 +13,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sets::math::{Point3, Real};
 
+use crate::airspace::{Airspace, Uav};
 use crate::error::WorldBuildError;
-use crate::fleet::{Fleet, Uav};
 use crate::render::{self, FrameSpec, ObjectKind, SceneObject};
 use crate::scene::City;
 use crate::traffic::sumo::SumoTools;
@@ -38,7 +38,7 @@ pub struct World {
     scenario: Scenario,
     city: Arc<City>,
     cars: Cars,
-    fleet: Fleet,
+    airspace: Airspace,
     step: u64,
 }
 
@@ -74,12 +74,12 @@ impl World {
                 Cars::place(&city.roads, scenario, traffic_rng, speed_rng)?
             }
         };
-        let fleet = Fleet::launch(scenario, city.tallest())?;
+        let airspace = Airspace::launch(scenario, city.tallest())?;
         Ok(World {
             scenario: scenario.clone(),
             city: Arc::new(city),
             cars,
-            fleet,
+            airspace,
             step: 0,
         })
     }
@@ -122,19 +122,19 @@ impl World {
 
     /// Number of UAVs.
     pub fn uav_count(&self) -> usize {
-        self.fleet.uavs().len()
+        self.airspace.uavs().len()
     }
 
     /// Sets the yaw reference of a UAV (ignored for an unknown index or a non-finite value).
     pub fn set_yaw_ref(&mut self, uav: usize, yaw_ref_rad: f64) {
-        self.fleet.command(uav, yaw_ref_rad);
+        self.airspace.command(uav, yaw_ref_rad);
     }
 
     /// Advances cars and UAVs by one CVS period.
     pub fn advance(&mut self) {
         let dt = self.scenario.timing.cvs_period_s;
         self.cars.step(dt);
-        self.fleet.step(dt);
+        self.airspace.step(dt);
         self.step += 1;
     }
 
@@ -188,7 +188,7 @@ impl World {
                 speed: car.speed_mps,
             };
         }
-        let uavs = self.fleet.uavs();
+        let uavs = self.airspace.uavs();
         out.uav_count = uavs.len().min(MAX_UAVS) as u32;
         for (i, (slot, u)) in out.uavs.iter_mut().zip(uavs).enumerate() {
             let p = u.state.position;
@@ -215,18 +215,18 @@ impl World {
 
     /// The UAVs, by index.
     pub fn uavs(&self) -> &[Uav] {
-        self.fleet.uavs()
+        self.airspace.uavs()
     }
 
     /// State of UAV `uav`, if it exists.
     pub fn uav_state(&self, uav: usize) -> Option<UavState> {
-        self.fleet.uavs().get(uav).map(|u| u.state)
+        self.airspace.uavs().get(uav).map(|u| u.state)
     }
 
     /// Moves UAV `uav` to `state`, with the state's yaw as reference (for tools and tests that
     /// need a given viewpoint; ignored for an unknown index).
     pub fn set_uav_state(&mut self, uav: usize, state: UavState) {
-        self.fleet.teleport(uav, state);
+        self.airspace.teleport(uav, state);
     }
 
     /// The posed camera of UAV `uav`, if it exists.
@@ -279,7 +279,7 @@ impl World {
             out.push(self.target_object(&car));
         }
         let [l, w, h] = UAV_BODY_M;
-        for (i, u) in self.fleet.uavs().iter().enumerate() {
+        for (i, u) in self.airspace.uavs().iter().enumerate() {
             if Some(i) != viewer {
                 out.push(SceneObject::new(
                     ObjectKind::Uav(i as u32),

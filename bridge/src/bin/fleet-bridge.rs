@@ -12,7 +12,7 @@ use bridge::Bridge;
 use bridge::plan::{self, HostPlan, HostShare};
 use bridge::security::{HostName, HostTlsFiles, LinkMode, LinkPlan, zenoh_config};
 use clap::Parser;
-use protocol::process::{self, ChildArgs, Role};
+use fleet_process::startup::{self, ChildArgs, Role};
 
 /// Forwards a run's iceoryx2 services between this host and the others over Zenoh, on
 /// mutually authenticated, encrypted links (QUIC or TLS over TCP).
@@ -46,7 +46,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args: Args = match process::start(Role::Child) {
+    let args: Args = match startup::start(Role::Child) {
         Ok(args) => args,
         Err(code) => return code,
     };

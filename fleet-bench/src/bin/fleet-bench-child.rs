@@ -5,10 +5,10 @@
 use std::process::ExitCode;
 
 use fleet_bench::ipc::BenchChildArgs;
-use protocol::process::{self, Role};
+use fleet_process::startup::{self, Role};
 
 fn main() -> ExitCode {
-    let args: BenchChildArgs = match process::start(Role::Child) {
+    let args: BenchChildArgs = match startup::start(Role::Child) {
         Ok(args) => args,
         Err(code) => return code,
     };

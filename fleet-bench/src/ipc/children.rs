@@ -1,5 +1,5 @@
 //! The benchmark's child processes, seen from the parent: each is `fleet-bench-child`, which
-//! dies with the parent (`protocol::process::die_with_parent`), says
+//! dies with the parent (`fleet_process::startup::die_with_parent`), says
 //! `ready` on stdout once its ports are open, starts on `go` from stdin and ends by printing
 //! `result {json}`. Every wait is bounded; a child that fails or falls silent fails the bench
 //! with its stderr, and every child still running is killed when the set is dropped.

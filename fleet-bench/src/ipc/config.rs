@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 use protocol::scenario::Scenario;
 
-use protocol::usage::{ScenarioArgs, UsageError};
+use fleet_process::usage::{ScenarioArgs, UsageError};
 
 /// Iterations of `--quick`.
 const QUICK_ITERATIONS: u64 = 50;

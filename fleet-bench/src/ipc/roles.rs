@@ -1,7 +1,7 @@
 //! `fleet-bench-child`: the processes of `fleet bench ipc`, one role each. A child opens its
 //! ports, prints `ready`, waits for `go` on stdin, measures, and prints `result {json}` (a
 //! [`ChildReport`]). It never waits longer than [`IDLE`] for a peer: a silent peer is an error,
-//! not a hang. It dies with the parent (`protocol::process::die_with_parent`).
+//! not a hang. It dies with the parent (`fleet_process::startup::die_with_parent`).
 
 use std::collections::BTreeSet;
 use std::io::Write;

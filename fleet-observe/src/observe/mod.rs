@@ -51,6 +51,7 @@ use estimator::EstimatorConfig;
 use estimator::fusion::SharedSet;
 use estimator::message::{self, EstimateInbox, PeerMessage};
 use estimator::occupancy::OccupancyMap;
+use fleet_process::resources::{CpuClock, PhaseClock, PhaseTimes};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -63,7 +64,6 @@ use protocol::ipc::{
     wait_for_wake,
 };
 use protocol::radio::Radio;
-use protocol::resources::{CpuClock, PhaseClock, PhaseTimes};
 use protocol::scenario::{Exchange, Scenario};
 use protocol::service::RunId;
 use protocol::wire::{

@@ -34,7 +34,7 @@ use crate::faults::{self, FaultRecord};
 use crate::observe::metrics::SetMetrics;
 use crate::observe::tally::ServiceKind;
 use crate::observe::{ObserverReport, StepMetrics};
-use crate::stats::Stats;
+use fleet_process::stats::Stats;
 
 /// The summary of a run.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]

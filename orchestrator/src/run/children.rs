@@ -12,7 +12,7 @@
 //! it is asked to terminate, so that no process of a run is left stopped.
 //!
 //! Every child is reaped here and nowhere else, after the kernel's account of the exited
-//! process was read ([`protocol::resources::exited_child_usage`]: exact CPU time and peak
+//! process was read ([`fleet_process::resources::exited_child_usage`]: exact CPU time and peak
 //! resident memory, a SIGKILLed agent's too). [`Children::exited`] lists every process that
 //! ended, with that account ([`super::resources`] joins it to the phases and the own peak
 //! memory the process reported, which replaces the kernel's peak when there is one).
@@ -25,8 +25,8 @@ use std::process::{ExitStatus, Stdio};
 use std::time::Duration;
 
 use anyhow::Context as _;
-use protocol::process::ChildArgs;
-use protocol::resources::{ProcessUsage, exited_child_usage};
+use fleet_process::resources::{ProcessUsage, exited_child_usage};
+use fleet_process::startup::ChildArgs;
 use protocol::service::RunId;
 use tokio::process::{Child, Command};
 use world_server::server::StepMode;

@@ -13,7 +13,7 @@ use fleet_observe::faults::{Fault, FaultKind};
 use super::chaos;
 use super::hosts::{HostLayout, RemoteHost};
 use fleet_observe::viewer::{LiveAddress, ViewConfig};
-use protocol::usage::{ScenarioArgs, UsageError};
+use fleet_process::usage::{ScenarioArgs, UsageError};
 use protocol::variant::Variant;
 
 /// The flags that make a run's scenario, shared by `fleet run` and `fleet host` so that the
@@ -365,7 +365,7 @@ pub fn check_faults(faults: &[Fault], scenario: &Scenario) -> Result<Vec<Fault>,
 /// `runs/<prefix><UTC timestamp>`, e.g. `runs/20250101T120000Z` or
 /// `runs/sweep-20250101T120000Z`.
 pub fn default_out_dir(prefix: &str) -> PathBuf {
-    let stamp: String = fleet_observe::clock::utc_now_rfc3339()
+    let stamp: String = fleet_process::clock::utc_now_rfc3339()
         .chars()
         .filter(|c| !matches!(c, '-' | ':'))
         .collect();

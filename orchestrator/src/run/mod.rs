@@ -235,15 +235,15 @@ pub async fn execute(config: &RunConfig, label: &str) -> anyhow::Result<RunRecor
 struct RunClock {
     started: Instant,
     started_utc: String,
-    own_at_start: Option<protocol::resources::ProcessUsage>,
+    own_at_start: Option<fleet_process::resources::ProcessUsage>,
 }
 
 impl RunClock {
     fn start() -> RunClock {
         RunClock {
             started: Instant::now(),
-            started_utc: fleet_observe::clock::utc_now_rfc3339(),
-            own_at_start: protocol::resources::own_usage().ok(),
+            started_utc: fleet_process::clock::utc_now_rfc3339(),
+            own_at_start: fleet_process::resources::own_usage().ok(),
         }
     }
 }
@@ -608,11 +608,11 @@ fn run_certificates(layout: &hosts::HostLayout, out: &std::path::Path) -> anyhow
 
 /// This process's CPU since `start` (its usage then), with its peak memory so far.
 fn own_usage_since(
-    start: Option<protocol::resources::ProcessUsage>,
-) -> Option<protocol::resources::ProcessUsage> {
-    let now = protocol::resources::own_usage().ok()?;
+    start: Option<fleet_process::resources::ProcessUsage>,
+) -> Option<fleet_process::resources::ProcessUsage> {
+    let now = fleet_process::resources::own_usage().ok()?;
     let start = start?;
-    Some(protocol::resources::ProcessUsage {
+    Some(fleet_process::resources::ProcessUsage {
         user_s: (now.user_s - start.user_s).max(0.0),
         system_s: (now.system_s - start.system_s).max(0.0),
         peak_rss_kb: now.peak_rss_kb,

@@ -10,9 +10,9 @@
 //!   at exit ([`PeakSource::Vmhwm`]). The kernel's account of the exited child
 //!   ([`PeakSource::Rusage`]) is only the fallback for a child that printed none (killed, or
 //!   a bridge): it includes this process's memory at the spawn
-//!   ([`protocol::resources`]), which grows with every fleet a bench or a sweep ran before.
+//!   ([`fleet_process::resources`]), which grows with every fleet a bench or a sweep ran before.
 //!   The orchestrator's own is its `getrusage` peak since the process started.
-//! - **Phases** are what each process measured itself ([`protocol::resources::PhaseClock`])
+//! - **Phases** are what each process measured itself ([`fleet_process::resources::PhaseClock`])
 //!   and printed in its report at exit (one line of JSON on stdout, which goes to its log):
 //!   the world-server's process CPU per phase, each agent's thread CPU per phase, the
 //!   observer thread's. A process that was killed prints no report, so it has no phases.
@@ -27,7 +27,7 @@ use std::path::Path;
 use fleet_observe::results::resources::{
     PeakSource, ProcessResources, ResourceTotals, Resources, RunSize,
 };
-use protocol::resources::{PhaseTimes, ProcessUsage, kib_to_mib};
+use fleet_process::resources::{PhaseTimes, ProcessUsage, kib_to_mib};
 
 use super::children::ExitedProcess;
 
@@ -181,7 +181,7 @@ fn reports_in(text: &str) -> impl Iterator<Item = (u32, Report)> + '_ {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::resources::PhaseTime;
+    use fleet_process::resources::PhaseTime;
 
     #[test]
     fn reports_are_found_among_log_lines_by_pid() {

@@ -57,7 +57,7 @@ use crate::Outcome;
 use crate::run::config::{RunConfig, default_out_dir, new_run_id};
 use crate::run::hosts::HostLayout;
 use crate::run::{execute, runtime, write_results};
-use protocol::usage::{ScenarioArgs, UsageError};
+use fleet_process::usage::{ScenarioArgs, UsageError};
 use protocol::variant::Variant;
 use report::{RowStatus, ScaleRow};
 

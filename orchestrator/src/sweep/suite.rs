@@ -31,7 +31,7 @@ use serde::Serialize;
 use super::paired::{self, Comparison, Paired, PairedMetric, Sides};
 use super::table::{Cell, Table, format_cell};
 use crate::Outcome;
-use protocol::usage::UsageError;
+use fleet_process::usage::UsageError;
 use protocol::variant::Variant;
 
 /// Most scenarios a suite holds.

@@ -83,6 +83,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use fleet_process::resources::{CpuClock, PhaseClock, PhaseTimes, own_peak_rss_kb};
 use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
 use protocol::codec::{self, EncodeError};
 use protocol::flight::UavState;
@@ -90,7 +91,6 @@ use protocol::frame::CvsFrame;
 use protocol::ipc::{Ipc, IpcOpenError, NodeScanError, RunNode, scan_nodes, wait_for_wake};
 use protocol::plan::FLAG_ROUND_START;
 use protocol::radio::{Endpoint, LinkKind, Radio};
-use protocol::resources::{CpuClock, PhaseClock, PhaseTimes, own_peak_rss_kb};
 use protocol::scenario::{Exchange, ExternalRequest, Scenario};
 use protocol::service::RunId;
 use protocol::timeouts::Timeouts;

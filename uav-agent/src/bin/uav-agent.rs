@@ -9,7 +9,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use clap::Parser;
-use protocol::process::{self, ChildArgs, Role};
+use fleet_process::startup::{self, ChildArgs, Role};
 use protocol::timeouts::Timeouts;
 use uav_agent::agent::{self, AgentConfig};
 
@@ -53,7 +53,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args: Args = match process::start(Role::Child) {
+    let args: Args = match startup::start(Role::Child) {
         Ok(args) => args,
         Err(code) => return code,
     };

@@ -10,6 +10,7 @@
 
 use std::time::Instant;
 
+use fleet_process::stats::Stats;
 use iceoryx2::pending_response::PendingResponse;
 use iceoryx2::port::client::Client;
 use iceoryx2::port::notifier::Notifier;
@@ -20,7 +21,6 @@ use protocol::plan::Steer;
 use protocol::plan::{
     Answer, ArrayId, OTHER_ROW_BYTES, RequestHeader, RequestShape, RequestWriter, TARGET_ROW_BYTES,
 };
-use protocol::stats::Stats;
 use protocol::wire::PlannedView;
 use serde::Serialize;
 use sets::raster::{CellBox, CellSet};

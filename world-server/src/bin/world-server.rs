@@ -11,7 +11,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use clap::{Parser, ValueEnum};
-use protocol::process::{self, ChildArgs, Role};
+use fleet_process::startup::{self, ChildArgs, Role};
 use protocol::timeouts::Timeouts;
 use world_server::server::{self, ServerConfig, StepMode};
 
@@ -58,7 +58,7 @@ enum Mode {
 }
 
 fn main() -> ExitCode {
-    let args: Args = match process::start(Role::Child) {
+    let args: Args = match startup::start(Role::Child) {
         Ok(args) => args,
         Err(code) => return code,
     };

@@ -9,7 +9,7 @@
 //! CPU time since the clock started: never more than the process's.
 //!
 //! ```
-//! use protocol::resources::{CpuClock, PhaseClock};
+//! use fleet_process::resources::{CpuClock, PhaseClock};
 //!
 //! let mut clock = PhaseClock::new(CpuClock::Thread, "other");
 //! let before = clock.enter("estimate");

@@ -4,8 +4,8 @@
 
 use std::path::PathBuf;
 
-use crate::scenario::Scenario;
 use clap::Args;
+use protocol::scenario::Scenario;
 
 /// Where the scenario comes from: a file and `KEY=VALUE` overrides.
 #[derive(Debug, Clone, Default, Args)]

@@ -20,20 +20,23 @@ pub struct Uav {
     pub yaw_ref: Real,
 }
 
-/// The fleet and its flight parameters.
+/// The UAVs in the air and their flight parameters.
 #[derive(Clone, Debug)]
-pub struct Fleet {
+pub struct Airspace {
     uavs: Vec<Uav>,
     speed: Real,
     max_yaw_rate: Real,
     fence: Real,
 }
 
-impl Fleet {
-    /// The fleet at its start: UAV `i` evenly spaced on a circle inside the geofence, heading
+impl Airspace {
+    /// The UAVs at their start: UAV `i` evenly spaced on a circle inside the geofence, heading
     /// to the centre of the RoI, at [`Scenario::uav_altitude`] (`altitudes_m[i]` or, when the
     /// scenario gives none, `tallest + 20 + 10 i` m).
-    pub fn launch(scenario: &Scenario, tallest_building: Real) -> Result<Fleet, WorldBuildError> {
+    pub fn launch(
+        scenario: &Scenario,
+        tallest_building: Real,
+    ) -> Result<Airspace, WorldBuildError> {
         let u = &scenario.uavs;
         let n = u.count as usize;
         if !u.altitudes_m.is_empty() && u.altitudes_m.len() < n {
@@ -59,7 +62,7 @@ impl Fleet {
                 }
             })
             .collect();
-        Ok(Fleet {
+        Ok(Airspace {
             uavs,
             speed: u.speed_mps,
             max_yaw_rate: u.max_yaw_rate_rps,
@@ -129,7 +132,7 @@ mod tests {
     #[test]
     fn uavs_stay_inside_the_region_whatever_they_are_told() {
         let s = Scenario::default();
-        let mut f = Fleet::launch(&s, 60.0).unwrap();
+        let mut f = Airspace::launch(&s, 60.0).unwrap();
         // Always steer straight out of the RoI.
         for _ in 0..2000 {
             for i in 0..f.uavs().len() {
@@ -152,7 +155,7 @@ mod tests {
     fn only_commands_crossing_the_geofence_are_overridden() {
         let s = Scenario::default();
         let fence = s.geofence_half_extent();
-        let mut f = Fleet::launch(&s, 60.0).unwrap();
+        let mut f = Airspace::launch(&s, 60.0).unwrap();
         let at = |x: Real| UavState {
             position: Point3::new(x, 0.0, 80.0),
             yaw: 0.0,
@@ -175,7 +178,7 @@ mod tests {
     #[test]
     fn default_altitudes_are_distinct_and_above_buildings() {
         let s = Scenario::default();
-        let f = Fleet::launch(&s, 57.0).unwrap();
+        let f = Airspace::launch(&s, 57.0).unwrap();
         let z: Vec<Real> = f.uavs().iter().map(|u| u.state.position.z).collect();
         assert_eq!(z, vec![77.0, 87.0, 97.0, 107.0]);
     }

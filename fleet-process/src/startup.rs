@@ -4,7 +4,7 @@
 //! ```no_run
 //! use std::process::ExitCode;
 //! use clap::Parser;
-//! use protocol::process::{self, Role};
+//! use fleet_process::startup::{self, Role};
 //!
 //! #[derive(Parser)]
 //! struct Args {
@@ -13,7 +13,7 @@
 //! }
 //!
 //! fn main() -> ExitCode {
-//!     let args: Args = match process::start(Role::Child) {
+//!     let args: Args = match startup::start(Role::Child) {
 //!         Ok(args) => args,
 //!         Err(code) => return code,
 //!     };
@@ -29,8 +29,8 @@ use std::process::ExitCode;
 use clap::Parser;
 use tracing_subscriber::EnvFilter;
 
-use crate::scenario::{Scenario, ScenarioError};
-use crate::service::RunId;
+use protocol::scenario::{Scenario, ScenarioError};
+use protocol::service::RunId;
 
 /// What every process of a run is told on its command line, whoever starts it (`fleet`, a
 /// test, a user): the run, its host's domain and the scenario. The world-server, the agent
