@@ -37,6 +37,57 @@ use crate::occupancy::OccupancyMap;
 /// estimate copies a set only when it changes one still shared.
 pub type SharedSet = Arc<CellSet>;
 
+/// The exchanged sets of one estimate: what a [`PeerEstimate`] carries, what the fusion law
+/// meets and joins, and what an outbox and an inbox keep as the base of set deltas
+/// ([`super::message`], which adds the sender's `H̄`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EstimateSets {
+    /// `X̄`, outer.
+    pub undetected: SharedSet,
+    /// `X_j`, outer, per identified id.
+    pub targets: BTreeMap<u32, SharedSet>,
+    /// `S^o`, inner.
+    pub obstacle_neighbourhood: SharedSet,
+    /// Explored ground.
+    pub explored: SharedSet,
+    /// `H^CVS`.
+    pub hidden: SharedSet,
+    /// `P^g`: ground the sender's frame of the step proved free (it clears `H̄`).
+    pub free_ground: SharedSet,
+}
+
+impl EstimateSets {
+    /// The exchanged sets of a state (copies: the state keeps changing).
+    pub fn of_state(state: &EstimatorState) -> Self {
+        let share = |set: &CellSet| Arc::new(set.clone());
+        Self {
+            undetected: share(state.undetected.cells()),
+            targets: state
+                .targets
+                .iter()
+                .map(|(&id, set)| (id, share(set.cells())))
+                .collect(),
+            obstacle_neighbourhood: share(&state.obstacle_neighbourhood),
+            explored: share(&state.explored),
+            hidden: share(&state.hidden),
+            free_ground: share(&state.free_ground),
+        }
+    }
+
+    /// Every set, targets last.
+    fn iter(&self) -> impl Iterator<Item = &SharedSet> {
+        [
+            &self.undetected,
+            &self.obstacle_neighbourhood,
+            &self.explored,
+            &self.hidden,
+            &self.free_ground,
+        ]
+        .into_iter()
+        .chain(self.targets.values())
+    }
+}
+
 /// A peer's estimate as received and validated ([`super::message`]), or this agent's own
 /// exchanged sets ([`EstimatorState::to_peer`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -53,18 +104,8 @@ pub struct PeerEstimate {
     pub incarnation: u64,
     /// Sender's camera pose at that step.
     pub pose: Option<CameraPose>,
-    /// `X̄`, outer.
-    pub undetected: SharedSet,
-    /// `X_j`, outer, per identified id.
-    pub targets: BTreeMap<u32, SharedSet>,
-    /// `S^o`, inner.
-    pub obstacle_neighbourhood: SharedSet,
-    /// Explored ground.
-    pub explored: SharedSet,
-    /// `H^CVS`.
-    pub hidden: SharedSet,
-    /// `P^g`: ground the sender's frame of `step` proved free (it clears `H̄`).
-    pub free_ground: SharedSet,
+    /// The sets of `step`.
+    pub sets: EstimateSets,
     /// The sender's map cells carried by the message (all others unknown).
     pub oem: OccupancyMap,
     /// Whether `oem` is the sender's whole known map rather than a delta.
@@ -162,30 +203,25 @@ fn fuse_into<S: FusedSet>(
         step_lag: dst.step.abs_diff(src.step),
         ..FuseReport::default()
     };
-    let shapes_ok = [
-        &src.undetected,
-        &src.obstacle_neighbourhood,
-        &src.explored,
-        &src.hidden,
-        &src.free_ground,
-    ]
-    .into_iter()
-    .chain(src.targets.values())
-    .all(|s| s.same_shape(dst.undetected.cells()));
+    let sets = &src.sets;
+    let shapes_ok = sets.iter().all(|s| s.same_shape(dst.undetected.cells()));
     if !shapes_ok {
         report.grid_mismatch = true;
         return report;
     }
     let radius = report.step_lag as f64 * radius_per_step;
-    let src_undetected = predict::grow(&src.undetected, grid, radius);
+    let src_undetected = predict::grow(&sets.undetected, grid, radius);
     let ids: BTreeSet<u32> = dst
         .targets
         .keys()
-        .chain(src.targets.keys())
+        .chain(sets.targets.keys())
         .copied()
         .collect();
     for id in ids {
-        let theirs = src.targets.get(&id).map(|s| predict::grow(s, grid, radius));
+        let theirs = sets
+            .targets
+            .get(&id)
+            .map(|s| predict::grow(s, grid, radius));
         let theirs: &CellSet = theirs.as_deref().unwrap_or(&src_undetected);
         let mine = match dst.targets.entry(id) {
             std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
@@ -210,10 +246,10 @@ fn fuse_into<S: FusedSet>(
     }
     dst.undetected.meet(&src_undetected);
     dst.obstacle_neighbourhood
-        .or_assign(&src.obstacle_neighbourhood);
-    dst.explored.or_assign(&src.explored);
-    dst.hidden.or_assign(&src.hidden);
-    dst.free_ground.or_assign(&src.free_ground);
+        .or_assign(&sets.obstacle_neighbourhood);
+    dst.explored.or_assign(&sets.explored);
+    dst.hidden.or_assign(&sets.hidden);
+    dst.free_ground.or_assign(&sets.free_ground);
     dst.oem.merge(&src.oem);
     report
 }
@@ -240,7 +276,7 @@ impl EstimatorState {
         );
         if !report.grid_mismatch {
             self.hidden_history
-                .fuse(step, peer.step, &peer.hidden, &peer.free_ground);
+                .fuse(step, peer.step, &peer.sets.hidden, &peer.sets.free_ground);
         }
         // A target learned from a peer starts from this side's X̄, whose reach knows nothing
         // near the target: its set must be bounded by its box (whole-cell growth keeps none).
@@ -270,16 +306,7 @@ impl EstimatorState {
             seq: 0,
             incarnation: 0,
             pose: self.pose,
-            undetected: Arc::new(self.undetected.cells().clone()),
-            targets: self
-                .targets
-                .iter()
-                .map(|(id, s)| (*id, Arc::new(s.cells().clone())))
-                .collect(),
-            obstacle_neighbourhood: Arc::new(self.obstacle_neighbourhood.clone()),
-            explored: Arc::new(self.explored.clone()),
-            hidden: Arc::new(self.hidden.clone()),
-            free_ground: Arc::new(self.free_ground.clone()),
+            sets: EstimateSets::of_state(self),
             oem: self.oem.clone(),
             oem_full: true,
         }
@@ -300,15 +327,16 @@ impl PeerEstimate {
     /// Fuses another estimate into this one, at this one's step (the same law as
     /// [`EstimatorState::fuse`]).
     pub fn fuse(&mut self, other: &PeerEstimate, config: &EstimatorConfig) -> FuseReport {
+        let sets = &mut self.sets;
         fuse_into(
             Lattice {
                 step: self.step,
-                undetected: &mut self.undetected,
-                targets: &mut self.targets,
-                obstacle_neighbourhood: Arc::make_mut(&mut self.obstacle_neighbourhood),
-                explored: Arc::make_mut(&mut self.explored),
-                hidden: Arc::make_mut(&mut self.hidden),
-                free_ground: Arc::make_mut(&mut self.free_ground),
+                undetected: &mut sets.undetected,
+                targets: &mut sets.targets,
+                obstacle_neighbourhood: Arc::make_mut(&mut sets.obstacle_neighbourhood),
+                explored: Arc::make_mut(&mut sets.explored),
+                hidden: Arc::make_mut(&mut sets.hidden),
+                free_ground: Arc::make_mut(&mut sets.free_ground),
                 oem: &mut self.oem,
             },
             other,
@@ -393,12 +421,14 @@ pub(crate) mod tests {
                         seq: 0,
                         incarnation: 0,
                         pose: None,
-                        undetected: undetected.into(),
-                        targets: targets.into_iter().map(|(id, s)| (id, s.into())).collect(),
-                        obstacle_neighbourhood: so.into(),
-                        explored: explored.into(),
-                        hidden: hidden.into(),
-                        free_ground: free_ground.into(),
+                        sets: EstimateSets {
+                            undetected: undetected.into(),
+                            targets: targets.into_iter().map(|(id, s)| (id, s.into())).collect(),
+                            obstacle_neighbourhood: so.into(),
+                            explored: explored.into(),
+                            hidden: hidden.into(),
+                            free_ground: free_ground.into(),
+                        },
                         oem,
                         oem_full: false,
                     }
@@ -407,26 +437,10 @@ pub(crate) mod tests {
     }
 
     /// The fused content, without sender bookkeeping or the map's pending changes.
-    type Content = (
-        SharedSet,
-        BTreeMap<u32, SharedSet>,
-        SharedSet,
-        SharedSet,
-        SharedSet,
-        SharedSet,
-        Vec<((u32, u32), OemCell)>,
-    );
+    type Content = (EstimateSets, Vec<((u32, u32), OemCell)>);
 
     fn content(p: &PeerEstimate) -> Content {
-        (
-            p.undetected.clone(),
-            p.targets.clone(),
-            p.obstacle_neighbourhood.clone(),
-            p.explored.clone(),
-            p.hidden.clone(),
-            p.free_ground.clone(),
-            p.oem.known_cells().collect::<Vec<_>>(),
-        )
+        (p.sets.clone(), p.oem.known_cells().collect::<Vec<_>>())
     }
 
     fn fused(a: &PeerEstimate, b: &PeerEstimate) -> PeerEstimate {
@@ -466,12 +480,12 @@ pub(crate) mod tests {
             for iy in 0..g.ny {
                 for ix in 0..g.nx {
                     let c = (ix, iy);
-                    if a.undetected.contains(c) && b.undetected.contains(c) {
-                        prop_assert!(f.undetected.contains(c));
+                    if a.sets.undetected.contains(c) && b.sets.undetected.contains(c) {
+                        prop_assert!(f.sets.undetected.contains(c));
                     }
-                    for (id, x) in &f.targets {
-                        let ina = a.targets.get(id).unwrap_or(&a.undetected).contains(c);
-                        let inb = b.targets.get(id).unwrap_or(&b.undetected).contains(c);
+                    for (id, x) in &f.sets.targets {
+                        let ina = a.sets.targets.get(id).unwrap_or(&a.sets.undetected).contains(c);
+                        let inb = b.sets.targets.get(id).unwrap_or(&b.sets.undetected).contains(c);
                         if ina && inb {
                             prop_assert!(x.contains(c));
                         }
@@ -487,13 +501,13 @@ pub(crate) mod tests {
             // A target b held at step 8 moved at most 2 steps of v_max T = 2 m by step 10.
             let f = fused(&a, &b);
             let g = config().grid;
-            for (ix, iy) in b.undetected.iter() {
+            for (ix, iy) in b.sets.undetected.iter() {
                 let p = g.cell_centre((ix, iy));
                 let moved = Point2::new(p.x + 1.9, p.y);
                 if let Some(c) = g.cell_of(&moved)
-                    && a.undetected.contains(c)
+                    && a.sets.undetected.contains(c)
                 {
-                    prop_assert!(f.undetected.contains(c));
+                    prop_assert!(f.sets.undetected.contains(c));
                 }
             }
         }
@@ -512,20 +526,21 @@ pub(crate) mod tests {
             .expect("tree")
             .current();
         let mut state = EstimatorState::new(&cfg);
-        state.undetected = ReachSet::with_cells((*a.undetected).clone());
+        state.undetected = ReachSet::with_cells((*a.sets.undetected).clone());
         state.targets = a
+            .sets
             .targets
             .iter()
             .map(|(k, v)| (*k, ReachSet::with_cells((**v).clone())))
             .collect();
-        state.obstacle_neighbourhood = (*a.obstacle_neighbourhood).clone();
-        state.explored = (*a.explored).clone();
-        state.hidden = (*a.hidden).clone();
-        state.free_ground = (*a.free_ground).clone();
+        state.obstacle_neighbourhood = (*a.sets.obstacle_neighbourhood).clone();
+        state.explored = (*a.sets.explored).clone();
+        state.hidden = (*a.sets.hidden).clone();
+        state.free_ground = (*a.sets.free_ground).clone();
         state.oem = a.oem.clone();
         state.fuse(&b, &cfg);
         assert_eq!(content(&state.to_peer(0)), content(&fused(&a, &b)));
-        assert!(state.hidden_history.recently_hidden().count() >= b.hidden.count());
+        assert!(state.hidden_history.recently_hidden().count() >= b.sets.hidden.count());
     }
 
     #[test]
@@ -533,7 +548,7 @@ pub(crate) mod tests {
         let cfg = config();
         let mut state = EstimatorState::new(&cfg);
         let mut other = state.to_peer(1);
-        other.undetected = CellSet::empty(&GroundGrid::new(4.0, 0.5)).into();
+        other.sets.undetected = CellSet::empty(&GroundGrid::new(4.0, 0.5)).into();
         let r = state.fuse(&other, &cfg);
         assert!(r.grid_mismatch);
         assert_eq!(state.undetected.cells(), &CellSet::full(&cfg.grid));
@@ -561,8 +576,8 @@ pub(crate) mod tests {
     fn news(uav: u32, step: u64, hidden: &[CellIndex], free: &[CellIndex]) -> PeerEstimate {
         let mut p = EstimatorState::new(&config()).to_peer(uav);
         p.step = step;
-        p.hidden = cells(hidden).into();
-        p.free_ground = cells(free).into();
+        p.sets.hidden = cells(hidden).into();
+        p.sets.free_ground = cells(free).into();
         p
     }
 

@@ -65,7 +65,7 @@ use sets::math::Real;
 use sets::raster::{CellBox, CellSet, ReachSet};
 
 pub use exchange::{ApplyReport, Measurement, Relayed};
-pub use fusion::{FuseReport, PeerEstimate};
+pub use fusion::{EstimateSets, FuseReport, PeerEstimate};
 pub use hidden::{HiddenHistory, Unseen};
 pub use message::{EstimateOutbox, EstimateReadError};
 

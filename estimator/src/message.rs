@@ -53,46 +53,27 @@ use sets::math::Point3;
 use sets::raster::CellSet;
 use sets::raster::delta::{DeltaError, SetCode};
 
-use super::fusion::SharedSet;
+use super::fusion::{EstimateSets, SharedSet};
 use super::{EstimatorConfig, EstimatorState, Measurement, PeerEstimate, Relayed};
 use crate::occupancy::{OccupancyMap, OemUpdateError};
 
-/// The sets of one estimate: what a sender keeps as the base of its next deltas and a
-/// receiver rebuilds (sharing them with the [`PeerEstimate`] it hands on).
+/// The sets of one message: the estimate's, and the sender's `H̄` (which only the observer
+/// reads). What a sender keeps as the base of its next deltas and a receiver rebuilds
+/// (sharing the estimate's with the [`PeerEstimate`] it hands on).
 #[derive(Clone, Debug, PartialEq)]
-pub struct EstimateSets {
-    /// `X̄`.
-    pub undetected: SharedSet,
-    /// `X_j` per identified id.
-    pub targets: BTreeMap<u32, SharedSet>,
-    /// `S^o`.
-    pub obstacle_neighbourhood: SharedSet,
-    /// The explored ground.
-    pub explored: SharedSet,
-    /// `H^CVS`.
-    pub hidden: SharedSet,
-    /// `P^g`.
-    pub free_ground: SharedSet,
+struct MessageSets {
+    /// The estimate's sets.
+    estimate: EstimateSets,
     /// `H̄`.
-    pub unseen: SharedSet,
+    unseen: SharedSet,
 }
 
-impl EstimateSets {
-    /// The exchanged sets of a state.
-    pub fn of_state(state: &EstimatorState) -> Self {
-        let share = |set: &CellSet| Arc::new(set.clone());
+impl MessageSets {
+    /// The sets a state sends.
+    fn of_state(state: &EstimatorState) -> Self {
         Self {
-            undetected: share(state.undetected.cells()),
-            targets: state
-                .targets
-                .iter()
-                .map(|(&id, set)| (id, share(set.cells())))
-                .collect(),
-            obstacle_neighbourhood: share(&state.obstacle_neighbourhood),
-            explored: share(&state.explored),
-            hidden: share(&state.hidden),
-            free_ground: share(&state.free_ground),
-            unseen: share(state.hidden_history.unseen()),
+            estimate: EstimateSets::of_state(state),
+            unseen: Arc::new(state.hidden_history.unseen().clone()),
         }
     }
 }
@@ -112,7 +93,7 @@ pub struct EstimateOutbox {
     /// Whether messages carry the map.
     map: bool,
     /// The sets of the last message, when sets go as deltas.
-    last: Option<EstimateSets>,
+    last: Option<MessageSets>,
 }
 
 impl EstimateOutbox {
@@ -175,7 +156,7 @@ impl EstimateOutbox {
     pub fn compose(&mut self, state: &mut EstimatorState) -> EstimateMsg {
         let full = self.next_is_full();
         let oem = self.take_map(state, full);
-        let sets = EstimateSets::of_state(state);
+        let sets = MessageSets::of_state(state);
         let base = if full { None } else { self.last.take() };
         let (sets_msg, any_delta) = sets_msg(&sets, base.as_ref());
         let msg = self.message(state, Some(sets_msg), None, any_delta, oem, full);
@@ -203,7 +184,7 @@ impl EstimateOutbox {
         } else {
             measurement.map_cells.clone()
         };
-        let sets = full.then(|| sets_msg(&EstimateSets::of_state(state), None).0);
+        let sets = full.then(|| sets_msg(&MessageSets::of_state(state), None).0);
         let relayed = relayed
             .iter()
             .map(|r| RelayedMeasurementMsg {
@@ -299,25 +280,26 @@ fn measurement_msg(m: &Measurement) -> MeasurementMsg {
 }
 
 /// The sets as a message, each a delta against `base` where that is smaller; whether any is.
-fn sets_msg(sets: &EstimateSets, base: Option<&EstimateSets>) -> (SetsMsg, bool) {
+fn sets_msg(sets: &MessageSets, base: Option<&MessageSets>) -> (SetsMsg, bool) {
     let code = |set: &SharedSet, base: Option<&SharedSet>| SetCode::choose(set, base.map(|b| &**b));
+    let (ours, theirs) = (&sets.estimate, base.map(|b| &b.estimate));
     let msg = SetsMsg {
-        undetected: code(&sets.undetected, base.map(|b| &b.undetected)),
-        targets: sets
+        undetected: code(&ours.undetected, theirs.map(|b| &b.undetected)),
+        targets: ours
             .targets
             .iter()
             .map(|(&id, set)| TargetSetMsg {
                 id,
-                set: code(set, base.and_then(|b| b.targets.get(&id))),
+                set: code(set, theirs.and_then(|b| b.targets.get(&id))),
             })
             .collect(),
         obstacle_neighbourhood: code(
-            &sets.obstacle_neighbourhood,
-            base.map(|b| &b.obstacle_neighbourhood),
+            &ours.obstacle_neighbourhood,
+            theirs.map(|b| &b.obstacle_neighbourhood),
         ),
-        explored: code(&sets.explored, base.map(|b| &b.explored)),
-        hidden: code(&sets.hidden, base.map(|b| &b.hidden)),
-        free_ground: code(&sets.free_ground, base.map(|b| &b.free_ground)),
+        explored: code(&ours.explored, theirs.map(|b| &b.explored)),
+        hidden: code(&ours.hidden, theirs.map(|b| &b.hidden)),
+        free_ground: code(&ours.free_ground, theirs.map(|b| &b.free_ground)),
         unseen: code(&sets.unseen, base.map(|b| &b.unseen)),
     };
     let any_delta = [
@@ -499,8 +481,8 @@ impl PeerMessage {
 fn rebuild(
     msg: &EstimateMsg,
     config: &EstimatorConfig,
-    base: Option<&EstimateSets>,
-) -> Result<(PeerMessage, Option<EstimateSets>), EstimateReadError> {
+    base: Option<&MessageSets>,
+) -> Result<(PeerMessage, Option<MessageSets>), EstimateReadError> {
     if !msg.time_s.is_finite() {
         return Err(EstimateReadError::BadTime(msg.time_s));
     }
@@ -520,12 +502,7 @@ fn rebuild(
             seq: msg.seq,
             incarnation: msg.incarnation,
             pose,
-            undetected: sets.undetected.clone(),
-            targets: sets.targets.clone(),
-            obstacle_neighbourhood: sets.obstacle_neighbourhood.clone(),
-            explored: sets.explored.clone(),
-            hidden: sets.hidden.clone(),
-            free_ground: sets.free_ground.clone(),
+            sets: sets.estimate.clone(),
             oem: OccupancyMap::from_updates(config.oem_grid, &msg.oem)?,
             oem_full: msg.oem_full,
         }),
@@ -638,8 +615,8 @@ fn rebuild_sets(
     msg: &EstimateMsg,
     sets: &SetsMsg,
     config: &EstimatorConfig,
-    base: Option<&EstimateSets>,
-) -> Result<EstimateSets, EstimateReadError> {
+    base: Option<&MessageSets>,
+) -> Result<MessageSets, EstimateReadError> {
     let grid = &config.grid;
     if let (Some(base_seq), None) = (msg.base_seq, base) {
         return Err(EstimateReadError::MissingBase {
@@ -647,41 +624,50 @@ fn rebuild_sets(
             base_seq,
         });
     }
+    let theirs = base.map(|b| &b.estimate);
     let mut targets = BTreeMap::new();
     for t in &sets.targets {
-        let b = base.and_then(|b| b.targets.get(&t.id));
+        let b = theirs.and_then(|b| b.targets.get(&t.id));
         let set = decode_set(grid, SetRole::Target(t.id), &t.set, b)?;
         if targets.insert(t.id, set).is_some() {
             return Err(EstimateReadError::DuplicateTarget(t.id));
         }
     }
-    Ok(EstimateSets {
+    let estimate = EstimateSets {
         undetected: decode_set(
             grid,
             SetRole::Undetected,
             &sets.undetected,
-            base.map(|b| &b.undetected),
+            theirs.map(|b| &b.undetected),
         )?,
         targets,
         obstacle_neighbourhood: decode_set(
             grid,
             SetRole::ObstacleNeighbourhood,
             &sets.obstacle_neighbourhood,
-            base.map(|b| &b.obstacle_neighbourhood),
+            theirs.map(|b| &b.obstacle_neighbourhood),
         )?,
         explored: decode_set(
             grid,
             SetRole::Explored,
             &sets.explored,
-            base.map(|b| &b.explored),
+            theirs.map(|b| &b.explored),
         )?,
-        hidden: decode_set(grid, SetRole::Hidden, &sets.hidden, base.map(|b| &b.hidden))?,
+        hidden: decode_set(
+            grid,
+            SetRole::Hidden,
+            &sets.hidden,
+            theirs.map(|b| &b.hidden),
+        )?,
         free_ground: decode_set(
             grid,
             SetRole::FreeGround,
             &sets.free_ground,
-            base.map(|b| &b.free_ground),
+            theirs.map(|b| &b.free_ground),
         )?,
+    };
+    Ok(MessageSets {
+        estimate,
         unseen: decode_set(grid, SetRole::Unseen, &sets.unseen, base.map(|b| &b.unseen))?,
     })
 }
@@ -692,7 +678,7 @@ struct Held {
     incarnation: u64,
     seq: u64,
     /// The base of the sender's next delta (none in an inbox that keeps no bases).
-    sets: Option<EstimateSets>,
+    sets: Option<MessageSets>,
 }
 
 /// The receiving side of estimates whose sets may be deltas: per sender, the sets of the last
@@ -832,16 +818,17 @@ mod tests {
         let mut s = EstimatorState::new(&cfg);
         s.step = p.step;
         s.time_s = p.time_s;
-        s.undetected = ReachSet::with_cells((*p.undetected).clone());
+        s.undetected = ReachSet::with_cells((*p.sets.undetected).clone());
         s.targets = p
+            .sets
             .targets
             .iter()
             .map(|(id, set)| (*id, ReachSet::with_cells((**set).clone())))
             .collect();
-        s.obstacle_neighbourhood = (*p.obstacle_neighbourhood).clone();
-        s.explored = (*p.explored).clone();
-        s.hidden = (*p.hidden).clone();
-        s.free_ground = (*p.free_ground).clone();
+        s.obstacle_neighbourhood = (*p.sets.obstacle_neighbourhood).clone();
+        s.explored = (*p.sets.explored).clone();
+        s.hidden = (*p.sets.hidden).clone();
+        s.free_ground = (*p.sets.free_ground).clone();
         s.oem = p.oem.clone();
         s
     }
@@ -871,12 +858,7 @@ mod tests {
             prop_assert_eq!(&from_bytes(&bytes).unwrap(), &msg);
             let back = PeerEstimate::from_bytes(&bytes, &cfg).unwrap();
             prop_assert_eq!((back.uav, back.step, back.incarnation), (2, 5, 9));
-            prop_assert_eq!(&back.undetected, &p.undetected);
-            prop_assert_eq!(&back.targets, &p.targets);
-            prop_assert_eq!(&back.obstacle_neighbourhood, &p.obstacle_neighbourhood);
-            prop_assert_eq!(&back.explored, &p.explored);
-            prop_assert_eq!(&back.hidden, &p.hidden);
-            prop_assert_eq!(&back.free_ground, &p.free_ground);
+            prop_assert_eq!(&back.sets, &p.sets);
             prop_assert_eq!(
                 back.oem.known_cells().collect::<Vec<_>>(),
                 p.oem.known_cells().collect::<Vec<_>>()
@@ -896,12 +878,7 @@ mod tests {
                 prop_assert_eq!(msg.base_seq.is_some(), i > 0 && msg.base_seq == Some(i as u64 - 1));
                 let bytes = to_bytes(&msg).unwrap();
                 let back = inbox.read_bytes(&bytes, &cfg).unwrap();
-                prop_assert_eq!(&back.undetected, &p.undetected);
-                prop_assert_eq!(&back.targets, &p.targets);
-                prop_assert_eq!(&back.obstacle_neighbourhood, &p.obstacle_neighbourhood);
-                prop_assert_eq!(&back.explored, &p.explored);
-                prop_assert_eq!(&back.hidden, &p.hidden);
-                prop_assert_eq!(&back.free_ground, &p.free_ground);
+                prop_assert_eq!(&back.sets, &p.sets);
                 prop_assert_eq!(inbox.unseen(2), Some(s.hidden_history.unseen()));
                 prop_assert_eq!(inbox.wanted(), 0);
             }
@@ -927,7 +904,7 @@ mod tests {
             // Either an error, or an estimate that passed every validation.
             if let Ok(p) = PeerEstimate::from_bytes(&bytes, &config()) {
                 let g = config().grid;
-                prop_assert!(p.undetected.same_shape(&CellSet::empty(&g)));
+                prop_assert!(p.sets.undetected.same_shape(&CellSet::empty(&g)));
             }
         }
     }
@@ -1097,12 +1074,12 @@ mod tests {
         let whole = outbox.compose(&mut moving_state(4));
         assert_eq!(whole.base_seq, None);
         let back = inbox.read(&whole, &cfg).unwrap();
-        assert_eq!(*back.undetected, *moving_state(4).undetected.cells());
+        assert_eq!(*back.sets.undetected, *moving_state(4).undetected.cells());
         assert_eq!(inbox.wanted(), 0);
         let next = outbox.compose(&mut moving_state(5));
         assert_eq!(next.base_seq, Some(4));
         let back = inbox.read(&next, &cfg).unwrap();
-        assert_eq!(*back.explored, moving_state(5).explored);
+        assert_eq!(*back.sets.explored, moving_state(5).explored);
         // A stateless reader (or a newcomer) cannot use a delta message.
         assert!(matches!(
             PeerEstimate::from_msg(&next, &cfg),

@@ -11,7 +11,7 @@
 //! | `paper` | the paper's MPC as written: the map and previously occluded ground (`kappa = 1`); the built-in defaults, so `fleet run` with no variant is the paper's scenario. Where the paper's text can be read two ways, or the code departed from it, the literal reading: the sets predicted and `Φ_X`, `Φ_d` measured on the estimator's cells, `Φ_d` from the UAV's ground position, `Φ_h` counting the predicted sets at the horizon's end inside recently hidden ground at the estimator's resolution, the window of eq. (28) in frames, the predicted views at the end of each period (eqs. 29-30), plans kept inside the RoI |
 //! | `kappa0` | the paper's MPC, previously occluded ground not rewarded (`kappa = 0`) |
 //! | `nomap` | the paper's MPC without the map (the paper's reference \[3\], `kappa = 0`) |
-//! | `setfleet` | the project's planner (`guidance.planner = "setfleet"`, `uav_agent::guidance::setfleet`): a decision every 1 s, a beam search 6 s ahead valuing the sets by their area (`guidance.growth_horizon_s = 0`), targets weighted, UAVs spread and, with a finite radio range, kept within it of each other, a car whose set outgrew 10 s of travel revisited by the UAV whose lane holds it (`guidance.track_revisit_s = 10`), its weights those of the default scenario scaled to the scenario's camera footprint and cars' speed (`guidance.adapt_weights = true`, `uav_agent::guidance::scale`); it keeps the readings it was tuned with (recently hidden ground over whole guidance periods, plans inside the RoI; `predicted_views`, `hidden_resolution`, `set_resolution`, `distance_from` and `hidden_sets` are the paper's MPC's only) |
+//! | `setfleet` | the project's planner (`guidance.planner = "setfleet"`, `uav_agent::guidance::setfleet`): a decision every 1 s, a beam search 6 s ahead valuing the sets by their area (`guidance.growth_horizon_s = 0`), targets weighted, UAVs spread and, with a finite radio range, kept within it of each other, a car whose set outgrew 10 s of travel revisited by the UAV whose lane holds it (`guidance.track_revisit_s = 10`), its weights those of the default scenario scaled to the scenario's camera footprint and cars' speed (`guidance.adapt_weights = true`, `uav_agent::guidance::weights`); it keeps the readings it was tuned with (recently hidden ground over whole guidance periods, plans inside the RoI; `predicted_views`, `hidden_resolution`, `set_resolution`, `distance_from` and `hidden_sets` are the paper's MPC's only) |
 
 use clap::ValueEnum;
 use serde::Serialize;
@@ -149,6 +149,6 @@ mod tests {
         // The user's overrides come after the variant's.
         let user = ["guidance.beam_width=2".to_owned()];
         let sf = Scenario::load(None, &Variant::Setfleet.with_user_overrides(&user)).unwrap();
-        assert_eq!(sf.guidance.beam_width, 2);
+        assert_eq!(sf.guidance.setfleet.beam_width, 2);
     }
 }

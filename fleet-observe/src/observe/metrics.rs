@@ -153,16 +153,22 @@ impl FusedSets {
         peers: &[&ObservedEstimate],
     ) -> FusedSets {
         let e = &own.estimate;
-        let mut unseen = Unseen::after_frame(e.step, own.unseen.clone(), &e.hidden, &e.free_ground);
+        let mut unseen = Unseen::after_frame(
+            e.step,
+            own.unseen.clone(),
+            &e.sets.hidden,
+            &e.sets.free_ground,
+        );
         for peer in peers {
             let p = &peer.estimate;
-            unseen.fuse(p.step, &p.hidden, &p.free_ground);
+            unseen.fuse(p.step, &p.sets.hidden, &p.sets.free_ground);
         }
+        let sets = fused.sets;
         FusedSets {
-            undetected: fused.undetected,
-            targets: fused.targets,
-            obstacle_neighbourhood: fused.obstacle_neighbourhood,
-            explored: fused.explored,
+            undetected: sets.undetected,
+            targets: sets.targets,
+            obstacle_neighbourhood: sets.obstacle_neighbourhood,
+            explored: sets.explored,
             unseen: unseen.into_cells(),
         }
     }
@@ -170,7 +176,7 @@ impl FusedSets {
     /// The sets of an estimate that holds an agent's sets after its step as they are (an
     /// agent's state message under the measurement exchange): nothing is fused.
     pub fn held(own: &ObservedEstimate) -> FusedSets {
-        let e = &own.estimate;
+        let e = &own.estimate.sets;
         FusedSets {
             undetected: e.undetected.clone(),
             targets: e.targets.clone(),
@@ -410,9 +416,9 @@ pub fn violations(
     let mut out = Vec::new();
     for t in truth {
         let p = ground_point(t);
-        let (set, kind) = match estimate.estimate.targets.get(&t.id) {
+        let (set, kind) = match estimate.estimate.sets.targets.get(&t.id) {
             Some(set) => (set, ViolatedSet::Target),
-            None => (&estimate.estimate.undetected, ViolatedSet::Undetected),
+            None => (&estimate.estimate.sets.undetected, ViolatedSet::Undetected),
         };
         let inside = cell_of_closed(grid, &p).is_some_and(|c| set.contains(c));
         if !inside {
@@ -461,7 +467,7 @@ pub fn identified_ids<'a>(
 ) -> BTreeSet<u32> {
     estimates
         .into_iter()
-        .flat_map(|e| e.estimate.targets.keys().copied())
+        .flat_map(|e| e.estimate.sets.targets.keys().copied())
         .collect()
 }
 
@@ -469,7 +475,7 @@ pub fn identified_ids<'a>(
 pub(crate) mod tests {
     use std::sync::Arc;
 
-    use estimator::EstimatorState;
+    use estimator::{EstimateSets, EstimatorState};
     use protocol::camera::CameraPose;
     use protocol::radio::LinkKind;
     use protocol::scenario::Scenario;
@@ -520,12 +526,14 @@ pub(crate) mod tests {
                 seq: step,
                 incarnation: 1,
                 pose: None,
-                undetected: CellSet::full(grid).into(),
-                targets: BTreeMap::new(),
-                obstacle_neighbourhood: CellSet::empty(grid).into(),
-                explored: CellSet::empty(grid).into(),
-                hidden: CellSet::empty(grid).into(),
-                free_ground: CellSet::empty(grid).into(),
+                sets: EstimateSets {
+                    undetected: CellSet::full(grid).into(),
+                    targets: BTreeMap::new(),
+                    obstacle_neighbourhood: CellSet::empty(grid).into(),
+                    explored: CellSet::empty(grid).into(),
+                    hidden: CellSet::empty(grid).into(),
+                    free_ground: CellSet::empty(grid).into(),
+                },
                 oem: OccupancyMap::new(*grid),
                 oem_full: false,
             },
@@ -536,8 +544,8 @@ pub(crate) mod tests {
 
     fn estimate(uav: u32, undetected: CellSet, targets: &[(u32, CellSet)]) -> ObservedEstimate {
         let mut e = blank(&grid(), uav, 3);
-        e.estimate.undetected = undetected.into();
-        e.estimate.targets = targets
+        e.estimate.sets.undetected = undetected.into();
+        e.estimate.sets.targets = targets
             .iter()
             .map(|(id, s)| (*id, s.clone().into()))
             .collect();
@@ -589,21 +597,23 @@ pub(crate) mod tests {
                 let mut e = blank(&grid(), uav, 3);
                 let mut x1 = scattered(seed + 1, 0.5);
                 x1.or_assign(&set(&[(4, 4), (5, 4)]));
-                e.estimate.undetected = scattered(seed + 2, 0.8).into();
-                e.estimate.targets.insert(1, x1.into());
+                e.estimate.sets.undetected = scattered(seed + 2, 0.8).into();
+                e.estimate.sets.targets.insert(1, x1.into());
                 if uav == 0 {
                     e.estimate
+                        .sets
                         .targets
                         .insert(2, scattered(seed + 3, 0.5).into());
                 } else {
                     e.estimate
+                        .sets
                         .targets
                         .insert(3, scattered(seed + 4, 0.6).into());
                 }
-                e.estimate.obstacle_neighbourhood = scattered(seed + 5, 0.1).into();
-                e.estimate.explored = scattered(seed + 6, 0.3).into();
-                e.estimate.hidden = scattered(seed + 7, 0.2).into();
-                e.estimate.free_ground = scattered(seed + 9, 0.2).into();
+                e.estimate.sets.obstacle_neighbourhood = scattered(seed + 5, 0.1).into();
+                e.estimate.sets.explored = scattered(seed + 6, 0.3).into();
+                e.estimate.sets.hidden = scattered(seed + 7, 0.2).into();
+                e.estimate.sets.free_ground = scattered(seed + 9, 0.2).into();
                 e.unseen = scattered(seed + 8, 0.3);
                 as_published(&mut e);
                 e
@@ -661,27 +671,30 @@ pub(crate) mod tests {
                 } else {
                     10.0 * f64::from(uav)
                 });
-                e.estimate.undetected = scattered(seed + 1, 0.8).into();
-                e.estimate.explored = scattered(seed + 2, 0.3).into();
-                e.estimate.hidden = scattered(seed + 3, 0.1).into();
-                e.estimate.free_ground = scattered(seed + 7, 0.2).into();
+                e.estimate.sets.undetected = scattered(seed + 1, 0.8).into();
+                e.estimate.sets.explored = scattered(seed + 2, 0.3).into();
+                e.estimate.sets.hidden = scattered(seed + 3, 0.1).into();
+                e.estimate.sets.free_ground = scattered(seed + 7, 0.2).into();
                 e.unseen = scattered(seed + 4, 0.2);
                 as_published(&mut e);
                 let mut targets = vec![(1, scattered(seed + 5, 0.9))];
                 if uav % 2 == 0 {
                     targets.push((2, scattered(seed + 6, 0.9)));
                 }
-                e.estimate.targets = targets.into_iter().map(|(id, s)| (id, s.into())).collect();
+                e.estimate.sets.targets =
+                    targets.into_iter().map(|(id, s)| (id, s.into())).collect();
                 e
             })
             .collect();
         let mut clashing = all.clone();
         clashing[0]
             .estimate
+            .sets
             .targets
             .insert(7, set(&[(1, 1)]).into());
         clashing[1]
             .estimate
+            .sets
             .targets
             .insert(7, set(&[(8, 8)]).into());
         for estimates in [&all, &clashing] {
@@ -739,8 +752,8 @@ pub(crate) mod tests {
                 let column: Vec<CellIndex> = (0..g.ny).map(|iy| (9 - uav, iy)).collect();
                 let mut undetected = CellSet::full(&g);
                 undetected.and_not_assign(&set(&column));
-                e.estimate.explored = set(&column).into();
-                e.estimate.undetected = undetected.into();
+                e.estimate.sets.explored = set(&column).into();
+                e.estimate.sets.undetected = undetected.into();
                 e
             })
             .collect();
@@ -784,13 +797,13 @@ pub(crate) mod tests {
                 let seed = u64::from(uav) * 10 + salt;
                 let mut e = blank(&grid(), uav, step);
                 e.estimate.pose = at(10.0 * f64::from(uav));
-                e.estimate.undetected = scattered(seed + 1, 0.8).into();
-                e.estimate.explored = scattered(seed + 2, 0.3).into();
-                e.estimate.hidden = scattered(seed + 3, 0.1).into();
-                e.estimate.free_ground = scattered(seed + 6, 0.2).into();
+                e.estimate.sets.undetected = scattered(seed + 1, 0.8).into();
+                e.estimate.sets.explored = scattered(seed + 2, 0.3).into();
+                e.estimate.sets.hidden = scattered(seed + 3, 0.1).into();
+                e.estimate.sets.free_ground = scattered(seed + 6, 0.2).into();
                 e.unseen = scattered(seed + 4, 0.2);
                 as_published(&mut e);
-                e.estimate.targets = [(1, scattered(seed + 5, 0.9).into())].into();
+                e.estimate.sets.targets = [(1, scattered(seed + 5, 0.9).into())].into();
                 e
             })
             .collect()
@@ -798,9 +811,10 @@ pub(crate) mod tests {
 
     /// An agent's state as it published `own`.
     fn state_of(own: &ObservedEstimate, cfg: &EstimatorConfig) -> EstimatorState {
-        let e = &own.estimate;
+        let step = own.estimate.step;
+        let e = &own.estimate.sets;
         let mut state = EstimatorState::new(cfg);
-        state.step = e.step;
+        state.step = step;
         state.undetected = ReachSet::with_cells((*e.undetected).clone());
         state.targets = e
             .targets
@@ -815,8 +829,8 @@ pub(crate) mod tests {
         // hidden ground, would do as well), then the frame.
         let none = CellSet::empty(&cfg.grid);
         let history = &mut state.hidden_history;
-        history.record(e.step.saturating_sub(1), &own.unseen, &none);
-        history.record(e.step, &e.hidden, &e.free_ground);
+        history.record(step.saturating_sub(1), &own.unseen, &none);
+        history.record(step, &e.hidden, &e.free_ground);
         assert_eq!(history.unseen(), &own.unseen, "a consistent fixture");
         state
     }
@@ -824,11 +838,11 @@ pub(crate) mod tests {
     /// Makes `e`'s published `H̄` what an agent publishes after its frame: holding the frame's
     /// hidden ground and none of the ground it proved free (which it did not see hidden).
     fn as_published(e: &mut ObservedEstimate) {
-        let mut hidden = (*e.estimate.hidden).clone();
-        hidden.and_not_assign(&e.estimate.free_ground);
+        let mut hidden = (*e.estimate.sets.hidden).clone();
+        hidden.and_not_assign(&e.estimate.sets.free_ground);
         e.unseen.or_assign(&hidden);
-        e.unseen.and_not_assign(&e.estimate.free_ground);
-        e.estimate.hidden = hidden.into();
+        e.unseen.and_not_assign(&e.estimate.sets.free_ground);
+        e.estimate.sets.hidden = hidden.into();
     }
 
     #[test]
@@ -921,8 +935,8 @@ pub(crate) mod tests {
         let uav = |id: u32, x: f64, hidden: &[CellIndex], free: &[CellIndex], unseen| {
             let mut e = blank(&g, id, 3);
             e.estimate.pose = at(x);
-            e.estimate.hidden = set(hidden).into();
-            e.estimate.free_ground = set(free).into();
+            e.estimate.sets.hidden = set(hidden).into();
+            e.estimate.sets.free_ground = set(free).into();
             e.unseen = unseen;
             as_published(&mut e);
             e
@@ -995,7 +1009,7 @@ pub(crate) mod tests {
                 assert_eq!(*sets.explored, state.explored, "explored of {at:?}");
                 let mut old_rule = own.unseen.clone();
                 for peer in observed.iter().filter(|p| p.uav() != own.uav()) {
-                    old_rule.or_assign(&peer.estimate.hidden);
+                    old_rule.or_assign(&peer.estimate.sets.hidden);
                 }
                 assert!(sets.unseen.is_subset_of(&old_rule));
                 cleared_by_peers += old_rule.difference_count(&sets.unseen);
@@ -1012,7 +1026,7 @@ pub(crate) mod tests {
             set(&[(0, 0), (1, 0), (2, 0)]),
             &[(4, set(&[(5, 5), (6, 5)])), (7, set(&[(0, 9)]))],
         );
-        a.estimate.explored = set(&[(8, 9), (9, 9)]).into();
+        a.estimate.sets.explored = set(&[(8, 9), (9, 9)]).into();
         a.unseen = set(&[(1, 0), (5, 5)]);
         let fused = FusedSets::fuse(&a, [], &config());
         let truth = [target(4, 1.5, 1.5), target(7, -4.5, 4.5)];

@@ -491,7 +491,7 @@ mod tests {
             protocol::scenario::Planner::Setfleet
         );
         assert_eq!(
-            c.scenario.guidance.beam_width, 3,
+            c.scenario.guidance.setfleet.beam_width, 3,
             "--set applies after the variant"
         );
         let e = args(&["--uavs", "0"]).validate().unwrap_err();

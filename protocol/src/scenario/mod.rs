@@ -432,8 +432,8 @@ pub struct GuidanceConfig {
     pub use_map: bool,
     /// Which planner decides: `"paper"` (the paper's MPC, the default), `"setfleet"` (the
     /// project's beam search) or `"external"` (every UAV asks an external planner and falls
-    /// back to the paper's MPC; docs/python.md). The keys below up to `adapt_weights` are read
-    /// by `setfleet` only.
+    /// back to the paper's MPC; docs/python.md). The keys of [`SetfleetConfig`] are read by
+    /// `setfleet` only.
     pub planner: Planner,
     /// The UAVs that ask an external planner for their decisions (docs/python.md), falling
     /// back to `planner`; the others decide with `planner` (`fleet run --planner
@@ -442,35 +442,9 @@ pub struct GuidanceConfig {
     /// When an asking UAV sends its request: `"turn"` (the default: in its turn of the token
     /// ring, with the plans of the UAVs ahead) or `"round_start"` ([`ExternalRequest`]).
     pub external_request: ExternalRequest,
-    /// `setfleet`: guidance periods looked ahead by the beam search.
-    pub lookahead_periods: u32,
-    /// `setfleet`: partial sequences kept after each period of the beam search.
-    pub beam_width: u32,
-    /// `setfleet`: weight of the identified targets' set area against `X̄`'s (per m²).
-    pub target_weight: f64,
-    /// `setfleet`: seconds of future growth charged on every set left unobserved: a set is
-    /// valued by its area grown by `max_speed_mps` times this (0: only today's area counts).
-    pub growth_horizon_s: f64,
-    /// `setfleet`: distance between view centres below which this UAV's plan is charged for
-    /// overlapping the plans already in the token, metres (0: no charge).
-    pub spread_m: f64,
-    /// `setfleet`: how the fleet shares the search: `"none"` (the default: every UAV values
-    /// all ground alike), `"sectors"` (a lane each) or `"lanes"` (lanes of one front)
-    /// ([`SweepPlan`]).
-    pub sweep: SweepPlan,
-    /// `setfleet`: the revisit period of the tracking schedule, seconds: an identified car
-    /// whose set has grown past the area its targets' speed covers in this time (a disc of
-    /// radius `max_speed_mps * track_revisit_s`) is revisited first by the UAV whose lane holds
-    /// it (0: no schedule).
-    pub track_revisit_s: f64,
-    /// `setfleet`: whether a UAV plans a second viewpoint for the largest pocket of `X̄`
-    /// hidden from where the UAVs flew in its own ground, and flies there when worth the
-    /// detour (`uav_agent::guidance::viewpoint`).
-    pub second_viewpoints: bool,
-    /// `setfleet`: whether `lambda`, `spread_m` and `track_revisit_s` are those of the default
-    /// scenario, scaled to this one by the camera footprint's width and the targets' speed
-    /// (`uav_agent::guidance::scale`), instead of taken as they are.
-    pub adapt_weights: bool,
+    /// The `setfleet` planner's keys, written in `[guidance]` itself.
+    #[serde(flatten)]
+    pub setfleet: SetfleetConfig,
     /// The paper's MPC: how `Φ_h` measures the predicted sets inside recently hidden ground:
     /// `"estimator"` (the default) or `"planning"` ([`HiddenResolution`]).
     pub hidden_resolution: HiddenResolution,
@@ -492,6 +466,43 @@ pub struct GuidanceConfig {
     /// The paper's MPC: which sets `Φ_h` counts inside recently hidden ground: `"predicted"`
     /// (the default) or `"current"` ([`HiddenSets`]).
     pub hidden_sets: HiddenSets,
+}
+
+/// The `setfleet` planner's keys of `[guidance]` (flattened into it: a scenario writes
+/// `guidance.beam_width`, not a table of its own). The planner reads them as they are
+/// (`uav_agent::guidance::setfleet`), `spread_m` and `track_revisit_s` scaled where it uses them
+/// when `adapt_weights` is set (`uav_agent::guidance::weights`). The paper's MPC reads none.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SetfleetConfig {
+    /// Guidance periods looked ahead by the beam search.
+    pub lookahead_periods: u32,
+    /// Partial sequences kept after each period of the beam search.
+    pub beam_width: u32,
+    /// Weight of the identified targets' set area against `X̄`'s (per m²).
+    pub target_weight: f64,
+    /// Seconds of future growth charged on every set left unobserved: a set is valued by its
+    /// area grown by `max_speed_mps` times this (0: only today's area counts).
+    pub growth_horizon_s: f64,
+    /// Distance between view centres below which this UAV's plan is charged for overlapping
+    /// the plans already in the token, metres (0: no charge).
+    pub spread_m: f64,
+    /// How the fleet shares the search: `"none"` (the default: every UAV values all ground
+    /// alike), `"sectors"` (a lane each) or `"lanes"` (lanes of one front) ([`SweepPlan`]).
+    pub sweep: SweepPlan,
+    /// The revisit period of the tracking schedule, seconds: an identified car whose set has
+    /// grown past the area its targets' speed covers in this time (a disc of radius
+    /// `max_speed_mps * track_revisit_s`) is revisited first by the UAV whose lane holds it
+    /// (0: no schedule).
+    pub track_revisit_s: f64,
+    /// Whether a UAV plans a second viewpoint for the largest pocket of `X̄` hidden from where
+    /// the UAVs flew in its own ground, and flies there when worth the detour
+    /// (`uav_agent::guidance::viewpoint`).
+    pub second_viewpoints: bool,
+    /// Whether `lambda`, `spread_m` and `track_revisit_s` are those of the default scenario,
+    /// scaled to this one by the camera footprint's width and the targets' speed
+    /// (`uav_agent::guidance::weights`), instead of taken as they are.
+    pub adapt_weights: bool,
 }
 
 /// How the MPC's `Φ_h` measures the predicted sets inside recently hidden ground
@@ -926,6 +937,21 @@ impl Default for GuidanceConfig {
             planner: Planner::Paper,
             external_uavs: Vec::new(),
             external_request: ExternalRequest::Turn,
+            setfleet: SetfleetConfig::default(),
+            hidden_resolution: HiddenResolution::Estimator,
+            hidden_window: HiddenWindow::Frames,
+            predicted_views: PredictedViews::PeriodEnd,
+            border: PlanBorder::Region,
+            set_resolution: SetResolution::Estimator,
+            distance_from: DistanceFrom::Uav,
+            hidden_sets: HiddenSets::Predicted,
+        }
+    }
+}
+
+impl Default for SetfleetConfig {
+    fn default() -> Self {
+        Self {
             lookahead_periods: 6,
             beam_width: 4,
             target_weight: 4.0,
@@ -935,13 +961,6 @@ impl Default for GuidanceConfig {
             track_revisit_s: 0.0,
             second_viewpoints: false,
             adapt_weights: false,
-            hidden_resolution: HiddenResolution::Estimator,
-            hidden_window: HiddenWindow::Frames,
-            predicted_views: PredictedViews::PeriodEnd,
-            border: PlanBorder::Region,
-            set_resolution: SetResolution::Estimator,
-            distance_from: DistanceFrom::Uav,
-            hidden_sets: HiddenSets::Predicted,
         }
     }
 }
@@ -1240,6 +1259,30 @@ mod tests {
         }
         let uavs = schema["guidance"]["external_uavs"].as_array().unwrap();
         assert!(uavs.first().is_some_and(Value::is_integer));
+    }
+
+    /// The `setfleet` keys are written in `[guidance]` itself, between `external_request` and
+    /// `hidden_resolution` as before they had a struct of their own: a resolved scenario's
+    /// text (which a run cache hashes) does not depend on how the keys are grouped in code.
+    #[test]
+    fn setfleet_keys_sit_in_guidance_in_their_order() {
+        let mut s = Scenario::default();
+        s.guidance.setfleet.beam_width = 9;
+        s.guidance.setfleet.sweep = SweepPlan::Lanes;
+        let text = s.to_toml_string();
+        let keys = "external_request = \"turn\"\nlookahead_periods = 6\nbeam_width = 9\n\
+                    target_weight = 4.0\ngrowth_horizon_s = 10.0\nspread_m = 60.0\n\
+                    sweep = \"lanes\"\ntrack_revisit_s = 0.0\nsecond_viewpoints = false\n\
+                    adapt_weights = false\nhidden_resolution = \"estimator\"\n";
+        assert!(text.contains(keys), "{text}");
+        assert_eq!(
+            s.to_toml_changes(),
+            "[guidance]\nbeam_width = 9\nsweep = \"lanes\"\n"
+        );
+        let back = Scenario::from_toml_str("[guidance]\nspread_m = 5\nbeam_width = 3\n").unwrap();
+        assert_eq!(back.guidance.setfleet.spread_m, 5.0);
+        assert_eq!(back.guidance.setfleet.beam_width, 3);
+        assert_eq!(back.guidance.setfleet.lookahead_periods, 6);
     }
 
     #[test]

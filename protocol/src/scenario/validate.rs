@@ -657,17 +657,18 @@ impl Scenario {
         )?;
         Interval::NON_NEGATIVE.check("guidance.lambda", guidance.lambda)?;
         Interval::NON_NEGATIVE.check("guidance.kappa", guidance.kappa)?;
+        let setfleet = &guidance.setfleet;
         check_integer(
             "guidance.lookahead_periods",
-            i128::from(guidance.lookahead_periods),
+            i128::from(setfleet.lookahead_periods),
         )?;
-        check_integer("guidance.beam_width", i128::from(guidance.beam_width))?;
-        Interval::NON_NEGATIVE.check("guidance.target_weight", guidance.target_weight)?;
+        check_integer("guidance.beam_width", i128::from(setfleet.beam_width))?;
+        Interval::NON_NEGATIVE.check("guidance.target_weight", setfleet.target_weight)?;
         Interval::closed(0.0, MAX_GROWTH_HORIZON_S)
-            .check("guidance.growth_horizon_s", guidance.growth_horizon_s)?;
-        Interval::closed(0.0, 1e4).check("guidance.spread_m", guidance.spread_m)?;
+            .check("guidance.growth_horizon_s", setfleet.growth_horizon_s)?;
+        Interval::closed(0.0, 1e4).check("guidance.spread_m", setfleet.spread_m)?;
         Interval::closed(0.0, MAX_GROWTH_HORIZON_S)
-            .check("guidance.track_revisit_s", guidance.track_revisit_s)?;
+            .check("guidance.track_revisit_s", setfleet.track_revisit_s)?;
         let uavs = self.uavs.count;
         let external = &guidance.external_uavs;
         let mut sorted = external.clone();
@@ -867,13 +868,17 @@ mod tests {
             ("guidance.lambda", |s| s.guidance.lambda = -1.0),
             ("guidance.kappa", |s| s.guidance.kappa = f64::INFINITY),
             ("guidance.lookahead_periods", |s| {
-                s.guidance.lookahead_periods = 0
+                s.guidance.setfleet.lookahead_periods = 0
             }),
             ("guidance.lookahead_periods", |s| {
-                s.guidance.lookahead_periods = 17
+                s.guidance.setfleet.lookahead_periods = 17
             }),
-            ("guidance.beam_width", |s| s.guidance.beam_width = 0),
-            ("guidance.beam_width", |s| s.guidance.beam_width = 65),
+            ("guidance.beam_width", |s| {
+                s.guidance.setfleet.beam_width = 0
+            }),
+            ("guidance.beam_width", |s| {
+                s.guidance.setfleet.beam_width = 65
+            }),
             ("comms.whole_sets_every", |s| s.comms.whole_sets_every = 0),
             ("comms.relay_hops", |s| {
                 s.comms.relay_hops = MAX_RELAY_HOPS + 1
@@ -891,17 +896,19 @@ mod tests {
                 s.guidance.external_uavs = vec![1, 1]
             }),
             ("guidance.target_weight", |s| {
-                s.guidance.target_weight = -1.0
+                s.guidance.setfleet.target_weight = -1.0
             }),
             ("guidance.growth_horizon_s", |s| {
-                s.guidance.growth_horizon_s = 601.0
+                s.guidance.setfleet.growth_horizon_s = 601.0
             }),
-            ("guidance.spread_m", |s| s.guidance.spread_m = f64::NAN),
-            ("guidance.track_revisit_s", |s| {
-                s.guidance.track_revisit_s = -1.0
+            ("guidance.spread_m", |s| {
+                s.guidance.setfleet.spread_m = f64::NAN
             }),
             ("guidance.track_revisit_s", |s| {
-                s.guidance.track_revisit_s = f64::INFINITY
+                s.guidance.setfleet.track_revisit_s = -1.0
+            }),
+            ("guidance.track_revisit_s", |s| {
+                s.guidance.setfleet.track_revisit_s = f64::INFINITY
             }),
             ("comms.range_m", |s| s.comms.range_m = 0.0),
             ("comms.range_m", |s| s.comms.range_m = f64::NAN),

@@ -19,17 +19,17 @@ pub mod external;
 pub mod growth;
 pub mod paper;
 pub mod ring;
-pub mod scale;
 pub mod setfleet;
 pub mod sweep;
 pub mod view;
 pub mod viewpoint;
+pub mod weights;
 
 use protocol::camera::{CameraModel, CameraPose};
 use protocol::flight::{self, UavState};
 use protocol::scenario::{
     DistanceFrom, HiddenResolution, HiddenSets, PlanBorder, Planner, PredictedViews, Scenario,
-    SetResolution,
+    SetResolution, SetfleetConfig,
 };
 use protocol::wire::PlannedView;
 use sets::grid::Rect;
@@ -38,9 +38,8 @@ use sets::raster::CellSet;
 
 pub use coarse::{CellWeights, CoarseGrid};
 pub use ring::{TokenRing, Turn};
-use scale::Scale;
-pub use setfleet::SetfleetParams;
 pub use view::{GroundPredictor, ObstacleCell};
+use weights::WeightFactors;
 
 /// Everything about guidance (both planners) that does not change during a run.
 #[derive(Clone, Debug)]
@@ -55,7 +54,8 @@ pub struct GuidanceParams {
     pub horizon: u32,
     /// The yaw increments `U`, radians.
     pub increments: Vec<f64>,
-    /// Weight of `Φ_d`.
+    /// Weight of `Φ_d` (the `setfleet` planner's scaled to the scenario with
+    /// `guidance.adapt_weights`, [`weights`]).
     pub lambda: f64,
     /// Weight of `Φ_h`.
     pub kappa: f64,
@@ -87,8 +87,11 @@ pub struct GuidanceParams {
     pub comms_range_m: f64,
     /// Which planner [`decide`] runs (never `External`: an asking agent's fallback).
     pub planner: Planner,
-    /// The `setfleet` planner's settings (unused by the paper's MPC).
-    pub setfleet: SetfleetParams,
+    /// The `setfleet` planner's settings as the scenario gives them (unused by the paper's
+    /// MPC); [`GuidanceParams::spread_m`] and [`GuidanceParams::track_revisit_s`] scale them.
+    pub setfleet: SetfleetConfig,
+    /// What the `setfleet` weights given are multiplied by ([`weights`]).
+    pub weight_factors: WeightFactors,
     /// Whether the `setfleet` planner shares its work with rayon's thread pool (whose size
     /// `RAYON_NUM_THREADS` sets; the machine's cores by default). Decisions do not depend on
     /// it. While one UAV plans, the others of a lockstep round wait for the token, so the
@@ -103,7 +106,8 @@ impl GuidanceParams {
             PlanBorder::Geofence => s.geofence_half_extent(),
             PlanBorder::Region => s.region.half_extent_m,
         };
-        let mut params = Self {
+        let weight_factors = WeightFactors::of(s);
+        Self {
             grids: CoarseGrid::new(s.grid()),
             camera: s.camera_model(),
             region: Rect {
@@ -112,7 +116,7 @@ impl GuidanceParams {
             },
             horizon: s.guidance.horizon,
             increments: s.guidance.yaw_increments_rad.clone(),
-            lambda: s.guidance.lambda,
+            lambda: weight_factors.lambda(s.guidance.lambda),
             kappa: s.guidance.kappa,
             use_map: s.guidance.use_map,
             hidden_resolution: s.guidance.hidden_resolution,
@@ -131,26 +135,23 @@ impl GuidanceParams {
                 Planner::External => Planner::Paper,
                 p => p,
             },
-            setfleet: SetfleetParams {
-                lookahead_periods: s.guidance.lookahead_periods,
-                beam_width: s.guidance.beam_width,
-                target_weight: s.guidance.target_weight,
-                growth_horizon_s: s.guidance.growth_horizon_s,
-                spread_m: s.guidance.spread_m,
-                sweep: s.guidance.sweep,
-                track_revisit_s: s.guidance.track_revisit_s,
-                second_viewpoints: s.guidance.second_viewpoints,
-            },
+            setfleet: s.guidance.setfleet,
+            weight_factors,
             parallel: true,
-        };
-        // `setfleet`'s weights read against the default scenario ([`scale`]).
-        if s.guidance.adapt_weights
-            && s.guidance.planner == Planner::Setfleet
-            && let (Some(scale), Some(reference)) = (Scale::of(s), Scale::reference())
-        {
-            scale.adapt(&reference, &mut params.lambda, &mut params.setfleet);
         }
-        params
+    }
+
+    /// `spread_m` as the `setfleet` planner uses it (scaled to the scenario with
+    /// `guidance.adapt_weights`).
+    pub fn spread_m(&self) -> f64 {
+        self.weight_factors.spread_m(self.setfleet.spread_m)
+    }
+
+    /// `track_revisit_s` as the `setfleet` planner uses it (scaled to the scenario with
+    /// `guidance.adapt_weights`).
+    pub fn track_revisit_s(&self) -> f64 {
+        self.weight_factors
+            .track_revisit_s(self.setfleet.track_revisit_s)
     }
 }
 
@@ -293,12 +294,12 @@ mod tests {
         };
         let default = params(Variant::Setfleet, &[]);
         assert_eq!(default.lambda, 10.0);
-        assert_eq!(default.setfleet.spread_m, 60.0);
-        assert_eq!(default.setfleet.track_revisit_s, 10.0);
+        assert_eq!(default.spread_m(), 60.0);
+        assert_eq!(default.track_revisit_s(), 10.0);
         let faster = params(Variant::Setfleet, &["targets.max_speed_mps=4"]);
-        assert_eq!(faster.setfleet.track_revisit_s, 5.0);
+        assert_eq!(faster.track_revisit_s(), 5.0);
         let steep = params(Variant::Setfleet, &["camera.tilt_rad=1.0"]);
-        assert!(steep.lambda < 10.0 && steep.setfleet.spread_m < 60.0);
+        assert!(steep.lambda < 10.0 && steep.spread_m() < 60.0);
         let paper = |user: &[&str]| params(Variant::Paper, user).lambda;
         let adapt = ["camera.tilt_rad=1.0", "guidance.adapt_weights=true"];
         assert_eq!(paper(&adapt), paper(&adapt[..1]));
@@ -428,7 +429,7 @@ mod tests {
         s.guidance.planner = Planner::Setfleet;
         s.timing.guidance_period_s = 1.0;
         s.guidance.lambda = 10.0;
-        s.guidance.target_weight = 1.0;
+        s.guidance.setfleet.target_weight = 1.0;
         let setfleet = GuidanceParams::from_scenario(&s);
         let mut rng = Xorshift(0x9e37_79b9_7f4a_7c15);
         let mut fingerprints = Vec::new();

@@ -52,7 +52,7 @@
 //!   lane holds it, and its cells weigh more; with `guidance.second_viewpoints` the distance
 //!   term pulls to a viewpoint predicted to see into the densest block of `X̄` hidden from
 //!   where the UAVs flew ([`super::viewpoint`]), when worth the detour.
-//! - **Weights read against the default scenario** ([`super::scale`]): with
+//! - **Weights read against the default scenario** ([`super::weights`]): with
 //!   `guidance.adapt_weights`, `lambda`, `spread_m` and `track_revisit_s` are scaled by the
 //!   ratios of the footprint's width and the targets' speed to the default scenario's, where
 //!   they were tuned.
@@ -84,7 +84,6 @@ use std::borrow::Cow;
 use protocol::camera::{Camera, CameraPose};
 use protocol::flight::UavState;
 use protocol::radio::in_comms_range;
-use protocol::scenario::SweepPlan;
 use protocol::wire::PlannedView;
 use rayon::prelude::*;
 use sets::grid::GroundGrid;
@@ -99,27 +98,6 @@ use super::{
     Cost, Decision, GroundPredictor, GuidanceParams, ObstacleCell, PlanningInput, decision,
     fly_step, stray, view,
 };
-
-/// The `setfleet` planner's own settings (from `[guidance]`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SetfleetParams {
-    /// Guidance periods looked ahead.
-    pub lookahead_periods: u32,
-    /// Partial sequences kept after each period.
-    pub beam_width: u32,
-    /// Weight of the identified targets' set area against `X̄`'s.
-    pub target_weight: f64,
-    /// Seconds of future growth charged on the sets ([`super::growth`]).
-    pub growth_horizon_s: f64,
-    /// Distance between view centres under which a plan overlapping the token's is charged, m.
-    pub spread_m: f64,
-    /// How the fleet shares the search ([`super::sweep`]).
-    pub sweep: SweepPlan,
-    /// The tracking schedule's revisit period, seconds (0: none).
-    pub track_revisit_s: f64,
-    /// Whether second viewpoints are planned for pockets ([`super::viewpoint`]).
-    pub second_viewpoints: bool,
-}
 
 /// A partial sequence of the beam.
 #[derive(Clone)]
@@ -694,7 +672,7 @@ impl Period<'_> {
             view::view_centre(&params.camera, p)
         });
         let crowding = spread_charge(
-            params.setfleet.spread_m,
+            params.spread_m(),
             self.fov_area,
             &centre,
             self.others_centres,
@@ -977,7 +955,7 @@ pub(crate) mod tests {
     use super::*;
     use crate::guidance::GuidanceParams;
     use crate::guidance::paper::plan as paper_plan;
-    use protocol::scenario::{Planner, Scenario};
+    use protocol::scenario::{Planner, Scenario, SweepPlan};
     use sets::math::Point3;
     use sets::raster::Coverage;
 

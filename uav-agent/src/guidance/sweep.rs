@@ -104,7 +104,7 @@ impl Sweep {
         // schedule.
         let lanes = Lanes::new(grid, input.fleet);
         let schedule = TrackSchedule {
-            revisit_s: params.setfleet.track_revisit_s,
+            revisit_s: params.track_revisit_s(),
             target_speed: params.target_max_speed,
         };
         let fine = &params.grids.fine;

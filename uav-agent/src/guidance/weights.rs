@@ -27,12 +27,13 @@
 //! scenario allows, plus the clearance and steps), and `v` the targets' speed bound. The
 //! dimensionless weights (`target_weight`, the beam, the lookahead) stay as given. Only
 //! decisions change, so the guarantee does not depend on any of this.
+//!
+//! The scenario keeps the weights as given ([`protocol::scenario::SetfleetConfig`]); the
+//! planner multiplies each by its factor ([`WeightFactors`]) where it uses it.
 
 use protocol::camera::{Camera, CameraPose};
-use protocol::scenario::Scenario;
+use protocol::scenario::{Planner, Scenario};
 use sets::math::Point3;
-
-use super::setfleet::SetfleetParams;
 
 /// The quantities the `setfleet` weights trade against, for one scenario.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,23 +68,73 @@ impl Scale {
         Scale::of(&Scenario::default())
     }
 
-    /// `lambda` and the `setfleet` weights, given for `reference`, scaled to `self` (the
-    /// module's table). A ratio that is not finite and positive (a zero speed) leaves its
-    /// weights as given.
-    pub fn adapt(&self, reference: &Scale, lambda: &mut f64, weights: &mut SetfleetParams) {
+    /// The factors that scale the weights given for `reference` to `self` (the module's
+    /// table). A ratio that is not finite and positive (a zero speed) leaves its weights as
+    /// given.
+    pub fn factors(&self, reference: &Scale) -> WeightFactors {
         let ratio = |num: f64, den: f64| {
             let r = num / den;
             if r.is_finite() && r > 0.0 { r } else { 1.0 }
         };
-        let width = ratio(self.footprint_width_m, reference.footprint_width_m);
-        *lambda *= width;
-        weights.spread_m *= width;
-        weights.track_revisit_s *= ratio(reference.target_speed_mps, self.target_speed_mps);
+        WeightFactors {
+            width: ratio(self.footprint_width_m, reference.footprint_width_m),
+            speed: ratio(reference.target_speed_mps, self.target_speed_mps),
+        }
+    }
+}
+
+/// What the weights given are multiplied by where the planner uses them (the module's
+/// table): 1 each unless the `setfleet` planner adapts its weights.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WeightFactors {
+    /// `W / W₀`, of `lambda` and `spread_m`.
+    pub width: f64,
+    /// `v₀ / v`, of `track_revisit_s`.
+    pub speed: f64,
+}
+
+impl WeightFactors {
+    /// The weights as given.
+    pub const GIVEN: WeightFactors = WeightFactors {
+        width: 1.0,
+        speed: 1.0,
+    };
+
+    /// The factors of `scenario`: scaled to it when its planner is `setfleet` with
+    /// `guidance.adapt_weights` (and its camera sees the ground in level flight), else
+    /// [`WeightFactors::GIVEN`]. The paper's MPC never adapts its `lambda`.
+    pub fn of(scenario: &Scenario) -> WeightFactors {
+        let guidance = &scenario.guidance;
+        if guidance.setfleet.adapt_weights
+            && guidance.planner == Planner::Setfleet
+            && let (Some(scale), Some(reference)) = (Scale::of(scenario), Scale::reference())
+        {
+            scale.factors(&reference)
+        } else {
+            WeightFactors::GIVEN
+        }
+    }
+
+    /// `lambda` as the planner uses it.
+    pub fn lambda(&self, given: f64) -> f64 {
+        given * self.width
+    }
+
+    /// `spread_m` as the planner uses it.
+    pub fn spread_m(&self, given: f64) -> f64 {
+        given * self.width
+    }
+
+    /// `track_revisit_s` as the planner uses it.
+    pub fn track_revisit_s(&self, given: f64) -> f64 {
+        given * self.speed
     }
 }
 
 #[cfg(test)]
 mod tests {
+    use protocol::scenario::SetfleetConfig;
+
     use super::*;
 
     fn load(overrides: &[&str]) -> Scenario {
@@ -91,20 +142,23 @@ mod tests {
         Scenario::load(None, &o).unwrap()
     }
 
-    fn adapted(s: &Scenario) -> (f64, SetfleetParams) {
-        let mut lambda = 10.0;
-        let mut w = crate::guidance::setfleet::tests::params().setfleet;
-        w.track_revisit_s = 10.0;
-        Scale::of(s)
-            .unwrap()
-            .adapt(&Scale::reference().unwrap(), &mut lambda, &mut w);
-        (lambda, w)
+    /// `lambda = 10`, `track_revisit_s = 10` and the default `spread_m` and
+    /// `growth_horizon_s`, as the planner uses them on `s`.
+    fn adapted(s: &Scenario) -> (f64, SetfleetConfig) {
+        let f = Scale::of(s).unwrap().factors(&Scale::reference().unwrap());
+        let given = SetfleetConfig::default();
+        let w = SetfleetConfig {
+            spread_m: f.spread_m(given.spread_m),
+            track_revisit_s: f.track_revisit_s(10.0),
+            ..given
+        };
+        (f.lambda(10.0), w)
     }
 
     #[test]
     fn the_default_scenario_keeps_the_weights_given() {
         let (lambda, w) = adapted(&Scenario::default());
-        let given = crate::guidance::setfleet::tests::params().setfleet;
+        let given = SetfleetConfig::default();
         assert_eq!(lambda, 10.0);
         assert_eq!(w.spread_m, given.spread_m);
         assert_eq!(w.growth_horizon_s, given.growth_horizon_s);
