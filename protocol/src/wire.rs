@@ -340,9 +340,8 @@ pub struct OemCellUpdate {
 ///
 /// The one record of them: the agent counts into it and sends it as it is, its report at exit
 /// prints it (`uav_agent::agent::AgentCounters`), and the observer sums it over the agent's
-/// incarnations (`+=`) into summary.json. A counter is added here, at the end (the fields'
-/// order is the wire's); the report and the summary name every field, so the build points at
-/// the places that give it its key.
+/// incarnations (`+=`) into summary.json. A counter is defined here only: the report and the
+/// summary name every field, so the build points at the places that give it its key.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct AgentStats {
     /// Frames folded into the estimator.

@@ -10,9 +10,9 @@
 //! going out and the peers' coming in, so it is one part: split, each half would reach into
 //! the other at every step.
 //!
-//! The radio's verdicts are drawn here, in a fixed order (by peer service, then message), and
-//! estimates are fused in ascending order of peer once the step's wait is over, so what an
-//! agent fuses does not depend on timing.
+//! The radio's verdicts on the estimates are taken here ([`protocol::radio`]: functions of the
+//! scenario's seed, the link and the step), and estimates are fused in ascending order of peer
+//! once the step's wait is over, so what an agent fuses does not depend on timing.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;

@@ -44,8 +44,9 @@
 //! from it, grown by the motion since;
 //! without one it starts from the full region. Either way it then fuses its peers' estimates;
 //! peers that see a new incarnation send it their whole map and whole sets. Sets travel as
-//! deltas against the previous message ([`estimator::message`]); a peer's estimate that cannot be
-//! rebuilt (a missed message) is dropped, not awaited, and whole sets are asked of its sender.
+//! deltas against the previous message ([`estimator::message`]); a peer's estimate that cannot
+//! be rebuilt (a missed message) is dropped, not awaited, and whole sets are asked of its
+//! sender.
 //!
 //! The radio between agents is simulated by the receiver ([`protocol::radio`]): every estimate and
 //! token crosses the IPC, and the receiving agent decides from the scenario's seed whether the
@@ -55,14 +56,14 @@
 //! token lost or out of range is taken as its sender having passed the turn with a plan this
 //! agent will not see: the ring skips it at once, as it does a holder whose wait ran out
 //! ([`crate::guidance::TokenRing::receive`]), so a lossy run waits for nothing it will not get
-//! and stays reproducible. A token carries its sender's pose for the radio to judge; in lockstep a
-//! receiver reads it at the token's step, the pose it judges from its own. With loss,
+//! and stays reproducible. A token carries its sender's pose for the radio to judge; in
+//! lockstep a receiver reads it at the token's step, the pose it judges from its own. With loss,
 //! estimates carry whole sets, never deltas: a delta against a lost message could not be
 //! rebuilt, and each later one of the chain would fail until whole sets came (the map keeps
 //! its deltas: they only add knowledge, see [`estimator::message`]). An estimate of step `k`
-//! is fused at step `k + d` (`d` the latency in steps), dilated by `d` steps; the agent still awaits
-//! (bounded) every peer's step-`k` message at step `k`, so what it fuses at each step does not
-//! depend on timing.
+//! is fused at step `k + d` (`d` the latency in steps), dilated by `d` steps; the agent still
+//! awaits (bounded) every peer's step-`k` message at step `k`, so what it fuses at each step
+//! does not depend on timing.
 //!
 //! What an agent knows of its peers comes only through what the radio carried to it
 //! (`comms.liveness = "radio"`, the default; `agent/liveness.rs`): the UAVs it knows live at a

@@ -2,9 +2,9 @@
 //! its incarnation), its ports and how it waits on them, where its time goes and what it
 //! counted.
 //!
-//! Every other part of the agent (the peer exchange, the guidance turn, liveness,
-//! checkpoints) sends, waits and counts through this one, which is passed to their steps
-//! explicitly: what the parts own stays theirs, and what they share (the ports, the clock,
+//! The peer exchange and the guidance turn send, wait and count through this one, and
+//! liveness and the checkpoints count their time on its clock; it is passed to their steps
+//! explicitly. What the parts own stays theirs, and what they share (the ports, the clock,
 //! the counters, the stop flags that end every wait) is in one place.
 
 use std::sync::atomic::{AtomicBool, Ordering};
