@@ -337,6 +337,11 @@ pub struct OemCellUpdate {
 }
 
 /// An agent's running counters, carried by every estimate.
+///
+/// The one record of them: the agent counts into it and sends it as it is, its report at exit
+/// prints it (`uav_agent::agent::AgentCounters`), and the observer sums it over the agent's
+/// incarnations (`+=`) into summary.json. A counter is defined here only: the report and the
+/// summary name every field, so the build points at the places that give it its key.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct AgentStats {
     /// Frames folded into the estimator.
@@ -365,6 +370,49 @@ pub struct AgentStats {
     /// Decisions of an agent that asks an external planner taken by its fallback planner
     /// instead (the answer was late, malformed or absent).
     pub external_fallbacks: u64,
+}
+
+impl std::ops::AddAssign for AgentStats {
+    /// Adds `other`'s counts to these (an agent's totals over its incarnations).
+    fn add_assign(&mut self, other: AgentStats) {
+        // Every field by name: a counter added to the record does not compile until it is
+        // summed too.
+        let AgentStats {
+            frames,
+            frames_refused,
+            estimates_received,
+            messages_dropped,
+            decisions,
+            token_timeouts,
+            estimates_lost,
+            tokens_lost,
+            relayed_applied,
+            relayed_sent,
+            external_decisions,
+            external_fallbacks,
+        } = other;
+        self.frames += frames;
+        self.frames_refused += frames_refused;
+        self.estimates_received += estimates_received;
+        self.messages_dropped += messages_dropped;
+        self.decisions += decisions;
+        self.token_timeouts += token_timeouts;
+        self.estimates_lost += estimates_lost;
+        self.tokens_lost += tokens_lost;
+        self.relayed_applied += relayed_applied;
+        self.relayed_sent += relayed_sent;
+        self.external_decisions += external_decisions;
+        self.external_fallbacks += external_fallbacks;
+    }
+}
+
+impl std::iter::Sum for AgentStats {
+    fn sum<I: Iterator<Item = AgentStats>>(iter: I) -> AgentStats {
+        iter.fold(AgentStats::default(), |mut total, stats| {
+            total += stats;
+            total
+        })
+    }
 }
 
 /// Agent -> peers and observers: the agent's estimate at a step.
@@ -498,6 +546,42 @@ pub struct GuidanceToken {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn agent_stats_sum_field_by_field() {
+        let one = AgentStats {
+            frames: 3,
+            frames_refused: 1,
+            estimates_received: 5,
+            messages_dropped: 2,
+            decisions: 1,
+            token_timeouts: 0,
+            estimates_lost: 4,
+            tokens_lost: 1,
+            relayed_applied: 6,
+            relayed_sent: 7,
+            external_decisions: 1,
+            external_fallbacks: 2,
+        };
+        let total: AgentStats = [one, one, AgentStats::default()].into_iter().sum();
+        assert_eq!(
+            total,
+            AgentStats {
+                frames: 6,
+                frames_refused: 2,
+                estimates_received: 10,
+                messages_dropped: 4,
+                decisions: 2,
+                token_timeouts: 0,
+                estimates_lost: 8,
+                tokens_lost: 2,
+                relayed_applied: 12,
+                relayed_sent: 14,
+                external_decisions: 2,
+                external_fallbacks: 4,
+            }
+        );
+    }
 
     fn header() -> WireHeader {
         WireHeader::new(WireKind::Estimate, 5, 2, 7, 10, 0)

@@ -18,7 +18,7 @@
 //! let config = AgentConfig::new("demo".parse()?, 0, Scenario::default());
 //! let shutdown = AtomicBool::new(false); // set by a signal handler to stop the agent
 //! let report = agent::run(config, &shutdown)?;
-//! println!("{} frames folded in", report.frames);
+//! println!("{} frames folded in", report.counters.shared.frames);
 //! # Ok(())
 //! # }
 //! ```

@@ -124,68 +124,15 @@ impl AgentTally {
         }
     }
 
-    fn sum(&self, f: impl Fn(&Incarnation) -> u64) -> u64 {
-        self.incarnations.iter().map(f).sum()
-    }
-
-    /// Frames folded in (steps processed), as of each incarnation's latest estimate.
-    pub fn steps_processed(&self) -> u64 {
-        self.sum(|i| i.stats.frames)
+    /// The counters its estimates carry, as of each incarnation's latest estimate, summed over
+    /// the incarnations.
+    pub fn counters(&self) -> AgentStats {
+        self.incarnations.iter().map(|i| i.stats).sum()
     }
 
     /// Estimates sent (each incarnation's latest message counter, plus one).
     pub fn estimates_sent(&self) -> u64 {
-        self.sum(|i| i.last_seq + 1)
-    }
-
-    /// Peer estimates fused, as of each incarnation's latest estimate.
-    pub fn estimates_received(&self) -> u64 {
-        self.sum(|i| i.stats.estimates_received)
-    }
-
-    /// Peer messages the agent dropped.
-    pub fn messages_dropped(&self) -> u64 {
-        self.sum(|i| i.stats.messages_dropped)
-    }
-
-    /// Guidance decisions taken.
-    pub fn decisions(&self) -> u64 {
-        self.sum(|i| i.stats.decisions)
-    }
-
-    /// Decisions taken after waiting out a silent token holder.
-    pub fn token_timeouts(&self) -> u64 {
-        self.sum(|i| i.stats.token_timeouts)
-    }
-
-    /// Peer estimates the simulated radio lost on their way to the agent (`comms.loss`).
-    pub fn estimates_lost(&self) -> u64 {
-        self.sum(|i| i.stats.estimates_lost)
-    }
-
-    /// Tokens the simulated radio lost on their way to the agent.
-    pub fn tokens_lost(&self) -> u64 {
-        self.sum(|i| i.stats.tokens_lost)
-    }
-
-    /// Peer measurements the agent applied from a copy another agent forwarded.
-    pub fn relayed_applied(&self) -> u64 {
-        self.sum(|i| i.stats.relayed_applied)
-    }
-
-    /// Peer measurements the agent forwarded.
-    pub fn relayed_sent(&self) -> u64 {
-        self.sum(|i| i.stats.relayed_sent)
-    }
-
-    /// Decisions the agent took from an external planner's answer.
-    pub fn external_decisions(&self) -> u64 {
-        self.sum(|i| i.stats.external_decisions)
-    }
-
-    /// Decisions its fallback planner took instead.
-    pub fn external_fallbacks(&self) -> u64 {
-        self.sum(|i| i.stats.external_fallbacks)
+        self.incarnations.iter().map(|i| i.last_seq + 1).sum()
     }
 
     /// Incarnations seen (1 + restarts that published).
@@ -228,10 +175,11 @@ mod tests {
         t.observe(&estimate(9, 0, 1)); // restarted
         t.observe(&estimate(9, 1, 2));
         assert_eq!(t.estimates_seen, 5);
-        assert_eq!(t.steps_processed(), 7);
+        let counters = t.counters();
+        assert_eq!(counters.frames, 7);
         assert_eq!(t.estimates_sent(), 7);
-        assert_eq!(t.estimates_received(), 14);
-        assert_eq!((t.estimates_lost(), t.tokens_lost()), (2 + 1, 1));
+        assert_eq!(counters.estimates_received, 14);
+        assert_eq!((counters.estimates_lost, counters.tokens_lost), (2 + 1, 1));
         assert_eq!(t.incarnations(), 2);
         assert_eq!(t.incarnation_starts(), vec![0, 0]);
         assert_eq!(t.last_step, Some(4));

@@ -28,11 +28,12 @@ use std::io::Write;
 use serde::{Deserialize, Serialize};
 
 use protocol::scenario::Scenario;
+use protocol::wire::AgentStats;
 
 use super::resources::Resources;
 use crate::faults::{self, FaultRecord};
 use crate::observe::metrics::SetMetrics;
-use crate::observe::tally::ServiceKind;
+use crate::observe::tally::{AgentTally, ServiceKind};
 use crate::observe::{ObserverReport, StepMetrics};
 use fleet_process::stats::Stats;
 
@@ -182,6 +183,45 @@ pub struct AgentSummary {
     pub geofence_overrides: u64,
     /// The set metrics of this agent's own fused sets.
     pub metrics: MetricFinals,
+}
+
+impl AgentSummary {
+    /// The summary of UAV `uav` as far as the counters its estimates carry go (`counters`,
+    /// summed over its incarnations); every other field at its default.
+    pub fn of_counters(uav: u32, counters: AgentStats) -> AgentSummary {
+        // Every counter by name: one added to the record does not compile until summary.json
+        // gives it a key here (its keys and their order are fixed) or leaves it out.
+        let AgentStats {
+            frames,
+            // In the agent's own report only.
+            frames_refused: _,
+            estimates_received,
+            messages_dropped,
+            decisions,
+            token_timeouts,
+            estimates_lost,
+            tokens_lost,
+            relayed_applied,
+            relayed_sent,
+            external_decisions,
+            external_fallbacks,
+        } = counters;
+        AgentSummary {
+            uav,
+            steps_processed: frames,
+            estimates_received,
+            messages_dropped,
+            decisions,
+            token_timeouts,
+            estimates_lost,
+            tokens_lost,
+            relayed_applied,
+            relayed_sent,
+            external_decisions,
+            external_fallbacks,
+            ..AgentSummary::default()
+        }
+    }
 }
 
 /// The summary values of one series of set metrics: one agent's, or the per-step mean over
@@ -602,21 +642,10 @@ fn agent_summaries(
         .map(|uav| {
             let t = observer.and_then(|o| o.agents.get(&uav));
             let last = observer.and_then(|o| o.final_undetected.get(&uav));
+            let counters = t.map(AgentTally::counters).unwrap_or_default();
             AgentSummary {
-                uav,
-                steps_processed: t.map_or(0, |t| t.steps_processed()),
-                estimates_sent: t.map_or(0, |t| t.estimates_sent()),
-                estimates_received: t.map_or(0, |t| t.estimates_received()),
+                estimates_sent: t.map_or(0, AgentTally::estimates_sent),
                 estimates_observed: t.map_or(0, |t| t.estimates_seen),
-                messages_dropped: t.map_or(0, |t| t.messages_dropped()),
-                decisions: t.map_or(0, |t| t.decisions()),
-                token_timeouts: t.map_or(0, |t| t.token_timeouts()),
-                estimates_lost: t.map_or(0, |t| t.estimates_lost()),
-                tokens_lost: t.map_or(0, |t| t.tokens_lost()),
-                relayed_applied: t.map_or(0, |t| t.relayed_applied()),
-                relayed_sent: t.map_or(0, |t| t.relayed_sent()),
-                external_decisions: t.map_or(0, |t| t.external_decisions()),
-                external_fallbacks: t.map_or(0, |t| t.external_fallbacks()),
                 final_undetected_digest: last.map(|(_, set)| set.digest()),
                 final_measured_step: last.map(|(step, _)| *step),
                 restarts: faults::restarts(record.faults, uav),
@@ -625,6 +654,7 @@ fn agent_summaries(
                     .copied()
                     .unwrap_or(0),
                 metrics: per_agent.get(&uav).cloned().unwrap_or_default(),
+                ..AgentSummary::of_counters(uav, counters)
             }
         })
         .collect()
@@ -755,6 +785,34 @@ fn print_resources(r: &Resources, out: &mut impl Write) -> std::io::Result<()> {
 mod tests {
     use super::*;
     use crate::observe::metrics::SetMetrics;
+
+    #[test]
+    fn an_agents_counters_fill_their_keys_of_the_summary_in_order() {
+        let counters = AgentStats {
+            frames: 1,
+            frames_refused: 2,
+            estimates_received: 3,
+            messages_dropped: 4,
+            decisions: 5,
+            token_timeouts: 6,
+            estimates_lost: 7,
+            tokens_lost: 8,
+            relayed_applied: 9,
+            relayed_sent: 10,
+            external_decisions: 11,
+            external_fallbacks: 12,
+        };
+        let json = serde_json::to_string(&AgentSummary::of_counters(3, counters))
+            .expect("a summary prints");
+        let expected = concat!(
+            r#"{"uav":3,"steps_processed":1,"estimates_sent":0,"estimates_received":3,"#,
+            r#""estimates_observed":0,"messages_dropped":4,"decisions":5,"token_timeouts":6,"#,
+            r#""estimates_lost":7,"tokens_lost":8,"relayed_applied":9,"relayed_sent":10,"#,
+            r#""external_decisions":11,"external_fallbacks":12,"final_undetected_digest":null,"#,
+            r#""final_measured_step":null,"restarts":0,"geofence_overrides":0,"metrics":{"#,
+        );
+        assert!(json.starts_with(expected), "{json}");
+    }
 
     #[test]
     fn ua_falls_below_a_fraction_at_the_first_step_whose_mean_is_below() {

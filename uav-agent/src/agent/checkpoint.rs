@@ -23,6 +23,11 @@
 //! fingerprint of the scenario. A file that is truncated, corrupt, of another format, run,
 //! UAV or scenario, or whose sets do not fit the estimator's grids is refused with a
 //! [`CheckpointError`]: the caller logs it and starts fresh.
+//!
+//! **The agent's part.** The agent's loop holds its checkpoints in one part (`Checkpoints`):
+//! the file, the thread, when to save, and what they did ([`CheckpointFigures`], printed in
+//! the agent's report). Nothing else of the agent reads or writes them, and the file's format
+//! is theirs alone, so both live here.
 
 use std::fs::{self, File};
 use std::io::Write as _;
@@ -36,6 +41,10 @@ use protocol::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 
 use estimator::{Estimator, EstimatorConfig, EstimatorState};
+use fleet_process::resources::PhaseClock;
+
+use super::config::AgentConfig;
+use super::phase;
 
 /// First bytes of every checkpoint file (format version included: 02 since the state keeps
 /// its frame's `P^g` and the step's news of the fleet's `H̄`), so a checkpoint of an older
@@ -377,6 +386,151 @@ fn flush_loop(file: &CheckpointFile, shared: &Shared) {
                 tracing::warn!(error = %e, "cannot flush the checkpoint");
             }
         }
+    }
+}
+
+/// What an agent's checkpoints did, printed flat in its report
+/// ([`super::AgentReport::checkpoint`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CheckpointFigures {
+    /// Step of the checkpoint this agent resumed from, if it did.
+    pub resumed_from_step: Option<u64>,
+    /// Why a checkpoint found at start was refused, if one was.
+    pub checkpoint_refused: Option<String>,
+    /// Checkpoints written.
+    pub checkpoints: u64,
+    /// Checkpoints that could not be written.
+    pub checkpoint_failures: u64,
+    /// Wall time the step loop spent on checkpoints (encoding and writing them, and flushing
+    /// them when there is no checkpoint thread), milliseconds.
+    pub checkpoint_ms: f64,
+    /// Flushes to the disk done by the checkpoint thread (one may serve several checkpoints).
+    pub checkpoint_flushes: u64,
+    /// Flushes that failed.
+    pub checkpoint_flush_failures: u64,
+    /// Wall time the checkpoint thread spent flushing, milliseconds.
+    pub checkpoint_flush_ms: f64,
+}
+
+/// An agent's checkpoints as its loop uses them: the file it resumed from and saves to, the
+/// thread that flushes it, when to save, and what they did.
+pub(super) struct Checkpoints {
+    /// The checkpoint file (none: no checkpoints).
+    file: Option<CheckpointFile>,
+    /// The thread that flushes the checkpoints to the disk (none: flushed in the loop).
+    flusher: Option<CheckpointFlusher>,
+    /// Save after the steps that are multiples of this.
+    every: u64,
+    /// What they did.
+    figures: CheckpointFigures,
+}
+
+impl Checkpoints {
+    /// The checkpoints of the agent `config` describes, and the estimator of `estimator`'s
+    /// grids it starts from: the checkpoint's when there is one that it accepts, else a fresh
+    /// one (a resumption or a refused checkpoint is noted).
+    pub(super) fn open(config: &AgentConfig, estimator: &EstimatorConfig) -> (Self, Estimator) {
+        let file = config.checkpoint.clone().map(|path| {
+            CheckpointFile::new(
+                path,
+                Owner::new(config.run_id.tag(), config.uav, &config.scenario),
+            )
+        });
+        let mut figures = CheckpointFigures::default();
+        let restored = restore(file.as_ref(), estimator, &mut figures);
+        let flusher = file.clone().and_then(|file| {
+            CheckpointFlusher::start(file)
+                .inspect_err(
+                    |e| tracing::warn!(error = %e, "no checkpoint thread: flushing in the loop"),
+                )
+                .ok()
+        });
+        let checkpoints = Checkpoints {
+            file,
+            flusher,
+            every: config.checkpoint_every.max(1),
+            figures,
+        };
+        (checkpoints, restored)
+    }
+
+    /// The step of the checkpoint the agent resumed from, if it did.
+    pub(super) fn resumed_from(&self) -> Option<u64> {
+        self.figures.resumed_from_step
+    }
+
+    /// The agent dropped the state it resumed from and starts fresh (a checkpoint of a run
+    /// that was started over).
+    pub(super) fn start_fresh(&mut self) {
+        self.figures.resumed_from_step = None;
+    }
+
+    /// Whether the agent saves after folding step `k` in.
+    pub(super) fn due(&self, k: u64) -> bool {
+        k.is_multiple_of(self.every)
+    }
+
+    /// Saves `state` to the checkpoint file, if there is one (a failure is logged and
+    /// counted: the run goes on without it), counting the time to [`phase::CHECKPOINT`].
+    /// Encodes the state and replaces the checkpoint with it; the checkpoint thread flushes it
+    /// to the disk (without a thread, it is flushed here).
+    pub(super) fn save(&mut self, state: &EstimatorState, clock: &mut PhaseClock) {
+        let Some(file) = &self.file else {
+            return;
+        };
+        let started = Instant::now();
+        let before = clock.enter(phase::CHECKPOINT);
+        let saved = file.encode(state).and_then(|bytes| match &self.flusher {
+            Some(flusher) => {
+                file.replace(&bytes)?;
+                flusher.request();
+                Ok(())
+            }
+            None => file.write(&bytes),
+        });
+        clock.enter(before);
+        self.figures.checkpoint_ms += started.elapsed().as_secs_f64() * 1e3;
+        match saved {
+            Ok(()) => self.figures.checkpoints += 1,
+            Err(e) => {
+                self.figures.checkpoint_failures += 1;
+                tracing::warn!(error = %e, "cannot write the checkpoint");
+            }
+        }
+    }
+
+    /// What the checkpoints did, once the checkpoint thread served the last request.
+    pub(super) fn finish(mut self) -> CheckpointFigures {
+        if let Some(flusher) = self.flusher.take() {
+            let stats = flusher.finish();
+            self.figures.checkpoint_flushes = stats.flushes;
+            self.figures.checkpoint_flush_failures = stats.failed;
+            self.figures.checkpoint_flush_ms = stats.flush_ms;
+        }
+        self.figures
+    }
+}
+
+/// The estimator the agent starts from: the checkpoint's when there is one that it accepts,
+/// else a fresh one; `figures` note a resumption or a refused checkpoint.
+fn restore(
+    checkpoint: Option<&CheckpointFile>,
+    config: &EstimatorConfig,
+    figures: &mut CheckpointFigures,
+) -> Estimator {
+    match checkpoint.map(|c| c.load(config)) {
+        Some(Ok(Some(estimator))) => {
+            let step = estimator.state().step;
+            tracing::info!(step, "resuming from the checkpoint");
+            figures.resumed_from_step = Some(step);
+            estimator
+        }
+        Some(Err(e)) => {
+            tracing::warn!(error = %e, "checkpoint refused: starting fresh");
+            figures.checkpoint_refused = Some(e.to_string());
+            Estimator::new(config.clone())
+        }
+        Some(Ok(None)) | None => Estimator::new(config.clone()),
     }
 }
 

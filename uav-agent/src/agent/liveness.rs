@@ -1,22 +1,175 @@
-//! Whom an agent knows live at its step (`comms.liveness`): the UAVs its token ring waits for
-//! and skips, and the round's fleet ([`crate::guidance::TokenRing`]).
+//! Who is there for an agent ([`Presence`]): whom it awaits at its step, and whom it knows
+//! live.
+//!
+//! **Awaited** are the peers the world serves at the step (the frame's `served` mask, the same
+//! for every agent) whose iceoryx2 node is alive (a SIGKILLed peer shows up dead at once and its
+//! resources are cleaned). They say that a message will never be sent (a peer the world does
+//! not serve sends no estimate, a dead holder no token), so they end the agent's waits.
+//! Listing the nodes costs milliseconds of CPU, so it is done when the served mask names a peer
+//! not known alive, and while waiting at most once per [`liveness_scan_period`], not at every
+//! step and every wake-up (the world drops a peer that died before the step from the mask).
+//! The same listing says whether the world-server's node is alive.
+//!
+//! **Known live** ([`LiveView`], `comms.liveness`) are the UAVs its token ring waits for and
+//! skips, and the round's fleet ([`crate::guidance::TokenRing`]):
 //!
 //! - **Radio** (the default): the peers whose estimate the agent fuses at its step, by the
 //!   radio's rule ([`Radio::fuses`]: delivered, arrived, sent from within range). A peer out
 //!   of range, or whose estimate the radio lost, is not live to the agent at that step, however
 //!   alive its process is: the agent has heard nothing from it.
-//! - **World**: the peers the world serves at the step (the frame's mask) whose process the
-//!   run's node list shows alive, the same for every agent.
+//! - **World**: the awaited peers, the same for every agent.
 //!
 //! Under both readings the agent still awaits every served, alive peer's estimate of the step
 //! before it fuses (bounded): a message comes over the IPC whatever the radio then decides,
 //! and only the mask and the node list say that one will never be sent. They end waits; under
-//! the radio's reading they never add a UAV to what the agent knows live.
+//! the radio's reading they never add a UAV to what the agent knows live. The two are one part
+//! because the ring asks both at each hop: whom it knows live, and whether the holder it waits
+//! for can still send.
 
 use std::collections::BTreeSet;
+use std::time::{Duration, Instant};
 
+use fleet_process::resources::PhaseClock;
+use protocol::ipc::{RunNode, scan_nodes};
 use protocol::radio::{Endpoint, Radio};
 use protocol::scenario::Liveness;
+use protocol::service::RunId;
+use protocol::wire::{UavMask, uav_bit};
+
+use super::config::AgentConfig;
+use super::phase;
+
+/// How old the last listing of the run's nodes may grow while the agent waits for peers or the
+/// token before it lists them again, for a fleet of up to [`UAVS_PER_SCAN_PERIOD`] UAVs: a peer
+/// that died meanwhile stops being awaited within this time. A listing costs about a
+/// millisecond of CPU; at every wait slice it was about 5 % of a run's CPU. The world lists
+/// them before every step anyway and serves only the live agents.
+const LIVENESS_SCAN_PERIOD: Duration = Duration::from_millis(250);
+
+/// A listing reads every node of the run, so it costs more in a larger fleet, and every agent
+/// of it lists: the period grows by [`LIVENESS_SCAN_PERIOD`] for every this many UAVs
+/// ([`liveness_scan_period`]).
+const UAVS_PER_SCAN_PERIOD: u32 = 4;
+
+/// How old the last listing may grow in a fleet of `uavs` UAVs: [`LIVENESS_SCAN_PERIOD`] up to
+/// [`UAVS_PER_SCAN_PERIOD`] UAVs, and as many times that as it has groups of them (1 s for 16
+/// UAVs, 4 s for 64). With a period that stays, the listings of a 64-UAV fleet on one machine
+/// took about 80 % of its agents' CPU. A dead peer still costs at most the peer wait of the
+/// step it died in: the world's listing before the next step no longer serves it.
+fn liveness_scan_period(uavs: u32) -> Duration {
+    LIVENESS_SCAN_PERIOD * uavs.div_ceil(UAVS_PER_SCAN_PERIOD).max(1)
+}
+
+/// Whom an agent awaits at its step and whom it knows live.
+pub(super) struct Presence {
+    /// The run whose nodes are listed.
+    run_id: RunId,
+    /// This agent's UAV.
+    me: u32,
+    /// UAVs in the fleet.
+    fleet: u32,
+    /// How old the last listing may grow while waiting ([`liveness_scan_period`]).
+    scan_period: Duration,
+    /// The agents the world serves at the current step (the frame's mask).
+    served: UavMask,
+    /// Live peers (this agent excluded), from the run's node list.
+    live: BTreeSet<u32>,
+    /// Whether the world's node was alive at the last listing.
+    world_live: bool,
+    /// When the run's nodes were last listed.
+    last_scan: Instant,
+    /// Whom the agent knows live at its step, for the ring (`comms.liveness`).
+    pub(super) view: LiveView,
+}
+
+impl Presence {
+    /// Nothing listed yet: every agent served, the world presumed alive.
+    pub(super) fn new(config: &AgentConfig) -> Self {
+        let fleet = config.scenario.uavs.count;
+        Presence {
+            run_id: config.run_id.clone(),
+            me: config.uav,
+            fleet,
+            scan_period: liveness_scan_period(fleet),
+            served: UavMask::MAX,
+            live: BTreeSet::new(),
+            world_live: true,
+            last_scan: Instant::now(),
+            view: LiveView::new(config.scenario.comms.liveness),
+        }
+    }
+
+    /// A new step whose frame says the world serves `served` (0: a world that does not say
+    /// whom it serves, and every live peer is awaited).
+    pub(super) fn serve(&mut self, served: UavMask) {
+        self.served = match served {
+            0 => UavMask::MAX,
+            mask => mask,
+        };
+    }
+
+    /// Re-reads which peers and whether the world are alive (and cleans dead nodes), counting
+    /// the time to [`phase::SCAN`].
+    pub(super) fn refresh(&mut self, clock: &mut PhaseClock) {
+        let before = clock.enter(phase::SCAN);
+        let scanned = scan_nodes(&self.run_id, true);
+        clock.enter(before);
+        self.last_scan = Instant::now();
+        match scanned {
+            Ok(scan) => {
+                self.world_live = scan.is_alive(RunNode::WORLD);
+                self.live = (0..self.fleet)
+                    .filter(|&j| j != self.me && scan.is_alive(&RunNode::agent_name(j)))
+                    .collect();
+                for dead in &scan.dead {
+                    tracing::info!(node = %dead, "cleaned up a dead node");
+                }
+            }
+            Err(e) => tracing::warn!(error = %e, "cannot list the run's nodes"),
+        }
+    }
+
+    /// Lists the run's nodes if the last listing is [`liveness_scan_period`] old: while
+    /// waiting, a peer that died is noticed within that time.
+    pub(super) fn refresh_if_stale(&mut self, clock: &mut PhaseClock) {
+        if self.last_scan.elapsed() >= self.scan_period {
+            self.refresh(clock);
+        }
+    }
+
+    /// Whether the world serves a peer not known alive (one that (re)joined): the world lists
+    /// the nodes before every step, so a peer it serves is alive unless it died since, which
+    /// the waits notice; only a newcomer needs a look.
+    pub(super) fn has_newcomer(&self) -> bool {
+        (0..self.fleet)
+            .any(|j| j != self.me && self.served & uav_bit(j) != 0 && !self.live.contains(&j))
+    }
+
+    /// Whether peer `uav`'s node was alive at the last listing.
+    pub(super) fn is_alive(&self, uav: u32) -> bool {
+        self.live.contains(&uav)
+    }
+
+    /// Whether the world's node was alive at the last listing.
+    pub(super) fn world_live(&self) -> bool {
+        self.world_live
+    }
+
+    /// The peers awaited at the current step: served by the world and alive.
+    pub(super) fn awaited(&self) -> BTreeSet<u32> {
+        self.live
+            .iter()
+            .copied()
+            .filter(|&j| self.served & uav_bit(j) != 0)
+            .collect()
+    }
+
+    /// The UAVs this agent knows live at its step, itself included, as `comms.liveness` reads
+    /// it: what the token ring waits for and the round's fleet.
+    pub(super) fn ring_live(&self) -> BTreeSet<u32> {
+        self.view.live(self.me, self.awaited())
+    }
+}
 
 /// The peers an agent knows live at its current step.
 #[derive(Clone, Debug)]
@@ -71,6 +224,13 @@ mod tests {
     use sets::math::Point3;
 
     use super::*;
+
+    #[test]
+    fn the_liveness_listing_slows_down_with_the_fleet() {
+        let ms = |uavs| liveness_scan_period(uavs).as_millis();
+        assert_eq!([ms(0), ms(1), ms(4)], [250, 250, 250]);
+        assert_eq!([ms(5), ms(8), ms(16), ms(64)], [500, 500, 1000, 4000]);
+    }
 
     fn at(uav: u32, step: u64, (x, y): (f64, f64)) -> Endpoint {
         Endpoint {
