@@ -7,10 +7,12 @@
 //! parent with [`write_fleet_certs`]) and the run's access policy ([`plan::access_policy`],
 //! `h0=0,1`, `h1=2,3`), or plain TCP without either. The keys are the run's own: frames go to UAV 2 on
 //! [`keys::frame`], estimates come from UAV 0 on [`keys::estimate`], so the access policy
-//! admits them as in a run. The publisher is declared as the bridge declares its own
-//! (reliable, [`CongestionControl::Block`], express, remote destinations only) and sends what
-//! the bridge sends: the [`envelope`] encoding, copied out of the reused buffer. The bench's
-//! [`Stamp`] travels as the Zenoh attachment, so the payload is exactly the bridge's.
+//! admits them as in a run. The publisher is the bridge's own: [`declare_publisher`], the
+//! function the bridge declares its publishers with, so the bench times the bridge's settings
+//! (reliable, blocking congestion control, express, remote destinations only) and not a copy
+//! of them. It sends what the bridge sends: the [`envelope`] encoding, copied out of the
+//! reused buffer. The bench's [`Stamp`] travels as the Zenoh attachment, so the payload is
+//! exactly the bridge's.
 //!
 //! Latency runs from the send start (the frame written, before it is encoded) to the decoded
 //! message on the subscriber (`decode_frame_into` a frame, or `decode_wire`); the checks
@@ -40,6 +42,7 @@ use anyhow::{Context, anyhow, bail};
 use bridge::endpoint::{Transport, free_loopback_port};
 use bridge::envelope;
 use bridge::keys;
+use bridge::outbound::declare_publisher;
 use bridge::plan::{self, HostShare};
 use bridge::security::{
     HostName, HostTlsFiles, LinkMode, LinkPlan, write_fleet_certs, zenoh_config,
@@ -53,7 +56,6 @@ use protocol::service::RunId;
 use protocol::wire::{WireHeader, WireKind, unix_now_ns};
 use zenoh::Wait;
 use zenoh::pubsub::Publisher;
-use zenoh::qos::CongestionControl;
 use zenoh::sample::Locality;
 
 use super::handshake::{BenchChildArgs, IDLE, ZenohTransport, ready_then_go};
@@ -183,17 +185,6 @@ fn close(session: zenoh::Session) {
     if let Err(e) = session.close().wait() {
         tracing::debug!(error = %e, "closing the Zenoh session");
     }
-}
-
-/// A publisher declared as the bridge declares its own.
-fn declare_publisher(session: &zenoh::Session, key: String) -> anyhow::Result<Publisher<'static>> {
-    session
-        .declare_publisher(key)
-        .congestion_control(CongestionControl::Block)
-        .express(true)
-        .allowed_destination(Locality::Remote)
-        .wait()
-        .map_err(|e| anyhow!("cannot declare a Zenoh publisher: {e}"))
 }
 
 /// Waits until `publisher` has a remote subscriber (at most [`IDLE`]).
