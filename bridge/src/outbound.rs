@@ -35,7 +35,7 @@ use zenoh::sample::Locality;
 
 use crate::envelope;
 use crate::keys;
-use crate::plan::HostPlan;
+use crate::placement::HostPlan;
 use crate::report::Counters;
 
 /// How often the local nodes are listed for the liveliness tokens: a local process that dies

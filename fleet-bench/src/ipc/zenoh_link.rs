@@ -4,7 +4,7 @@
 //! The publisher is the world host `h0`, a Zenoh router listening on a loopback port; the
 //! subscriber is the agent host `h1`, a client connecting to it. Their configurations are
 //! [`zenoh_config`]'s: over QUIC or TLS over TCP with the fleet's certificates (made by the
-//! parent with [`write_fleet_certs`]) and the run's access policy ([`plan::access_policy`],
+//! parent with [`write_fleet_certs`]) and the run's access policy ([`placement::access_policy`],
 //! `h0=0,1`, `h1=2,3`), or plain TCP without either. The keys are the run's own: frames go to UAV 2 on
 //! [`keys::frame`], estimates come from UAV 0 on [`keys::estimate`], so the access policy
 //! admits them as in a run. The publisher is the bridge's own: [`declare_publisher`], the
@@ -43,7 +43,7 @@ use bridge::endpoint::{Transport, free_loopback_port};
 use bridge::envelope;
 use bridge::keys;
 use bridge::outbound::declare_publisher;
-use bridge::plan::{self, HostShare};
+use bridge::placement::{self, HostShare};
 use bridge::security::{
     HostName, HostTlsFiles, LinkMode, LinkPlan, write_fleet_certs, zenoh_config,
 };
@@ -153,7 +153,7 @@ fn config(
         ZenohTransport::Tcp => zenoh_config(&link, None, None)?,
         ZenohTransport::Tls | ZenohTransport::Quic => {
             let tls = HostTlsFiles::in_dir(certs, &HostName::new(host)?);
-            let policy = plan::access_policy(run, &members()?)?;
+            let policy = placement::access_policy(run, &members()?)?;
             zenoh_config(&link, Some(&tls), Some(&policy))?
         }
     };
@@ -612,7 +612,7 @@ mod tests {
     #[test]
     fn only_the_router_may_publish_the_bench_messages() {
         let run = RunId::new("bench-zenoh-policy").unwrap();
-        let policy = plan::access_policy(&run, &members().unwrap()).unwrap();
+        let policy = placement::access_policy(&run, &members().unwrap()).unwrap();
         let world = policy.publications(&HostName::new(ROUTER_HOST).unwrap());
         assert_eq!(world, vec![format!("{}/**", keys::run_root(&run))]);
         let client = policy.publications(&HostName::new(CLIENT_HOST).unwrap());
