@@ -23,7 +23,7 @@ use protocol::wire::{UavCommand, WireKind};
 
 use crate::envelope::{self, EnvelopeError};
 use crate::keys::Topic;
-use crate::plan::HostPlan;
+use crate::placement::HostPlan;
 use crate::report::Counters;
 
 /// What the Zenoh callbacks queue for the inbound thread.

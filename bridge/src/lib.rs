@@ -2,7 +2,7 @@
 //! host to the same run's services on the other hosts.
 //!
 //! The world-server, the agents and the observer do not change: they speak iceoryx2 on their
-//! own host, and the bridge forwards what another host needs ([`plan::HostPlan`] says what,
+//! own host, and the bridge forwards what another host needs ([`placement::HostPlan`] says what,
 //! [`keys`] how it is named on Zenoh, [`envelope`] how it is written). Besides data, the
 //! bridges carry *liveliness*: each announces its host's live processes, and each keeps a
 //! proxy iceoryx2 node for every process announced by another host, so the processes, which
@@ -33,7 +33,7 @@ pub mod envelope;
 pub mod inbound;
 pub mod keys;
 pub mod outbound;
-pub mod plan;
+pub mod placement;
 pub mod report;
 pub mod security;
 
@@ -46,7 +46,7 @@ use zenoh::sample::{Locality, Sample, SampleKind};
 
 use inbound::Arrival;
 use outbound::Outbound;
-use plan::HostPlan;
+use placement::HostPlan;
 use report::Counters;
 
 /// Why a bridge stopped with an error.

@@ -35,7 +35,7 @@ use zenoh::sample::Locality;
 
 use crate::envelope;
 use crate::keys;
-use crate::plan::HostPlan;
+use crate::placement::HostPlan;
 use crate::report::Counters;
 
 /// How often the local nodes are listed for the liveliness tokens: a local process that dies
@@ -104,7 +104,18 @@ pub enum OpenError {
     Zenoh(zenoh::Error),
 }
 
-fn publisher(session: &zenoh::Session, key: String) -> Result<Publisher<'static>, OpenError> {
+/// Declares the publisher of `key` with the bridge's settings, the one place they are written
+/// (the bridge's publishers and `fleet bench`'s Zenoh cases both declare theirs here):
+///
+/// - reliable (Zenoh's default channel) with [`CongestionControl::Block`]: a lockstep run must
+///   not lose a message to a full queue;
+/// - Zenoh's default priority, the same for every key, so messages keep their order;
+/// - express: each message goes out at once instead of waiting to be batched;
+/// - remote destinations only ([`Locality::Remote`]).
+pub fn declare_publisher(
+    session: &zenoh::Session,
+    key: String,
+) -> Result<Publisher<'static>, OpenError> {
     session
         .declare_publisher(key)
         // Lossless: a lockstep run must not lose a message to a full queue; a receiver that
@@ -146,7 +157,7 @@ impl RemoteAgents {
                         .subscriber_builder()
                         .create()
                         .map_err(IpcOpenError::from)?,
-                    to: publisher(session, keys::frame(run, uav))?,
+                    to: declare_publisher(session, keys::frame(run, uav))?,
                 });
                 services._frames.push(service);
             }
@@ -203,7 +214,7 @@ impl LocalAgents {
                         .subscriber_builder()
                         .create()
                         .map_err(IpcOpenError::from)?,
-                    to: publisher(session, keys::command(run, uav))?,
+                    to: declare_publisher(session, keys::command(run, uav))?,
                 });
                 services._commands.push(service);
             }
@@ -214,15 +225,15 @@ impl LocalAgents {
                     .subscriber_builder()
                     .create()
                     .map_err(IpcOpenError::from)?,
-                estimates: publisher(session, keys::estimate(run, uav))?,
+                estimates: declare_publisher(session, keys::estimate(run, uav))?,
                 states: if plan.world {
                     None
                 } else {
-                    Some(publisher(session, keys::state(run, uav))?)
+                    Some(declare_publisher(session, keys::state(run, uav))?)
                 },
             });
             services._wire.push(service);
-            tokens_out.insert(uav, publisher(session, keys::token(run, uav))?);
+            tokens_out.insert(uav, declare_publisher(session, keys::token(run, uav))?);
         }
         Ok(LocalAgents {
             commands,
@@ -256,7 +267,7 @@ impl<'a> Outbound<'a> {
             .map_err(IpcOpenError::from)?;
         services._wire.push(guidance);
         let end_of_run = if plan.world {
-            Some(publisher(session, keys::end_of_run(&plan.run))?)
+            Some(declare_publisher(session, keys::end_of_run(&plan.run))?)
         } else {
             None
         };

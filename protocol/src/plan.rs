@@ -11,8 +11,17 @@
 //!   and the planned views. [`Answer::decode`] checks every field and refuses a malformed
 //!   answer with an [`AnswerError`] that names what is wrong; it never panics, whatever the
 //!   bytes.
+//!
+//! [`layout`] holds the layout as data (every field's name, offset and type), which the
+//! writers and the reader here follow and against which the tests check `docs/python.md` and
+//! `python/setfleet/layout.py`.
+
+pub mod layout;
 
 use std::f64::consts::PI;
+
+use layout::{ANSWER_FIELDS, HeaderWriter, OTHER_ROW_FIELDS, REQUEST_ARRAYS, REQUEST_FIELDS};
+use layout::{TARGET_ROW_FIELDS, offset_of, row_bytes};
 
 /// First four bytes of a request, `SFPQ`.
 pub const REQUEST_MAGIC: u32 = u32::from_le_bytes(*b"SFPQ");
@@ -29,11 +38,11 @@ pub const MAX_ANSWER_INCREMENTS: u32 = 64;
 /// Most planned views an answer may hold (they travel on in the token to every later UAV).
 pub const MAX_ANSWER_POSES: u32 = 256;
 /// Byte offset of the array table in the request header.
-const ARRAY_TABLE_OFFSET: usize = 272;
-/// Bytes of one row of the targets table.
-pub const TARGET_ROW_BYTES: usize = 32;
-/// Bytes of one row of the others table.
-pub const OTHER_ROW_BYTES: usize = 16;
+const ARRAY_TABLE_OFFSET: usize = offset_of(REQUEST_FIELDS, "arrays");
+/// Bytes of one row of the targets table ([`layout::TARGET_ROW_FIELDS`]).
+pub const TARGET_ROW_BYTES: usize = row_bytes(TARGET_ROW_FIELDS);
+/// Bytes of one row of the others table ([`layout::OTHER_ROW_FIELDS`]).
+pub const OTHER_ROW_BYTES: usize = row_bytes(OTHER_ROW_FIELDS);
 /// Bytes of one pose (`x, y, z, yaw`).
 pub const POSE_BYTES: usize = 32;
 
@@ -41,7 +50,8 @@ pub const POSE_BYTES: usize = 32;
 /// the token came (`guidance.external_request = "round_start"`): it holds no plans ahead.
 pub const FLAG_ROUND_START: u32 = 1;
 
-/// The arrays of a request, in their order after the header.
+/// The arrays of a request, in their order after the header ([`layout::REQUEST_ARRAYS`] gives
+/// their names and element types).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(usize)]
 pub enum ArrayId {
@@ -74,7 +84,7 @@ pub enum ArrayId {
 /// Arrays in a request.
 pub const ARRAYS: usize = 12;
 
-/// The scalar fields of a request (`docs/python.md` gives their offsets).
+/// The scalar fields of a request ([`layout::REQUEST_FIELDS`] gives their offsets).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RequestHeader {
     /// The run's tag.
@@ -157,22 +167,24 @@ pub struct RequestShape {
 }
 
 impl RequestShape {
-    /// Bytes of each array, in [`ArrayId`] order.
+    /// Bytes of each array, in [`ArrayId`] order: its elements times an element's bytes.
     fn lengths(&self) -> [usize; ARRAYS] {
-        [
-            8 * self.increments,
-            2 * self.plan_cells,
-            2 * self.plan_cells,
-            2 * self.plan_cells,
-            2 * self.plan_cells,
-            TARGET_ROW_BYTES * self.targets,
-            2 * self.target_counts,
-            4 * self.oem_cells,
+        let elements = [
+            self.increments,
+            self.plan_cells,
+            self.plan_cells,
+            self.plan_cells,
+            self.plan_cells,
+            self.targets,
+            self.target_counts,
             self.oem_cells,
-            OTHER_ROW_BYTES * self.others,
-            POSE_BYTES * self.poses,
-            4 * self.fleet,
-        ]
+            self.oem_cells,
+            self.others,
+            // A pose is 4 numbers.
+            4 * self.poses,
+            self.fleet,
+        ];
+        std::array::from_fn(|i| elements[i] * REQUEST_ARRAYS[i].element.bytes())
     }
 
     /// Where each array starts and how long it is, and the size of the whole request: the
@@ -205,65 +217,46 @@ impl<'a> RequestWriter<'a> {
         let (table, total) = shape.layout();
         assert_eq!(buf.len(), total, "request buffer of the wrong size");
         buf.fill(0);
-        let mut w = Cursor { buf, at: 0 };
-        w.u32(REQUEST_MAGIC);
-        w.u16(LAYOUT_VERSION);
-        w.u16(REQUEST_HEADER_BYTES as u16);
-        for v in [
-            header.run_tag,
-            header.step,
-            header.round,
-            header.total_steps,
-        ] {
-            w.u64(v);
-        }
-        for v in [
-            header.uav,
-            header.fleet_size,
-            header.steps_per_period,
-            header.horizon,
-            header.deadline_ms,
-            header.flags,
-        ] {
-            w.u32(v);
-        }
-        for v in [
-            header.time_s,
-            header.dt_s,
-            header.speed_mps,
-            header.max_yaw_rate_rps,
-        ] {
-            w.f64(v);
-        }
-        header.pose.iter().for_each(|&v| w.f64(v));
-        w.f64(header.camera_aperture_rad);
-        w.f64(header.camera_tilt_rad);
-        header.camera_size.iter().for_each(|&v| w.u32(v));
-        header.plan_origin.iter().for_each(|&v| w.f64(v));
-        w.f64(header.plan_cell_m);
-        header.plan_size.iter().for_each(|&v| w.u32(v));
-        w.f64(header.count_cell_m2);
-        header.oem_origin.iter().for_each(|&v| w.f64(v));
-        w.f64(header.oem_cell_m);
-        header.oem_size.iter().for_each(|&v| w.u32(v));
-        w.f64(header.border_half_m);
-        w.f64(header.undetected_m2);
-        w.f64(header.targets_m2);
-        for n in [
-            shape.increments,
-            shape.targets,
-            shape.others,
-            shape.poses,
-            shape.fleet,
-            shape.target_counts,
-        ] {
-            w.u32(n as u32);
-        }
-        debug_assert_eq!(w.at, ARRAY_TABLE_OFFSET);
-        for (offset, len) in table {
-            w.u64(offset as u64);
-            w.u64(len as u64);
-        }
+        let mut w = HeaderWriter::new(&mut *buf, REQUEST_FIELDS);
+        w.put("magic", REQUEST_MAGIC);
+        w.put("version", LAYOUT_VERSION);
+        w.put("header_bytes", REQUEST_HEADER_BYTES as u16);
+        w.put("run_tag", header.run_tag);
+        w.put("step", header.step);
+        w.put("round", header.round);
+        w.put("total_steps", header.total_steps);
+        w.put("uav", header.uav);
+        w.put("fleet_size", header.fleet_size);
+        w.put("steps_per_period", header.steps_per_period);
+        w.put("horizon", header.horizon);
+        w.put("deadline_ms", header.deadline_ms);
+        w.put("flags", header.flags);
+        w.put("time_s", header.time_s);
+        w.put("dt_s", header.dt_s);
+        w.put("speed_mps", header.speed_mps);
+        w.put("max_yaw_rate_rps", header.max_yaw_rate_rps);
+        w.put_all(&["x", "y", "z", "yaw"], &header.pose);
+        w.put("camera_aperture_rad", header.camera_aperture_rad);
+        w.put("camera_tilt_rad", header.camera_tilt_rad);
+        w.put_all(&["camera_rows", "camera_cols"], &header.camera_size);
+        w.put_all(&["plan_origin_x", "plan_origin_y"], &header.plan_origin);
+        w.put("plan_cell_m", header.plan_cell_m);
+        w.put_all(&["plan_nx", "plan_ny"], &header.plan_size);
+        w.put("count_cell_m2", header.count_cell_m2);
+        w.put_all(&["oem_origin_x", "oem_origin_y"], &header.oem_origin);
+        w.put("oem_cell_m", header.oem_cell_m);
+        w.put_all(&["oem_nx", "oem_ny"], &header.oem_size);
+        w.put("border_half_m", header.border_half_m);
+        w.put("undetected_m2", header.undetected_m2);
+        w.put("targets_m2", header.targets_m2);
+        w.put("n_increments", shape.increments as u32);
+        w.put("n_targets", shape.targets as u32);
+        w.put("n_others", shape.others as u32);
+        w.put("n_poses", shape.poses as u32);
+        w.put("n_fleet", shape.fleet as u32);
+        w.put("n_target_counts", shape.target_counts as u32);
+        w.array_table(&table);
+        w.finish();
         Self { buf, table }
     }
 
@@ -284,31 +277,6 @@ impl<'a> RequestWriter<'a> {
         for (chunk, v) in self.array(id).chunks_exact_mut(N).zip(values) {
             chunk.copy_from_slice(&put(v));
         }
-    }
-}
-
-/// Little-endian writes at a moving offset.
-struct Cursor<'a> {
-    buf: &'a mut [u8],
-    at: usize,
-}
-
-impl Cursor<'_> {
-    fn bytes<const N: usize>(&mut self, b: [u8; N]) {
-        self.buf[self.at..self.at + N].copy_from_slice(&b);
-        self.at += N;
-    }
-    fn u16(&mut self, v: u16) {
-        self.bytes(v.to_le_bytes());
-    }
-    fn u32(&mut self, v: u32) {
-        self.bytes(v.to_le_bytes());
-    }
-    fn u64(&mut self, v: u64) {
-        self.bytes(v.to_le_bytes());
-    }
-    fn f64(&mut self, v: f64) {
-        self.bytes(v.to_le_bytes());
     }
 }
 
@@ -405,6 +373,21 @@ pub enum AnswerError {
     },
 }
 
+/// Offsets of the answer's fields ([`layout::ANSWER_FIELDS`]).
+mod answer_at {
+    use super::{ANSWER_FIELDS, offset_of};
+
+    pub(super) const MAGIC: usize = offset_of(ANSWER_FIELDS, "magic");
+    pub(super) const VERSION: usize = offset_of(ANSWER_FIELDS, "version");
+    pub(super) const KIND: usize = offset_of(ANSWER_FIELDS, "kind");
+    pub(super) const STEP: usize = offset_of(ANSWER_FIELDS, "step");
+    pub(super) const UAV: usize = offset_of(ANSWER_FIELDS, "uav");
+    pub(super) const N_INCREMENTS: usize = offset_of(ANSWER_FIELDS, "n_increments");
+    pub(super) const N_POSES: usize = offset_of(ANSWER_FIELDS, "n_poses");
+    pub(super) const YAW_REF: usize = offset_of(ANSWER_FIELDS, "yaw_ref");
+    pub(super) const PLANNER_NS: usize = offset_of(ANSWER_FIELDS, "planner_ns");
+}
+
 impl Answer {
     /// Reads the answer to the request of `step` by `uav`, checking every field.
     pub fn decode(buf: &[u8], step: u64, uav: u32) -> Result<Answer, AnswerError> {
@@ -414,17 +397,17 @@ impl Answer {
         }
         let word = |at: usize| le_u32(buf, at).unwrap_or(0);
         let half = |at: usize| u16::from_le_bytes([buf[at], buf[at + 1]]);
-        if word(0) != ANSWER_MAGIC {
-            return Err(AnswerError::Magic(word(0)));
+        if word(answer_at::MAGIC) != ANSWER_MAGIC {
+            return Err(AnswerError::Magic(word(answer_at::MAGIC)));
         }
-        if half(4) != LAYOUT_VERSION {
-            return Err(AnswerError::Version(half(4)));
+        if half(answer_at::VERSION) != LAYOUT_VERSION {
+            return Err(AnswerError::Version(half(answer_at::VERSION)));
         }
-        let kind = half(6);
+        let kind = half(answer_at::KIND);
         if kind > 1 {
             return Err(AnswerError::Kind(kind));
         }
-        let (got, got_uav) = (field(8), word(16));
+        let (got, got_uav) = (field(answer_at::STEP), word(answer_at::UAV));
         if (got, got_uav) != (step, uav) {
             return Err(AnswerError::Other {
                 got,
@@ -433,7 +416,7 @@ impl Answer {
                 uav,
             });
         }
-        let (increments, poses) = (word(20), word(24));
+        let (increments, poses) = (word(answer_at::N_INCREMENTS), word(answer_at::N_POSES));
         if increments > MAX_ANSWER_INCREMENTS
             || poses > MAX_ANSWER_POSES
             || (kind == 0 && increments == 0)
@@ -474,12 +457,12 @@ impl Answer {
         let steer = if kind == 0 {
             Steer::Increments(incs)
         } else {
-            Steer::YawRef(check("yaw_ref", float(32), true)?)
+            Steer::YawRef(check("yaw_ref", float(answer_at::YAW_REF), true)?)
         };
         Ok(Answer {
             steer,
             poses,
-            planner_ns: field(40),
+            planner_ns: field(answer_at::PLANNER_NS),
         })
     }
 
@@ -490,19 +473,20 @@ impl Answer {
             Steer::Increments(v) => (0, 0.0, v),
             Steer::YawRef(y) => (1, *y, &[]),
         };
-        let mut out = Vec::with_capacity(
-            ANSWER_HEADER_BYTES + 8 * incs.len() + POSE_BYTES * self.poses.len(),
-        );
-        out.extend(ANSWER_MAGIC.to_le_bytes());
-        out.extend(LAYOUT_VERSION.to_le_bytes());
-        out.extend(kind.to_le_bytes());
-        out.extend(step.to_le_bytes());
-        out.extend(uav.to_le_bytes());
-        out.extend((incs.len() as u32).to_le_bytes());
-        out.extend((self.poses.len() as u32).to_le_bytes());
-        out.extend(0u32.to_le_bytes());
-        out.extend(yaw_ref.to_le_bytes());
-        out.extend(self.planner_ns.to_le_bytes());
+        let mut out = vec![0; ANSWER_HEADER_BYTES];
+        out.reserve(8 * incs.len() + POSE_BYTES * self.poses.len());
+        let mut w = HeaderWriter::new(&mut out, ANSWER_FIELDS);
+        w.put("magic", ANSWER_MAGIC);
+        w.put("version", LAYOUT_VERSION);
+        w.put("kind", kind);
+        w.put("step", step);
+        w.put("uav", uav);
+        w.put("n_increments", incs.len() as u32);
+        w.put("n_poses", self.poses.len() as u32);
+        w.put("reserved", 0u32);
+        w.put("yaw_ref", yaw_ref);
+        w.put("planner_ns", self.planner_ns);
+        w.finish();
         incs.iter().for_each(|u| out.extend(u.to_le_bytes()));
         self.poses
             .iter()

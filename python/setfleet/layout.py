@@ -5,6 +5,10 @@ An agent that asks an outside planner for its guidance decision sends a *request
 multiple of 8 bytes from the start of the payload. The planner replies with an *answer*: a
 48-byte header, the yaw increments and the planned views.
 
+The layout is defined once, in Rust (``protocol/src/plan/layout.rs``): ``cargo test -p
+protocol`` checks this module's dtypes and constants, and the tables of ``docs/python.md``,
+against it and names the first field that differs.
+
 This module holds
 
 - the numpy dtypes of both headers (:data:`REQUEST_HEADER`, :data:`ANSWER_HEADER`) and of the
@@ -169,7 +173,7 @@ REQUEST_HEADER: np.dtype = _struct(
         ("n_poses", "<u4", 260),
         ("n_fleet", "<u4", 264),
         ("n_target_counts", "<u4", 268),
-        ("arrays", ("<u8", (_N_ARRAYS, 2)), 272),
+        ("arrays", ("<u8", (12, 2)), 272),
     ],
     REQUEST_HEADER_BYTES,
 )

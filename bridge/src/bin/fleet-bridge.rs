@@ -9,7 +9,7 @@ use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
 
 use bridge::Bridge;
-use bridge::plan::{self, HostPlan, HostShare};
+use bridge::placement::{self, HostPlan, HostShare};
 use bridge::security::{HostName, HostTlsFiles, LinkMode, LinkPlan, zenoh_config};
 use clap::Parser;
 use fleet_process::startup::{self, ChildArgs, Role};
@@ -118,7 +118,7 @@ fn configure(args: &Args) -> Result<(HostPlan, zenoh::Config), String> {
         .as_ref()
         .map(|dir| HostTlsFiles::in_dir(dir, &args.host));
     let policy =
-        plan::access_policy(&args.child.run_id, &args.member).map_err(|e| e.to_string())?;
+        placement::access_policy(&args.child.run_id, &args.member).map_err(|e| e.to_string())?;
     let policy = tls.as_ref().map(|_| &policy);
     let mut config = zenoh_config(&link, tls.as_ref(), policy).map_err(|e| e.to_string())?;
     if !world {

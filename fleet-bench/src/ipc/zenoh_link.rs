@@ -4,13 +4,15 @@
 //! The publisher is the world host `h0`, a Zenoh router listening on a loopback port; the
 //! subscriber is the agent host `h1`, a client connecting to it. Their configurations are
 //! [`zenoh_config`]'s: over QUIC or TLS over TCP with the fleet's certificates (made by the
-//! parent with [`write_fleet_certs`]) and the run's access policy ([`plan::access_policy`],
+//! parent with [`write_fleet_certs`]) and the run's access policy ([`placement::access_policy`],
 //! `h0=0,1`, `h1=2,3`), or plain TCP without either. The keys are the run's own: frames go to UAV 2 on
 //! [`keys::frame`], estimates come from UAV 0 on [`keys::estimate`], so the access policy
-//! admits them as in a run. The publisher is declared as the bridge declares its own
-//! (reliable, [`CongestionControl::Block`], express, remote destinations only) and sends what
-//! the bridge sends: the [`envelope`] encoding, copied out of the reused buffer. The bench's
-//! [`Stamp`] travels as the Zenoh attachment, so the payload is exactly the bridge's.
+//! admits them as in a run. The publisher is the bridge's own: [`declare_publisher`], the
+//! function the bridge declares its publishers with, so the bench times the bridge's settings
+//! (reliable, blocking congestion control, express, remote destinations only) and not a copy
+//! of them. It sends what the bridge sends: the [`envelope`] encoding, copied out of the
+//! reused buffer. The bench's [`Stamp`] travels as the Zenoh attachment, so the payload is
+//! exactly the bridge's.
 //!
 //! Latency runs from the send start (the frame written, before it is encoded) to the decoded
 //! message on the subscriber (`decode_frame_into` a frame, or `decode_wire`); the checks
@@ -40,7 +42,8 @@ use anyhow::{Context, anyhow, bail};
 use bridge::endpoint::{Transport, free_loopback_port};
 use bridge::envelope;
 use bridge::keys;
-use bridge::plan::{self, HostShare};
+use bridge::outbound::declare_publisher;
+use bridge::placement::{self, HostShare};
 use bridge::security::{
     HostName, HostTlsFiles, LinkMode, LinkPlan, write_fleet_certs, zenoh_config,
 };
@@ -53,7 +56,6 @@ use protocol::service::RunId;
 use protocol::wire::{WireHeader, WireKind, unix_now_ns};
 use zenoh::Wait;
 use zenoh::pubsub::Publisher;
-use zenoh::qos::CongestionControl;
 use zenoh::sample::Locality;
 
 use super::handshake::{BenchChildArgs, IDLE, ZenohTransport, ready_then_go};
@@ -151,7 +153,7 @@ fn config(
         ZenohTransport::Tcp => zenoh_config(&link, None, None)?,
         ZenohTransport::Tls | ZenohTransport::Quic => {
             let tls = HostTlsFiles::in_dir(certs, &HostName::new(host)?);
-            let policy = plan::access_policy(run, &members()?)?;
+            let policy = placement::access_policy(run, &members()?)?;
             zenoh_config(&link, Some(&tls), Some(&policy))?
         }
     };
@@ -183,17 +185,6 @@ fn close(session: zenoh::Session) {
     if let Err(e) = session.close().wait() {
         tracing::debug!(error = %e, "closing the Zenoh session");
     }
-}
-
-/// A publisher declared as the bridge declares its own.
-fn declare_publisher(session: &zenoh::Session, key: String) -> anyhow::Result<Publisher<'static>> {
-    session
-        .declare_publisher(key)
-        .congestion_control(CongestionControl::Block)
-        .express(true)
-        .allowed_destination(Locality::Remote)
-        .wait()
-        .map_err(|e| anyhow!("cannot declare a Zenoh publisher: {e}"))
 }
 
 /// Waits until `publisher` has a remote subscriber (at most [`IDLE`]).
@@ -621,7 +612,7 @@ mod tests {
     #[test]
     fn only_the_router_may_publish_the_bench_messages() {
         let run = RunId::new("bench-zenoh-policy").unwrap();
-        let policy = plan::access_policy(&run, &members().unwrap()).unwrap();
+        let policy = placement::access_policy(&run, &members().unwrap()).unwrap();
         let world = policy.publications(&HostName::new(ROUTER_HOST).unwrap());
         assert_eq!(world, vec![format!("{}/**", keys::run_root(&run))]);
         let client = policy.publications(&HostName::new(CLIENT_HOST).unwrap());

@@ -14,7 +14,7 @@
 
 use std::collections::BTreeSet;
 
-use bridge::plan::HostShare;
+use bridge::placement::HostShare;
 use bridge::security::HostName;
 use protocol::service::RunId;
 

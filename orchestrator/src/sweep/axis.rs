@@ -7,7 +7,7 @@
 //! `fleet sweep --merge` reads it like any sweep). Beside them the sweep writes:
 //!
 //! - `axis.json` and `axis.md`: per variant, one row per metric of the sweep's table
-//!   ([`super::rows`], its final values and its means over the steady window) plus the
+//!   ([`super::metrics`], its final values and its means over the steady window) plus the
 //!   radio's rows (the share of peer estimates and of tokens the radio lost, measured, and
 //!   the estimates' traffic), one column per value, mean ± sample standard deviation over the
 //!   seeds; then, per variant, every value compared with the first seed by seed (`paired` in
@@ -45,8 +45,8 @@ use serde::Serialize;
 
 use super::Shard;
 use super::collect::{FoundRuns, MergeConfig, assemble, columns, gather, write_table};
+use super::metrics::{METRICS, Metric, metric};
 use super::paired::{self, Comparison, PairedMetric, Sides, compare_metrics};
-use super::rows::{RADIO_ROWS, ROWS};
 use super::table::{Cell, format_cell, seed_range};
 use crate::Outcome;
 use fleet_observe::observe::StepMetrics;
@@ -225,13 +225,9 @@ impl AxisTable {
                     .map(|runs| {
                         let run = |seed: &u64| runs.get(&(variant, *seed));
                         let mut cells = BTreeMap::new();
-                        for (i, row) in ROWS.iter().enumerate() {
+                        for (i, metric) in METRICS.iter().enumerate() {
                             let values = seeds.iter().map(|s| run(s).and_then(|r| r.values[i]));
-                            cells.insert(row.key, Cell::of(values.collect()));
-                        }
-                        for (i, row) in RADIO_ROWS.iter().enumerate() {
-                            let values = seeds.iter().map(|s| run(s).and_then(|r| r.radio[i]));
-                            cells.insert(row.key, Cell::of(values.collect()));
+                            cells.insert(metric.key, Cell::of(values.collect()));
                         }
                         cells
                     })
@@ -283,16 +279,11 @@ impl AxisTable {
             "Final metrics and means over {} of simulated time against `{}`, mean ± standard \
              deviation over {} seeds ({}); the set metrics are each agent's own, averaged over \
              agents unless marked worst agent.",
-            super::rows::window_text(),
+            super::metrics::window_text(),
             self.key,
             self.seeds.len(),
             seed_range(&self.seeds)
         );
-        let rows = ROWS
-            .iter()
-            .map(|r| (r.key, r.label(), r.scale))
-            .chain(RADIO_ROWS.iter().map(|r| (r.key, r.label.into(), r.scale)));
-        let rows: Vec<(&str, std::borrow::Cow<'_, str>, f64)> = rows.collect();
         for variant in &self.variants {
             let name = variant.name();
             let _ = writeln!(md, "\n### {name}\n");
@@ -303,14 +294,14 @@ impl AxisTable {
                 .collect();
             let _ = writeln!(md, "| metric | {} |", heads.join(" | "));
             let _ = writeln!(md, "|---|{}", "---:|".repeat(heads.len()));
-            for (key, label, scale) in &rows {
+            for metric in &METRICS {
                 let cells: Vec<String> = (0..self.values.len())
                     .map(|i| {
-                        self.cell(name, i, key)
-                            .map_or_else(|| "-".into(), |c| format_cell(c, *scale))
+                        self.cell(name, i, metric.key)
+                            .map_or_else(|| "-".into(), |c| format_cell(c, metric.scale))
                     })
                     .collect();
-                let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
+                let _ = writeln!(md, "| {} | {} |", metric.label(), cells.join(" | "));
             }
         }
         if let Some(reference) = self.values.first() {
@@ -442,12 +433,11 @@ fn write(table: &AxisTable, axis: &Axis, curves: &AxisCurves, out: &Path) -> any
     Ok(())
 }
 
-/// One panel of `axis.png`: a row of the table, scaled.
+/// One panel of `axis.png`: a metric of the table, shown with its scale.
 struct Panel {
     caption: &'static str,
     y_desc: &'static str,
-    key: &'static str,
-    scale: f64,
+    metric: &'static Metric,
     /// Where the legend goes (away from where the curves usually are).
     legend: SeriesLabelPosition,
 }
@@ -456,29 +446,25 @@ const PANELS: [Panel; 4] = [
     Panel {
         caption: "UA, undetected-set area (final)",
         y_desc: "% of the region",
-        key: "ua_final",
-        scale: 100.0,
+        metric: metric("ua_final"),
         legend: SeriesLabelPosition::LowerRight,
     },
     Panel {
         caption: "localisation error (mean over the run)",
         y_desc: "m",
-        key: "loc_error_mean_m",
-        scale: 1.0,
+        metric: metric("loc_error_mean_m"),
         legend: SeriesLabelPosition::LowerRight,
     },
     Panel {
         caption: "target-set area (mean over the run)",
         y_desc: "% of the region",
-        key: "target_set_area_mean",
-        scale: 100.0,
+        metric: metric("target_set_area_mean"),
         legend: SeriesLabelPosition::LowerRight,
     },
     Panel {
         caption: "peer estimates lost by the radio (measured)",
         y_desc: "%",
-        key: "estimates_lost_share",
-        scale: 100.0,
+        metric: metric("estimates_lost_share"),
         legend: SeriesLabelPosition::UpperLeft,
     },
 ];
@@ -582,9 +568,10 @@ fn panel_series(panel: &Panel, table: &AxisTable, xs: &[f64]) -> PanelSeries {
                 .iter()
                 .enumerate()
                 .filter_map(|(i, &x)| {
-                    let cell = table.cell(variant.name(), i, panel.key)?;
+                    let cell = table.cell(variant.name(), i, panel.metric.key)?;
                     let (mean, sd) = (cell.mean?, cell.sd?);
-                    Some((x, mean * panel.scale, sd * panel.scale))
+                    let scale = panel.metric.scale;
+                    Some((x, mean * scale, sd * scale))
                 })
                 .collect();
             (v, points)
@@ -634,8 +621,8 @@ fn draw_variant(
 #[cfg(test)]
 mod tests {
     use super::super::collect::FoundRun;
+    use super::super::metrics::run_values;
     use super::super::paired::{Differences, Window};
-    use super::super::rows::{ROW_COUNT, radio_values, run_values};
     use super::*;
     use fleet_observe::results::summary::Summary;
 
@@ -690,7 +677,6 @@ mod tests {
     fn run(s: &Summary) -> FoundRun {
         FoundRun {
             values: run_values(s, &[]),
-            radio: radio_values(s),
             series: Vec::new(),
             source: std::path::PathBuf::new(),
         }
@@ -734,13 +720,12 @@ mod tests {
 
     /// A run whose only values are these rows'.
     fn run_of(rows: &[(&str, f64)]) -> FoundRun {
-        let mut values = vec![None; ROW_COUNT];
+        let mut values = vec![None; METRICS.len()];
         for &(key, value) in rows {
-            values[ROWS.iter().position(|r| r.key == key).unwrap()] = Some(value);
+            values[METRICS.iter().position(|m| m.key == key).unwrap()] = Some(value);
         }
         FoundRun {
             values,
-            radio: vec![None; RADIO_ROWS.len()],
             series: Vec::new(),
             source: std::path::PathBuf::new(),
         }

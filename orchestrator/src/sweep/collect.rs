@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 
-use super::rows::{ROW_COUNT, radio_values, run_values};
+use super::metrics::{METRICS, run_values};
 use super::table::Table;
 use crate::Outcome;
 use fleet_observe::observe::StepMetrics;
@@ -33,10 +33,8 @@ pub struct MergeConfig {
 
 /// One run read back from a sweep directory.
 pub(super) struct FoundRun {
-    /// Its value of every row of the table ([`run_values`]).
+    /// Its value of every metric, in the order of [`METRICS`] ([`run_values`]).
     pub values: Vec<Option<f64>>,
-    /// Its value of every radio row of an axis table ([`super::axis`]).
-    pub radio: Vec<Option<f64>>,
     /// Its metrics per step.
     pub series: Vec<StepMetrics>,
     /// Where it was read.
@@ -79,7 +77,7 @@ pub(super) fn assemble(
                     if flag_missing {
                         failed.push(format!("{}/seed-{seed} (missing)", variant.name()));
                     }
-                    values.push(vec![None; ROW_COUNT]);
+                    values.push(vec![None; METRICS.len()]);
                 }
             }
         }
@@ -220,7 +218,6 @@ pub(super) fn read_run(dir: &Path, variant: Variant, seed: u64) -> anyhow::Resul
         .with_context(|| format!("{}: timeseries.csv", dir.display()))?;
     Ok(FoundRun {
         values: run_values(&summary, &series),
-        radio: radio_values(&summary),
         series,
         source: dir.to_owned(),
     })

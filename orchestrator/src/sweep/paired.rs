@@ -15,14 +15,14 @@
 //!   they are equal.
 //!
 //! Lower is better for all four metrics compared (UA, OA, target-set area, localisation
-//! error; `COMPARED` in [`super::rows`]), so a negative mean favours `a`. A CI that excludes 0
+//! error; `COMPARED` in [`super::metrics`]), so a negative mean favours `a`. A CI that excludes 0
 //! says the difference is measurable on these seeds; one that holds 0 says these seeds cannot
 //! tell the two apart (more seeds may). With one pair there is no `sd`, `ci95` or `t`; with
 //! equal differences on every seed (`sd` 0) the CI is the mean and there is no `t`.
 //!
 //! Each metric is compared twice: on its row of the table read from `summary.json`
 //! (`"final"`: UA and OA at the last step, area and error averaged over the whole run) and on
-//! its mean over the steady window (`"100-300 s"`, [`super::rows::STEADY_WINDOW_S`]).
+//! its mean over the steady window (`"100-300 s"`, [`super::metrics::STEADY_WINDOW_S`]).
 //!
 //! An axis sweep compares its values the same way, each value with the first, per variant
 //! ([`super::axis`]), with the same statistics and the same Markdown.
@@ -31,7 +31,7 @@ use std::fmt::Write as _;
 
 use serde::{Serialize, Serializer};
 
-use super::rows::{COMPARED, ROWS, digits, window_text};
+use super::metrics::{COMPARED, ROWS, digits, window_text};
 use protocol::variant::Variant;
 
 /// Which value of a metric a comparison is of.
@@ -178,8 +178,8 @@ pub(super) fn compare_metrics(
 ) -> Vec<PairedMetric> {
     let mut compared = Vec::new();
     for metric in &COMPARED {
-        for (window, key) in Window::BOTH.into_iter().zip(metric.rows) {
-            if let (Some(a), Some(b)) = (a(key), b(key)) {
+        for (window, row) in Window::BOTH.into_iter().zip(metric.rows) {
+            if let (Some(a), Some(b)) = (a(row.key), b(row.key)) {
                 compared.push(PairedMetric {
                     metric: metric.metric,
                     window,

@@ -28,6 +28,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use serde::Serialize;
 
+use super::metrics::{Metric, metric};
 use super::paired::{self, Comparison, Paired, PairedMetric, Sides};
 use super::table::{Cell, Table, format_cell};
 use crate::Outcome;
@@ -180,11 +181,12 @@ impl Comparison for ScenarioPaired<'_> {
     }
 }
 
-/// The rows of `table.json` the suite's first table shows: key, heading, scale.
-const SUITE_ROWS: [(&str, &str, f64); 3] = [
-    ("ua_final", "UA final (%)", 100.0),
-    ("ua_window", "UA 100-300 s (%)", 100.0),
-    ("loc_error_mean_m", "loc. error (m)", 1.0),
+/// The columns of the suite's first table: a metric of the scenarios' tables and its heading,
+/// shorter than its label.
+const SUITE_COLUMNS: [(&Metric, &str); 3] = [
+    (metric("ua_final"), "UA final (%)"),
+    (metric("ua_window"), "UA 100-300 s (%)"),
+    (metric("loc_error_mean_m"), "loc. error (m)"),
 ];
 
 /// Writes `suite.json` and `suite.md` into `out` from each scenario's table (in the suite's
@@ -202,11 +204,11 @@ pub fn write(suite: &Suite, tables: &[Table], out: &Path) -> anyhow::Result<()> 
                 .variants
                 .iter()
                 .map(|v| {
-                    let cells = SUITE_ROWS
+                    let cells = SUITE_COLUMNS
                         .iter()
-                        .filter_map(|(key, _, _)| {
-                            let cell = table.metrics.get(v.name())?.get(key)?;
-                            Some((*key, cell))
+                        .filter_map(|(metric, _)| {
+                            let cell = table.metrics.get(v.name())?.get(metric.key)?;
+                            Some((metric.key, cell))
                         })
                         .collect();
                     (*v, cells)
@@ -248,10 +250,14 @@ fn to_markdown(results: &[ScenarioResults<'_>], paired: &[ScenarioPaired<'_>]) -
         "Every scenario of the suite: mean ± standard deviation over the seeds, per variant.\n\n",
     );
     let _ = write!(md, "| scenario | seeds | variant |");
-    for (_, head, _) in SUITE_ROWS {
+    for (_, head) in SUITE_COLUMNS {
         let _ = write!(md, " {head} |");
     }
-    let _ = writeln!(md, "\n|---|---:|---|{}", "---:|".repeat(SUITE_ROWS.len()));
+    let _ = writeln!(
+        md,
+        "\n|---|---:|---|{}",
+        "---:|".repeat(SUITE_COLUMNS.len())
+    );
     for scenario in results {
         for (variant, cells) in &scenario.variants {
             let _ = write!(
@@ -261,9 +267,12 @@ fn to_markdown(results: &[ScenarioResults<'_>], paired: &[ScenarioPaired<'_>]) -
                 scenario.seeds.len(),
                 variant.name()
             );
-            for (key, _, scale) in SUITE_ROWS {
-                let cell = cells.iter().find(|(k, _)| *k == key).map(|(_, c)| *c);
-                let text = cell.map_or_else(|| "-".into(), |c| format_cell(c, scale));
+            for (metric, _) in SUITE_COLUMNS {
+                let cell = cells
+                    .iter()
+                    .find(|(k, _)| *k == metric.key)
+                    .map(|(_, c)| *c);
+                let text = cell.map_or_else(|| "-".into(), |c| format_cell(c, metric.scale));
                 let _ = write!(md, " {text} |");
             }
             md.push('\n');
@@ -359,6 +368,78 @@ mod tests {
         let ua = paired[0]["mean"].as_f64().unwrap();
         assert!((ua - 0.2).abs() < 1e-12, "{suite}");
         std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    /// `suite.md` and the rows of `suite.json` as a suite of one scenario writes them: the
+    /// columns, their headings and their formats, byte for byte.
+    #[test]
+    fn the_suite_table_text_is_pinned() {
+        use super::super::metrics::METRICS;
+        let run = |ua: f64, window: Option<f64>, error: f64| {
+            let mut values = vec![None; METRICS.len()];
+            for (key, value) in [
+                ("ua_final", Some(ua)),
+                ("ua_window", window),
+                ("loc_error_mean_m", Some(error)),
+            ] {
+                values[METRICS.iter().position(|m| m.key == key).unwrap()] = value;
+            }
+            values
+        };
+        let results = vec![
+            (
+                Variant::Paper,
+                vec![run(0.30, None, 3.5), run(0.20, None, 4.5)],
+            ),
+            (
+                Variant::Setfleet,
+                vec![run(0.10, Some(0.2), 12.0), run(0.10, Some(0.4), 14.0)],
+            ),
+        ];
+        let table = Table::build(vec![1, 2], &results, vec!["paper/seed-3".into()]);
+        let suite = Suite {
+            scenarios: vec![("city".into(), PathBuf::from("suite/city.toml"))],
+        };
+        let dir = std::env::temp_dir().join(format!("setfleet-suite-text-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        write(&suite, &[table], &dir).unwrap();
+        let md = std::fs::read_to_string(dir.join("suite.md")).unwrap();
+        let expected = "\
+Every scenario of the suite: mean ± standard deviation over the seeds, per variant.
+
+| scenario | seeds | variant | UA final (%) | UA 100-300 s (%) | loc. error (m) |
+|---|---:|---|---:|---:|---:|
+| city | 2 | paper | 25.00 ± 7.07 | - | 4.00 ± 0.71 |
+| city | 2 | setfleet | 10.00 ± 0.00 | 30.00 ± 14.14 | 13.0 ± 1.4 |
+
+Failed or interrupted runs: city/paper/seed-3.
+
+Paired differences a − b per scenario, seed by seed on the seeds both ran: mean Δ [95 % \
+confidence interval, Student's t], and on how many seeds a was lower / b was lower / they tied. \
+Lower is better for these four metrics, so Δ < 0 favours a; a CI that excludes 0 means the \
+difference is measurable on these seeds. Final: the row above (UA and OA at the end, area and \
+error over the whole run); 100-300 s: the mean over that window. Fractions in percentage points \
+(pp).
+
+| scenario | a − b | metric | Δ final [95 % CI] | a / b lower, ties | Δ 100-300 s [95 % CI] | a / b lower, ties |
+|---|---|---|---:|---:|---:|---:|
+| city | paper − setfleet | UA (pp) | 15.00 [-48.53, 78.53] | 0 / 2, 0 | - | - |
+| city | paper − setfleet | OA (pp) | - | - | - | - |
+| city | paper − setfleet | target-set area (pp) | - | - | - | - |
+| city | paper − setfleet | localisation error (m) | -9.00 [-15.35, -2.65] | 2 / 0, 0 | - | - |
+";
+        assert_eq!(md, expected);
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("suite.json")).unwrap())
+                .unwrap();
+        let keys: Vec<&str> = json["scenarios"][0]["variants"][1][1]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|cell| cell[0].as_str())
+            .collect();
+        assert_eq!(keys, ["ua_final", "ua_window", "loc_error_mean_m"]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// The project's suites (held out and for tuning) read, share no scenario, and every

@@ -20,8 +20,8 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use super::metrics::{ROWS, STEADY_WINDOW_S, digits, window_text};
 use super::paired::{self, Paired};
-use super::rows::{ROWS, STEADY_WINDOW_S, digits, window_text};
 use fleet_observe::results::curves::mean_sd;
 use protocol::variant::Variant;
 
@@ -124,7 +124,7 @@ impl Table {
         let names: Vec<&str> = self.variants.iter().map(|v| v.name()).collect();
         let _ = writeln!(md, "| metric | {} |", names.join(" | "));
         let _ = writeln!(md, "|---|{}", "---:|".repeat(names.len()));
-        for row in &ROWS {
+        for row in ROWS {
             let cells: Vec<String> = names
                 .iter()
                 .map(|v| {
@@ -195,7 +195,7 @@ pub(super) fn format_cell(cell: &Cell, scale: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sweep::rows::{ROW_COUNT, run_values};
+    use crate::sweep::metrics::{METRICS, run_values};
     use fleet_observe::results::summary::Summary;
 
     /// The row values of a run with these final UA and OA and no time series.
@@ -269,7 +269,7 @@ mod tests {
                     run(0.30, Some(0.3)),
                     run(0.30, Some(0.4)),
                     run(0.45, Some(0.4)),
-                    vec![None; ROW_COUNT],
+                    vec![None; METRICS.len()],
                 ],
             ),
             (Variant::Nomap, vec![run(0.5, None); 4]),
@@ -329,6 +329,77 @@ mod tests {
             "{md}"
         );
         assert!(md.contains("| setfleet − nomap | localisation error (m) | - | - | - | - |"));
+    }
+
+    /// The rows of `table.md` and the keys of `table.json`, in order, byte for byte.
+    #[test]
+    fn the_table_rows_are_pinned() {
+        let table = Table::build(
+            vec![1],
+            &[(Variant::Paper, vec![values(0.25, None)])],
+            vec![],
+        );
+        let md = table.to_markdown();
+        let labels: Vec<&str> = md
+            .lines()
+            .skip_while(|l| !l.starts_with("|---"))
+            .skip(1)
+            .take_while(|l| l.starts_with("| "))
+            .filter_map(|l| l.split(" | ").next())
+            .collect();
+        assert_eq!(
+            labels,
+            [
+                "| UA, undetected-set area (%)",
+                "| OA, undetected and occluded (%)",
+                "| UA, worst agent (%)",
+                "| OA, worst agent (%)",
+                "| explored (%)",
+                "| target-set area, mean over the whole run (%)",
+                "| localisation error, mean over the whole run (m)",
+                "| UA, mean over 100-300 s (%)",
+                "| OA, mean over 100-300 s (%)",
+                "| target-set area, mean over 100-300 s (%)",
+                "| localisation error, mean over 100-300 s (m)",
+                "| identified targets (final)",
+                "| guarantee violations",
+                "| all identified at (s)",
+                "| UA below 25 % at (s)",
+                "| UA below 15 % at (s)",
+                "| real-time factor",
+            ]
+        );
+        assert!(
+            md.contains("| UA, undetected-set area (%) | 25.00 ± 0.00 |\n"),
+            "{md}"
+        );
+        let keys: Vec<&str> = ROWS.iter().map(|r| r.key).collect();
+        assert_eq!(
+            keys,
+            [
+                "ua_final",
+                "oa_final",
+                "ua_final_worst",
+                "oa_final_worst",
+                "explored_final",
+                "target_set_area_mean",
+                "loc_error_mean_m",
+                "ua_window",
+                "oa_window",
+                "target_set_area_window",
+                "loc_error_m_window",
+                "identified_final",
+                "violations",
+                "time_all_identified_s",
+                "time_ua_below_25_s",
+                "time_ua_below_15_s",
+                "real_time_factor",
+            ]
+        );
+        let written: Vec<&str> = table.metrics["paper"].keys().copied().collect();
+        let mut sorted = keys.clone();
+        sorted.sort_unstable();
+        assert_eq!(written, sorted);
     }
 
     #[test]

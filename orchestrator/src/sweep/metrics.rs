@@ -1,7 +1,12 @@
-//! The metrics a sweep reports of each run: the rows of its table (`ROWS`, read from a run's
-//! `summary.json` and `timeseries.csv`), the steady window of the window rows
-//! ([`STEADY_WINDOW_S`]), the metrics two variants are compared on (`COMPARED`) and the
-//! radio's rows of an axis over the radio (`RADIO_ROWS`).
+//! The metrics a sweep reports of each run, one record each ([`METRICS`]): the key of the JSON
+//! tables, the label of the Markdown ones, the factor its values are shown with and where a
+//! run's value comes from (its `summary.json`, or its `timeseries.csv` over the steady window
+//! [`STEADY_WINDOW_S`]).
+//!
+//! Every table of a sweep reads them here: the sweep's table has a row per metric of [`ROWS`]
+//! ([`super::table`]), an axis table a row per metric, the radio's included ([`super::axis`]),
+//! the suite's table a column per metric it picks ([`super::suite`]), and two variants are
+//! compared on the metrics of [`COMPARED`] ([`super::paired`]).
 
 use std::borrow::Cow;
 
@@ -22,8 +27,8 @@ pub fn window_text() -> String {
     format!("{}-{} s", STEADY_WINDOW_S.0, STEADY_WINDOW_S.1)
 }
 
-/// Where a row's value of a run comes from.
-pub(super) enum Source {
+/// Where a metric's value of a run comes from.
+enum Source {
     /// A value of the run's `summary.json` (`None` where the run has none).
     Summary(fn(&Summary) -> Option<f64>),
     /// The mean of a per-step value (of the step's mean over agents) over the steps of
@@ -34,17 +39,22 @@ pub(super) enum Source {
     },
 }
 
-/// One row of the table: the `table.json` key, the label in `table.md`, the factor to
-/// display it with, and where a run's value comes from.
-pub(super) struct Row {
+/// One metric of a run: its key in `table.json`, `suite.json` and `axis.json`, its label in
+/// the Markdown tables, the factor its values are shown with, and where a run's value comes
+/// from.
+pub(super) struct Metric {
+    /// Its key in the JSON tables.
     pub(super) key: &'static str,
+    /// Its label, without the window of a window metric ([`Metric::label`] adds it).
     label: &'static str,
+    /// The factor its values are shown with: 100 for fractions (shown in %), 1 otherwise.
     pub(super) scale: f64,
+    /// Where a run's value comes from.
     source: Source,
 }
 
-impl Row {
-    /// The row's label in `table.md`; a window row's names the window.
+impl Metric {
+    /// Its label in the Markdown tables; a window metric's names the window.
     pub(super) fn label(&self) -> Cow<'static, str> {
         match self.source {
             Source::Summary(_) => Cow::Borrowed(self.label),
@@ -55,56 +65,98 @@ impl Row {
             )),
         }
     }
+
+    /// A run's value: from its summary's values, or from its series of metrics per step (its
+    /// `timeseries.csv`) for a window metric.
+    fn value(&self, summary: &Summary, series: &[StepMetrics]) -> Option<f64> {
+        match self.source {
+            Source::Summary(value) => value(summary),
+            Source::Window { step, .. } => window_mean(series, step),
+        }
+    }
 }
 
-/// How many rows the table has.
-pub(super) const ROW_COUNT: usize = ROWS.len();
+/// The metric of key `key`, found when the program is compiled (a key no metric has does not
+/// compile).
+pub(super) const fn metric(key: &str) -> &'static Metric {
+    let mut i = 0;
+    while i < METRICS.len() {
+        if same(METRICS[i].key.as_bytes(), key.as_bytes()) {
+            return &METRICS[i];
+        }
+        i += 1;
+    }
+    panic!("no metric has this key");
+}
 
-/// The metrics of the table, in row order.
-pub(super) const ROWS: [Row; 17] = [
-    Row {
+/// Whether `a` and `b` are the same bytes (`==` on slices is not available in a `const fn`).
+const fn same(a: &[u8], b: &[u8]) -> bool {
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+/// How many metrics are rows of the sweep's table: all but the radio's, which come last.
+const TABLE_ROWS: usize = 17;
+
+/// The rows of the sweep's table (`table.md`, `table.json`), in order.
+pub(super) const ROWS: &[Metric] = METRICS.split_at(TABLE_ROWS).0;
+
+/// Every metric, in the order of the tables' rows: those of the sweep's table ([`ROWS`]), then
+/// the radio's, which only an axis table shows: what the links lost, measured from the
+/// agents' counters, and what the estimates cost (under loss they carry whole sets).
+pub(super) static METRICS: [Metric; 20] = [
+    Metric {
         key: "ua_final",
         label: "UA, undetected-set area (%)",
         scale: 100.0,
         source: Source::Summary(|s| s.ua_final),
     },
-    Row {
+    Metric {
         key: "oa_final",
         label: "OA, undetected and occluded (%)",
         scale: 100.0,
         source: Source::Summary(|s| s.oa_final),
     },
-    Row {
+    Metric {
         key: "ua_final_worst",
         label: "UA, worst agent (%)",
         scale: 100.0,
         source: Source::Summary(|s| s.ua_final_worst),
     },
-    Row {
+    Metric {
         key: "oa_final_worst",
         label: "OA, worst agent (%)",
         scale: 100.0,
         source: Source::Summary(|s| s.oa_final_worst),
     },
-    Row {
+    Metric {
         key: "explored_final",
         label: "explored (%)",
         scale: 100.0,
         source: Source::Summary(|s| s.explored_final),
     },
-    Row {
+    Metric {
         key: "target_set_area_mean",
         label: "target-set area, mean over the whole run (%)",
         scale: 100.0,
         source: Source::Summary(|s| s.target_set_area_mean),
     },
-    Row {
+    Metric {
         key: "loc_error_mean_m",
         label: "localisation error, mean over the whole run (m)",
         scale: 1.0,
         source: Source::Summary(|s| s.loc_error_mean_m),
     },
-    Row {
+    Metric {
         key: "ua_window",
         label: "UA",
         scale: 100.0,
@@ -113,7 +165,7 @@ pub(super) const ROWS: [Row; 17] = [
             unit: "%",
         },
     },
-    Row {
+    Metric {
         key: "oa_window",
         label: "OA",
         scale: 100.0,
@@ -122,7 +174,7 @@ pub(super) const ROWS: [Row; 17] = [
             unit: "%",
         },
     },
-    Row {
+    Metric {
         key: "target_set_area_window",
         label: "target-set area",
         scale: 100.0,
@@ -131,7 +183,7 @@ pub(super) const ROWS: [Row; 17] = [
             unit: "%",
         },
     },
-    Row {
+    Metric {
         key: "loc_error_m_window",
         label: "localisation error",
         scale: 1.0,
@@ -140,41 +192,74 @@ pub(super) const ROWS: [Row; 17] = [
             unit: "m",
         },
     },
-    Row {
+    Metric {
         key: "identified_final",
         label: "identified targets (final)",
         scale: 1.0,
         source: Source::Summary(|s| Some(s.identified_final)),
     },
-    Row {
+    Metric {
         key: "violations",
         label: "guarantee violations",
         scale: 1.0,
         source: Source::Summary(|s| Some(s.violations as f64)),
     },
-    Row {
+    Metric {
         key: "time_all_identified_s",
         label: "all identified at (s)",
         scale: 1.0,
         source: Source::Summary(|s| s.time_all_identified_s),
     },
-    Row {
+    Metric {
         key: "time_ua_below_25_s",
         label: "UA below 25 % at (s)",
         scale: 1.0,
         source: Source::Summary(|s| s.time_ua_below_25_s),
     },
-    Row {
+    Metric {
         key: "time_ua_below_15_s",
         label: "UA below 15 % at (s)",
         scale: 1.0,
         source: Source::Summary(|s| s.time_ua_below_15_s),
     },
-    Row {
+    Metric {
         key: "real_time_factor",
         label: "real-time factor",
         scale: 1.0,
         source: Source::Summary(|s| Some(s.real_time_factor)),
+    },
+    // The radio's.
+    Metric {
+        key: "estimates_lost_share",
+        label: "peer estimates lost by the radio (%)",
+        scale: 100.0,
+        source: Source::Summary(|s| {
+            let lost: u64 = s.agents.iter().map(|a| a.estimates_lost).sum();
+            let heard = lost + s.agents.iter().map(|a| a.estimates_received).sum::<u64>();
+            (heard > 0).then(|| lost as f64 / heard as f64)
+        }),
+    },
+    Metric {
+        key: "tokens_lost_share",
+        label: "tokens lost by the radio (%)",
+        scale: 100.0,
+        source: Source::Summary(|s| {
+            let lost: u64 = s.agents.iter().map(|a| a.tokens_lost).sum();
+            // Every token sent (the observer sees each once) goes to every other agent.
+            let sent = s.comms.get("tokens")?.messages;
+            let links = sent * u64::from(s.uavs.saturating_sub(1));
+            (links > 0).then(|| lost as f64 / links as f64)
+        }),
+    },
+    Metric {
+        key: "estimate_kb_per_s",
+        label: "estimates sent, kB per simulated s",
+        scale: 1.0,
+        source: Source::Summary(|s| {
+            let bytes = s.comms.get("estimates")?.bytes as f64;
+            let sim_s = Some(s.sim_s).filter(|t| *t > 0.0)?;
+            Some(bytes / sim_s / 1e3)
+        }),
     },
 ];
 
@@ -185,17 +270,15 @@ pub(super) struct Compared {
     pub(super) metric: &'static str,
     /// Its name in `table.md`'s comparison, with the unit of a difference.
     pub(super) label: &'static str,
-    /// The keys of its two rows: the value of `summary.json`, the mean over the window.
-    pub(super) rows: [&'static str; 2],
+    /// Its two rows: the value of `summary.json`, the mean over the window.
+    pub(super) rows: [&'static Metric; 2],
 }
 
 impl Compared {
     /// The factor its differences are displayed with: its rows' (100 for fractions, so
     /// percentage points).
     pub(super) fn scale(&self) -> f64 {
-        ROWS.iter()
-            .find(|r| r.key == self.rows[0])
-            .map_or(1.0, |r| r.scale)
+        self.rows[0].scale
     }
 }
 
@@ -204,34 +287,33 @@ pub(super) const COMPARED: [Compared; 4] = [
     Compared {
         metric: "ua",
         label: "UA (pp)",
-        rows: ["ua_final", "ua_window"],
+        rows: [metric("ua_final"), metric("ua_window")],
     },
     Compared {
         metric: "oa",
         label: "OA (pp)",
-        rows: ["oa_final", "oa_window"],
+        rows: [metric("oa_final"), metric("oa_window")],
     },
     Compared {
         metric: "target_set_area",
         label: "target-set area (pp)",
-        rows: ["target_set_area_mean", "target_set_area_window"],
+        rows: [
+            metric("target_set_area_mean"),
+            metric("target_set_area_window"),
+        ],
     },
     Compared {
         metric: "loc_error_m",
         label: "localisation error (m)",
-        rows: ["loc_error_mean_m", "loc_error_m_window"],
+        rows: [metric("loc_error_mean_m"), metric("loc_error_m_window")],
     },
 ];
 
-/// A run's value of every row of the table, in row order: from its summary's values and its
-/// series of metrics per step (its `timeseries.csv`).
+/// A run's value of every metric, in the order of [`METRICS`] (so its values of the sweep's
+/// rows come first): from its summary's values and its series of metrics per step (its
+/// `timeseries.csv`).
 pub(super) fn run_values(summary: &Summary, series: &[StepMetrics]) -> Vec<Option<f64>> {
-    ROWS.iter()
-        .map(|row| match row.source {
-            Source::Summary(value) => value(summary),
-            Source::Window { step, .. } => window_mean(series, step),
-        })
-        .collect()
+    METRICS.iter().map(|m| m.value(summary, series)).collect()
 }
 
 /// The mean of `value` of each step's mean over agents, over the steps of [`STEADY_WINDOW_S`]
@@ -254,56 +336,6 @@ pub(super) fn digits(value: f64, scale: f64) -> usize {
     } else {
         1
     }
-}
-
-/// A row of the axis table that the sweep's table does not have: read from a run's summary.
-pub(super) struct RadioRow {
-    pub(super) key: &'static str,
-    pub(super) label: &'static str,
-    pub(super) scale: f64,
-    value: fn(&Summary) -> Option<f64>,
-}
-
-/// The radio's rows: what the links lost, measured from the agents' counters, and what the
-/// estimates cost (under loss they carry whole sets).
-pub(super) const RADIO_ROWS: [RadioRow; 3] = [
-    RadioRow {
-        key: "estimates_lost_share",
-        label: "peer estimates lost by the radio (%)",
-        scale: 100.0,
-        value: |s| {
-            let lost: u64 = s.agents.iter().map(|a| a.estimates_lost).sum();
-            let heard = lost + s.agents.iter().map(|a| a.estimates_received).sum::<u64>();
-            (heard > 0).then(|| lost as f64 / heard as f64)
-        },
-    },
-    RadioRow {
-        key: "tokens_lost_share",
-        label: "tokens lost by the radio (%)",
-        scale: 100.0,
-        value: |s| {
-            let lost: u64 = s.agents.iter().map(|a| a.tokens_lost).sum();
-            // Every token sent (the observer sees each once) goes to every other agent.
-            let sent = s.comms.get("tokens")?.messages;
-            let links = sent * u64::from(s.uavs.saturating_sub(1));
-            (links > 0).then(|| lost as f64 / links as f64)
-        },
-    },
-    RadioRow {
-        key: "estimate_kb_per_s",
-        label: "estimates sent, kB per simulated s",
-        scale: 1.0,
-        value: |s| {
-            let bytes = s.comms.get("estimates")?.bytes as f64;
-            let sim_s = Some(s.sim_s).filter(|t| *t > 0.0)?;
-            Some(bytes / sim_s / 1e3)
-        },
-    },
-];
-
-/// A run's values of the radio rows, from its `summary.json`.
-pub(super) fn radio_values(summary: &Summary) -> Vec<Option<f64>> {
-    RADIO_ROWS.iter().map(|row| (row.value)(summary)).collect()
 }
 
 #[cfg(test)]
@@ -390,10 +422,21 @@ mod tests {
         let short = [step(50.0, 0.5, Some(1.0)), step(99.0, 0.5, Some(1.0))];
         let values = run_values(&Summary::default(), &short);
         assert_eq!(values[row("ua_window")], None);
-        // Every compared metric has both its rows.
+    }
+
+    #[test]
+    fn every_metric_has_its_own_key_and_the_compared_ones_are_rows_of_the_table() {
+        for (i, m) in METRICS.iter().enumerate() {
+            assert!(
+                METRICS[..i].iter().all(|o| o.key != m.key),
+                "{} twice",
+                m.key
+            );
+        }
+        assert_eq!(METRICS[ROWS.len()].key, "estimates_lost_share");
         for c in &COMPARED {
-            for key in c.rows {
-                assert!(ROWS.iter().any(|r| r.key == key), "{key}");
+            for row in c.rows {
+                assert!(ROWS.iter().any(|r| std::ptr::eq(r, row)), "{}", row.key);
             }
         }
     }

@@ -1,4 +1,5 @@
-//! Which of a run's processes live on this host, and what the bridge therefore forwards.
+//! Where a run's processes are placed: which of them live on this host, and what the bridge
+//! therefore forwards.
 
 use std::collections::BTreeSet;
 use std::fmt;
