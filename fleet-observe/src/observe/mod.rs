@@ -33,9 +33,19 @@
 //! subscriber) and the guidance token's plans (decoded then). Sinks only read what was
 //! measured: the run is the same with them or without.
 //!
+//! The observer's thread is a loop ([`spawn`]) over a few parts, each in its own module:
+//! its ports on the run's services (`ports`), the reception of the agents' estimates as an
+//! agent receives them (`reception`), what the sinks are shown (`showing`) and the record it
+//! hands back ([`ObserverReport`], `report`). The loop owns the order of everything: what is
+//! read when, when a step is acknowledged, measured and shown.
+//!
 //! Signals are left to the tokio side ([`SignalHandlingMode::Disabled`]).
 
 pub mod metrics;
+mod ports;
+mod reception;
+mod report;
+mod showing;
 pub mod sink;
 pub mod tally;
 
@@ -46,38 +56,24 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use estimator::EstimateReadError;
-use estimator::EstimatorConfig;
-use estimator::fusion::SharedSet;
-use estimator::message::{self, EstimateInbox, PeerMessage};
-use estimator::occupancy::OccupancyMap;
-use fleet_process::resources::{CpuClock, PhaseClock, PhaseTimes};
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
-use iceoryx2::port::subscriber::Subscriber;
+use fleet_process::resources::{CpuClock, PhaseClock};
 use iceoryx2::prelude::{SignalHandlingMode, WaitSet};
-use protocol::codec;
-use protocol::frame::CvsFrame;
-use protocol::ipc::{
-    EventService, Ipc, PubSubService, RunNode, WakeEvent, WireService, WireSubscriber, scan_nodes,
-    wait_for_wake,
-};
-use protocol::radio::Radio;
-use protocol::scenario::{Exchange, Scenario};
+use protocol::ipc::{Ipc, RunNode, scan_nodes, wait_for_wake};
+use protocol::scenario::Scenario;
 use protocol::service::RunId;
 use protocol::wire::{
-    DropReason, GuidanceToken, HELLO_STEP, ObserverAck, PlannedView, TargetTruth, TruthState,
-    UavCommand, UavMask, WireHeader, WireKind, unix_now_ns,
+    DropReason, HELLO_STEP, TruthState, UavMask, WireHeader, WireKind, unix_now_ns,
 };
+use sets::grid::GroundGrid;
 use tokio::sync::mpsc::UnboundedSender;
 
-use metrics::{
-    AgentSpread, EstimateObserveError, FusedSets, ObservedEstimate, SetMetrics, identified_ids,
-    violations,
-};
-use sink::{Sink, SinkMaker, StepView};
-use tally::{AgentTally, Comms, ServiceKind};
+use metrics::{AgentSpread, ObservedEstimate, SetMetrics, identified_ids, violations};
+use ports::Ports;
+use reception::Reception;
+pub use report::{FinalState, ObserverEnd, ObserverReport};
+use showing::Showing;
+use sink::SinkMaker;
+use tally::ServiceKind;
 
 /// What the observer needs to know about the run.
 pub struct ObserverConfig {
@@ -157,67 +153,6 @@ pub enum ObserverEvent {
     },
 }
 
-/// How the observer's loop ended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ObserverEnd {
-    /// The world announced the end of the run and every truth received was processed.
-    EndOfRun,
-    /// The orchestrator stopped it.
-    Stopped,
-}
-
-/// One agent's final knowledge, for the pictures.
-#[derive(Clone, Debug)]
-pub struct FinalState {
-    /// Step.
-    pub step: u64,
-    /// Simulated time, seconds.
-    pub time_s: f64,
-    /// The agent whose sets these are (the lowest id measured at that step).
-    pub uav: u32,
-    /// That agent's fused sets of the step.
-    pub sets: FusedSets,
-    /// The targets' truth at that step.
-    pub targets: Vec<TargetTruth>,
-}
-
-/// Everything the observer gathered, returned when its thread ends.
-#[derive(Clone, Debug)]
-pub struct ObserverReport {
-    /// Truth steps processed.
-    pub steps: u64,
-    /// How it ended.
-    pub end: ObserverEnd,
-    /// Per agent.
-    pub agents: BTreeMap<u32, AgentTally>,
-    /// Traffic per service kind.
-    pub comms: Comms,
-    /// Messages the observer could not use, by reason.
-    pub dropped: BTreeMap<String, u64>,
-    /// The last measured step's fused sets of one agent.
-    pub final_state: Option<FinalState>,
-    /// Per agent, its last measured step and its `X̄` after that step's fusion as the
-    /// observer rebuilt it: an agent whose run ended there holds the same set.
-    pub final_undetected: BTreeMap<u32, (u64, SharedSet)>,
-    /// The fleet's map: every map update of every estimate merged.
-    pub oem: OccupancyMap,
-    /// Each UAV's ground track (x, y) per step.
-    pub tracks: Vec<Vec<[f64; 2]>>,
-    /// Every UAV's true pose at every step processed (`tracks.csv`).
-    pub poses: Vec<crate::results::tracks::UavPose>,
-    /// Per UAV, the steps at which the world's geofence overrode its agent's command
-    /// ([`protocol::wire::UavTruth::geofence_override`]).
-    pub geofence_overrides: Vec<u64>,
-    /// Wall time from the first truth to the last step's ack.
-    pub stepping: Option<Duration>,
-    /// Where the observer thread's time went ([`phase`]): thread CPU and wall time.
-    pub phases: PhaseTimes,
-    /// The files the sinks made (`run.gif`), to be written into the run's output.
-    pub files: Vec<sink::SinkFile>,
-    /// Why an essential sink (the recording or the live view) failed, if one did.
-    pub sink_failure: Option<String>,
-}
-
 /// What the observer says once it has started.
 #[derive(Clone, Debug, Default)]
 pub struct ObserverStarted {
@@ -275,76 +210,8 @@ const WAIT_SLICE: Duration = Duration::from_millis(20);
 const HELLO_INTERVAL: Duration = Duration::from_millis(200);
 /// Interval of node scans while waiting for estimates.
 const SCAN_INTERVAL: Duration = Duration::from_millis(100);
-/// Steps of estimates kept per agent ahead of the truth being processed.
-const MAX_STORED_STEPS: usize = 64;
 
-struct Ports {
-    truth: Subscriber<Ipc, TruthState, ()>,
-    estimates: Vec<(u32, WireSubscriber)>,
-    tokens: WireSubscriber,
-    /// The shown UAV's camera frames, when a viewer is on.
-    frames: Option<Subscriber<Ipc, CvsFrame, ()>>,
-    ack: Publisher<Ipc, ObserverAck, ()>,
-    world_wake: Notifier<Ipc>,
-    wake: Listener<Ipc>,
-    _services: Services,
-}
-
-/// The services the ports belong to, kept open as long as the ports.
-struct Services {
-    _truth: PubSubService<TruthState>,
-    _estimates: Vec<WireService>,
-    _guidance: WireService,
-    _ack: PubSubService<ObserverAck>,
-    _events: Vec<EventService>,
-    _frames: Option<PubSubService<CvsFrame>>,
-}
-
-impl Ports {
-    /// The observer's ports; with `camera`, also a subscriber to that UAV's frames.
-    fn open(node: &RunNode, uavs: u32, camera: Option<u32>) -> anyhow::Result<Ports> {
-        let truth_service = node.open_truth()?;
-        let truth = truth_service.subscriber_builder().create()?;
-        let mut estimate_services = Vec::new();
-        let mut estimates = Vec::new();
-        for uav in 0..uavs {
-            let s = node.open_estimate(uav)?;
-            estimates.push((uav, s.subscriber_builder().create()?));
-            estimate_services.push(s);
-        }
-        let guidance = node.open_guidance()?;
-        let tokens = guidance.subscriber_builder().create()?;
-        let ack_service = node.open_observer_ack()?;
-        let ack = ack_service.publisher_builder().create()?;
-        let world = node.open_world_wake()?;
-        let world_wake = world.notifier_builder().create()?;
-        let own = node.open_observer_wake()?;
-        let wake = own.listener_builder().create()?;
-        let frame_service = camera.map(|uav| node.open_cvs(uav)).transpose()?;
-        let frames = frame_service
-            .as_ref()
-            .map(|s| s.subscriber_builder().create())
-            .transpose()?;
-        Ok(Ports {
-            truth,
-            estimates,
-            tokens,
-            frames,
-            ack,
-            world_wake,
-            wake,
-            _services: Services {
-                _truth: truth_service,
-                _estimates: estimate_services,
-                _guidance: guidance,
-                _ack: ack_service,
-                _events: vec![world, own],
-                _frames: frame_service,
-            },
-        })
-    }
-}
-
+/// The observer thread: builds its sinks and ports, runs the loop, ends the sinks.
 fn observe(
     config: &ObserverConfig,
     makers: Vec<SinkMaker>,
@@ -372,96 +239,68 @@ fn observe(
     // The spawner waits for this; it is gone only if the spawner is.
     let _ = ready.send(started);
     drop(city);
-    let camera = sinks.iter().find_map(|s| s.camera());
-    let ports = Ports::open(&node, uavs, camera).context("cannot open the observer's ports")?;
+    let showing = Showing::new(sinks, config.shown_uav);
+    let ports =
+        Ports::open(&node, uavs, showing.camera()).context("cannot open the observer's ports")?;
     let waitset = node.waitset()?;
     let _guard = waitset
         .attach_notification(&ports.wake)
         .context("cannot wait on the observer's wake-up event")?;
-    let estimator = EstimatorConfig::from_scenario(&config.scenario);
+    let reception = Reception::new(&config.scenario);
     let mut observer = Observer {
-        radio: Radio::from_scenario(&config.scenario),
-        sent: BTreeMap::new(),
         config,
         run_tag: config.run.tag(),
         ports: &ports,
         waitset: &waitset,
         stop,
         events,
-        report: ObserverReport {
-            steps: 0,
-            end: ObserverEnd::Stopped,
-            agents: BTreeMap::new(),
-            comms: Comms::default(),
-            dropped: BTreeMap::new(),
-            final_state: None,
-            final_undetected: BTreeMap::new(),
-            oem: OccupancyMap::new(estimator.oem_grid),
-            tracks: vec![Vec::new(); uavs as usize],
-            poses: Vec::new(),
-            geofence_overrides: vec![0; uavs as usize],
-            stepping: None,
-            phases: PhaseTimes::new(),
-            files: Vec::new(),
-            sink_failure: None,
-        },
-        estimator,
+        report: ObserverReport::new(uavs, reception.oem_grid()),
         truths: VecDeque::new(),
-        store: BTreeMap::new(),
-        inbox: EstimateInbox::new(),
-        exchange: config.scenario.comms.exchange,
         next_fault: 0,
         end_of_run: false,
         first_truth: None,
         clock,
-        camera,
-        shows_plans: sinks.iter().any(|s| s.shows_plans()),
-        sinks,
-        plans: (0, BTreeMap::new()),
-        oem_changed: false,
+        reception,
+        showing,
     };
     let ended = observer.main_loop();
-    observer.finish_showing();
+    observer.showing.finish(&mut observer.report);
     ended?;
     observer.report.phases = observer.clock.times();
     Ok(observer.report)
 }
 
+/// The observer's loop and its state: the run's ports, the truths not yet processed, the
+/// faults, the clock of its time, and the parts it hands each message to.
 struct Observer<'a> {
+    /// The run.
     config: &'a ObserverConfig,
+    /// The tag of the run's messages ([`RunId::tag`]).
     run_tag: u64,
+    /// The observer's ports.
     ports: &'a Ports,
+    /// Waits on [`Ports::wake`].
     waitset: &'a WaitSet<Ipc>,
+    /// Raised by the orchestrator to end the loop.
     stop: &'a AtomicBool,
+    /// To the tokio side.
     events: &'a UnboundedSender<ObserverEvent>,
-    estimator: EstimatorConfig,
+    /// What the observer gathered so far.
     report: ObserverReport,
+    /// Truths received, not yet processed, in order.
     truths: VecDeque<TruthState>,
-    /// Decoded estimates per agent, by step, not yet measured.
-    store: BTreeMap<u32, BTreeMap<u64, ObservedEstimate>>,
-    /// The agents' links.
-    radio: Radio,
-    /// With a latency of `d` steps, the estimates of the last `d` steps measured, by step:
-    /// those the agents fuse in the next `d` steps.
-    sent: BTreeMap<u64, Vec<ObservedEstimate>>,
-    /// The agents' last sets, the bases of their deltas.
-    inbox: EstimateInbox,
-    /// What the agents' estimates carry (`comms.exchange`).
-    exchange: Exchange,
+    /// The next of [`ObserverConfig::fault_times`] not yet due.
     next_fault: usize,
+    /// Whether the world announced the end of the run.
     end_of_run: bool,
+    /// When the first truth of the run arrived.
     first_truth: Option<Instant>,
+    /// Where the thread's time goes ([`phase`]).
     clock: PhaseClock,
+    /// The agents' estimates, received as an agent receives them.
+    reception: Reception,
     /// What the run is shown to.
-    sinks: Vec<Box<dyn Sink>>,
-    /// The UAV whose camera frames a sink shows.
-    camera: Option<u32>,
-    /// Whether a sink shows the guidance plans.
-    shows_plans: bool,
-    /// The newest guidance round seen and its plans, by UAV (the first plan seen of each).
-    plans: (u64, BTreeMap<u32, PlannedView>),
-    /// Whether the fleet's map changed since the last step shown.
-    oem_changed: bool,
+    showing: Showing,
 }
 
 impl Observer<'_> {
@@ -510,22 +349,7 @@ impl Observer<'_> {
     }
 
     fn send_ack(&self, step: u64, restarted: UavMask) -> anyhow::Result<()> {
-        self.ports
-            .ack
-            .send_copy(ObserverAck {
-                run_tag: self.run_tag,
-                step,
-                restarted,
-            })
-            .context("cannot send the observer's ack")?;
-        if let Err(e) = self
-            .ports
-            .world_wake
-            .notify_with_custom_event_id(WakeEvent::ObserverAck.id())
-        {
-            tracing::debug!(error = ?e, "cannot wake the world");
-        }
-        Ok(())
+        self.ports.send_ack(self.run_tag, step, restarted)
     }
 
     /// Reads everything pending: truths into the queue, estimates decoded into the store,
@@ -551,7 +375,7 @@ impl Observer<'_> {
                         );
                         self.truths.push_back(truth);
                     } else {
-                        self.drop_message("truth", DropReason::OtherRun);
+                        self.report.drop_message("truth", DropReason::OtherRun);
                     }
                 }
                 Ok(None) => break,
@@ -578,13 +402,7 @@ impl Observer<'_> {
                 Ok(Some(sample)) => {
                     let frame = sample.payload();
                     if frame.header.run_tag == self.run_tag && frame.is_well_formed() {
-                        for sink in &mut self.sinks {
-                            if sink.camera() == self.camera {
-                                let before = self.clock.enter(sink.phase());
-                                sink.frame(frame);
-                                self.clock.enter(before);
-                            }
-                        }
+                        self.showing.frame(frame, &mut self.clock);
                     }
                 }
                 Ok(None) => return,
@@ -596,12 +414,7 @@ impl Observer<'_> {
         }
     }
 
-    /// Counts a dropped message as `{what}:{reason}` (e.g. `estimate:other-run`).
-    fn drop_message(&mut self, what: &str, reason: DropReason) {
-        let key = format!("{what}:{}", reason.label());
-        *self.report.dropped.entry(key).or_default() += 1;
-    }
-
+    /// Hands every pending message of agent `idx`'s estimate service to the reception.
     fn drain_estimates(&mut self, idx: usize) {
         let (sender, sub) = &self.ports.estimates[idx];
         let sender = *sender;
@@ -614,88 +427,15 @@ impl Observer<'_> {
                     return;
                 }
             };
-            let header = *sample.user_header();
-            let len = sample.payload().len();
-            // Under the measurement exchange the agents' sets come in state messages, for the
-            // observers only; their estimates carry measurements, for the traffic and the map.
-            let (kind, service) = match self.exchange {
-                Exchange::Measurements if header.kind == WireKind::State as u32 => {
-                    (WireKind::State, ServiceKind::States)
-                }
-                _ => (WireKind::Estimate, ServiceKind::Estimates),
-            };
-            self.report.comms.count_timed(
-                service,
-                (len + std::mem::size_of::<WireHeader>()) as u64,
-                header.sent_unix_ns,
-                unix_now_ns(),
-            );
-            if let Err(reason) = header.check(len, kind, self.run_tag, Some(sender)) {
-                drop(sample);
-                self.drop_estimate(sender, reason);
-                continue;
-            }
-            if self.exchange == Exchange::Measurements && kind == WireKind::Estimate {
-                let read = message::from_bytes(sample.payload())
-                    .map_err(EstimateReadError::from)
-                    .and_then(|msg| PeerMessage::from_msg(&msg, &self.estimator).map(|_| msg));
-                drop(sample);
-                match read {
-                    Ok(msg) if msg.uav == sender => {
-                        let tally = self.report.agents.entry(sender).or_default();
-                        tally.observe_message(msg.step, msg.incarnation, msg.seq, msg.stats);
-                        for u in &msg.oem {
-                            if let Ok((index, cell)) =
-                                OccupancyMap::cell_of_update(&self.estimator.oem_grid, u)
-                            {
-                                self.oem_changed |= self.report.oem.merge_cell(index, cell);
-                            }
-                        }
-                    }
-                    Ok(_) => self.drop_estimate(sender, DropReason::Sender),
-                    Err(err) => {
-                        tracing::warn!(uav = sender, error = %err, "unreadable estimate dropped");
-                        self.drop_estimate(sender, err.drop_reason());
-                    }
-                }
-                continue;
-            }
-            let decoded =
-                ObservedEstimate::read(&mut self.inbox, sample.payload(), &self.estimator);
-            drop(sample);
-            match decoded {
-                Ok((e, _)) if e.uav() != sender => {
-                    self.drop_estimate(sender, DropReason::Sender);
-                    tracing::warn!(
-                        uav = sender,
-                        claims = e.uav(),
-                        "estimate of another UAV dropped"
-                    );
-                }
-                Ok((e, map)) => {
-                    self.oem_changed |= self.report.oem.merge(&map);
-                    if self.exchange == Exchange::Sets {
-                        self.report.agents.entry(sender).or_default().observe(&e);
-                    }
-                    let steps = self.store.entry(sender).or_default();
-                    steps.insert(e.step(), e);
-                    while steps.len() > MAX_STORED_STEPS {
-                        steps.pop_first();
-                    }
-                }
-                Err(EstimateObserveError::Read(err)) => {
-                    tracing::warn!(uav = sender, error = %err, "unreadable estimate dropped");
-                    self.drop_estimate(sender, err.drop_reason());
-                }
-            }
+            let changed = self
+                .reception
+                .receive(sender, sample, self.run_tag, &mut self.report);
+            self.showing.note_map(changed);
         }
     }
 
-    fn drop_estimate(&mut self, uav: u32, reason: DropReason) {
-        self.report.agents.entry(uav).or_default().estimates_dropped += 1;
-        self.drop_message("estimate", reason);
-    }
-
+    /// Counts the guidance tokens and hands them to the showing, which reads their plans if a
+    /// sink shows them.
     fn drain_tokens(&mut self) {
         loop {
             let sample = match self.ports.tokens.receive() {
@@ -711,18 +451,10 @@ impl Observer<'_> {
             // Any agent may send the token: the sender is not checked.
             if let Err(reason) = header.check(len, WireKind::Token, self.run_tag, None) {
                 drop(sample);
-                self.drop_message("token", reason);
+                self.report.drop_message("token", reason);
                 continue;
             }
-            if self.shows_plans {
-                match codec::decode::<GuidanceToken>(sample.payload()) {
-                    Ok(token) => self.note_plans(token),
-                    Err(e) => {
-                        tracing::warn!(error = %e, "unreadable token");
-                        self.drop_message("token", DropReason::Malformed);
-                    }
-                }
-            }
+            self.showing.token(sample.payload(), &mut self.report);
             drop(sample);
             self.report.comms.count_timed(
                 ServiceKind::Tokens,
@@ -730,69 +462,6 @@ impl Observer<'_> {
                 header.sent_unix_ns,
                 unix_now_ns(),
             );
-        }
-    }
-
-    /// Keeps the plans of the newest round: a newer round replaces them, and within a round
-    /// the first plan seen of each UAV is kept (as the agents merge tokens).
-    fn note_plans(&mut self, token: GuidanceToken) {
-        let (round, plans) = &mut self.plans;
-        if token.round < *round {
-            return;
-        }
-        if token.round > *round {
-            *round = token.round;
-            plans.clear();
-        }
-        for plan in token.plans {
-            plans.entry(plan.uav).or_insert(plan);
-        }
-    }
-
-    /// Ends every sink, keeping the files they made.
-    fn finish_showing(&mut self) {
-        for sink in std::mem::take(&mut self.sinks) {
-            let essential = sink.essential();
-            match sink.finish() {
-                Ok(file) => self.report.files.extend(file),
-                Err(e) => self.sink_failed(essential, &*e),
-            }
-        }
-    }
-
-    /// Shows a measured step to every sink; a sink that fails is abandoned.
-    fn show(&mut self, truth: &TruthState, sets: Option<(u32, &FusedSets)>, step: &StepMetrics) {
-        let view = StepView {
-            truth,
-            sets,
-            oem: &self.report.oem,
-            oem_changed: std::mem::take(&mut self.oem_changed),
-            plans: &self.plans.1,
-            metrics: step,
-        };
-        let mut failed = Vec::new();
-        for (i, sink) in self.sinks.iter_mut().enumerate() {
-            let before = self.clock.enter(sink.phase());
-            if let Err(e) = sink.step(&view) {
-                failed.push((i, e));
-            }
-            self.clock.enter(before);
-        }
-        for (i, e) in failed.into_iter().rev() {
-            let sink = self.sinks.remove(i);
-            self.sink_failed(sink.essential(), &*e);
-        }
-    }
-
-    /// Logs a sink's failure; an essential sink's fails the run.
-    fn sink_failed(&mut self, essential: bool, e: &(dyn std::error::Error + Send + Sync)) {
-        if essential {
-            tracing::error!(error = %e, "a view of the run failed");
-            self.report
-                .sink_failure
-                .get_or_insert_with(|| e.to_string());
-        } else {
-            tracing::warn!(error = %e, "a view of the run abandoned");
         }
     }
 
@@ -810,7 +479,7 @@ impl Observer<'_> {
         let mut last_scan = Instant::now();
         loop {
             self.drain();
-            awaited.retain(|uav| !self.store.get(uav).is_some_and(|s| s.contains_key(&k)));
+            awaited.retain(|&uav| !self.reception.has(uav, k));
             if awaited.is_empty() || self.stopping() {
                 break;
             }
@@ -850,14 +519,23 @@ impl Observer<'_> {
     /// traffic, shows the step to the sinks and returns its metrics.
     fn measure(&mut self, truth: &TruthState, live_agents: u32) -> StepMetrics {
         let k = truth.step;
-        let estimates = self.take_estimates(k);
-        let violation_count = self.check_guarantee(truth, &estimates);
-        let (all_fused, agents) = self.fuse_and_measure(truth, &estimates);
+        let grid = self.reception.grid();
+        let estimates = self.reception.take(k);
+        let violation_count = check_guarantee(truth, &estimates, &grid);
+        let all_fused = self.reception.fuse(k, &estimates);
+        let mut agents = BTreeMap::new();
+        for (uav, fused) in &all_fused {
+            // Its `X̄` after this step's fusion, the last it holds if its run ends here.
+            self.report
+                .final_undetected
+                .insert(*uav, (k, fused.undetected.clone()));
+            agents.insert(*uav, SetMetrics::measure(fused, truth.targets(), &grid));
+        }
         let spread = AgentSpread::over(agents.values());
         let estimate_count = estimates.len() as u32;
         let identified_any = identified_ids(&estimates).len() as u32;
-        self.keep_sent(k, estimates);
-        self.record_fleet(truth, live_agents);
+        self.reception.keep_sent(k, estimates);
+        self.report.record_fleet(truth, live_agents);
         let step = StepMetrics {
             step: k,
             time_s: truth.time_s,
@@ -869,139 +547,9 @@ impl Observer<'_> {
             agents,
             violations: violation_count,
         };
-        self.show_fused(truth, all_fused, &step);
-        step
-    }
-
-    /// Takes every agent's estimate of step `k` out of the store, dropping older ones.
-    fn take_estimates(&mut self, k: u64) -> Vec<ObservedEstimate> {
-        self.store
-            .values_mut()
-            .filter_map(|steps| {
-                let e = steps.remove(&k);
-                // Older steps will never be measured now.
-                steps.retain(|&s, _| s > k);
-                e
-            })
-            .collect()
-    }
-
-    /// Checks every estimate against the truth, logs each violation and returns their count.
-    fn check_guarantee(&self, truth: &TruthState, estimates: &[ObservedEstimate]) -> u32 {
-        let k = truth.step;
-        let grid = self.estimator.grid;
-        let mut violation_count = 0;
-        for e in estimates {
-            for v in violations(e, truth.targets(), &grid) {
-                violation_count += 1;
-                tracing::error!(
-                    step = k,
-                    agent = v.uav,
-                    target = v.target,
-                    set = v.set.name(),
-                    distance_m = v.distance_m,
-                    "guarantee violated: target outside its set"
-                );
-            }
-        }
-        violation_count
-    }
-
-    /// Fuses each agent's sets as the agent did (with the estimates its links delivered),
-    /// keeps its `X̄` as its last, and measures them against the truth.
-    fn fuse_and_measure(
-        &mut self,
-        truth: &TruthState,
-        estimates: &[ObservedEstimate],
-    ) -> (Vec<(u32, FusedSets)>, BTreeMap<u32, SetMetrics>) {
-        let k = truth.step;
-        let grid = self.estimator.grid;
-        let mut agents = BTreeMap::new();
-        let d = self.radio.latency_steps();
-        let sent: &[ObservedEstimate] = if d == 0 {
-            estimates
-        } else {
-            k.checked_sub(d)
-                .and_then(|from| self.sent.get(&from))
-                .map_or(&[], Vec::as_slice)
-        };
-        let all_fused = match self.exchange {
-            Exchange::Sets => FusedSets::of_agents(estimates, sent, &self.estimator, &self.radio),
-            // The agents' state messages hold their sets once they applied their peers'.
-            Exchange::Measurements => estimates.iter().map(FusedSets::held).collect(),
-        };
-        let all_fused: Vec<(u32, FusedSets)> = estimates
-            .iter()
-            .map(ObservedEstimate::uav)
-            .zip(all_fused)
-            .collect();
-        for (uav, fused) in &all_fused {
-            self.report
-                .final_undetected
-                .insert(*uav, (k, fused.undetected.clone()));
-            agents.insert(*uav, SetMetrics::measure(fused, truth.targets(), &grid));
-        }
-        (all_fused, agents)
-    }
-
-    /// With a link latency, keeps step `k`'s estimates for the steps that fuse them.
-    fn keep_sent(&mut self, k: u64, estimates: Vec<ObservedEstimate>) {
-        let d = self.radio.latency_steps();
-        // Under the measurement exchange the agents' own state messages are measured: nothing
-        // is fused later.
-        if d > 0 && self.exchange == Exchange::Sets {
-            // Kept for the steps `k + 1 ..= k + d`, which fuse them.
-            self.sent.insert(k, estimates);
-            self.sent = self.sent.split_off(&k.saturating_add(1).saturating_sub(d));
-        }
-    }
-
-    /// Records the UAVs' tracks and geofence overrides and counts the step's frames and
-    /// commands of the `live_agents`.
-    fn record_fleet(&mut self, truth: &TruthState, live_agents: u32) {
-        for u in truth.uavs() {
-            if let Some(track) = self.report.tracks.get_mut(u.id as usize) {
-                track.push([u.position[0], u.position[1]]);
-            }
-            self.report.poses.push(crate::results::tracks::UavPose {
-                step: truth.step,
-                time_s: truth.time_s,
-                uav: u.id,
-                position: u.position,
-                yaw: u.yaw,
-            });
-            if let Some(count) = self.report.geofence_overrides.get_mut(u.id as usize) {
-                *count += u64::from(u.geofence_override());
-            }
-        }
-        self.report.comms.count(
-            ServiceKind::Frames,
-            u64::from(live_agents),
-            u64::from(live_agents) * std::mem::size_of::<CvsFrame>() as u64,
-        );
-        self.report.comms.count(
-            ServiceKind::Commands,
-            u64::from(live_agents),
-            u64::from(live_agents) * std::mem::size_of::<UavCommand>() as u64,
-        );
-    }
-
-    /// Shows the step with the shown UAV's sets and keeps the lowest id's as the final state.
-    fn show_fused(
-        &mut self,
-        truth: &TruthState,
-        all_fused: Vec<(u32, FusedSets)>,
-        step: &StepMetrics,
-    ) {
-        let k = truth.step;
-        // The shown UAV's sets are shown (the lowest id's when its estimate did not arrive);
-        // the lowest id comes first, and its sets are the ones drawn in `sets.png`.
-        let shown = all_fused
-            .iter()
-            .find(|(uav, _)| *uav == self.config.shown_uav)
-            .or(all_fused.first())
-            .map(|(uav, fused)| (*uav, fused));
-        self.show(truth, shown, step);
+        self.showing
+            .show_fused(truth, &all_fused, &step, &mut self.clock, &mut self.report);
+        // The lowest id's sets are the final state (drawn in `sets.png`).
         if let Some((uav, sets)) = all_fused.into_iter().next() {
             self.report.final_state = Some(FinalState {
                 step: k,
@@ -1011,6 +559,7 @@ impl Observer<'_> {
                 targets: truth.targets().to_vec(),
             });
         }
+        step
     }
 
     /// Lets the orchestrator apply the faults due by this step's time before the step is
@@ -1049,4 +598,24 @@ impl Observer<'_> {
         tracing::warn!(step = truth.step, "faults were not applied in time");
         0
     }
+}
+
+/// Checks every estimate against the truth, logs each violation and returns their count.
+fn check_guarantee(truth: &TruthState, estimates: &[ObservedEstimate], grid: &GroundGrid) -> u32 {
+    let k = truth.step;
+    let mut violation_count = 0;
+    for e in estimates {
+        for v in violations(e, truth.targets(), grid) {
+            violation_count += 1;
+            tracing::error!(
+                step = k,
+                agent = v.uav,
+                target = v.target,
+                set = v.set.name(),
+                distance_m = v.distance_m,
+                "guarantee violated: target outside its set"
+            );
+        }
+    }
+    violation_count
 }
