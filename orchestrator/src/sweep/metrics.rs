@@ -1,12 +1,12 @@
-//! The metrics a sweep reports of each run, one record each ([`METRICS`]): the key of the JSON
+//! The metrics a sweep reports of each run, one record each (`METRICS`): the key of the JSON
 //! tables, the label of the Markdown ones, the factor its values are shown with and where a
 //! run's value comes from (its `summary.json`, or its `timeseries.csv` over the steady window
 //! [`STEADY_WINDOW_S`]).
 //!
-//! Every table of a sweep reads them here: the sweep's table has a row per metric of [`ROWS`]
+//! Every table of a sweep reads them here: the sweep's table has a row per metric of `ROWS`
 //! ([`super::table`]), an axis table a row per metric, the radio's included ([`super::axis`]),
 //! the suite's table a column per metric it picks ([`super::suite`]), and two variants are
-//! compared on the metrics of [`COMPARED`] ([`super::paired`]).
+//! compared on the metrics of `COMPARED` ([`super::paired`]).
 
 use std::borrow::Cow;
 
@@ -309,7 +309,7 @@ pub(super) const COMPARED: [Compared; 4] = [
     },
 ];
 
-/// A run's value of every metric, in the order of [`METRICS`] (so its values of the sweep's
+/// A run's value of every metric, in the order of `METRICS` (so its values of the sweep's
 /// rows come first): from its summary's values and its series of metrics per step (its
 /// `timeseries.csv`).
 pub(super) fn run_values(summary: &Summary, series: &[StepMetrics]) -> Vec<Option<f64>> {
