@@ -22,7 +22,7 @@ use fleet_process::usage::{ScenarioArgs, UsageError};
 use protocol::scenario::Scenario;
 use world_server::scene::{RING_BORDER_GAP_M, RoadProfile};
 
-use crate::Outcome;
+use crate::outcome::Outcome;
 
 /// The scene's file name in the output directory, as `scenario.toml` names it.
 const SCENE_FILE: &str = "city.json";

@@ -19,7 +19,7 @@ use protocol::ipc::{RunNode, scan_nodes};
 use protocol::service::RunId;
 use world_server::server::StepMode;
 
-use crate::Outcome;
+use crate::outcome::Outcome;
 use crate::run::children::{Binaries, Children};
 use crate::run::config::{RunScenarioArgs, default_out_dir};
 use crate::run::hosts::HostLayout;

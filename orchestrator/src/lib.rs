@@ -13,6 +13,8 @@
 //! - [`sweep`]: `fleet sweep`, every variant on several seeds, the paper's Table I.
 //! - [`render`]: `fleet render`, one frame as pictures.
 //! - [`city`]: `fleet city`, a real city imported from OpenStreetMap.
+//! - [`outcome`]: how a command ended ([`Outcome`]), its exit code; every command module
+//!   returns one, so none depends on this crate's root.
 //! - [`scale`]: `fleet bench scale`, whole runs per fleet size; the other benchmarks are the
 //!   `fleet-bench` crate's.
 //!
@@ -30,6 +32,7 @@
 pub mod city;
 pub mod cli;
 pub mod host;
+pub mod outcome;
 pub mod render;
 pub mod run;
 pub mod scale;
@@ -37,28 +40,7 @@ pub mod sweep;
 
 use cli::{BenchKind, Cli, FleetCommand};
 use fleet_process::usage::UsageError;
-
-/// How a `fleet` command ended, and its exit code.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Outcome {
-    /// Exit 0.
-    Success,
-    /// Exit 1: the command failed.
-    Failed,
-    /// Exit 2: bad arguments or scenario.
-    BadInput,
-}
-
-impl Outcome {
-    /// The process exit code.
-    pub fn code(self) -> u8 {
-        match self {
-            Outcome::Success => 0,
-            Outcome::Failed => 1,
-            Outcome::BadInput => 2,
-        }
-    }
-}
+pub use outcome::Outcome;
 
 /// Runs a parsed command line, printing errors to stderr.
 pub fn dispatch(cli: Cli) -> Outcome {

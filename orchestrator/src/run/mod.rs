@@ -54,7 +54,7 @@ use fleet_observe::results::summary::{RunFacts, Summary};
 use fleet_observe::results::{curves, maps, timeseries, tracks};
 use fleet_observe::viewer::Viewer;
 
-use crate::Outcome;
+use crate::outcome::Outcome;
 use children::{Binaries, Children};
 use config::RunConfig;
 use faults::{DueFault, FaultPlan, PendingResume, Resumes};

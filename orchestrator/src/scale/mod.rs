@@ -52,7 +52,7 @@ use protocol::scenario::{Exchange, Scenario};
 use protocol::wire::MAX_UAVS;
 use world_server::server::StepMode;
 
-use crate::Outcome;
+use crate::outcome::Outcome;
 
 use crate::run::config::{RunConfig, default_out_dir, new_run_id};
 use crate::run::hosts::HostLayout;

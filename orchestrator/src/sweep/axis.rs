@@ -48,7 +48,7 @@ use super::collect::{FoundRuns, MergeConfig, assemble, columns, gather, write_ta
 use super::metrics::{METRICS, Metric, metric};
 use super::paired::{self, Comparison, PairedMetric, Sides, compare_metrics};
 use super::table::{Cell, format_cell, seed_range};
-use crate::Outcome;
+use crate::outcome::Outcome;
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::pictures::{FONT, palette, short_number};
 use fleet_observe::results::curves::draw_bands;

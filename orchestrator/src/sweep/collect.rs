@@ -12,7 +12,7 @@ use anyhow::Context as _;
 
 use super::metrics::{METRICS, run_values};
 use super::table::Table;
-use crate::Outcome;
+use crate::outcome::Outcome;
 use fleet_observe::observe::StepMetrics;
 use fleet_observe::results::curves::draw_sweep;
 use fleet_observe::results::summary::Summary;

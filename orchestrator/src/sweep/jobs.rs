@@ -26,7 +26,7 @@ use anyhow::Context as _;
 use tokio::signal::unix::{SignalKind, signal};
 
 use super::{PlannedRun, RunCache};
-use crate::Outcome;
+use crate::outcome::Outcome;
 use crate::run::{execute, outcome, write_results};
 use fleet_observe::results::summary::Summary;
 

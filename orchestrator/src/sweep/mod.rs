@@ -58,7 +58,7 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use clap::Args;
 
-use crate::Outcome;
+use crate::outcome::Outcome;
 use crate::run::config::{RunConfig, check_faults, new_run_id};
 use crate::run::hosts::HostLayout;
 use crate::run::runtime;

@@ -31,7 +31,7 @@ use serde::Serialize;
 use super::metrics::{Metric, metric};
 use super::paired::{self, Comparison, Paired, PairedMetric, Sides};
 use super::table::{Cell, Table, format_cell};
-use crate::Outcome;
+use crate::outcome::Outcome;
 use fleet_process::usage::UsageError;
 use protocol::variant::Variant;
 
