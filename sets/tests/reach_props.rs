@@ -42,6 +42,34 @@ fn samples(g: &GroundGrid, n: u32) -> Vec<(Point2, CellIndex)> {
     out
 }
 
+/// The sampled positions possible after the targets move at most `r` from the `possible`
+/// ones (a possible position stays possible: it may stand still). Samples are looked up by
+/// cell, so that each looks only at the cells within the motion.
+fn moved(g: &GroundGrid, pts: &[(Point2, CellIndex)], possible: &[bool], r: f64) -> Vec<bool> {
+    let mut by_cell: Vec<Vec<Point2>> = vec![Vec::new(); (g.nx * g.ny) as usize];
+    for ((p, (ix, iy)), k) in pts.iter().zip(possible) {
+        if *k {
+            by_cell[(iy * g.nx + ix) as usize].push(*p);
+        }
+    }
+    let span = (r / g.cell_m).ceil() as i64 + 1;
+    pts.iter()
+        .map(|(p, (ix, iy))| {
+            (-span..=span).any(|dy| {
+                (-span..=span).any(|dx| {
+                    let (x, y) = (i64::from(*ix) + dx, i64::from(*iy) + dy);
+                    if x < 0 || y < 0 || x >= i64::from(g.nx) || y >= i64::from(g.ny) {
+                        return false;
+                    }
+                    by_cell[(y * i64::from(g.nx) + x) as usize]
+                        .iter()
+                        .any(|q| (p - q).norm() <= r)
+                })
+            })
+        })
+        .collect()
+}
+
 /// One event of the random histories.
 #[derive(Clone, Debug)]
 enum Event {
@@ -59,10 +87,18 @@ enum Event {
     Learn(CellBox),
     /// The reach is bounded by the set's box ([`ReachSet::bound_by_box`]).
     Bound,
+    /// The set keeps its reach over this rectangle only, with a summary of lower bounds
+    /// elsewhere ([`ReachSet::set_window`]; nothing for a set not kept over a window).
+    Window(CellBox),
 }
 
 /// The grid of the test across words: 136 columns (two whole words and 8 cells), 12 rows.
 const WIDE: (u32, u32) = (136, 12);
+
+/// The grid of the window tests: 136 columns and 48 rows, six blocks of rows
+/// ([`sets::raster::reach::SUMMARY_BLOCK`]), room for proven-free boxes that hold blocks
+/// away from every block that is not free.
+const ROOMY: (u32, u32) = (136, 48);
 
 impl Event {
     /// The event for a wide grid of `ny` rows: its box's rows folded into them, its motion
@@ -80,6 +116,7 @@ impl Event {
             Event::Free(b) => Event::Free(fold(b)),
             Event::Measure(b) => Event::Measure(fold(b)),
             Event::Learn(b) => Event::Learn(fold(b)),
+            Event::Window(b) => Event::Window(fold(b)),
             Event::Move(r) => Event::Move(4.0 * r),
             other => other,
         }
@@ -101,6 +138,7 @@ fn apply(g: &GroundGrid, set: &mut ReachSet, e: &Event, clock: &mut f64) {
         Event::Restore => *set = ReachSet::from_cells_at(g, set.cells().clone(), *clock),
         Event::Learn(b) => *set = set.restricted_copy(g, &box_set(g, b), LEARN_MARGIN),
         Event::Bound => set.bound_by_box(g),
+        Event::Window(b) => set.set_window(b),
     }
 }
 
@@ -118,7 +156,23 @@ fn event(n: u32) -> impl Strategy<Value = Event> {
         1 => Just(Event::Restore),
         1 => cell_box(n, 11).prop_map(move |b| Event::Learn(measured(b))),
         1 => Just(Event::Bound),
+        2 => cell_box(n, n).prop_map(Event::Window),
     ]
+}
+
+/// Events on the [`ROOMY`] grid: proven-free boxes of up to 40 cells, windows anywhere.
+fn roomy_event() -> impl Strategy<Value = Event> {
+    let (nx, ny) = ROOMY;
+    prop_oneof![
+        6 => (0.1f64..2.0).prop_map(Event::Move),
+        4 => cell_box(nx, 72).prop_map(Event::Free),
+        1 => cell_box(nx, 14).prop_map(Event::Measure),
+        1 => Just(Event::Restore),
+        1 => cell_box(nx, 14).prop_map(Event::Learn),
+        1 => Just(Event::Bound),
+        3 => cell_box(nx, 48).prop_map(Event::Window),
+    ]
+    .prop_map(move |e| e.within_rows(ny))
 }
 
 /// Events on the 160 x 160 grid: larger boxes, moves of up to three metres.
@@ -130,6 +184,7 @@ fn wide_event() -> impl Strategy<Value = Event> {
         1 => Just(Event::Restore),
         1 => cell_box(160, 30).prop_map(Event::Learn),
         1 => Just(Event::Bound),
+        2 => cell_box(160, 160).prop_map(Event::Window),
     ]
 }
 
@@ -141,7 +196,7 @@ proptest! {
     /// whole-cell dilation it replaces.
     #[test]
     fn the_set_holds_every_possible_position(events in proptest::collection::vec(event(24), 1..24)) {
-        holds_every_possible_position(&grid(), SAMPLES, &events, None)?;
+        holds_every_possible_position(&grid(), SAMPLES, &events, Storage::Every)?;
     }
 
     /// The same for a set that stores its reach over the rows near its cells only, with the
@@ -151,7 +206,7 @@ proptest! {
         events in proptest::collection::vec(event(24), 1..24),
         margin in 0u32..6,
     ) {
-        holds_every_possible_position(&grid(), SAMPLES, &events, Some(margin))?;
+        holds_every_possible_position(&grid(), SAMPLES, &events, Storage::Margin(margin))?;
     }
 
     /// The same on a grid three words wide, so that the window also cuts and widens by
@@ -163,7 +218,51 @@ proptest! {
         margin in 0u32..10,
     ) {
         let g = GroundGrid { nx: WIDE.0, ny: WIDE.1, ..GroundGrid::new(1.0, 0.5) };
-        holds_every_possible_position(&g, 2, &events, Some(margin))?;
+        holds_every_possible_position(&g, 2, &events, Storage::Margin(margin))?;
+    }
+
+    /// The same for an undetected set kept over a window that moves between the events
+    /// ([`ReachSet::keep_window`]), with a summary of lower bounds per block outside it: on a
+    /// grid three words wide and six blocks high, with proven-free boxes that raise the
+    /// summary, on the same width two blocks high (the second one partial), and on the square
+    /// grid. The window only loosens the set: until a measurement makes it a target's set, it
+    /// holds every cell of the same set kept without a window.
+    #[test]
+    fn a_set_kept_over_a_moving_window_holds_every_possible_position(
+        roomy in proptest::collection::vec(roomy_event(), 1..24),
+        wide in proptest::collection::vec(event(WIDE.0).prop_map(|e| e.within_rows(WIDE.1)), 1..24),
+        square in proptest::collection::vec(event(24), 1..24),
+    ) {
+        let at = |(nx, ny): (u32, u32)| GroundGrid { nx, ny, ..GroundGrid::new(1.0, 0.5) };
+        holds_every_possible_position(&at(ROOMY), 2, &roomy, Storage::Window)?;
+        holds_every_possible_position(&at(WIDE), 2, &wide, Storage::Window)?;
+        holds_every_possible_position(&grid(), SAMPLES, &square, Storage::Window)?;
+    }
+
+    /// A set kept over a window that covers the grid is the set kept without one, cells and
+    /// reach, through any history (the window is storage only until it leaves some cells out).
+    #[test]
+    fn a_window_over_the_whole_grid_changes_nothing(
+        events in proptest::collection::vec(wide_event(), 1..24),
+    ) {
+        let g = GroundGrid::new(40.0, 0.5);
+        let whole_grid = CellBox { x0: 0, y0: 0, x1: g.nx - 1, y1: g.ny - 1 };
+        let mut plain = ReachSet::full(&g);
+        let mut windowed = ReachSet::full(&g).keep_window();
+        let (mut a, mut b) = (0.0, 0.0);
+        for e in &events {
+            let e = match e {
+                Event::Window(_) => Event::Window(whole_grid),
+                other => other.clone(),
+            };
+            apply(&g, &mut plain, &e, &mut a);
+            apply(&g, &mut windowed, &e, &mut b);
+            if matches!(e, Event::Restore) {
+                windowed = windowed.keep_window();
+            }
+            prop_assert!(plain == windowed, "the sets differ after {:?}", e);
+            prop_assert_eq!(plain.cells(), windowed.cells());
+        }
     }
 
     /// Advancing within a dilation read word by word ([`ReachSet::advance_within`] with a
@@ -231,6 +330,7 @@ proptest! {
                         set.bound_by_box(&g);
                     }
                 }
+                Event::Window(_) => {}
             }
             prop_assert!(whole == local, "the sets differ after {:?}", e);
             prop_assert!(whole == unskipped, "the sets differ after {:?}", e);
@@ -329,38 +429,55 @@ fn reach_of(set: &ReachSet) -> Vec<u32> {
     relative.iter().map(|r| r + base).collect()
 }
 
-/// The checks of `the_set_holds_every_possible_position` through `events`, for a set that
-/// stores every row (`margin` `None`) or the rows within `margin` of its cells.
+/// Where a set of the tests stores its reach.
+#[derive(Clone, Copy, Debug)]
+enum Storage {
+    /// Every cell.
+    Every,
+    /// The rows within this margin of its cells ([`ReachSet::with_margin`]).
+    Margin(u32),
+    /// A window the events move, with a summary elsewhere ([`ReachSet::keep_window`]).
+    Window,
+}
+
+impl Storage {
+    fn apply(self, set: ReachSet) -> ReachSet {
+        match self {
+            Storage::Every => set,
+            Storage::Margin(m) => set.with_margin(m),
+            Storage::Window => set.keep_window(),
+        }
+    }
+}
+
+/// The checks of `the_set_holds_every_possible_position` through `events`, for a set stored
+/// as `storage` says. A set kept over a window is also checked against the same set kept
+/// without one, which it must hold (until a measurement makes it a target's set).
 fn holds_every_possible_position(
     g: &GroundGrid,
     per_side: u32,
     events: &[Event],
-    margin: Option<u32>,
+    storage: Storage,
 ) -> Result<(), TestCaseError> {
     let g = *g;
     let pts = samples(&g, per_side);
     let mut possible = vec![true; pts.len()];
-    let stored_near = |set: ReachSet| match margin {
-        Some(m) => set.with_margin(m),
-        None => set,
+    let mut set = storage.apply(ReachSet::full(&g));
+    let mut plain = matches!(storage, Storage::Window).then(|| ReachSet::full(&g));
+    let margin = match storage {
+        Storage::Margin(m) => Some(m),
+        _ => None,
     };
-    let mut set = stored_near(ReachSet::full(&g));
     let mut dilated = CellSet::full(&g);
     let mut clock = 0.0;
     for e in events {
+        if let Some(plain) = &mut plain {
+            let mut plain_clock = clock;
+            apply(&g, plain, e, &mut plain_clock);
+        }
         match e {
             Event::Move(r) => {
-                let before = possible.clone();
-                let held: Vec<Point2> = pts
-                    .iter()
-                    .zip(&before)
-                    .filter(|(_, k)| **k)
-                    .map(|((p, _), _)| *p)
-                    .collect();
-                for ((p, _), k) in pts.iter().zip(possible.iter_mut()) {
-                    // A possible position stays possible (it may stand still).
-                    *k = *k || held.iter().any(|q| (p - q).norm() <= *r);
-                }
+                possible = moved(&g, &pts, &possible, *r);
                 clock += r;
                 let previous = set.cells().dilate(&g, *r);
                 set.advance(clock);
@@ -390,9 +507,20 @@ fn holds_every_possible_position(
             Event::Restore => {
                 let restored = ReachSet::from_cells_at(&g, set.cells().clone(), clock);
                 prop_assert_eq!(restored.cells(), set.cells());
-                set = stored_near(restored);
+                set = storage.apply(restored);
             }
             Event::Bound => set.bound_by_box(&g),
+            Event::Window(b) => set.set_window(b),
+        }
+        if matches!(e, Event::Learn(_) | Event::Measure(_)) {
+            plain = None;
+        }
+        if let Some(plain) = &plain {
+            prop_assert!(
+                plain.cells().is_subset_of(set.cells()),
+                "the window dropped cells of the set without one after {:?}",
+                e
+            );
         }
         for ((p, c), k) in pts.iter().zip(&possible) {
             prop_assert!(
@@ -567,22 +695,33 @@ enum LateEvent {
     Learn(CellBox, usize),
     /// The reach is bounded by the set's box.
     Bound,
+    /// The set keeps its reach over this rectangle only ([`ReachSet::set_window`]).
+    Window(CellBox),
 }
 
-fn late_event(n: u32) -> impl Strategy<Value = LateEvent> {
+/// Late events on a grid of `nx` x `ny` cells, proven-free boxes of up to `free_side` cells.
+fn late_event(nx: u32, ny: u32, free_side: u32) -> impl Strategy<Value = LateEvent> {
+    let fold = move |b: CellBox| CellBox {
+        x0: b.x0,
+        x1: b.x1,
+        y0: b.y0 % ny,
+        y1: (b.y0 % ny + (b.y1 - b.y0)).min(ny - 1),
+    };
     let measured = move |b: CellBox| CellBox {
-        x1: (b.x1 + 6).min(n - 1),
-        y1: (b.y1 + 6).min(n - 1),
-        ..b
+        x1: (b.x1 + 6).min(nx - 1),
+        y1: (b.y1 + 6).min(ny - 1),
+        ..fold(b)
     };
     prop_oneof![
         4 => (0.1f64..1.6).prop_map(LateEvent::Move),
-        4 => (cell_box(n, 11), 0usize..4).prop_map(|(b, lag)| LateEvent::Free(b, lag)),
-        1 => (cell_box(n, 11), 0usize..4)
+        4 => (cell_box(nx, free_side), 0usize..4)
+            .prop_map(move |(b, lag)| LateEvent::Free(fold(b), lag)),
+        1 => (cell_box(nx, 11), 0usize..4)
             .prop_map(move |(b, lag)| LateEvent::Measure(measured(b), lag)),
-        1 => (cell_box(n, 11), 0usize..4)
+        1 => (cell_box(nx, 11), 0usize..4)
             .prop_map(move |(b, lag)| LateEvent::Learn(measured(b), lag)),
         1 => Just(LateEvent::Bound),
+        2 => cell_box(nx, 48).prop_map(move |b| LateEvent::Window(fold(b))),
     ]
 }
 
@@ -601,29 +740,7 @@ fn possible_after(g: &GroundGrid, pts: &[(Point2, CellIndex)], facts: &[Fact]) -
     let mut possible = vec![true; pts.len()];
     for f in facts {
         match f {
-            Fact::Move(r) => {
-                // Samples by cell, so that a sample looks only at the cells within the motion.
-                let mut by_cell: Vec<Vec<Point2>> = vec![Vec::new(); (g.nx * g.ny) as usize];
-                for ((p, (ix, iy)), k) in pts.iter().zip(&possible) {
-                    if *k {
-                        by_cell[(iy * g.nx + ix) as usize].push(*p);
-                    }
-                }
-                let span = (r / g.cell_m).ceil() as i64 + 1;
-                for ((p, (ix, iy)), k) in pts.iter().zip(possible.iter_mut()) {
-                    *k = (-span..=span).any(|dy| {
-                        (-span..=span).any(|dx| {
-                            let (x, y) = (i64::from(*ix) + dx, i64::from(*iy) + dy);
-                            if x < 0 || y < 0 || x >= i64::from(g.nx) || y >= i64::from(g.ny) {
-                                return false;
-                            }
-                            by_cell[(y * i64::from(g.nx) + x) as usize]
-                                .iter()
-                                .any(|q| (p - q).norm() <= *r)
-                        })
-                    });
-                }
-            }
+            Fact::Move(r) => possible = moved(g, pts, &possible, *r),
             Fact::Free(free) => {
                 for ((_, c), k) in pts.iter().zip(possible.iter_mut()) {
                     *k &= !free.contains(*c);
@@ -648,87 +765,113 @@ proptest! {
     /// its own time, among the moves. With no lag they are the current operations.
     #[test]
     fn late_facts_keep_every_possible_position(
-        events in proptest::collection::vec(late_event(24), 1..20),
+        events in proptest::collection::vec(late_event(24, 24, 11), 1..20),
         margin in prop::option::of(0u32..6),
     ) {
-        let g = grid();
-        let pts = samples(&g, SAMPLES);
-        let stored_near = |set: ReachSet| match margin {
-            Some(m) => set.with_margin(m),
-            None => set,
+        let storage = margin.map_or(Storage::Every, Storage::Margin);
+        late_facts_hold(&grid(), SAMPLES, &events, storage)?;
+    }
+
+    /// The same for an undetected set kept over a window that moves between the facts, on a
+    /// grid two words wide and six blocks high, with proven-free boxes large enough to hold
+    /// blocks far from every block that is not free (so that late facts raise the summary
+    /// above the clock).
+    #[test]
+    fn late_facts_keep_every_possible_position_in_a_moving_window(
+        events in proptest::collection::vec(late_event(ROOMY.0, ROOMY.1, 40), 1..20),
+    ) {
+        let g = GroundGrid { nx: ROOMY.0, ny: ROOMY.1, ..GroundGrid::new(1.0, 0.5) };
+        late_facts_hold(&g, 1, &events, Storage::Window)?;
+    }
+}
+
+/// The checks of `late_facts_keep_every_possible_position` through `events`, for a set stored
+/// as `storage` says, with `per_side` x `per_side` samples a cell.
+fn late_facts_hold(
+    g: &GroundGrid,
+    per_side: u32,
+    events: &[LateEvent],
+    storage: Storage,
+) -> Result<(), TestCaseError> {
+    let g = *g;
+    let pts = samples(&g, per_side);
+    let mut set = storage.apply(ReachSet::full(&g));
+    let margin = match storage {
+        Storage::Margin(m) => Some(m),
+        _ => None,
+    };
+    let mut facts: Vec<Fact> = Vec::new();
+    // The clock after each move, with 0 first.
+    let mut clocks = vec![0.0];
+    for e in events {
+        let clock = *clocks.last().expect("a clock");
+        // Where a fact `lag` moves old goes among the facts, and its clock.
+        let at = |lag: usize, facts: &[Fact]| {
+            let lag = lag.min(clocks.len() - 1);
+            let mut moves = 0;
+            let mut k = facts.len();
+            while moves < lag {
+                k -= 1;
+                if matches!(facts[k], Fact::Move(_)) {
+                    moves += 1;
+                }
+            }
+            (k, clocks[clocks.len() - 1 - lag])
         };
-        let mut set = stored_near(ReachSet::full(&g));
-        let mut facts: Vec<Fact> = Vec::new();
-        // The clock after each move, with 0 first.
-        let mut clocks = vec![0.0];
-        for e in &events {
-            let clock = *clocks.last().expect("a clock");
-            // Where a fact `lag` moves old goes among the facts, and its clock.
-            let at = |lag: usize, facts: &[Fact]| {
-                let lag = lag.min(clocks.len() - 1);
-                let mut moves = 0;
-                let mut k = facts.len();
-                while moves < lag {
-                    k -= 1;
-                    if matches!(facts[k], Fact::Move(_)) {
-                        moves += 1;
-                    }
-                }
-                (k, clocks[clocks.len() - 1 - lag])
-            };
-            match e {
-                LateEvent::Move(r) => {
-                    let next = clock + r;
-                    let previous = set.cells().dilate(&g, *r);
-                    set.advance(next);
-                    set.intersect(&previous);
-                    clocks.push(next);
-                    facts.push(Fact::Move(*r));
-                }
-                LateEvent::Free(b, lag) => {
-                    let (k, then) = at(*lag, &facts);
-                    let free = box_set(&g, b);
-                    if *lag == 0 {
-                        let mut current = set.clone();
-                        current.clear(&g, &free, b);
-                        set.clear_since(&g, &free, b, then);
-                        prop_assert!(set == current, "no lag is the current clear");
-                    } else {
-                        set.clear_since(&g, &free, b, then);
-                    }
-                    facts.insert(k, Fact::Free(free));
-                }
-                LateEvent::Measure(b, lag) | LateEvent::Learn(b, lag) => {
-                    let (k, then) = at(*lag, &facts);
-                    let m = box_set(&g, b);
-                    if matches!(e, LateEvent::Learn(..)) {
-                        let grown = m.dilate(&g, clock - then);
-                        set = set.restricted_copy(&g, &grown, margin.unwrap_or(LEARN_MARGIN));
-                    }
-                    if *lag == 0 {
-                        let mut current = set.clone();
-                        current.restrict(&g, &m, 8);
-                        set.restrict_since(&g, &m, 8, then);
-                        prop_assert!(set == current, "no lag is the current restriction");
-                    } else {
-                        set.restrict_since(&g, &m, 8, then);
-                    }
-                    facts.insert(k, Fact::In(m));
-                }
-                LateEvent::Bound => set.bound_by_box(&g),
+        match e {
+            LateEvent::Move(r) => {
+                let next = clock + r;
+                let previous = set.cells().dilate(&g, *r);
+                set.advance(next);
+                set.intersect(&previous);
+                clocks.push(next);
+                facts.push(Fact::Move(*r));
             }
-            let possible = possible_after(&g, &pts, &facts);
-            for ((p, c), k) in pts.iter().zip(&possible) {
-                prop_assert!(
-                    !*k || set.contains(*c),
-                    "possible position {:?} outside the set (cell {:?}) after {:?}",
-                    p,
-                    c,
-                    e
-                );
+            LateEvent::Free(b, lag) => {
+                let (k, then) = at(*lag, &facts);
+                let free = box_set(&g, b);
+                if *lag == 0 {
+                    let mut current = set.clone();
+                    current.clear(&g, &free, b);
+                    set.clear_since(&g, &free, b, then);
+                    prop_assert!(set == current, "no lag is the current clear");
+                } else {
+                    set.clear_since(&g, &free, b, then);
+                }
+                facts.insert(k, Fact::Free(free));
             }
+            LateEvent::Measure(b, lag) | LateEvent::Learn(b, lag) => {
+                let (k, then) = at(*lag, &facts);
+                let m = box_set(&g, b);
+                if matches!(e, LateEvent::Learn(..)) {
+                    let grown = m.dilate(&g, clock - then);
+                    set = set.restricted_copy(&g, &grown, margin.unwrap_or(LEARN_MARGIN));
+                }
+                if *lag == 0 {
+                    let mut current = set.clone();
+                    current.restrict(&g, &m, 8);
+                    set.restrict_since(&g, &m, 8, then);
+                    prop_assert!(set == current, "no lag is the current restriction");
+                } else {
+                    set.restrict_since(&g, &m, 8, then);
+                }
+                facts.insert(k, Fact::In(m));
+            }
+            LateEvent::Bound => set.bound_by_box(&g),
+            LateEvent::Window(b) => set.set_window(b),
+        }
+        let possible = possible_after(&g, &pts, &facts);
+        for ((p, c), k) in pts.iter().zip(&possible) {
+            prop_assert!(
+                !*k || set.contains(*c),
+                "possible position {:?} outside the set (cell {:?}) after {:?}",
+                p,
+                c,
+                e
+            );
         }
     }
+    Ok(())
 }
 
 /// A late clear removes the free cells deeper than the motion since, and keeps the others.
@@ -763,4 +906,57 @@ fn a_late_clear_removes_what_its_clock_still_proves() {
     // From now on they regrow at the motion's pace.
     set.advance(3.5);
     assert!(set.contains((15, 20)) && !set.contains((16, 20)));
+}
+
+/// Ground proven free outside the window raises the summary: the blocks deep in it stay out
+/// of the set while the motion has not reached them, as they would without a window (to
+/// within a block), and the ones near its sides rejoin first.
+#[test]
+fn free_ground_outside_the_window_stays_out_by_blocks() {
+    let g = GroundGrid {
+        nx: ROOMY.0,
+        ny: ROOMY.1,
+        ..GroundGrid::new(1.0, 0.5)
+    };
+    let mut set = ReachSet::full(&g).keep_window();
+    // The window holds the first word of columns; the free box lies beyond it.
+    set.set_window(&CellBox {
+        x0: 0,
+        y0: 0,
+        x1: 63,
+        y1: 47,
+    });
+    let free = CellBox {
+        x0: 64,
+        y0: 0,
+        x1: 135,
+        y1: 47,
+    };
+    set.clear(&g, &box_set(&g, &free), &free);
+    set.advance(2.0);
+    // The box's far side is the grid's edge, its near side the window's: cells 8 blocks
+    // (32 m) from the near side stay out after 2 m, and so do cells 4.5 m from it (a block
+    // of 4 m is the summary's rounding; the block next to the side rejoins).
+    assert!(!set.contains((130, 20)));
+    assert!(!set.contains((64 + 9, 20)));
+    assert!(set.contains((64, 20)));
+    // Without a window the same history keeps out every cell beyond 2 m of the side.
+    let mut plain = ReachSet::full(&g);
+    plain.clear(&g, &box_set(&g, &free), &free);
+    plain.advance(2.0);
+    assert!(!plain.contains((64 + 5, 20)));
+    // As the motion grows, the set regrows no later than the one without a window (it holds
+    // it), and no sooner than a block's diagonal allows: every cell it holds is within the
+    // motion plus a block's diagonal of a cell the free box did not prove free.
+    let block_diagonal = 8.0 * 0.5 * 2f64.sqrt();
+    for step in 1..=80 {
+        let clock = 2.0 + 0.5 * f64::from(step);
+        set.advance(clock);
+        plain.advance(clock);
+        assert!(plain.cells().is_subset_of(set.cells()), "clock {clock}");
+        let mut unproven = CellSet::full(&g);
+        unproven.and_not_assign(&box_set(&g, &free));
+        let regrown = unproven.dilate(&g, clock + block_diagonal);
+        assert!(set.cells().is_subset_of(&regrown), "clock {clock}");
+    }
 }

@@ -66,6 +66,37 @@
 //! - clearing free ground raises the reach over the window's cells only, and counts the
 //!   window's edges as not free, which only lowers the bounds.
 //!
+//! # A window around the UAV
+//! The set of the targets no UAV has found yet, `X̄`, covers most of the region, so the same
+//! cut by its box stores nothing less. An agent of a large fleet instead keeps `X̄`'s reach
+//! over a window around its UAV ([`ReachSet::keep_window`], [`ReachSet::set_window`]): the
+//! ground its guidance reads. Outside the window the set keeps a *summary*: for each block of
+//! [`SUMMARY_BLOCK`] x [`SUMMARY_BLOCK`] cells one reach `σ(B)` that no cell of the block is
+//! below, and every cell `c` outside the window counts with `τ(c) = σ(block(c))`. The set's
+//! cells are kept over the whole grid (one bit a cell). Why (I1) and (I2) still hold:
+//!
+//! - **Folding.** A block leaving the window takes `σ ← max(σ, least τ of its cells)`: both
+//!   are lower bounds of every cell's reach, so the larger is too (it is a fact about the
+//!   targets, and (I1) is invariant in time). A block entering gives each cell `σ`.
+//! - **Growth.** An advance adds, outside the window, every cell of each block whose `σ` the
+//!   clock reached (where the advance's outer bound allows), so every cell the clock may
+//!   have brought a target to is in the set, as (I1) requires; a block is looked at again
+//!   when some of its cells leave the set, when its bound falls or when it leaves the window.
+//! - **Clearing.** Ground proven free over a box that reaches outside the window raises the
+//!   reach exactly over the box's part in the window (the window's sides count as not free,
+//!   as for any window), and raises `σ` over the blocks outside it with a transform on the
+//!   blocks: a block is free when every one of its cells is free, and the gap between two
+//!   blocks' squares is at most the gap between any cell of one and any cell of the other,
+//!   so `σ ← max(σ, ⌊(gap + b) / unit⌋)` keeps (I1) for each of its cells. Free cells leave
+//!   the set wherever they lie (I2); a late fact removes a block's cells only when its raised
+//!   `σ` is above the clock.
+//! - **Lowering.** Any lower reach keeps (I1), so the summary may only lose tightness: a
+//!   cell entering the window may rejoin the set sooner than it would have, never drop a
+//!   target.
+//!
+//! Before the first [`ReachSet::set_window`] every cell is stored and the set is the one
+//! without a window, bit for bit; a window that covers the grid keeps it so.
+//!
 //! ```
 //! use sets::grid::GroundGrid;
 //! use sets::raster::{CellBox, CellSet, ReachSet};
@@ -98,9 +129,12 @@ use super::geodesic::{self, geodesic_gap_field};
 use super::{CellBox, CellSet, common_rows};
 use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
-use window::{FarField, Stored};
+use window::{Far, FarField, Stored};
 
+mod summary;
 mod window;
+
+pub use summary::BLOCK as SUMMARY_BLOCK;
 
 /// The unit of reach, metres: `1/256` m, far below any cell and any step's motion.
 pub const REACH_UNIT_M: Real = 1.0 / 256.0;
@@ -172,8 +206,8 @@ pub struct ReachSet {
     rows: (u32, u32),
     /// The rows and words whose reach is stored; they hold every cell of the set.
     stored: Stored,
-    /// The reach of the cells outside the stored ones; `None` when every cell is stored.
-    far: Option<FarField>,
+    /// The reach of the cells outside the stored ones.
+    far: Far,
     /// Cells around the set's box a cut of the window keeps ([`ReachSet::with_margin`]);
     /// `None`: every cell is stored.
     margin: Option<u32>,
@@ -198,7 +232,10 @@ impl PartialEq for ReachSet {
         if self.cells != other.cells || self.clock_m != other.clock_m {
             return false;
         }
-        if self.stored == other.stored && self.far.is_none() && other.far.is_none() {
+        if self.stored == other.stored
+            && matches!(self.far, Far::Nothing)
+            && matches!(other.far, Far::Nothing)
+        {
             return self.reach == other.reach;
         }
         let nx = self.cells.nx() as usize;
@@ -235,7 +272,7 @@ impl ReachSet {
             scanned: vec![Scan::default(); words],
             rows: rows_of(&cells),
             stored: Stored::everything(&cells),
-            far: None,
+            far: Far::Nothing,
             margin: None,
             cells,
             clock_m: if clock_m.is_finite() { clock_m } else { 0.0 },
@@ -392,6 +429,8 @@ impl ReachSet {
             self.hold_row(first);
             self.hold_row(last);
         }
+        let outside = self.outside_growth(reached, None);
+        self.grow_outside(outside);
     }
 
     /// [`ReachSet::advance`], then [`ReachSet::intersect`] with an outer raster `bound` of the
@@ -433,12 +472,14 @@ impl ReachSet {
             }
             *fresh = keep;
         }
+        let outside = self.outside_growth(reached, Some(&mut bound));
         for (iy, w, fresh) in grown {
             self.cells.row_mut(iy)[w] |= fresh;
             if fresh != 0 {
                 self.hold_row(iy);
             }
         }
+        self.grow_outside(outside);
     }
 
     /// `cells ← cells ∩ outer`, for an outer raster of the set's targets (a peer's set, a
@@ -491,6 +532,7 @@ impl ReachSet {
         if let Some((w, seeds)) = self.window_seeds(free, window) {
             self.raise_outside(grid, &w, &seeds, self.clock_m);
         }
+        self.raise_summary(grid, free, window, self.clock_m);
         self.remove(free);
     }
 
@@ -517,6 +559,7 @@ impl ReachSet {
                     self.raise_outside(grid, &w, &seeds, then_m);
                     self.drop_unreached(&w);
                 }
+                self.raise_summary(grid, free, window, then_m);
             }
             _ => {}
         }
@@ -546,6 +589,7 @@ impl ReachSet {
                 }
             }
         }
+        self.raise_summary(grid, free, window, self.clock_m);
         self.remove(free);
     }
 
@@ -820,8 +864,13 @@ impl ReachSet {
         if visit.is_empty() {
             return;
         }
-        // The set has no cell outside its stored words.
-        let words = self.stored.word_range();
+        // A target's set has no cell outside its stored words; an undetected set kept over a
+        // window may have cells in every word.
+        let words = if self.far.holds_outside() {
+            0..self.cells.words_per_row()
+        } else {
+            self.stored.word_range()
+        };
         let mut held: Option<(u32, u32)> = None;
         for iy in visit.clone() {
             let mut any = 0;
@@ -829,8 +878,12 @@ impl ReachSet {
                 let gone = remove(&self.cells, iy, w);
                 if gone != 0 {
                     self.cells.row_mut(iy)[w] &= !gone;
-                    let slot = self.slot(iy, w);
-                    self.pending[slot] = 0;
+                    if self.stores(w as u32 * 64, iy) {
+                        let slot = self.slot(iy, w);
+                        self.pending[slot] = 0;
+                    } else {
+                        self.unsettle_removed(iy, w, gone);
+                    }
                 }
                 any |= self.cells.row(iy)[w];
             }

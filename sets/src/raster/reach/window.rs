@@ -1,10 +1,33 @@
-//! A [`ReachSet`] that stores its reach over a window of cells around its box, with the far
-//! field of its box outside (the module docs of [`super`] say why this keeps the guarantee).
+//! A [`ReachSet`] that stores its reach over a window of cells: a target's set around its box,
+//! with the far field of its box outside; an undetected set around its UAV, with a summary of
+//! lower bounds per block outside (the module docs of [`super`] say why both keep the
+//! guarantee).
 
-use super::{REACH_UNIT_M, ReachSet, Scan, gap_cells};
+use super::summary::{BLOCK, Summary};
+use super::{GAPS, REACH_UNIT_M, ReachSet, Scan, gap_cells, reached_units};
 use crate::grid::GroundGrid;
 use crate::math::Real;
-use crate::raster::{CellBox, CellSet};
+use crate::raster::{CellBox, CellSet, WordBound};
+
+/// What a set knows of the reach of the cells it does not store.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) enum Far {
+    /// Nothing: the set stores every cell.
+    Nothing,
+    /// A target's set: the bound of its box ([`FarField`]), and no cell of the set outside
+    /// the window.
+    OfBox(FarField),
+    /// An undetected set kept over a window ([`ReachSet::keep_window`]): a lower bound per
+    /// block, and cells of the set anywhere.
+    Summary(Box<Summary>),
+}
+
+impl Far {
+    /// Whether the set may hold cells outside its window.
+    pub(super) fn holds_outside(&self) -> bool {
+        matches!(self, Far::Summary(_))
+    }
+}
 
 /// Rows a window widens by at least when the clock comes near its edge, so that a growing
 /// set widens it every few steps rather than at every step.
@@ -108,6 +131,27 @@ impl Stored {
     /// The stored words of each stored row.
     pub(super) fn word_range(&self) -> std::ops::Range<usize> {
         self.words.0..self.words.1
+    }
+
+    /// The part rounded out to whole blocks of rows (the words are whole blocks already); the
+    /// caller clamps the rows to the grid.
+    fn whole_blocks(self) -> Self {
+        Self {
+            rows: (
+                self.rows.0 / BLOCK * BLOCK,
+                self.rows.1.div_ceil(BLOCK).saturating_mul(BLOCK),
+            ),
+            words: self.words,
+        }
+    }
+
+    /// Whether every cell of block `(bx, by)` of a grid `ny` rows high is stored.
+    fn holds_block(&self, bx: u32, by: u32, ny: u32) -> bool {
+        let (y0, y1) = (by * BLOCK, ((by + 1) * BLOCK).min(ny));
+        self.word_range()
+            .contains(&(bx as usize * BLOCK as usize / 64))
+            && self.rows.0 <= y0
+            && y1 <= self.rows.1
     }
 
     /// Whether word `w` of row `iy` is stored.
@@ -217,7 +261,7 @@ impl ReachSet {
             cells,
             reach: Vec::new(),
             stored: part,
-            far: Some(FarField::new(grid, bbox, self.clock_m)),
+            far: Far::OfBox(FarField::new(grid, bbox, self.clock_m)),
             margin: Some(margin),
             clock_m: self.clock_m,
         };
@@ -256,9 +300,13 @@ impl ReachSet {
     /// Writes the reach of cells `x0..x0 + span.len()` of row `iy` into `span`: the stored
     /// one where it is stored, else the far field.
     pub(super) fn copy_reach_span(&self, iy: u32, x0: u32, span: &mut [u32]) {
-        span.fill(0);
-        if let Some(far) = &self.far {
-            far.raise_span(iy, x0, span);
+        match &self.far {
+            Far::Nothing => span.fill(0),
+            Far::OfBox(far) => {
+                span.fill(0);
+                far.raise_span(iy, x0, span);
+            }
+            Far::Summary(summary) => summary.fill_span(iy, x0, span),
         }
         if !self.stored_rows().contains(&iy) {
             return;
@@ -280,7 +328,11 @@ impl ReachSet {
         if self.stores(ix, iy) {
             self.reach[self.index(ix, iy)]
         } else {
-            self.far.as_ref().map_or(0, |far| far.tau(ix, iy))
+            match &self.far {
+                Far::Nothing => 0,
+                Far::OfBox(far) => far.tau(ix, iy),
+                Far::Summary(summary) => summary.tau_of_cell(ix, iy),
+            }
         }
     }
 
@@ -293,7 +345,7 @@ impl ReachSet {
         if let Some(margin) = self.margin {
             let part = self.margin_box(bbox, margin);
             self.reshape(part);
-            self.far = Some(far);
+            self.far = Far::OfBox(far);
         }
         self.scanned.fill(Scan::default());
         let (x0, stride) = (self.stored_columns().start, self.stride());
@@ -309,7 +361,7 @@ impl ReachSet {
     /// cell the clock reaches is stored: the far field grows with the gap to its box, so once
     /// the rows and the columns next to the window are out of reach, so is every cell beyond.
     pub(super) fn widen_for(&mut self, reached: u32) {
-        let Some(far) = self.far else {
+        let Far::OfBox(far) = self.far else {
             return;
         };
         let (ny, wpr) = (self.cells.ny(), self.cells.words_per_row());
@@ -335,12 +387,15 @@ impl ReachSet {
         });
     }
 
-    /// Widens the window to hold `part` (clamped to the grid); the new cells take the far
-    /// field. A set without a far field stores every cell already.
+    /// Widens the window to hold `part` (clamped to the grid; for a set kept over a window
+    /// around its UAV, rounded out to whole blocks); the new cells take the far field. A set
+    /// without a far field stores every cell already.
     pub(super) fn store(&mut self, part: Stored) {
-        if self.far.is_none() {
-            return;
-        }
+        let part = match self.far {
+            Far::Nothing => return,
+            Far::OfBox(_) => part,
+            Far::Summary(_) => part.whole_blocks(),
+        };
         let part = Stored {
             rows: (part.rows.0, part.rows.1.min(self.cells.ny())),
             words: (part.words.0, part.words.1.min(self.cells.words_per_row())),
@@ -353,18 +408,21 @@ impl ReachSet {
 
     /// Stores the reach over `part` exactly: the cells stored before keep their reach, the
     /// others take the far field (a set without one stores every cell, so it has none to
-    /// take), and the cells outside `part` are forgotten (the set must have no cell there).
+    /// take), and the cells outside `part` are forgotten (a target's set has no cell there; an
+    /// undetected set folds their reach into its summary first).
     fn reshape(&mut self, part: Stored) {
         if part == self.stored {
             return;
         }
         debug_assert!(
-            self.rows.0 >= self.rows.1
+            self.far.holds_outside()
+                || self.rows.0 >= self.rows.1
                 || (part.rows.0 <= self.rows.0 && self.rows.1 <= part.rows.1),
             "the set's rows {:?} outside {:?}",
             self.rows,
             part.rows
         );
+        self.fold_leaving(&part);
         let columns = part.columns(self.cells.nx());
         let (x0, stride) = (columns.start, columns.len());
         let words = part.words.1.saturating_sub(part.words.0);
@@ -398,5 +456,252 @@ impl ReachSet {
         self.pending = pending;
         self.scanned = scanned;
         self.stored = part;
+    }
+}
+
+/// The cells an advance adds outside the window, `(row, word, bits)`, and each block it
+/// visited with whether it took all of its cells ([`ReachSet::outside_growth`]).
+#[derive(Debug, Default)]
+pub(super) struct OutsideGrowth {
+    cells: Vec<(u32, usize, u64)>,
+    settled: Vec<(u32, u32, bool)>,
+}
+
+/// An undetected set kept over a window around its UAV (the module docs of [`super`], "A
+/// window around the UAV").
+impl ReachSet {
+    /// The set keeps its reach over a window ([`ReachSet::set_window`]) and, outside it, a
+    /// lower bound per block of [`BLOCK`] x [`BLOCK`] cells; it may hold cells anywhere. Until
+    /// the first [`ReachSet::set_window`] every cell stays stored, so the set is unchanged.
+    #[must_use]
+    pub fn keep_window(mut self) -> Self {
+        if matches!(self.far, Far::Nothing) && self.margin.is_none() {
+            self.far = Far::Summary(Box::new(Summary::new(self.cells.nx(), self.cells.ny())));
+        }
+        self
+    }
+
+    /// Whether the set is kept over a window ([`ReachSet::keep_window`]).
+    pub fn keeps_window(&self) -> bool {
+        self.far.holds_outside()
+    }
+
+    /// Stores the reach over `window` (rounded out to whole words of columns and blocks of
+    /// rows, clamped to the grid) and nowhere else: the cells leaving it fold their reach into
+    /// their block's bound, and the cells entering it take their block's bound. Only a set
+    /// kept over a window moves it; for any other set this does nothing.
+    pub fn set_window(&mut self, window: &CellBox) {
+        if !self.far.holds_outside() || self.cells.nx() == 0 || self.cells.ny() == 0 {
+            return;
+        }
+        let part = Stored::of_box(&CellBox {
+            x0: window.x0.min(self.cells.nx() - 1),
+            y0: window.y0.min(self.cells.ny() - 1),
+            x1: window.x1.min(self.cells.nx() - 1),
+            y1: window.y1.min(self.cells.ny() - 1),
+        })
+        .whole_blocks();
+        let part = Stored {
+            rows: (part.rows.0, part.rows.1.min(self.cells.ny())),
+            words: part.words,
+        };
+        self.reshape(part);
+    }
+
+    /// The blocks of the stored part that `part` does not hold give their cells' least reach
+    /// to their bound ([`Summary::fold`]); nothing for a set without a summary.
+    pub(super) fn fold_leaving(&mut self, part: &Stored) {
+        let Far::Summary(summary) = &self.far else {
+            return;
+        };
+        let ny = self.cells.ny();
+        let (nbx, nby) = summary.blocks();
+        let mut folds = Vec::new();
+        for by in self.stored.rows.0 / BLOCK..self.stored.rows.1.div_ceil(BLOCK).min(nby) {
+            for bx in 0..nbx {
+                if !self.stored.holds_block(bx, by, ny) || part.holds_block(bx, by, ny) {
+                    continue;
+                }
+                folds.push((bx, by, self.least_reach_of_block(bx, by)));
+            }
+        }
+        if let Far::Summary(summary) = &mut self.far {
+            for (bx, by, least) in folds {
+                summary.fold(bx, by, least);
+            }
+        }
+    }
+
+    /// The least stored reach of the cells of block `(bx, by)`, which the window holds.
+    fn least_reach_of_block(&self, bx: u32, by: u32) -> u32 {
+        let (x0, x1) = (bx * BLOCK, ((bx + 1) * BLOCK).min(self.cells.nx()));
+        let (y0, y1) = (by * BLOCK, ((by + 1) * BLOCK).min(self.cells.ny()));
+        (y0..y1)
+            .map(|iy| {
+                let at = self.index(x0, iy);
+                self.reach[at..at + (x1 - x0) as usize]
+                    .iter()
+                    .copied()
+                    .min()
+                    .unwrap_or(u32::MAX)
+            })
+            .min()
+            .unwrap_or(u32::MAX)
+    }
+
+    /// The cells of block `(bx, by)` in row `iy` as bits of word `w = bx * BLOCK / 64`.
+    fn block_bits(&self, bx: u32) -> (usize, u64) {
+        let x0 = bx * BLOCK;
+        let width = BLOCK.min(self.cells.nx() - x0);
+        let mask = if width == 64 {
+            u64::MAX
+        } else {
+            (1u64 << width) - 1
+        };
+        ((x0 / 64) as usize, mask << (x0 % 64))
+    }
+
+    /// The advance outside the window, read from the cells before it: every unsettled block
+    /// whose bound the clock `reached` (reach units) has come to gives the set its cells, those
+    /// `bound` allows (`None`: all); a block that `bound` cut stays unsettled, so the next
+    /// advance looks at it again. [`ReachSet::grow_outside`] applies it.
+    pub(super) fn outside_growth(
+        &self,
+        reached: u32,
+        mut bound: Option<&mut dyn WordBound>,
+    ) -> OutsideGrowth {
+        let mut growth = OutsideGrowth::default();
+        let Far::Summary(summary) = &self.far else {
+            return growth;
+        };
+        let (stored, ny) = (self.stored, self.cells.ny());
+        for (bx, by) in summary.due(reached, |bx, by| stored.holds_block(bx, by, ny)) {
+            let (w, bits) = self.block_bits(bx);
+            let mut whole = true;
+            for iy in by * BLOCK..((by + 1) * BLOCK).min(ny) {
+                let fresh = bits & !self.cells.row(iy)[w];
+                if fresh == 0 {
+                    continue;
+                }
+                let keep = match bound.as_deref_mut() {
+                    Some(b) if !b.may_hold_row(iy) || !b.may_hold(iy, w) => 0,
+                    Some(b) => fresh & b.word(&self.cells, iy, w),
+                    None => fresh,
+                };
+                whole &= keep == fresh;
+                if keep != 0 {
+                    growth.cells.push((iy, w, keep));
+                }
+            }
+            growth.settled.push((bx, by, whole));
+        }
+        growth
+    }
+
+    /// Applies [`ReachSet::outside_growth`].
+    pub(super) fn grow_outside(&mut self, growth: OutsideGrowth) {
+        for (iy, w, keep) in growth.cells {
+            self.cells.row_mut(iy)[w] |= keep;
+            self.hold_row(iy);
+        }
+        if let Far::Summary(summary) = &mut self.far {
+            for (bx, by, whole) in growth.settled {
+                summary.settle(bx, by, whole);
+            }
+        }
+    }
+
+    /// Marks unsettled the blocks outside the window that hold bits of `gone`, cells just
+    /// removed from word `w` of row `iy`.
+    pub(super) fn unsettle_removed(&mut self, iy: u32, w: usize, gone: u64) {
+        if gone == 0 || self.stored.holds(iy, w) {
+            return;
+        }
+        if let Far::Summary(summary) = &mut self.far {
+            for byte in 0..8u32 {
+                if gone >> (8 * byte) & 0xFF != 0 {
+                    summary.unsettle(w as u32 * 64 / BLOCK + byte, iy / BLOCK);
+                }
+            }
+        }
+    }
+
+    /// Raises the bounds of the blocks outside the window from ground `free` proven free at
+    /// the clock `clock_m` over `window` ([`Summary::raise_free`]), and, when that clock is
+    /// behind the set's, removes the cells of the raised blocks whose bound the clock has not
+    /// reached: by (I1) none holds a target now. Nothing for a set without a summary, or when
+    /// `window` lies inside the stored cells (the exact correction raised all of it).
+    pub(super) fn raise_summary(
+        &mut self,
+        grid: &GroundGrid,
+        free: &CellSet,
+        window: &CellBox,
+        clock_m: Real,
+    ) {
+        let Far::Summary(summary) = &mut self.far else {
+            return;
+        };
+        let (nx, ny) = (self.cells.nx(), self.cells.ny());
+        if nx == 0 || ny == 0 || window.x0 > window.x1 || window.y0 > window.y1 {
+            return;
+        }
+        let (x1, y1) = (window.x1.min(nx - 1), window.y1.min(ny - 1));
+        let (nbx, nby) = summary.blocks();
+        let blocks = CellBox {
+            x0: (window.x0 / BLOCK).saturating_sub(1),
+            y0: (window.y0 / BLOCK).saturating_sub(1),
+            x1: (x1 / BLOCK + 1).min(nbx - 1),
+            y1: (y1 / BLOCK + 1).min(nby - 1),
+        };
+        let stored = self.stored;
+        if (blocks.y0..=blocks.y1)
+            .all(|by| (blocks.x0..=blocks.x1).all(|bx| stored.holds_block(bx, by, ny)))
+        {
+            return;
+        }
+        // A block is free when it lies in the window and every one of its cells is free.
+        let free_block = |bx: u32, by: u32| {
+            let (cx0, cx1) = (bx * BLOCK, ((bx + 1) * BLOCK).min(nx) - 1);
+            let (cy0, cy1) = (by * BLOCK, ((by + 1) * BLOCK).min(ny) - 1);
+            if cx0 < window.x0 || cx1 > x1 || cy0 < window.y0 || cy1 > y1 {
+                return false;
+            }
+            let width = cx1 - cx0 + 1;
+            let mask = if width == 64 {
+                u64::MAX
+            } else {
+                (1u64 << width) - 1
+            } << (cx0 % 64);
+            (cy0..=cy1).all(|iy| free.row(iy)[(cx0 / 64) as usize] & mask == mask)
+        };
+        let raised = GAPS.with_borrow_mut(|gaps| {
+            summary.raise_free(
+                grid,
+                &blocks,
+                clock_m,
+                free_block,
+                |bx, by| stored.holds_block(bx, by, ny),
+                gaps,
+            )
+        });
+        if clock_m >= self.clock_m {
+            return;
+        }
+        let reached = reached_units(self.clock_m);
+        let gone: Vec<(u32, u32)> = raised
+            .into_iter()
+            .filter(|&(bx, by)| summary.tau(bx, by) > reached)
+            .collect();
+        for &(bx, by) in &gone {
+            summary.unsettle(bx, by);
+        }
+        for (bx, by) in gone {
+            let (w, bits) = self.block_bits(bx);
+            for iy in by * BLOCK..((by + 1) * BLOCK).min(ny) {
+                if self.cells.row(iy)[w] & bits != 0 {
+                    self.cells.row_mut(iy)[w] &= !bits;
+                }
+            }
+        }
     }
 }
