@@ -116,6 +116,9 @@ pub struct EstimatorConfig {
     /// What `S^o` and the map assume of the ray a depth was measured along
     /// (`estimator.depth_ray`).
     pub depth_ray: RayAssumption,
+    /// Half-side, metres, of the square around the UAV over which `X̄` keeps its reach
+    /// (`estimator.window_m`; infinite: the whole grid). See [`EstimatorConfig::window_of`].
+    pub window_m: Real,
 }
 
 impl EstimatorConfig {
@@ -138,6 +141,47 @@ impl EstimatorConfig {
             oem_full_every: 20,
             sets: scenario.estimator.sets,
             depth_ray: scenario.estimator.depth_ray,
+            window_m: scenario.estimator.window_m,
+        }
+    }
+}
+
+impl EstimatorConfig {
+    /// Whether `X̄` keeps its reach over a window around the UAV rather than the whole grid.
+    pub fn keeps_window(&self) -> bool {
+        self.window_m.is_finite()
+    }
+
+    /// The cells of the window around a UAV at `pose` over which `X̄` keeps its reach: the
+    /// square of half-side [`EstimatorConfig::window_m`] around the camera's ground point,
+    /// clamped to the grid; `None` without a window. (The window is storage: any window
+    /// keeps the guarantee, [`sets::raster::reach`] says why.)
+    pub fn window_of(&self, pose: &CameraPose) -> Option<CellBox> {
+        if !self.keeps_window() {
+            return None;
+        }
+        let (x, y, r) = (pose.position.x, pose.position.y, self.window_m);
+        let columns = self.grid.columns_touching(x - r, x + r)?;
+        let rows = self.grid.rows_touching(y - r, y + r)?;
+        Some(CellBox {
+            x0: columns.0,
+            y0: rows.0,
+            x1: columns.1,
+            y1: rows.1,
+        })
+    }
+
+    /// `X̄` before any frame: the whole grid, kept over a window when one is configured.
+    fn undetected_at_start(&self) -> ReachSet {
+        self.keep_window(ReachSet::full(&self.grid))
+    }
+
+    /// `set` kept over a window when one is configured ([`ReachSet::keep_window`]).
+    fn keep_window(&self, set: ReachSet) -> ReachSet {
+        if self.keeps_window() && !set.keeps_window() {
+            set.keep_window()
+        } else {
+            set
         }
     }
 }
@@ -187,7 +231,7 @@ impl EstimatorState {
             time_s: 0.0,
             frames: 0,
             pose: None,
-            undetected: ReachSet::full(g),
+            undetected: config.undetected_at_start(),
             targets: BTreeMap::new(),
             obstacle_neighbourhood: CellSet::empty(g),
             explored: CellSet::empty(g),
@@ -338,7 +382,7 @@ impl Estimator {
         let grid = &config.grid;
         let rebuild =
             |set: &ReachSet| ReachSet::from_cells_at(grid, set.cells().clone(), set.clock_m());
-        state.undetected = rebuild(&state.undetected);
+        state.undetected = config.keep_window(rebuild(&state.undetected));
         let margin = target_reach_margin(grid);
         for set in state.targets.values_mut() {
             *set = rebuild(set).with_margin(margin);
@@ -408,6 +452,9 @@ impl Estimator {
             steps_elapsed: h.step.saturating_sub(st.step),
             ..StepReport::default()
         };
+        if let Some(window) = cfg.window_of(&frame.camera().pose) {
+            st.undetected.set_window(&window);
+        }
         let clock = predict_sets(cfg, st, &mut report);
         let view = FrameView::new(frame, cfg.depth_noise, cfg.depth_ray);
         report.invalid_depth_pixels = view.invalid_depth_pixels();

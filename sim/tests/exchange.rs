@@ -1,7 +1,8 @@
 //! The measurement exchange (`comms.exchange = "measurements"`) over rendered frames:
 //!
 //! - whatever subset of the peers' measurements arrives, in whatever order and however late,
-//!   every target stays in its sets;
+//!   every target stays in its sets, with `X̄` kept over the whole region or over a window
+//!   around each UAV (`estimator.window_m`) that moves with it;
 //! - when every measurement arrives in its step, each agent's sets lie inside the sets the
 //!   same agent holds under the intersection fusion of the set exchange.
 
@@ -14,11 +15,12 @@ use sim::{Fleet, FleetOptions};
 
 const RUN_TAG: u64 = 0x0e8c_4a17;
 
-fn scenario(seed: u64, exchange: Exchange) -> Scenario {
+fn scenario(seed: u64, exchange: Exchange, window_m: f64) -> Scenario {
     let mut s = Scenario {
         seed,
         ..Scenario::default()
     };
+    s.estimator.window_m = window_m;
     s.region.half_extent_m = 80.0;
     s.camera.rows = 90;
     s.camera.cols = 120;
@@ -83,10 +85,15 @@ enum Fate {
 }
 
 /// Runs `steps` steps of a 3-UAV fleet whose measurements meet the `fates` (cycled) on their
-/// way, checking the guarantee throughout; returns the measurements applied and how many of
-/// them late.
-fn run_with_fates(seed: u64, fates: &[u64], steps: u64) -> Result<(u64, u64), TestCaseError> {
-    let s = scenario(seed, Exchange::Measurements);
+/// way, with `X̄` kept over a window of half-side `window_m` around each UAV, checking the
+/// guarantee throughout; returns the measurements applied and how many of them late.
+fn run_with_fates(
+    seed: u64,
+    fates: &[u64],
+    steps: u64,
+    window_m: f64,
+) -> Result<(u64, u64), TestCaseError> {
+    let s = scenario(seed, Exchange::Measurements, window_m);
     let options = FleetOptions {
         run_tag: RUN_TAG,
         exchange: false,
@@ -152,7 +159,8 @@ fn run_with_fates(seed: u64, fates: &[u64], steps: u64) -> Result<(u64, u64), Te
 /// Every fate of the proptest, with no loss: every measurement is applied, most of them late.
 #[test]
 fn late_measurements_are_applied_and_keep_every_target() {
-    let (applied, late) = run_with_fates(3, &[1, 2, 3, 4, 5], 30).expect("guarantee");
+    let (applied, late) =
+        run_with_fates(3, &[1, 2, 3, 4, 5], 30, f64::INFINITY).expect("guarantee");
     // 3 senders x 2 receivers x 30 steps, less those still in flight at the end.
     assert!(
         applied > 150 && late > applied / 2,
@@ -164,13 +172,16 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(12))]
 
     /// Measurements lost, late by up to 3 steps and reordered never drop a target from its
-    /// sets: the truth is checked after every frame and every measurement applied.
+    /// sets: the truth is checked after every frame and every measurement applied. Each agent
+    /// keeps `X̄` over the whole region or over a window of random size (from a few cells to
+    /// most of the 160 m region) around its UAV, which moves with it between the steps.
     #[test]
     fn any_subset_of_measurements_in_any_order_keeps_every_target(
         seed in 1u64..1000,
         fates in proptest::collection::vec(any::<u64>(), 1..64),
+        window_m in prop_oneof![Just(f64::INFINITY), 4.0f64..70.0],
     ) {
-        run_with_fates(seed, &fates, 40)?;
+        run_with_fates(seed, &fates, 40, window_m)?;
     }
 
     /// With every measurement in its step, each agent's `X̄` lies inside the one the same agent
@@ -182,8 +193,9 @@ proptest! {
             run_tag: RUN_TAG,
             ..FleetOptions::default()
         };
-        let mut fused = Fleet::new(&scenario(seed, Exchange::Sets), options.clone()).expect("fleet");
-        let mut applied = Fleet::new(&scenario(seed, Exchange::Measurements), options).expect("fleet");
+        let at = |exchange| scenario(seed, exchange, f64::INFINITY);
+        let mut fused = Fleet::new(&at(Exchange::Sets), options.clone()).expect("fleet");
+        let mut applied = Fleet::new(&at(Exchange::Measurements), options).expect("fleet");
         let (mut rng_a, mut rng_b) = (Lcg(seed), Lcg(seed));
         let mut tighter = 0u64;
         let mut outside = (0u64, 0u64);

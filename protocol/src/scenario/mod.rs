@@ -370,6 +370,12 @@ pub struct EstimatorConfig {
     /// What the estimator assumes of the ray a depth was measured along: `"any"` (the
     /// default, the paper's eq. 5) or `"centre"` ([`RayAssumption`]).
     pub depth_ray: RayAssumption,
+    /// Half-side, metres, of the square around its UAV over which an agent keeps the reach
+    /// of `X̄`, with a lower bound per block of cells outside it (docs/design.md §3, "Agent
+    /// windows"). `inf`, the default, keeps it over the whole region, as the design's
+    /// estimator does; a large fleet sets it to what its guidance reads, so that an agent's
+    /// work and memory follow its neighbourhood rather than the fleet.
+    pub window_m: f64,
 }
 
 /// What the estimator assumes of the ray along which a pixel's depth was measured
@@ -919,6 +925,7 @@ impl Default for EstimatorConfig {
             oem_cell_m: 5.0,
             sets: SetGrowth::Reach,
             depth_ray: RayAssumption::Any,
+            window_m: f64::INFINITY,
         }
     }
 }

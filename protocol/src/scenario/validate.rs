@@ -633,7 +633,8 @@ impl Scenario {
             "estimator.oem_cell_m",
             estimator.oem_cell_m,
             format!("estimator.cell_m ({} m) <= value < inf", estimator.cell_m),
-        )
+        )?;
+        Interval::open_closed(0.0, f64::INFINITY).check("estimator.window_m", estimator.window_m)
     }
 
     fn validate_guidance(&self) -> Result<(), ScenarioError> {
@@ -855,6 +856,8 @@ mod tests {
                 s.estimator.cell_m = 0.4;
             }),
             ("estimator.oem_cell_m", |s| s.estimator.oem_cell_m = 0.25),
+            ("estimator.window_m", |s| s.estimator.window_m = 0.0),
+            ("estimator.window_m", |s| s.estimator.window_m = f64::NAN),
             ("guidance.horizon", |s| s.guidance.horizon = 5),
             ("guidance.yaw_increments_rad", |s| {
                 s.guidance.yaw_increments_rad.clear()
