@@ -144,9 +144,7 @@ impl EstimatorConfig {
             window_m: scenario.estimator.window_m,
         }
     }
-}
 
-impl EstimatorConfig {
     /// Whether `X̄` keeps its reach over a window around the UAV rather than the whole grid.
     pub fn keeps_window(&self) -> bool {
         self.window_m.is_finite()
