@@ -448,6 +448,14 @@ impl Storage {
             Storage::Window => set.keep_window(),
         }
     }
+
+    /// The margin of a set stored near its cells.
+    fn margin(self) -> Option<u32> {
+        match self {
+            Storage::Margin(m) => Some(m),
+            _ => None,
+        }
+    }
 }
 
 /// The checks of `the_set_holds_every_possible_position` through `events`, for a set stored
@@ -464,10 +472,7 @@ fn holds_every_possible_position(
     let mut possible = vec![true; pts.len()];
     let mut set = storage.apply(ReachSet::full(&g));
     let mut plain = matches!(storage, Storage::Window).then(|| ReachSet::full(&g));
-    let margin = match storage {
-        Storage::Margin(m) => Some(m),
-        _ => None,
-    };
+    let margin = storage.margin();
     let mut dilated = CellSet::full(&g);
     let mut clock = 0.0;
     for e in events {
@@ -796,10 +801,7 @@ fn late_facts_hold(
     let g = *g;
     let pts = samples(&g, per_side);
     let mut set = storage.apply(ReachSet::full(&g));
-    let margin = match storage {
-        Storage::Margin(m) => Some(m),
-        _ => None,
-    };
+    let margin = storage.margin();
     let mut facts: Vec<Fact> = Vec::new();
     // The clock after each move, with 0 first.
     let mut clocks = vec![0.0];
