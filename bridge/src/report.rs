@@ -30,6 +30,12 @@ pub struct Counters {
     pub proxies_created: u64,
     /// Liveliness tokens declared for this host's processes.
     pub announced: u64,
+    /// Messages of remote processes that came before the process's announcement, and waited
+    /// for it.
+    pub held: u64,
+    /// Of those, the messages published without it: it did not come within the wait, or the
+    /// sender's held messages outgrew the hold.
+    pub unannounced: u64,
 }
 
 impl Counters {
@@ -75,6 +81,8 @@ impl Counters {
         }
         self.proxies_created += other.proxies_created;
         self.announced += other.announced;
+        self.held += other.held;
+        self.unannounced += other.unannounced;
     }
 
     /// Messages refused in all.
@@ -103,6 +111,8 @@ mod tests {
         b.received("token", 3);
         b.refused("estimate", "malformed");
         b.proxies_created = 2;
+        b.held = 3;
+        b.unannounced = 1;
         a.merge(b);
         assert_eq!(
             a.sent["frame"],
@@ -114,5 +124,6 @@ mod tests {
         assert_eq!(a.received["token"].messages, 1);
         assert_eq!(a.refused_total(), 2);
         assert_eq!(a.proxies_created, 2);
+        assert_eq!((a.held, a.unannounced), (3, 1));
     }
 }

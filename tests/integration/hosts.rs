@@ -90,11 +90,18 @@ fn run_on_hosts(hosts: u16, extra: &[&str]) -> (String, Value) {
     for a in s["agents"].as_array().expect("agents") {
         assert_eq!(a["steps_processed"], 20, "{hosts} hosts: {a}");
     }
+    // No agent was ever taken for dead: each one's hello and messages reached the world after
+    // its proxy existed.
+    let world = world_report(&out_dir);
+    for a in world["agents"].as_array().expect("world's agents") {
+        assert_eq!((&a["deaths"], &a["misses"]), (&0.into(), &0.into()), "{a}");
+    }
     // One host runs no bridge.
     let bridges = if hosts > 1 { hosts } else { 0 };
     for host in 0..bridges {
         let r = bridge_report(&out_dir, host);
         assert_eq!(r["refused"], serde_json::json!({}), "host {host}: {r}");
+        assert_eq!(r["unannounced"], 0, "host {host}: {r}");
         assert!(
             r["received"]["estimate"]["messages"].as_u64() > Some(0),
             "host {host}: {r}"
@@ -358,6 +365,7 @@ fn intruders_without_the_fleets_certificate_are_refused_and_reach_nobody() {
     for host in 0..2 {
         let r = bridge_report(&out_dir, host);
         assert_eq!(r["refused"], serde_json::json!({}), "host {host}: {r}");
+        assert_eq!(r["unannounced"], 0, "host {host}: {r}");
     }
     // The world host's bridge logged each refusal.
     let log = std::fs::read_to_string(&world_bridge_log).expect("log");

@@ -6,13 +6,16 @@
 //! owns every local port and handles the queue in arrival order. Liveliness and data share
 //! that queue: a remote process's proxy node exists before its first message is published
 //! here (its host declares it alive before forwarding anything of it, see
-//! [`crate::outbound`]), so a local process that lists the run's nodes on receipt of a
-//! hello or an estimate finds the sender alive, as it would on one host.
+//! [`crate::outbound`], and this thread holds what comes before the declaration, see
+//! [`unannounced`]), so a local process that lists the run's nodes on receipt of a hello or
+//! an estimate finds the sender alive, as it would on one host.
+
+mod unannounced;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -25,6 +28,7 @@ use crate::envelope::{self, EnvelopeError};
 use crate::keys::Topic;
 use crate::placement::HostPlan;
 use crate::report::Counters;
+use unannounced::{Message, Unannounced};
 
 /// What the Zenoh callbacks queue for the inbound thread.
 #[derive(Debug)]
@@ -171,26 +175,79 @@ pub fn run(
         }
     };
     let mut proxies = Proxies::default();
+    let mut unannounced = Unannounced::default();
     while !shutdown.load(Ordering::Relaxed) {
-        match arrivals.recv_timeout(POLL) {
+        let wait = unannounced.next_deadline().map_or(POLL, |d| {
+            d.saturating_duration_since(Instant::now()).min(POLL)
+        });
+        match arrivals.recv_timeout(wait) {
             Ok(Arrival::Data { topic, bytes }) => {
-                let len = bytes.len() as u64;
-                match publish(plan, &ports, topic, &bytes) {
-                    Ok(()) => counters.received(topic_label(topic), len),
-                    Err(e) => {
-                        tracing::warn!(?topic, error = %e, "message from another host refused");
-                        counters.refused(topic_label(topic), e.label());
-                    }
+                let node = sender(topic);
+                if unannounced.holds(&node)
+                    || (plan.is_remote_node(&node) && !proxies.exists(&node))
+                {
+                    counters.held += 1;
+                    let over = unannounced.hold(&node, (topic, bytes), Instant::now());
+                    deliver_unannounced(plan, &ports, over, &mut counters);
+                } else {
+                    deliver(plan, &ports, topic, &bytes, &mut counters);
                 }
             }
             Ok(Arrival::Alive { host, node, up }) => {
-                proxies.update(plan, &host, &node, up, &mut counters)
+                proxies.update(plan, &host, &node, up, &mut counters);
+                if proxies.exists(&node) {
+                    for (topic, bytes) in unannounced.release(&node) {
+                        deliver(plan, &ports, topic, &bytes, &mut counters);
+                    }
+                }
             }
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => break,
         }
+        let expired = unannounced.expired(Instant::now());
+        deliver_unannounced(plan, &ports, expired, &mut counters);
     }
+    let left = unannounced.release_all();
+    deliver_unannounced(plan, &ports, left, &mut counters);
     counters
+}
+
+/// The node that publishes `topic`'s messages.
+fn sender(topic: Topic) -> String {
+    match topic {
+        Topic::Frame(_) | Topic::EndOfRun => RunNode::WORLD.to_owned(),
+        Topic::Command(uav) | Topic::Estimate(uav) | Topic::State(uav) | Topic::Token(uav) => {
+            RunNode::agent_name(uav)
+        }
+    }
+}
+
+/// Publishes a message here, or counts it refused.
+fn deliver(plan: &HostPlan, ports: &Ports, topic: Topic, bytes: &[u8], counters: &mut Counters) {
+    match publish(plan, ports, topic, bytes) {
+        Ok(()) => counters.received(topic_label(topic), bytes.len() as u64),
+        Err(e) => {
+            tracing::warn!(?topic, error = %e, "message from another host refused");
+            counters.refused(topic_label(topic), e.label());
+        }
+    }
+}
+
+/// Publishes held messages whose sender's announcement did not come in time.
+fn deliver_unannounced(
+    plan: &HostPlan,
+    ports: &Ports,
+    messages: Vec<Message>,
+    counters: &mut Counters,
+) {
+    for (topic, bytes) in messages {
+        tracing::warn!(
+            ?topic,
+            "published before its sender was announced alive: the announcement did not come"
+        );
+        counters.unannounced += 1;
+        deliver(plan, ports, topic, &bytes, counters);
+    }
 }
 
 /// Name of a topic in the counters.
@@ -331,6 +388,11 @@ struct Proxies {
 }
 
 impl Proxies {
+    /// Whether a proxy of `node` exists.
+    fn exists(&self, node: &str) -> bool {
+        self.nodes.contains_key(node)
+    }
+
     fn update(
         &mut self,
         plan: &HostPlan,
