@@ -175,6 +175,40 @@ fn the_same_seed_in_lockstep_gives_the_same_results() {
     }
 }
 
+/// `estimator.window_m`: a window over the whole region gives the run without one byte for
+/// byte (sets and metrics), and windows smaller than the region keep the guarantee, under both
+/// exchanges.
+#[test]
+fn windows_over_the_region_change_nothing_and_smaller_ones_keep_the_guarantee() {
+    for exchange in ["measurements", "sets"] {
+        let run = |window_m: &str| {
+            let t = TestRun::new("run-windows");
+            let file = t.write("scenario.toml", &scenario(20.0, 2));
+            let out_dir = t.dir.join("out");
+            let exchange = format!("comms.exchange={exchange}");
+            let window = format!("estimator.window_m={window_m}");
+            let args = ["--strict", "--set", &exchange, "--set", &window];
+            let out = finish(
+                &t,
+                ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &args)),
+            );
+            assert!(out.status.success(), "window {window_m}: {}", stderr(&out));
+            let csv = std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv");
+            (without_wall_clock(summary(&out_dir)), csv)
+        };
+        let (none, covering) = (run("inf"), run("1000"));
+        assert_eq!(none.1, covering.1, "{exchange}: timeseries.csv differs");
+        assert_eq!(none.0, covering.0, "{exchange}: summary.json differs");
+        // 25 m around each UAV in a 200 m region: `--strict` fails the run on a violation.
+        let (small, _) = run("25");
+        assert_eq!(small["violations"], 0, "{exchange}: {small}");
+        assert_ne!(
+            small["ua_final"], none.0["ua_final"],
+            "{exchange}: no window?"
+        );
+    }
+}
+
 #[test]
 fn killed_agents_leave_a_run_that_completes_with_guaranteed_survivors() {
     for exchange in ["sets", "measurements"] {

@@ -29,6 +29,11 @@
 //! fused by the agent later, dilated; here only the estimates of the same step are fused (in
 //! lockstep every live peer's estimate of the step is fused at that step).
 //!
+//! **Under windows** (`estimator.window_m`) an agent's `X̄` is loose outside its window: its
+//! UA and OA are measured over the window ([`SetMetrics::within`]), and the fleet's `X̄`, the
+//! intersection of the agents', gives the UA and OA that stand for the mean
+//! ([`fleet_areas`]).
+//!
 //! **Fleet-wide**, where a per-agent reading would say less: the guarantee is checked on each
 //! published estimate ([`violations`]), and [`identified_ids`] counts the targets identified by
 //! any agent. Every area is a fraction of the grid's area (the region of interest).
@@ -43,7 +48,7 @@ use protocol::radio::Radio;
 use protocol::wire::{AgentStats, TargetTruth};
 use sets::grid::{CellIndex, GroundGrid};
 use sets::math::Point2;
-use sets::raster::CellSet;
+use sets::raster::{CellBox, CellSet};
 
 /// What the observer keeps of one agent's estimate of one step.
 #[derive(Clone, Debug, PartialEq)]
@@ -308,6 +313,50 @@ impl SetMetrics {
             identified: fused.targets.len() as f64,
         }
     }
+}
+
+impl SetMetrics {
+    /// These metrics with UA and OA over an agent's `window` only (`estimator.window_m`): the
+    /// shares of the window, not of the region, that its `X̄` and `X̄ ∩ H̄` cover. Outside its
+    /// window an agent keeps `X̄` loose (coarse bounds of the reach), so its own UA says what it
+    /// knows where its guidance reads; the fleet's is [`fleet_areas`].
+    pub fn within(self, fused: &FusedSets, window: &CellBox) -> SetMetrics {
+        let cells = window.cell_count().max(1) as f64;
+        let mut occluded = (*fused.undetected).clone();
+        occluded.and_assign(&fused.unseen);
+        SetMetrics {
+            ua: fused.undetected.count_in_box(window) as f64 / cells,
+            oa: occluded.count_in_box(window) as f64 / cells,
+            ..self
+        }
+    }
+}
+
+/// The fleet's UA and OA when the agents keep `X̄` over windows: the fleet's `X̄` is the
+/// intersection of the agents' (each an outer set of the cars not yet identified, so their
+/// intersection is one too), UA its share of the region, and OA the mean over agents of the
+/// share of the region in both it and the agent's `H̄`. When every agent holds the same
+/// `X̄` (lockstep, perfect links, no windows) they are the means over agents of UA and OA.
+/// `None` for no agent.
+pub fn fleet_areas<'a>(
+    agents: impl IntoIterator<Item = &'a FusedSets>,
+    grid: &GroundGrid,
+) -> Option<(f64, f64)> {
+    let agents: Vec<&FusedSets> = agents.into_iter().collect();
+    let (first, rest) = agents.split_first()?;
+    let mut fleet = (*first.undetected).clone();
+    for a in rest {
+        fleet.and_assign(&a.undetected);
+    }
+    let cells = grid.cell_count().max(1) as f64;
+    let occluded: Vec<f64> = agents
+        .iter()
+        .map(|a| fleet.intersection_count(&a.unseen) as f64 / cells)
+        .collect();
+    Some((
+        fleet.count() as f64 / cells,
+        mean(&occluded).unwrap_or_default(),
+    ))
 }
 
 /// Several agents' metrics of one step summarised: each metric's mean over the agents that
@@ -1061,6 +1110,38 @@ pub(crate) mod tests {
         assert_eq!(s.mean.target_set_area, Some(0.015));
         assert_eq!(s.worst.loc_error_m, m.loc_error_m);
         assert!(AgentSpread::over([]).is_none());
+    }
+
+    #[test]
+    fn under_windows_an_agent_is_measured_over_its_window_and_the_fleet_over_the_intersection() {
+        let g = grid();
+        // Agent 0 still holds the cells of columns 0-4 of row 0, agent 1 those of columns 3-7:
+        // the fleet's X̄ is columns 3 and 4.
+        let row = |x0: u32, x1: u32| set(&(x0..=x1).map(|x| (x, 0)).collect::<Vec<_>>());
+        let mut a = estimate(0, row(0, 4), &[]);
+        a.unseen = set(&[(0, 0), (4, 0), (9, 9)]);
+        let b = estimate(1, row(3, 7), &[]);
+        let (fa, fb) = (
+            FusedSets::fuse(&a, [], &config()),
+            FusedSets::fuse(&b, [], &config()),
+        );
+        // Agent 0's window: columns 0-1 of rows 0-4, 10 cells, 2 of them in X̄, 1 hidden.
+        let window = CellBox {
+            x0: 0,
+            y0: 0,
+            x1: 1,
+            y1: 4,
+        };
+        let whole = SetMetrics::measure(&fa, &[], &g);
+        let m = whole.within(&fa, &window);
+        assert_eq!((whole.ua, whole.oa), (0.05, 0.02));
+        assert_eq!((m.ua, m.oa), (0.2, 0.1));
+        assert_eq!(m.explored, whole.explored);
+        // The fleet: 2 cells of 100; agent 0's H̄ holds one of them, agent 1's none.
+        assert_eq!(fleet_areas([&fa, &fb], &g), Some((0.02, 0.005)));
+        // Agents that hold the same X̄: the fleet's UA and OA are theirs.
+        assert_eq!(fleet_areas([&fa, &fa], &g), Some((whole.ua, whole.oa)));
+        assert_eq!(fleet_areas([], &g), None);
     }
 
     #[test]

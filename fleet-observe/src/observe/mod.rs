@@ -67,7 +67,7 @@ use protocol::wire::{
 use sets::grid::GroundGrid;
 use tokio::sync::mpsc::UnboundedSender;
 
-use metrics::{AgentSpread, ObservedEstimate, SetMetrics, identified_ids, violations};
+use metrics::{AgentSpread, ObservedEstimate, SetMetrics, fleet_areas, identified_ids, violations};
 use ports::Ports;
 use reception::Reception;
 pub use report::{FinalState, ObserverEnd, ObserverReport};
@@ -111,7 +111,8 @@ pub struct StepMetrics {
     /// Each agent's set metrics on its own fused sets, by UAV (the agents whose estimate of
     /// the step arrived).
     pub agents: BTreeMap<u32, SetMetrics>,
-    /// Mean over [`StepMetrics::agents`], `None` when no estimate of the step arrived.
+    /// Mean over [`StepMetrics::agents`], `None` when no estimate of the step arrived. Under
+    /// windows its UA and OA are the fleet's ([`metrics::fleet_areas`]).
     pub mean: Option<SetMetrics>,
     /// Worst agent, metric by metric, `None` when no estimate of the step arrived.
     pub worst: Option<SetMetrics>,
@@ -524,14 +525,31 @@ impl Observer<'_> {
         let violation_count = check_guarantee(truth, &estimates, &grid);
         let all_fused = self.reception.fuse(k, &estimates);
         let mut agents = BTreeMap::new();
-        for (uav, fused) in &all_fused {
+        let mut windowed = false;
+        for ((uav, fused), estimate) in all_fused.iter().zip(&estimates) {
             // Its `X̄` after this step's fusion, the last it holds if its run ends here.
             self.report
                 .final_undetected
                 .insert(*uav, (k, fused.undetected.clone()));
-            agents.insert(*uav, SetMetrics::measure(fused, truth.targets(), &grid));
+            let mut metrics = SetMetrics::measure(fused, truth.targets(), &grid);
+            // A window over the whole region is no window: the metrics stay today's.
+            let window = self.reception.window_of(estimate);
+            if let Some(window) = window.filter(|w| w.cell_count() < grid.cell_count() as u64) {
+                metrics = metrics.within(fused, &window);
+                windowed = true;
+            }
+            agents.insert(*uav, metrics);
         }
-        let spread = AgentSpread::over(agents.values());
+        let mut spread = AgentSpread::over(agents.values());
+        // Under windows the fleet's UA and OA stand for the agents' mean (docs/design.md §6).
+        if let (true, Some(spread), Some((ua, oa))) = (
+            windowed,
+            spread.as_mut(),
+            fleet_areas(all_fused.iter().map(|(_, f)| f), &grid),
+        ) {
+            spread.mean.ua = ua;
+            spread.mean.oa = oa;
+        }
         let estimate_count = estimates.len() as u32;
         let identified_any = identified_ids(&estimates).len() as u32;
         self.reception.keep_sent(k, estimates);

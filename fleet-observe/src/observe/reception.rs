@@ -21,6 +21,7 @@ use protocol::radio::Radio;
 use protocol::scenario::{Exchange, Scenario};
 use protocol::wire::{DropReason, WireHeader, WireKind, unix_now_ns};
 use sets::grid::GroundGrid;
+use sets::raster::CellBox;
 
 use super::ObserverReport;
 use super::metrics::{EstimateObserveError, FusedSets, ObservedEstimate};
@@ -66,6 +67,12 @@ impl Reception {
     /// The ground grid the agents' sets live on.
     pub(super) fn grid(&self) -> GroundGrid {
         self.estimator.grid
+    }
+
+    /// The window over which the sender of `estimate` kept `X̄` at its step
+    /// ([`EstimatorConfig::window_of`] of its pose); `None` without windows.
+    pub(super) fn window_of(&self, estimate: &ObservedEstimate) -> Option<CellBox> {
+        self.estimator.window_of(estimate.estimate.pose.as_ref()?)
     }
 
     /// The grid of the agents' occupancy maps.

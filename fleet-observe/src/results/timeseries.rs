@@ -5,7 +5,9 @@
 //!
 //! The set metrics come twice: the mean over the agents measured at that step (`explored`,
 //! `ua`, ...) and the worst agent (the same names suffixed `_worst`). `identified_any` and
-//! `violations` are fleet-wide.
+//! `violations` are fleet-wide. When the agents keep `X̄` over windows (`estimator.window_m`)
+//! `ua` and `oa` are the fleet's (its `X̄` the intersection of the agents') and `ua_worst`
+//! and `oa_worst` the worst agent's over its window (docs/design.md §6, "Under windows").
 
 use std::fmt::Write as _;
 use std::path::Path;
