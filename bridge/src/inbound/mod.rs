@@ -7,8 +7,8 @@
 //! that queue: a remote process's proxy node exists before its first message is published
 //! here (its host declares it alive before forwarding anything of it, see
 //! [`crate::outbound`], and this thread holds what comes before the declaration, see
-//! [`unannounced`]), so a local process that lists the run's nodes on receipt of a hello or
-//! an estimate finds the sender alive, as it would on one host.
+//! `inbound/unannounced.rs`), so a local process that lists the run's nodes on receipt of a
+//! hello or an estimate finds the sender alive, as it would on one host.
 
 mod unannounced;
 
