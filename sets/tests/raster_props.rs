@@ -438,6 +438,8 @@ proptest! {
         let cb = CellBox { x0: bx.0, y0: bx.1, x1: bx.2, y1: bx.3 };
         let m_in: HashSet<CellIndex> = ma.iter().copied().filter(|&c| cb.contains(c)).collect();
         prop_assert_eq!(sa.count_in_box(&cb) as usize, m_in.len());
+        let m_and_in = m_and.iter().filter(|&&c| cb.contains(c)).count();
+        prop_assert_eq!(sa.intersection_count_in_box(&sb, &cb) as usize, m_and_in);
         let mut cropped = sa.clone();
         cropped.crop(&cb);
         prop_assert_eq!(cropped.iter().collect::<HashSet<_>>(), m_in);

@@ -322,11 +322,10 @@ impl SetMetrics {
     /// knows where its guidance reads; the fleet's is [`fleet_areas`].
     pub fn within(self, fused: &FusedSets, window: &CellBox) -> SetMetrics {
         let cells = window.cell_count().max(1) as f64;
-        let mut occluded = (*fused.undetected).clone();
-        occluded.and_assign(&fused.unseen);
+        let undetected = &fused.undetected;
         SetMetrics {
-            ua: fused.undetected.count_in_box(window) as f64 / cells,
-            oa: occluded.count_in_box(window) as f64 / cells,
+            ua: undetected.count_in_box(window) as f64 / cells,
+            oa: undetected.intersection_count_in_box(&fused.unseen, window) as f64 / cells,
             ..self
         }
     }

@@ -70,6 +70,18 @@ impl CellSet {
 
     /// Number of cells of the set inside `bbox` (clamped to the grid).
     pub fn count_in_box(&self, bbox: &CellBox) -> u64 {
+        self.count_in_box_and(bbox, |_, _| u64::MAX)
+    }
+
+    /// Number of cells of `self ∩ other` inside `bbox` (clamped to the grid), without
+    /// building the intersection.
+    pub fn intersection_count_in_box(&self, other: &CellSet, bbox: &CellBox) -> u64 {
+        debug_assert!(self.same_shape(other));
+        self.count_in_box_and(bbox, |iy, w| other.row(iy)[w])
+    }
+
+    /// Number of cells of the set inside `bbox` whose bit is also set in `also(row, word)`.
+    fn count_in_box_and(&self, bbox: &CellBox, also: impl Fn(u32, usize) -> u64) -> u64 {
         if bbox.x0 > bbox.x1 || bbox.y0 > bbox.y1 || bbox.y0 >= self.ny {
             return 0;
         }
@@ -78,7 +90,10 @@ impl CellSet {
             .map(|iy| {
                 let row = self.row(iy);
                 (w0..=w1.min(self.words_per_row.saturating_sub(1)))
-                    .map(|w| (row[w] & span_mask(w as u32, bbox.x0, bbox.x1)).count_ones() as u64)
+                    .map(|w| {
+                        let mask = span_mask(w as u32, bbox.x0, bbox.x1);
+                        (row[w] & also(iy, w) & mask).count_ones() as u64
+                    })
                     .sum::<u64>()
             })
             .sum()
