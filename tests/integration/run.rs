@@ -121,6 +121,21 @@ fn without_wall_clock(mut v: Value) -> Value {
     v
 }
 
+/// Runs the 20 s 2-UAV scenario with `args` to a successful end; returns its summary without
+/// the wall clock and its `timeseries.csv`.
+fn two_uav_run(topic: &str, args: &[&str]) -> (Value, String) {
+    let t = TestRun::new(topic);
+    let file = t.write("scenario.toml", &scenario(20.0, 2));
+    let out_dir = t.dir.join("out");
+    let out = finish(
+        &t,
+        ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, args)),
+    );
+    assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+    let csv = std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv");
+    (without_wall_clock(summary(&out_dir)), csv)
+}
+
 #[test]
 fn the_same_seed_in_lockstep_gives_the_same_results() {
     // `paper`, `kappa0` and `nomap` share the paper's planner; `setfleet` has its own. Lossy,
@@ -141,20 +156,9 @@ fn the_same_seed_in_lockstep_gives_the_same_results() {
         ("paper", &measurements[..]),
         ("paper", &lossy_measurements[..]),
     ] {
+        let args = [&["--variant", variant][..], links].concat();
         let results: Vec<(Value, String)> = (0..2)
-            .map(|_| {
-                let t = TestRun::new("run-determinism");
-                let file = t.write("scenario.toml", &scenario(20.0, 2));
-                let out_dir = t.dir.join("out");
-                let args = [&["--variant", variant][..], links].concat();
-                let out = finish(
-                    &t,
-                    ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &args)),
-                );
-                assert!(out.status.success(), "{variant}: {}", stderr(&out));
-                let csv = std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv");
-                (without_wall_clock(summary(&out_dir)), csv)
-            })
+            .map(|_| two_uav_run("run-determinism", &args))
             .collect();
         assert_eq!(
             results[0].1, results[1].1,
@@ -182,19 +186,12 @@ fn the_same_seed_in_lockstep_gives_the_same_results() {
 fn windows_over_the_region_change_nothing_and_smaller_ones_keep_the_guarantee() {
     for exchange in ["measurements", "sets"] {
         let run = |window_m: &str| {
-            let t = TestRun::new("run-windows");
-            let file = t.write("scenario.toml", &scenario(20.0, 2));
-            let out_dir = t.dir.join("out");
             let exchange = format!("comms.exchange={exchange}");
             let window = format!("estimator.window_m={window_m}");
-            let args = ["--strict", "--set", &exchange, "--set", &window];
-            let out = finish(
-                &t,
-                ChildGuard::spawn(&mut fleet_run(&t, &file, &out_dir, &args)),
-            );
-            assert!(out.status.success(), "window {window_m}: {}", stderr(&out));
-            let csv = std::fs::read_to_string(out_dir.join("timeseries.csv")).expect("csv");
-            (without_wall_clock(summary(&out_dir)), csv)
+            two_uav_run(
+                "run-windows",
+                &["--strict", "--set", &exchange, "--set", &window],
+            )
         };
         let (none, covering) = (run("inf"), run("1000"));
         assert_eq!(none.1, covering.1, "{exchange}: timeseries.csv differs");

@@ -243,7 +243,8 @@ fn deliver_unannounced(
     for (topic, bytes) in messages {
         tracing::warn!(
             ?topic,
-            "published before its sender was announced alive: the announcement did not come"
+            "published before its sender was announced alive: no announcement within the hold, \
+             or the sender's held messages outgrew it"
         );
         counters.unannounced += 1;
         deliver(plan, ports, topic, &bytes, counters);
