@@ -1,6 +1,6 @@
 //! `fleet bench scale` end to end: a tiny scaling study (1 and 2 UAVs under both exchanges,
-//! 2 s each) writes a report with a row per run and every field, the headline keys of each
-//! exchange, a decodable picture, sees no violation and leaves no process and no iceoryx2
+//! each over the whole region and with a 40 m window, 2 s each) writes a report with a row per
+//! run and every field, the headline keys of each series, a decodable picture, sees no violation and leaves no process and no iceoryx2
 //! file; bad flags exit with code 2 and name the flag.
 
 use std::ffi::OsStr;
@@ -56,6 +56,15 @@ fn json(path: &Path) -> Value {
 /// The exchanges the test measures, in the order they run.
 const EXCHANGES: [&str; 2] = ["sets", "measurements"];
 
+/// The series the test measures, in the order they run: each exchange over the whole region,
+/// then with windows of 40 m half-side (smaller than the 100 m and 141 m regions).
+const SERIES: [(&str, &str, Option<f64>); 4] = [
+    ("sets", "sets", None),
+    ("sets_w40", "sets", Some(40.0)),
+    ("measurements", "measurements", None),
+    ("measurements_w40", "measurements", Some(40.0)),
+];
+
 #[test]
 fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing() {
     let t = TestRun::new("scale");
@@ -69,6 +78,8 @@ fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing
             OsStr::new("2,1"),
             OsStr::new("--exchange"),
             OsStr::new("sets,measurements"),
+            OsStr::new("--window-m"),
+            OsStr::new("inf,40"),
             OsStr::new("--duration"),
             OsStr::new("2"),
             OsStr::new("--out"),
@@ -79,12 +90,14 @@ fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing
     );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "fleet bench scale failed: {stderr}");
-    // A line when each run is done: each exchange in turn, the sizes smallest first.
+    // A line when each run is done: each series in turn, the sizes smallest first.
     for line in [
-        "scale 1/4: sets, 1 UAVs, 1 cars",
-        "scale 2/4: sets, 2 UAVs, 2 cars",
-        "scale 3/4: measurements, 1 UAVs, 1 cars",
-        "scale 4/4: measurements, 2 UAVs, 2 cars",
+        "scale 1/8: sets, 1 UAVs, 1 cars",
+        "scale 2/8: sets, 2 UAVs, 2 cars",
+        "scale 3/8: sets, 40 m window, 1 UAVs, 1 cars",
+        "scale 4/8: sets, 40 m window, 2 UAVs, 2 cars",
+        "scale 5/8: measurements, 1 UAVs, 1 cars",
+        "scale 8/8: measurements, 40 m window, 2 UAVs, 2 cars",
     ] {
         assert!(stderr.contains(line), "no {line:?} in {stderr}");
     }
@@ -102,29 +115,32 @@ fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing
     assert_eq!(report["goal_cpu_per_uav_step_ratio"], 1.5);
     assert_eq!(report["goal_agent_peak_mb"], 60.0);
     assert_eq!(report["exchanges"], serde_json::json!(EXCHANGES));
-    // The headline keys of each exchange: null, as no run has 16 UAVs.
-    for exchange in EXCHANGES {
+    let keys: Vec<&str> = SERIES.iter().map(|s| s.0).collect();
+    assert_eq!(report["series"], serde_json::json!(keys));
+    // The headline keys of each series: null, as no run has 16 UAVs.
+    for (series, ..) in SERIES {
         for key in [
             "real_time_factor_16",
             "bytes_per_uav_ratio_16",
             "cpu_per_uav_step_ratio_16",
             "agent_peak_mb_16",
         ] {
-            let key = format!("{key}_{exchange}");
+            let key = format!("{key}_{series}");
             assert_eq!(report.get(&key), Some(&Value::Null), "{key}: {report}");
         }
     }
     assert_eq!(report["violations"], 0);
     assert_eq!(report["failed_runs"], serde_json::json!([]));
     let cases = report["cases"].as_array().expect("cases");
-    assert_eq!(cases.len(), 4, "{report}");
-    let runs = EXCHANGES
+    assert_eq!(cases.len(), 8, "{report}");
+    let runs = SERIES
         .iter()
-        .flat_map(|&e| [(e, 1, 1, 50.0), (e, 2, 2, 50.0 * 2f64.sqrt())]);
-    for (case, (exchange, uavs, cars, half)) in cases.iter().zip(runs) {
-        assert_eq!(case["name"], format!("{exchange} uavs={uavs}"), "{case}");
+        .flat_map(|&s| [(s, 1, 1, 50.0), (s, 2, 2, 50.0 * 2f64.sqrt())]);
+    for (case, ((series, exchange, window), uavs, cars, half)) in cases.iter().zip(runs) {
+        assert_eq!(case["name"], format!("{series} uavs={uavs}"), "{case}");
         let p = &case["params"];
         assert_eq!(p["exchange"], exchange, "{case}");
+        assert_eq!(p["window_m"], serde_json::json!(window), "{case}");
         assert_eq!(p["uavs"], uavs, "{case}");
         assert_eq!(p["cars"], cars, "{case}");
         assert_eq!(p["status"], "ok", "{case}");
@@ -135,7 +151,7 @@ fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing
             let v = m[key].as_f64().unwrap_or(f64::NAN);
             assert!(
                 v.is_finite() && v > 0.0,
-                "{exchange} uavs={uavs}: {key} = {:?}",
+                "{series} uavs={uavs}: {key} = {:?}",
                 m[key]
             );
         }
@@ -154,14 +170,22 @@ fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing
         assert!(m.get("bytes_per_uav_ratio_to_4").is_none(), "{case}");
         assert!(m.get("cpu_per_uav_step_ratio_to_4").is_none(), "{case}");
 
-        // Each run is a whole `fleet run` in its own directory, under its exchange.
-        let run_dir = runs_dir.join(exchange).join(format!("uavs-{uavs}"));
+        // Each run is a whole `fleet run` in its own directory, under its series.
+        let run_dir = runs_dir.join(series).join(format!("uavs-{uavs}"));
         let summary = json(&run_dir.join("summary.json"));
         let scenario = std::fs::read_to_string(run_dir.join("scenario.toml"))
             .unwrap_or_else(|e| panic!("{}: {e}", run_dir.display()));
         assert!(
             scenario.contains(&format!("exchange = \"{exchange}\"")),
-            "{exchange} uavs={uavs}: {scenario}"
+            "{series} uavs={uavs}: {scenario}"
+        );
+        let window_line = format!(
+            "window_m = {}",
+            window.map_or("inf".into(), |m| format!("{m:?}"))
+        );
+        assert!(
+            scenario.contains(&window_line),
+            "{series} uavs={uavs}: {scenario}"
         );
         assert_eq!(summary["uavs"], uavs);
         assert_eq!(summary["targets"], cars);
@@ -172,14 +196,14 @@ fn a_tiny_scale_bench_reports_every_size_under_both_exchanges_and_leaves_nothing
             .as_array()
             .expect("processes");
         for p in processes.iter().filter(|p| p["role"] != "orchestrator") {
-            assert_eq!(p["peak_rss_source"], "vmhwm", "{exchange} uavs={uavs}: {p}");
+            assert_eq!(p["peak_rss_source"], "vmhwm", "{series} uavs={uavs}: {p}");
         }
         let run = summary["timing"]["run_id"].as_str().expect("run id");
         let run = RunId::new(run).expect("a valid run id");
         let left = ipc::run_files(&run).unwrap_or_default();
         assert!(
             left.is_empty(),
-            "{exchange} uavs={uavs}: files left: {left:?}"
+            "{series} uavs={uavs}: files left: {left:?}"
         );
     }
 
@@ -216,6 +240,11 @@ fn bad_scale_flags_exit_2_naming_the_flag() {
         (&["--duration=-1"], "--duration -1"),
         (&["--exchange", "bogus"], "--exchange"),
         (&["--exchange", "sets,bogus"], "--exchange"),
+        (&["--window-m=-5"], "--window-m"),
+        (
+            &["--window-m", "auto,none"],
+            "a window is `inf`, `auto` or a positive number",
+        ),
     ] {
         let with_out = args
             .iter()

@@ -22,19 +22,26 @@
 //! [`ALTITUDE_STEP_M`] per UAV, the last of 16 would fly 150 m above the first and see
 //! several times its ground, and the bench would compare altitudes as much as fleet sizes.
 //!
-//! Per run, one (exchange, fleet size) pair ([`report::ScaleRow`]): wall time per simulated
+//! Each exchange also runs under every window of `--window-m` (`estimator.window_m`: `inf`,
+//! the whole region, by default; a half-side in metres; or `auto`, each fleet's guidance
+//! reach, [`Scenario::guidance_reach_m`]): an exchange and a window make a [`Series`], one
+//! scaling curve.
+//!
+//! Per run, one (series, fleet size) pair ([`report::ScaleRow`]): wall time per simulated
 //! second and the real-time factor, CPU per UAV-step (every process's CPU over UAVs x steps),
 //! the estimates' and the token's messages and bytes per simulated second in total and per
 //! UAV, peak resident memory per process (world, largest agent, all agents, orchestrator),
 //! violations, and the bytes per UAV per second and the CPU per UAV-step against the 4-UAV
-//! run **of the same exchange**. Writes `scale.json` (a [`BenchReport`], one case per run,
-//! the headline figures per exchange) and `scale.png` ([`plot`], one line per exchange) into
-//! `--out`, each run's own results under `--runs` in `<exchange>/uavs-<N>`.
+//! run **of the same series**. Writes `scale.json` (a [`BenchReport`], one case per run,
+//! the headline figures per series) and `scale.png` ([`plot`], one line per series) into
+//! `--out`, each run's own results under `--runs` in `<series key>/uavs-<N>`
+//! ([`Series::key`]: `measurements`, `measurements_w300`, `measurements_wauto`).
 //!
-//! The runs go one after another: for each exchange in the order given, the fleet sizes
-//! smallest first. A run needs the machine to itself for its real-time factor to mean
-//! anything. The exchange is the last override of each run's scenario, so `--exchange` wins
-//! over a `--set comms.exchange=...`. A run that fails is a row with its status, the next runs
+//! The runs go one after another: for each exchange in the order given, each window in the
+//! order given, the fleet sizes smallest first. A run needs the machine to itself for its
+//! real-time factor to mean anything. The exchange and the window are the last overrides of
+//! each run's scenario, so `--exchange` and `--window-m` win over a `--set comms.exchange=...`
+//! or `--set estimator.window_m=...`. A run that fails is a row with its status, the next runs
 //! still go (a signal stops the bench), and the exit code is 1.
 //!
 //! [`BenchReport`]: fleet_bench::BenchReport
@@ -42,6 +49,7 @@
 
 pub mod plot;
 pub mod report;
+pub mod series;
 
 use std::path::PathBuf;
 
@@ -60,6 +68,7 @@ use crate::run::{execute, runtime, write_results};
 use fleet_process::usage::{ScenarioArgs, UsageError};
 use protocol::variant::Variant;
 use report::{RowStatus, ScaleRow};
+pub use series::{Series, WindowChoice};
 
 /// The fleet size the scenario's region and cars are for.
 pub const REFERENCE_UAVS: u32 = 4;
@@ -96,6 +105,16 @@ pub struct BenchScaleArgs {
         default_values = Exchange::NAMES
     )]
     pub exchange: Vec<String>,
+    /// The windows (`estimator.window_m`) to measure, comma-separated, in the order they run:
+    /// each `inf` (the whole region), a half-side in metres, or `auto` (each fleet's guidance
+    /// reach); every exchange runs under each (overrides `--set estimator.window_m=...`).
+    #[arg(
+        long,
+        value_name = "LIST",
+        value_delimiter = ',',
+        default_value = "inf"
+    )]
+    pub window_m: Vec<WindowChoice>,
     /// Where `scale.json` and `scale.png` go (default: `runs/scale-<UTC timestamp>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -104,11 +123,11 @@ pub struct BenchScaleArgs {
     pub runs: Option<PathBuf>,
 }
 
-/// One run of the bench, an exchange and a fleet size, its scenario resolved.
+/// One run of the bench, a series and a fleet size, its scenario resolved.
 #[derive(Debug, Clone)]
 pub struct ScalePoint {
-    /// The exchange (the run's `comms.exchange`).
-    pub exchange: Exchange,
+    /// The exchange and the window.
+    pub series: Series,
     /// UAVs.
     pub uavs: u32,
     /// The run.
@@ -125,15 +144,23 @@ impl ScalePoint {
     pub fn cars(&self) -> u32 {
         self.config.scenario.targets.count
     }
+
+    /// The window's half-side (`estimator.window_m`), metres; `None` for the whole region.
+    pub fn window_m(&self) -> Option<f64> {
+        Some(self.config.scenario.estimator.window_m).filter(|m| m.is_finite())
+    }
 }
 
 /// A validated `fleet bench scale`.
 #[derive(Debug, Clone)]
 pub struct ScaleConfig {
-    /// The runs in the order they go: by exchange, then by increasing fleet size.
+    /// The runs in the order they go: by exchange, then by window, then by increasing fleet
+    /// size.
     pub points: Vec<ScalePoint>,
     /// The exchanges measured, in the order they run (no repeats).
     pub exchanges: Vec<Exchange>,
+    /// The series measured, in the order they run (no repeats).
+    pub series: Vec<Series>,
     /// The seed of every run.
     pub seed: u64,
     /// Simulated seconds per run.
@@ -202,6 +229,11 @@ impl BenchScaleArgs {
                 Exchange::NAMES.join(", ")
             )));
         }
+        if self.window_m.is_empty() {
+            return Err(UsageError(
+                "--window-m: give at least one window (inf, auto or metres)".into(),
+            ));
+        }
         if !(self.duration.is_finite() && self.duration > 0.0) {
             return Err(UsageError(format!(
                 "--duration {}: must be a positive number of seconds",
@@ -212,6 +244,7 @@ impl BenchScaleArgs {
         sizes.sort_unstable();
         sizes.dedup();
         let exchanges = each_once(self.exchange.iter().map(String::as_str));
+        let windows = each_once(self.window_m.iter().copied());
         let mut base_overrides = self.variant.with_user_overrides(&self.scenario.overrides);
         base_overrides.push(format!("seed={}", self.seed));
         base_overrides.push(format!("duration_s={:?}", self.duration));
@@ -225,11 +258,14 @@ impl BenchScaleArgs {
             .clone()
             .unwrap_or_else(|| default_out_dir("scale-"));
         let runs = self.runs.clone().unwrap_or_else(|| out.join("runs"));
-        let pairs = exchanges
-            .iter()
-            .flat_map(|&name| sizes.iter().map(move |&uavs| (name, uavs)));
-        let mut points = Vec::with_capacity(exchanges.len() * sizes.len());
-        for (index, (name, uavs)) in pairs.enumerate() {
+        let mut runs_of = Vec::with_capacity(exchanges.len() * windows.len() * sizes.len());
+        for &name in &exchanges {
+            for &window in &windows {
+                runs_of.extend(sizes.iter().map(|&uavs| (name, window, uavs)));
+            }
+        }
+        let mut points = Vec::with_capacity(runs_of.len());
+        for (index, (name, window, uavs)) in runs_of.into_iter().enumerate() {
             let (half, cars) = scaled_region(base.region.half_extent_m, base.targets.count, uavs);
             let mut overrides = base_overrides.clone();
             overrides.push(format!("uavs.count={uavs}"));
@@ -241,18 +277,31 @@ impl BenchScaleArgs {
             }
             // Last, so that the flag wins over a `--set comms.exchange=...`.
             overrides.push(format!("comms.exchange={name}"));
+            let bad = |e| {
+                UsageError(format!(
+                    "--uavs {uavs} --exchange {name} --window-m {window}: bad scenario: {e}"
+                ))
+            };
             let scenario =
-                Scenario::load(self.scenario.scenario.as_deref(), &overrides).map_err(|e| {
-                    UsageError(format!(
-                        "--uavs {uavs} --exchange {name}: bad scenario: {e}"
-                    ))
-                })?;
-            let out = runs.join(name).join(format!("uavs-{uavs}"));
+                Scenario::load(self.scenario.scenario.as_deref(), &overrides).map_err(bad)?;
+            // The window last too; `auto` reads the fleet's own scenario.
+            overrides.push(format!(
+                "estimator.window_m={:?}",
+                window.resolve(&scenario)
+            ));
+            let scenario =
+                Scenario::load(self.scenario.scenario.as_deref(), &overrides).map_err(bad)?;
+            let series = Series {
+                exchange: scenario.comms.exchange,
+                window,
+            };
+            let out = runs.join(series.key()).join(format!("uavs-{uavs}"));
             let run_id = new_run_id(u32::try_from(index).unwrap_or(u32::MAX));
-            points.push(self.point(scenario, out, run_id));
+            points.push(self.point(series, scenario, out, run_id));
         }
         Ok(ScaleConfig {
-            exchanges: each_once(points.iter().map(|p| p.exchange)),
+            exchanges: each_once(points.iter().map(|p| p.series.exchange)),
+            series: each_once(points.iter().map(|p| p.series)),
             points,
             seed: self.seed,
             duration_s: self.duration,
@@ -265,13 +314,14 @@ impl BenchScaleArgs {
     /// The run of a resolved scenario: lockstep, no faults, its own directory and id.
     fn point(
         &self,
+        series: Series,
         scenario: Scenario,
         out: PathBuf,
         run_id: protocol::service::RunId,
     ) -> ScalePoint {
         let uavs = scenario.uavs.count;
         ScalePoint {
-            exchange: scenario.comms.exchange,
+            series,
             uavs,
             config: RunConfig {
                 scenario,
@@ -305,16 +355,21 @@ pub fn command(config: &ScaleConfig) -> anyhow::Result<Outcome> {
     let mut rows = Vec::with_capacity(total);
     for (i, point) in config.points.iter().enumerate() {
         let side = 2.0 * point.half_extent_m();
-        let exchange = point.exchange.name();
+        let series = point.series.label();
+        // What `auto` came to.
+        let window = match (point.series.window, point.window_m()) {
+            (WindowChoice::Auto, Some(m)) => format!(" ({m} m)"),
+            _ => String::new(),
+        };
         eprintln!(
-            "fleet: scale {}/{total}: {exchange}, {} UAVs, {} cars, region {side:.0} x {side:.0} \
-             m, {} s simulated",
+            "fleet: scale {}/{total}: {series}{window}, {} UAVs, {} cars, region {side:.0} x \
+             {side:.0} m, {} s simulated",
             i + 1,
             point.uavs,
             point.cars(),
             config.duration_s,
         );
-        let label = format!("{exchange}, {} UAVs", point.uavs);
+        let label = format!("{series}, {} UAVs", point.uavs);
         let row = match rt.block_on(execute(&point.config, &label)) {
             Ok(record) => {
                 // The row is the record's, whether or not the run's files could be written.
@@ -488,7 +543,11 @@ mod tests {
     fn every_exchange_runs_every_size_in_the_order_given() {
         let c = parse(&["--uavs", "4,1", "--out", "o"]).unwrap();
         assert_eq!(c.exchanges, vec![Exchange::Sets, Exchange::Measurements]);
-        let runs: Vec<(Exchange, u32)> = c.points.iter().map(|p| (p.exchange, p.uavs)).collect();
+        let runs: Vec<(Exchange, u32)> = c
+            .points
+            .iter()
+            .map(|p| (p.series.exchange, p.uavs))
+            .collect();
         assert_eq!(
             runs,
             vec![
@@ -499,8 +558,10 @@ mod tests {
             ]
         );
         for p in &c.points {
-            assert_eq!(p.config.scenario.comms.exchange, p.exchange);
-            let dir = format!("o/runs/{}/uavs-{}", p.exchange.name(), p.uavs);
+            assert_eq!(p.config.scenario.comms.exchange, p.series.exchange);
+            assert_eq!(p.series.window, WindowChoice::Whole);
+            assert_eq!(p.window_m(), None);
+            let dir = format!("o/runs/{}/uavs-{}", p.series.exchange.name(), p.uavs);
             assert_eq!(p.config.out, PathBuf::from(dir));
         }
         let ids: std::collections::BTreeSet<_> = c
@@ -529,6 +590,93 @@ mod tests {
     }
 
     #[test]
+    fn every_exchange_runs_under_every_window_and_auto_is_each_fleets_guidance_reach() {
+        let c = parse(&[
+            "--uavs",
+            "16,4",
+            "--exchange",
+            "measurements",
+            "--window-m",
+            "auto,inf,150,auto",
+            "--set",
+            "estimator.window_m=10",
+            "--out",
+            "o",
+        ])
+        .unwrap();
+        let auto = Series {
+            exchange: Exchange::Measurements,
+            window: WindowChoice::Auto,
+        };
+        let whole = Series {
+            window: WindowChoice::Whole,
+            ..auto
+        };
+        let metres = Series {
+            window: WindowChoice::Metres(150.0),
+            ..auto
+        };
+        assert_eq!(c.series, vec![auto, whole, metres]);
+        let runs: Vec<(Series, u32, Option<f64>, String)> = c
+            .points
+            .iter()
+            .map(|p| {
+                let dir = p.config.out.display().to_string();
+                (p.series, p.uavs, p.window_m(), dir)
+            })
+            .collect();
+        // The 4-UAV and the 16-UAV fleets fly the same altitude band: the same reach.
+        let reach = Scenario::default().guidance_reach_m();
+        assert_eq!(reach, 320.0);
+        assert_eq!(
+            runs,
+            vec![
+                (
+                    auto,
+                    4,
+                    Some(reach),
+                    "o/runs/measurements_wauto/uavs-4".into()
+                ),
+                (
+                    auto,
+                    16,
+                    Some(reach),
+                    "o/runs/measurements_wauto/uavs-16".into()
+                ),
+                (whole, 4, None, "o/runs/measurements/uavs-4".into()),
+                (whole, 16, None, "o/runs/measurements/uavs-16".into()),
+                (
+                    metres,
+                    4,
+                    Some(150.0),
+                    "o/runs/measurements_w150/uavs-4".into()
+                ),
+                (
+                    metres,
+                    16,
+                    Some(150.0),
+                    "o/runs/measurements_w150/uavs-16".into()
+                ),
+            ]
+        );
+        // The flag wins over `--set`, and every run is its own.
+        assert!(c.points[2].config.scenario.estimator.window_m.is_infinite());
+        let ids: std::collections::BTreeSet<_> = c
+            .points
+            .iter()
+            .map(|p| p.config.run_id.to_string())
+            .collect();
+        assert_eq!(ids.len(), 6);
+        // A fleet lower than 4 UAVs' band sees less ground: a shorter reach.
+        let c = parse(&["--uavs", "1", "--window-m", "auto"]).unwrap();
+        assert_eq!(
+            c.points[0].window_m(),
+            Some(c.points[0].config.scenario.guidance_reach_m())
+        );
+        assert!(c.points[0].window_m().unwrap() < reach);
+    }
+
+    #[test]
     fn bad_flags_are_named() {
         for (args, says) in [
             (&["--uavs", "0"][..], "--uavs 0: every fleet size must be 1"),
@@ -545,6 +693,12 @@ mod tests {
             (&["--exchange", "bogus"], "--exchange"),
             (&["--exchange", "sets,bogus"], "--exchange"),
             (&["--exchange", ""], "--exchange"),
+            (
+                &["--window-m", "0"],
+                "a window is `inf`, `auto` or a positive number",
+            ),
+            (&["--window-m", "inf,wide"], "--window-m"),
+            (&["--window-m", ""], "--window-m"),
             (&["--set", "region.half_extent_m=1"], "half_extent_m"),
         ] {
             let e = parse(args).unwrap_err();

@@ -1,7 +1,7 @@
 //! `scale.png`: four panels against the fleet size (log2 axis): the real-time factor (log
 //! axis, with the goal and real time marked), CPU per UAV-step, bytes per UAV per simulated
-//! second, and the largest agent's peak memory. Each panel has one line per exchange
-//! (`comms.exchange`), in the colour of its place in the bench's order ([`palette`] from the
+//! second, and the largest agent's peak memory. Each panel has one line per series (an
+//! exchange, `comms.exchange`, and a window, `estimator.window_m`), in the colour of its place in the bench's order ([`palette`] from the
 //! second colour on, the first being as red as the goal), named in the panel's legend. A run
 //! that failed has no point.
 
@@ -14,9 +14,9 @@ use super::ScaleConfig;
 use super::report::{GOAL_RTF_16, RowStatus, ScaleRow};
 use fleet_observe::pictures::{FONT, palette, short_number};
 
-/// One exchange's points in a panel: (fleet size, value).
+/// One series' points in a panel: (fleet size, value).
 struct Line {
-    name: &'static str,
+    name: String,
     colour: RGBColor,
     points: Vec<(u32, f64)>,
 }
@@ -37,18 +37,18 @@ struct Panel {
 
 /// Writes the picture of `rows` to `path`.
 pub fn draw(rows: &[ScaleRow], config: &ScaleConfig, path: &Path) -> anyhow::Result<()> {
-    // One line per exchange, in the bench's order.
+    // One line per series, in the bench's order.
     let lines = |f: &dyn Fn(&ScaleRow) -> Option<f64>| -> Vec<Line> {
         config
-            .exchanges
+            .series
             .iter()
             .enumerate()
-            .map(|(i, &exchange)| Line {
-                name: exchange.name(),
+            .map(|(i, &series)| Line {
+                name: series.label(),
                 colour: palette(i + 1),
                 points: rows
                     .iter()
-                    .filter(|r| r.exchange == exchange && r.status == RowStatus::Ok)
+                    .filter(|r| r.series == series && r.status == RowStatus::Ok)
                     .filter_map(|r| f(r).filter(|v| v.is_finite()).map(|v| (r.uavs, v)))
                     .collect(),
             })
@@ -210,7 +210,7 @@ fn draw_panel(
         let colour = line.colour;
         chart
             .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))?
-            .label(line.name)
+            .label(line.name.clone())
             .legend(move |(px, py)| {
                 PathElement::new(vec![(px, py), (px + 22, py)], colour.stroke_width(2))
             });
@@ -250,8 +250,8 @@ mod tests {
     fn axes_hold_every_size_and_value() {
         let x = x_range(&[1, 2, 16]);
         assert!(x.start < 0.0 && x.end > 4.0);
-        let line = |name, points| Line {
-            name,
+        let line = |name: &str, points| Line {
+            name: name.to_owned(),
             colour: palette(1),
             points,
         };

@@ -1,12 +1,13 @@
-//! The rows of `fleet bench scale` (one per run, an exchange and a fleet size, [`ScaleRow`]) and
+//! The rows of `fleet bench scale` (one per run, a series and a fleet size, [`ScaleRow`]) and
 //! the report they make: a [`BenchReport`] of kind `scale` with one case per run (named
-//! `"<exchange> uavs=<N>"`), the goals and, per exchange, the headline figures at the top
-//! (`real_time_factor_16_<exchange>`, `bytes_per_uav_ratio_16_<exchange>`,
-//! `cpu_per_uav_step_ratio_16_<exchange>`, `agent_peak_mb_16_<exchange>`).
+//! `"<series key> uavs=<N>"`, [`Series::key`]: `measurements uavs=16`, `measurements_wauto
+//! uavs=16`), the goals and, per series, the headline figures at the top
+//! (`real_time_factor_16_<key>`, `bytes_per_uav_ratio_16_<key>`,
+//! `cpu_per_uav_step_ratio_16_<key>`, `agent_peak_mb_16_<key>`).
 //!
 //! A run's ratios ([`set_ratios`]) are against the [`REFERENCE_UAVS`]-UAV run **of the same
-//! exchange**: each exchange is its own scaling curve, the other's 4-UAV run is never the
-//! reference.
+//! series** (exchange and window): each series is its own scaling curve, another's 4-UAV run
+//! is never the reference.
 //!
 //! Rates are per second of **simulated** time, so they do not depend on the machine's speed.
 //! Messages and bytes are those the observer received from the estimates' and the token's
@@ -18,12 +19,11 @@ use std::io::Write;
 
 use serde_json::{Value, json};
 
-use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint};
+use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint, Series};
 use crate::run::RunRecord;
 use fleet_bench::{BenchCase, BenchReport, Metrics};
 use fleet_observe::results::resources::ProcessResources;
 use fleet_observe::results::summary::Summary;
-use protocol::scenario::Exchange;
 
 /// The issue's goal: real-time factor of a 16-UAV fleet (on 2 cores).
 pub const GOAL_RTF_16: f64 = 2.0;
@@ -109,13 +109,16 @@ impl PeakMemory {
     }
 }
 
-/// One run, an exchange and a fleet size: what it measured.
+/// One run, a series and a fleet size: what it measured.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScaleRow {
-    /// The exchange (`comms.exchange`).
-    pub exchange: Exchange,
+    /// The exchange (`comms.exchange`) and the window (`estimator.window_m`) as asked.
+    pub series: Series,
     /// UAVs.
     pub uavs: u32,
+    /// The window's half-side (the run's `estimator.window_m`), metres; `None` for the whole
+    /// region.
+    pub window_m: Option<f64>,
     /// Side of the square region, metres.
     pub region_side_m: f64,
     /// Cars.
@@ -151,19 +154,20 @@ pub struct ScaleRow {
     pub violations: u64,
     /// The run's iceoryx2 files left after it (must be 0).
     pub leftover_ipc_files: Option<usize>,
-    /// Bytes per UAV per second over the same figure at [`REFERENCE_UAVS`] UAVs under the
-    /// same exchange (set by [`set_ratios`]).
+    /// Bytes per UAV per second over the same figure at [`REFERENCE_UAVS`] UAVs in the same
+    /// series (set by [`set_ratios`]).
     pub bytes_per_uav_ratio_to_4: Option<f64>,
-    /// CPU per UAV-step over the same figure at [`REFERENCE_UAVS`] UAVs under the same
-    /// exchange (set by [`set_ratios`]).
+    /// CPU per UAV-step over the same figure at [`REFERENCE_UAVS`] UAVs in the same series
+    /// (set by [`set_ratios`]).
     pub cpu_per_uav_step_ratio_to_4: Option<f64>,
 }
 
 impl ScaleRow {
     fn empty(point: &ScalePoint, status: RowStatus) -> ScaleRow {
         ScaleRow {
-            exchange: point.exchange,
+            series: point.series,
             uavs: point.uavs,
+            window_m: point.window_m(),
             region_side_m: 2.0 * point.half_extent_m(),
             cars: point.cars(),
             status,
@@ -258,7 +262,7 @@ impl ScaleRow {
         format!(
             "{}, {} UAVs, {} cars, {:.0} m: {}, real time x{}, CPU {} ms per UAV-step, {} B per \
              UAV per s, agent peak {} MB, {} violations",
-            self.exchange.name(),
+            self.series.label(),
             self.uavs,
             self.cars,
             self.region_side_m,
@@ -271,12 +275,14 @@ impl ScaleRow {
         )
     }
 
-    /// The row as a report case: the exchange, the sizes and the status as parameters, every
-    /// measured value as a metric (a value not measured is left out).
+    /// The row as a report case: the series, the sizes and the status as parameters
+    /// (`window` as asked, `inf`, `auto` or metres, and `window_m` as run, `null` for the
+    /// whole region), every measured value as a metric (a value not measured is left out).
     pub fn to_case(&self) -> BenchCase {
-        let exchange = self.exchange.name();
         let mut params = BTreeMap::new();
-        params.insert("exchange".into(), json!(exchange));
+        params.insert("exchange".into(), json!(self.series.exchange.name()));
+        params.insert("window".into(), json!(self.series.window.to_string()));
+        params.insert("window_m".into(), json!(self.window_m));
         params.insert("uavs".into(), json!(self.uavs));
         params.insert("region_side_m".into(), json!(self.region_side_m));
         params.insert("cars".into(), json!(self.cars));
@@ -339,27 +345,26 @@ impl ScaleRow {
             self.leftover_ipc_files.map(|n| n as f64),
         );
         BenchCase {
-            name: format!("{exchange} uavs={}", self.uavs),
+            name: format!("{} uavs={}", self.series.key(), self.uavs),
             params,
             metrics: m,
         }
     }
 }
 
-/// The run a row's ratios are against: the [`REFERENCE_UAVS`]-UAV run of `exchange` that
-/// went well.
-fn reference(rows: &[ScaleRow], exchange: Exchange) -> Option<&ScaleRow> {
+/// The run of `series` with `uavs` UAVs that went well.
+fn good_run(rows: &[ScaleRow], series: Series, uavs: u32) -> Option<&ScaleRow> {
     rows.iter()
-        .find(|r| r.exchange == exchange && r.uavs == REFERENCE_UAVS && r.status == RowStatus::Ok)
+        .find(|r| r.series == series && r.uavs == uavs && r.status == RowStatus::Ok)
 }
 
 /// Sets every row's bytes per UAV per second and CPU per UAV-step over the
-/// [`REFERENCE_UAVS`]-UAV row's of the same exchange (none without that row or its figure).
+/// [`REFERENCE_UAVS`]-UAV row's of the same series (none without that row or its figure).
 pub fn set_ratios(rows: &mut [ScaleRow]) {
     let ratios: Vec<(Option<f64>, Option<f64>)> = rows
         .iter()
         .map(|row| {
-            let reference = reference(rows, row.exchange);
+            let reference = good_run(rows, row.series, REFERENCE_UAVS);
             let ratio = |f: &dyn Fn(&ScaleRow) -> Option<f64>| {
                 let base = reference.and_then(f).filter(|b| *b > 0.0)?;
                 Some(f(row)? / base)
@@ -376,9 +381,9 @@ pub fn set_ratios(rows: &mut [ScaleRow]) {
     }
 }
 
-/// The report: the goals, the exchanges and, per exchange, the headline figures of its
-/// 16-UAV run (real-time factor, bytes and CPU ratios, largest agent's peak memory; `null`
-/// without a good 16-UAV run), one case per row.
+/// The report: the goals, the exchanges and the series and, per series, the headline figures
+/// of its 16-UAV run (real-time factor, bytes and CPU ratios, largest agent's peak memory;
+/// `null` without a good 16-UAV run), one case per row.
 pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
     let mut report = BenchReport::new("scale");
     let s = &mut report.summary;
@@ -388,6 +393,8 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
     s.insert("mode".into(), json!("lockstep"));
     let names: Vec<&str> = config.exchanges.iter().map(|&e| e.name()).collect();
     s.insert("exchanges".into(), json!(names));
+    let keys: Vec<String> = config.series.iter().map(Series::key).collect();
+    s.insert("series".into(), json!(keys));
     s.insert("reference_uavs".into(), json!(REFERENCE_UAVS));
     s.insert("goal_uavs".into(), json!(16));
     s.insert("goal_real_time_factor".into(), json!(GOAL_RTF_16));
@@ -405,11 +412,9 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
         v.filter(|v| v.is_finite())
             .map_or(Value::Null, |v| json!(v))
     };
-    for &exchange in &config.exchanges {
-        let name = exchange.name();
-        let at_16 = rows
-            .iter()
-            .find(|r| r.exchange == exchange && r.uavs == 16 && r.status == RowStatus::Ok);
+    for &series in &config.series {
+        let name = series.key();
+        let at_16 = good_run(rows, series, 16);
         let headline: [(&str, Option<f64>); 4] = [
             (
                 "real_time_factor_16",
@@ -439,7 +444,7 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
     let failed: Vec<String> = rows
         .iter()
         .filter(|r| !r.is_clean())
-        .map(|r| format!("{} uavs={}: {}", r.exchange.name(), r.uavs, r.status.text()))
+        .map(|r| format!("{} uavs={}: {}", r.series.key(), r.uavs, r.status.text()))
         .collect();
     s.insert("failed_runs".into(), json!(failed));
     report.cases = rows.iter().map(ScaleRow::to_case).collect();
@@ -450,9 +455,9 @@ pub fn build(config: &ScaleConfig, rows: &[ScaleRow]) -> BenchReport {
 pub fn print_table(rows: &[ScaleRow], out: &mut impl Write) -> std::io::Result<()> {
     writeln!(
         out,
-        "{:<12} {:>5} {:>7} {:>5} {:>7} {:>9} {:>12} {:>9} {:>12} {:>7} {:>10} {:>10} {:>4}  \
+        "{:<20} {:>5} {:>7} {:>5} {:>7} {:>9} {:>12} {:>9} {:>12} {:>7} {:>10} {:>10} {:>4}  \
          status",
-        "exchange",
+        "series",
         "UAVs",
         "side m",
         "cars",
@@ -473,9 +478,9 @@ pub fn print_table(rows: &[ScaleRow], out: &mut impl Write) -> std::io::Result<(
     for r in rows {
         writeln!(
             out,
-            "{:<12} {:>5} {:>7.0} {:>5} {:>7} {:>9} {:>12} {:>9} {:>12} {:>7} {:>10} {:>10} {:>4}  \
+            "{:<20} {:>5} {:>7.0} {:>5} {:>7} {:>9} {:>12} {:>9} {:>12} {:>7} {:>10} {:>10} {:>4}  \
              {}",
-            r.exchange.name(),
+            r.series.key(),
             r.uavs,
             r.region_side_m,
             r.cars,
@@ -497,6 +502,8 @@ pub fn print_table(rows: &[ScaleRow], out: &mut impl Write) -> std::io::Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scale::WindowChoice;
+    use protocol::scenario::Exchange;
     use protocol::variant::Variant;
     use std::path::PathBuf;
 
@@ -504,8 +511,12 @@ mod tests {
     /// bytes of estimates per second and `cpu_ms` per UAV-step.
     fn row(exchange: Exchange, uavs: u32, estimate_bytes_per_s: f64, cpu_ms: f64) -> ScaleRow {
         ScaleRow {
-            exchange,
+            series: Series {
+                exchange,
+                window: WindowChoice::Whole,
+            },
             uavs,
+            window_m: None,
             region_side_m: 100.0,
             cars: 1,
             status: RowStatus::Ok,
@@ -553,10 +564,18 @@ mod tests {
             .collect()
     }
 
-    fn config(exchanges: Vec<Exchange>) -> ScaleConfig {
+    /// `row` in a series with a window of `window_m`.
+    fn windowed(mut row: ScaleRow, window_m: f64) -> ScaleRow {
+        row.series.window = WindowChoice::Metres(window_m);
+        row.window_m = Some(window_m);
+        row
+    }
+
+    fn config(series: Vec<Series>) -> ScaleConfig {
         ScaleConfig {
             points: Vec::new(),
-            exchanges,
+            exchanges: series.iter().map(|s| s.exchange).collect(),
+            series,
             seed: 1,
             duration_s: 10.0,
             variant: Variant::Paper,
@@ -621,6 +640,46 @@ mod tests {
     }
 
     #[test]
+    fn a_windowed_series_is_against_its_own_four_uav_run() {
+        let mut rows = vec![
+            measurements(4, 400.0, 80.0),
+            measurements(16, 1600.0, 200.0),
+            windowed(measurements(4, 400.0, 100.0), 320.0),
+            windowed(measurements(16, 1600.0, 120.0), 320.0),
+            windowed(measurements(16, 1600.0, 110.0), 150.0),
+        ];
+        set_ratios(&mut rows);
+        assert_eq!(
+            ratios(&rows),
+            vec![
+                (Some(1.0), Some(1.0)),
+                (Some(1.0), Some(2.5)),
+                (Some(1.0), Some(1.0)),
+                (Some(1.0), Some(1.2)),
+                // No 4-UAV run with a 150 m window.
+                (None, None),
+            ]
+        );
+        let case = rows[3].to_case();
+        assert_eq!(case.name, "measurements_w320 uavs=16");
+        assert_eq!(case.params["window"], "320");
+        assert_eq!(case.params["window_m"], 320.0);
+        assert_eq!(rows[0].to_case().params["window_m"], Value::Null);
+        assert!(
+            rows[3]
+                .progress_line()
+                .starts_with("measurements, 320 m window, 16 UAVs")
+        );
+        let series: Vec<Series> = rows[..3].iter().map(|r| r.series).collect();
+        let report = build(&config(series[1..].to_vec()), &rows);
+        let s = &report.summary;
+        assert_eq!(s["exchanges"], json!(["measurements", "measurements"]));
+        assert_eq!(s["series"], json!(["measurements", "measurements_w320"]));
+        assert_eq!(s["cpu_per_uav_step_ratio_16_measurements"], 2.5);
+        assert_eq!(s["cpu_per_uav_step_ratio_16_measurements_w320"], 1.2);
+    }
+
+    #[test]
     fn a_case_carries_every_measure_and_a_failed_row_only_its_status() {
         let mut rows = vec![sets(4, 800.0, 100.0)];
         set_ratios(&mut rows);
@@ -673,9 +732,10 @@ mod tests {
         rows[1].memory.agent_max_mb = Some(400.0);
         rows[3].memory.agent_max_mb = Some(55.0);
         set_ratios(&mut rows);
-        let report = build(&config(vec![Exchange::Sets, Exchange::Measurements]), &rows);
+        let report = build(&config(vec![rows[0].series, rows[2].series]), &rows);
         let s = &report.summary;
         assert_eq!(s["exchanges"], json!(["sets", "measurements"]));
+        assert_eq!(s["series"], json!(["sets", "measurements"]));
         assert_eq!(s["goal_cpu_per_uav_step_ratio"], 1.5);
         assert_eq!(s["goal_agent_peak_mb"], 60.0);
         assert_eq!(s["goal_bytes_per_uav_ratio"], 1.5);
@@ -698,7 +758,7 @@ mod tests {
         );
         assert_eq!(report.cases.len(), 5);
         // Without a 16-UAV run, the headline figures are null.
-        let report = build(&config(vec![Exchange::Measurements]), &rows[..1]);
+        let report = build(&config(vec![rows[2].series]), &rows[..1]);
         assert_eq!(report.summary["exchanges"], json!(["measurements"]));
         assert_eq!(
             report.summary["real_time_factor_16_measurements"],
@@ -707,17 +767,22 @@ mod tests {
     }
 
     #[test]
-    fn the_table_has_a_line_per_run_with_its_exchange() {
-        let mut rows = vec![sets(4, 800.0, 100.0), measurements(4, 400.0, 80.0)];
+    fn the_table_has_a_line_per_run_with_its_series() {
+        let mut rows = vec![
+            sets(4, 800.0, 100.0),
+            measurements(4, 400.0, 80.0),
+            windowed(measurements(4, 400.0, 80.0), 150.0),
+        ];
         set_ratios(&mut rows);
         let mut out = Vec::new();
         print_table(&rows, &mut out).unwrap();
         let text = String::from_utf8(out).unwrap();
         let lines: Vec<&str> = text.lines().collect();
-        assert_eq!(lines.len(), 3, "{text}");
-        assert!(lines[0].starts_with("exchange"), "{text}");
+        assert_eq!(lines.len(), 4, "{text}");
+        assert!(lines[0].starts_with("series"), "{text}");
         assert!(lines[0].contains("CPU vs 4"), "{text}");
         assert!(lines[1].starts_with("sets "), "{text}");
         assert!(lines[2].starts_with("measurements "), "{text}");
+        assert!(lines[3].starts_with("measurements_w150 "), "{text}");
     }
 }

@@ -43,7 +43,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use toml::{Table, Value};
 
-use crate::camera::CameraModel;
+use crate::camera::{Camera, CameraModel, CameraPose};
 use sets::grid::GroundGrid;
 
 mod overrides;
@@ -1053,6 +1053,36 @@ impl Scenario {
         (0..n).map(|i| self.uav_altitude(i, tallest)).sum::<f64>() / n as f64
     }
 
+    /// How far from its UAV's ground point an agent's guidance reads `X̄` closely, metres:
+    /// the ground one guidance plan can look at. A plan moves the UAV `speed_mps x
+    /// guidance_period_s` per period for `horizon` periods and is made a period before it
+    /// starts (so `horizon + 1` periods of travel), and from each pose the camera sees ground
+    /// as far as the farthest corner of its image's footprint on flat ground, taken at the
+    /// fleet's highest altitude ([`Scenario::uav_altitude`] with the tallest building of
+    /// `region.building_height_m`). Rounded up to whole 10 m. It is the window `fleet bench
+    /// scale --window-m auto` gives every agent (`estimator.window_m`, docs/design.md §3):
+    /// inside it the planner's footprints read the same `X̄` as without a window.
+    /// `inf` if a corner of the image looks at or above the horizon.
+    pub fn guidance_reach_m(&self) -> f64 {
+        let travel = self.uavs.speed_mps
+            * self.timing.guidance_period_s
+            * f64::from(self.guidance.horizon + 1);
+        let tallest = self.region.building_height_m[1];
+        let highest = (0..self.uavs.count.max(1) as usize)
+            .map(|i| self.uav_altitude(i, tallest))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let pose = CameraPose {
+            position: sets::math::Point3::new(0.0, 0.0, highest),
+            yaw: 0.0,
+        };
+        let sight = Camera::new(self.camera_model(), pose)
+            .image_ground_footprint()
+            .map_or(f64::INFINITY, |corners| {
+                corners.iter().map(|c| c.coords.norm()).fold(0.0, f64::max)
+            });
+        ((travel + sight) / 10.0).ceil() * 10.0
+    }
+
     /// Whether UAV `uav` asks an external planner for its decisions (`guidance.planner =
     /// "external"`, or `uav` in `guidance.external_uavs`).
     pub fn asks_external(&self, uav: u32) -> bool {
@@ -1237,6 +1267,49 @@ fn resolve(mut table: Table, schema: &Table) -> Result<Scenario, ScenarioError> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_guidance_reach_is_a_plans_travel_and_the_cameras_farthest_ground() {
+        // The top corners of the image from the highest UAV: its forward, sideways and
+        // downward components for a camera tilted `t` below the horizon.
+        let far_corner = |s: &Scenario| {
+            let m = s.camera_model();
+            let (side, up) = (
+                (m.aperture_rad / 2.0).tan(),
+                f64::from(m.rows) / 2.0 / m.focal_px(),
+            );
+            let t = m.tilt_rad;
+            let (forward, down) = (t.cos() + up * t.sin(), t.sin() - up * t.cos());
+            let highest = s.uav_altitude(s.uavs.count as usize - 1, s.region.building_height_m[1]);
+            highest * forward.hypot(side) / down
+        };
+        let paper = Scenario::default();
+        // 3 periods of 3 s at 10 m/s, and 229.1 m of ground from 110 m up.
+        assert!(
+            (far_corner(&paper) - 229.08).abs() < 0.01,
+            "{}",
+            far_corner(&paper)
+        );
+        assert_eq!(paper.guidance_reach_m(), 320.0);
+        let mut fast = paper.clone();
+        fast.uavs.speed_mps = 20.0;
+        fast.guidance.horizon = 3;
+        // 4 periods of 3 s at 20 m/s: 240 + 229.08 m, rounded up.
+        assert_eq!(fast.guidance_reach_m(), 470.0);
+        let mut low = paper.clone();
+        low.uavs.altitudes_m = vec![40.0, 30.0];
+        low.uavs.count = 2;
+        let expected = 90.0
+            + far_corner(&Scenario {
+                uavs: UavsConfig {
+                    count: 1,
+                    altitudes_m: vec![40.0],
+                    ..low.uavs.clone()
+                },
+                ..low.clone()
+            });
+        assert_eq!(low.guidance_reach_m(), (expected / 10.0).ceil() * 10.0);
+    }
 
     #[test]
     fn line_and_column_count_characters_from_one() {
