@@ -60,7 +60,7 @@ mod tests {
             let read = Config::from_file(&path).unwrap();
             let expected = layout.run_on(&run, h as u16).file_prefix();
             assert_eq!(read.global.prefix.to_string(), expected);
-            // Everything else is iceoryx2's default, as every process of the run uses it.
+            // Everything else is the run's configuration, as every process of the run uses it.
             assert_eq!(read, run_config(&layout.run_on(&run, h as u16)).unwrap());
         }
         std::fs::remove_dir_all(&out).unwrap();

@@ -141,6 +141,15 @@ pub const CVS_BUFFER: usize = 2;
 pub const MESSAGE_BUFFER: usize = 16;
 /// Samples a subscriber may hold at once.
 pub const MAX_BORROWED: usize = 2;
+/// Connections to publishers that went away a subscriber keeps while it still has their
+/// samples to read or holds one (iceoryx2's `subscriber_expired_connection_buffer`, 128 by
+/// default). Each subscriber allocates room for this many connections beside those to live
+/// publishers, about 3.7 kB each: at iceoryx2's default, 0.48 MB per subscriber, 30 MB for an
+/// agent of a 64-UAV fleet with its 63 peers' estimate subscribers (heaptrack). Past it, the
+/// oldest expired connection without a held sample is dropped, and with it the dead
+/// publisher's unread messages, which lossy delivery already allows; a held sample is never
+/// dropped, since a subscriber holds at most [`MAX_BORROWED`], fewer than this.
+pub const EXPIRED_CONNECTIONS: usize = MAX_BORROWED + RESTART_OVERLAP;
 
 /// What a wake-up notification announces; its value is the iceoryx2 event id.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -263,12 +272,17 @@ pub enum NodeScanError {
     List(#[from] NodeListFailure),
 }
 
-/// The iceoryx2 configuration of a run: built-in defaults with the run's file prefix.
+/// The iceoryx2 configuration of a run: built-in defaults with the run's file prefix, and
+/// [`EXPIRED_CONNECTIONS`] expired connections per subscriber.
 pub fn run_config(run: &RunId) -> Result<Config, IpcOpenError> {
     let prefix = run.file_prefix();
     let mut config = Config::default();
     config.global.prefix =
         FileName::new(prefix.as_bytes()).map_err(|_| IpcOpenError::Prefix(prefix.clone()))?;
+    config
+        .defaults
+        .publish_subscribe
+        .subscriber_expired_connection_buffer = EXPIRED_CONNECTIONS;
     Ok(config)
 }
 
@@ -728,6 +742,15 @@ mod tests {
         let run = RunId::new("cfg-test").unwrap();
         let config = run_config(&run).unwrap();
         assert_eq!(config.global.prefix.to_string(), run.file_prefix());
+        let pub_sub = &config.defaults.publish_subscribe;
+        assert_eq!(
+            pub_sub.subscriber_expired_connection_buffer,
+            EXPIRED_CONNECTIONS
+        );
+        assert!(
+            EXPIRED_CONNECTIONS >= MAX_BORROWED,
+            "a held sample is never dropped"
+        );
         let host = run.in_domain(2);
         let config = run_config(&host).unwrap();
         assert_eq!(config.global.prefix.to_string(), "iox2_sf_cfg-test.h2_");
