@@ -150,6 +150,8 @@ pub const MAX_BORROWED: usize = 2;
 /// publisher's unread messages, which lossy delivery already allows; a held sample is never
 /// dropped, since a subscriber holds at most [`MAX_BORROWED`], fewer than this.
 pub const EXPIRED_CONNECTIONS: usize = MAX_BORROWED + RESTART_OVERLAP;
+// A subscriber never has to drop a connection whose sample it holds.
+const _: () = assert!(EXPIRED_CONNECTIONS >= MAX_BORROWED);
 
 /// What a wake-up notification announces; its value is the iceoryx2 event id.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -746,10 +748,6 @@ mod tests {
         assert_eq!(
             pub_sub.subscriber_expired_connection_buffer,
             EXPIRED_CONNECTIONS
-        );
-        assert!(
-            EXPIRED_CONNECTIONS >= MAX_BORROWED,
-            "a held sample is never dropped"
         );
         let host = run.in_domain(2);
         let config = run_config(&host).unwrap();
