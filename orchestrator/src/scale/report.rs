@@ -574,7 +574,7 @@ mod tests {
     fn config(series: Vec<Series>) -> ScaleConfig {
         ScaleConfig {
             points: Vec::new(),
-            exchanges: series.iter().map(|s| s.exchange).collect(),
+            exchanges: crate::scale::each_once(series.iter().map(|s| s.exchange)),
             series,
             seed: 1,
             duration_s: 10.0,
@@ -673,7 +673,7 @@ mod tests {
         let series: Vec<Series> = rows[..3].iter().map(|r| r.series).collect();
         let report = build(&config(series[1..].to_vec()), &rows);
         let s = &report.summary;
-        assert_eq!(s["exchanges"], json!(["measurements", "measurements"]));
+        assert_eq!(s["exchanges"], json!(["measurements"]));
         assert_eq!(s["series"], json!(["measurements", "measurements_w320"]));
         assert_eq!(s["cpu_per_uav_step_ratio_16_measurements"], 2.5);
         assert_eq!(s["cpu_per_uav_step_ratio_16_measurements_w320"], 1.2);
