@@ -277,20 +277,15 @@ impl BenchScaleArgs {
             }
             // Last, so that the flag wins over a `--set comms.exchange=...`.
             overrides.push(format!("comms.exchange={name}"));
-            let bad = |e| {
-                UsageError(format!(
-                    "--uavs {uavs} --exchange {name} --window-m {window}: bad scenario: {e}"
-                ))
-            };
-            let scenario =
-                Scenario::load(self.scenario.scenario.as_deref(), &overrides).map_err(bad)?;
-            // The window last too; `auto` reads the fleet's own scenario.
-            overrides.push(format!(
-                "estimator.window_m={:?}",
-                window.resolve(&scenario)
-            ));
-            let scenario =
-                Scenario::load(self.scenario.scenario.as_deref(), &overrides).map_err(bad)?;
+            let mut scenario = Scenario::load(self.scenario.scenario.as_deref(), &overrides)
+                .map_err(|e| {
+                    UsageError(format!(
+                        "--uavs {uavs} --exchange {name}: bad scenario: {e}"
+                    ))
+                })?;
+            // The window last too (it wins over `--set estimator.window_m=...`); `auto` reads
+            // the fleet's own scenario. Every choice is in the key's range, (0, inf].
+            scenario.estimator.window_m = window.resolve(&scenario);
             let series = Series {
                 exchange: scenario.comms.exchange,
                 window,
