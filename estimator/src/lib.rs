@@ -171,7 +171,11 @@ impl EstimatorConfig {
 
     /// `X̄` before any frame: the whole grid, kept over a window when one is configured.
     fn undetected_at_start(&self) -> ReachSet {
-        self.keep_window(ReachSet::full(&self.grid))
+        if self.keeps_window() {
+            ReachSet::full_outside_window(&self.grid)
+        } else {
+            ReachSet::full(&self.grid)
+        }
     }
 
     /// `set` kept over a window when one is configured ([`ReachSet::keep_window`]).

@@ -16,12 +16,25 @@
 //! | [`Timeouts::start`] | the world | hellos at start and from announced restarts | 30 s |
 //! | [`Timeouts::rehello`] | an agent | a frame, before it says hello again | 1 s |
 //!
+//! The three chosen waits hold for a machine running up to [`AGENTS_PER_WAIT`] agents (16 on
+//! two cores, measured). A larger fleet shares the machine's cores between more agents, so
+//! that every agent's step takes longer in wall time, and a 64-UAV fleet on two cores took up
+//! to 10 s a step: [`Timeouts::for_scenario`] scales the three by `⌈n / AGENTS_PER_WAIT⌉`
+//! for a fleet of `n`, which keeps such a run in lockstep (no healthy agent skipped, no peer
+//! left out of a fusion for being late), and so reproducible. On hosts of their own the
+//! agents would need less; the longer waits cost time only when a process is stalled, since a
+//! dead one shows up at once.
+//!
 //! The ack wait covers one step of a healthy agent: a full peer wait, one silent holder's
 //! token wait, and its own estimator and planner. An agent slower than that (stopped, swapped
 //! out) is skipped, not lost: it rejoins with its next ack or hello. A dead process never
 //! costs a wait: iceoryx2's node list shows it dead at once.
 
 use std::time::Duration;
+
+/// Agents one machine may run at once with the waits as chosen; larger fleets lengthen them
+/// ([`Timeouts::for_scenario`]).
+pub const AGENTS_PER_WAIT: u32 = 16;
 
 /// The waits of a run. [`Timeouts::default`] is what every binary uses unless told otherwise.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,18 +72,22 @@ impl Timeouts {
         }
     }
 
-    /// These waits with the budget of the external planner `scenario` may ask
-    /// (`timing.external_planner_ms`, when any UAV asks one): the world and every agent derive
-    /// it from the same scenario, so they agree.
+    /// These waits for `scenario`'s fleet: the three chosen ones scaled by
+    /// `⌈uavs / AGENTS_PER_WAIT⌉` (see the [module](self) docs), and the budget of the
+    /// external planner it may ask (`timing.external_planner_ms`, when any UAV asks one). The
+    /// world, the observer and every agent derive them from the same scenario, so they agree.
     pub fn for_scenario(self, scenario: &crate::scenario::Scenario) -> Timeouts {
         let asks = (0..scenario.uavs.count).any(|uav| scenario.asks_external(uav));
+        let load = scenario.uavs.count.div_ceil(AGENTS_PER_WAIT).max(1);
         Timeouts {
+            peer_wait: self.peer_wait * load,
+            token_wait: self.token_wait * load,
+            compute: self.compute * load,
             planner: if asks {
                 Duration::from_millis(u64::from(scenario.timing.external_planner_ms))
             } else {
                 Duration::ZERO
             },
-            ..self
         }
     }
 
@@ -148,5 +165,20 @@ mod tests {
         );
         assert_eq!(t.ack(), plain.ack() + Duration::from_millis(1500));
         assert_eq!(t.estimate_wait(), plain.estimate_wait());
+    }
+
+    #[test]
+    fn fleets_larger_than_a_machine_runs_lengthen_the_chosen_waits() {
+        use crate::scenario::Scenario;
+        let mut s = Scenario::default();
+        let chosen = Timeouts::with_waits_ms(Some(500), None);
+        for (uavs, load) in [(1, 1), (16, 1), (17, 2), (32, 2), (64, 4)] {
+            s.uavs.count = uavs;
+            let t = chosen.for_scenario(&s);
+            assert_eq!(t.peer_wait, chosen.peer_wait * load, "{uavs} UAVs");
+            assert_eq!(t.token_wait, chosen.token_wait * load, "{uavs} UAVs");
+            assert_eq!(t.ack(), chosen.ack() * load, "{uavs} UAVs");
+            assert!(t.estimate_wait() < t.ack());
+        }
     }
 }

@@ -265,6 +265,30 @@ proptest! {
         }
     }
 
+    /// A set that starts outside its window ([`ReachSet::full_outside_window`]) is, from its
+    /// first window on, the whole grid kept over a window ([`ReachSet::keep_window`]): the
+    /// same cells and reach through any history, on the grid of the window tests.
+    #[test]
+    fn a_set_started_outside_its_window_is_the_whole_grid_kept_over_it(
+        first in cell_box(ROOMY.0, 48).prop_map(|b| Event::Window(b).within_rows(ROOMY.1)),
+        events in proptest::collection::vec(roomy_event(), 1..24),
+    ) {
+        let g = GroundGrid { nx: ROOMY.0, ny: ROOMY.1, ..GroundGrid::new(1.0, 0.5) };
+        let mut whole = ReachSet::full(&g).keep_window();
+        let mut started = ReachSet::full_outside_window(&g);
+        let (mut a, mut b) = (0.0, 0.0);
+        for e in std::iter::once(&first).chain(&events) {
+            apply(&g, &mut whole, e, &mut a);
+            apply(&g, &mut started, e, &mut b);
+            if matches!(e, Event::Restore) {
+                whole = whole.keep_window();
+                started = started.keep_window();
+            }
+            prop_assert!(whole == started, "the sets differ after {:?}", e);
+            prop_assert_eq!(whole.cells(), started.cells());
+        }
+    }
+
     /// Advancing within a dilation read word by word ([`ReachSet::advance_within`] with a
     /// [`sets::raster::WordDilation`] of the set's rows, which skips the rows and words no
     /// cell is near) leaves the set, its reach and its clock exactly as advancing and then

@@ -536,6 +536,7 @@ impl Observer<'_> {
             let window = self.reception.window_of(estimate);
             if let Some(window) = window.filter(|w| w.cell_count() < grid.cell_count() as u64) {
                 metrics = metrics.within(fused, &window);
+                self.report.windows.count(fused, &window);
                 windowed = true;
             }
             agents.insert(*uav, metrics);

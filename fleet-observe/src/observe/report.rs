@@ -18,7 +18,7 @@ use sets::grid::GroundGrid;
 
 use super::metrics::FusedSets;
 use super::sink;
-use super::tally::{AgentTally, Comms, ServiceKind};
+use super::tally::{AgentTally, Comms, ServiceKind, WindowTally};
 
 /// How the observer's loop ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -80,6 +80,8 @@ pub struct ObserverReport {
     pub files: Vec<sink::SinkFile>,
     /// Why an essential sink (the recording or the live view) failed, if one did.
     pub sink_failure: Option<String>,
+    /// The cars' sets held under windows, and those that meet their holder's window.
+    pub windows: WindowTally,
 }
 
 impl ObserverReport {
@@ -103,6 +105,7 @@ impl ObserverReport {
             phases: PhaseTimes::new(),
             files: Vec::new(),
             sink_failure: None,
+            windows: WindowTally::default(),
         }
     }
 

@@ -122,6 +122,10 @@ pub struct Summary {
     /// UAVs (each agent's count is in `agents`): how often the planner's plans were not the
     /// ones flown near the border (`guidance.border`).
     pub geofence_overrides: u64,
+    /// The cars' sets the agents held under windows and those that met their holder's window
+    /// (absent without windows smaller than the region).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub windows: Option<WindowsSummary>,
     /// Per agent.
     pub agents: Vec<AgentSummary>,
     /// Traffic per service kind.
@@ -317,6 +321,42 @@ pub struct LatencySummary {
     pub latency_p99_ms: f64,
 }
 
+/// The cars' sets the agents held under windows, per agent-step
+/// ([`WindowTally`](crate::observe::tally::WindowTally)): how many an agent that kept only the
+/// cars whose sets meet its window would keep.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct WindowsSummary {
+    /// Agent-steps measured under windows.
+    pub agent_steps: u64,
+    /// Cars' sets an agent held, mean over those agent-steps.
+    pub targets_held_mean: f64,
+    /// Of them, the sets with a cell in the agent's window.
+    pub targets_meeting_window_mean: f64,
+    /// The share of the sets held that met the window (`null` when none was held).
+    pub targets_meeting_window_share: Option<f64>,
+    /// The share of the cells of the sets held that belong to sets that met the window.
+    pub target_cells_meeting_window_share: Option<f64>,
+}
+
+impl WindowsSummary {
+    /// The summary of `tally`; `None` when no agent-step was measured under a window.
+    pub fn of(tally: &crate::observe::tally::WindowTally) -> Option<WindowsSummary> {
+        let per_step = |n: u64| n as f64 / tally.agent_steps as f64;
+        let share = |part: u64, all: u64| (all > 0).then(|| part as f64 / all as f64);
+        (tally.agent_steps > 0).then(|| WindowsSummary {
+            agent_steps: tally.agent_steps,
+            targets_held_mean: per_step(tally.targets),
+            targets_meeting_window_mean: per_step(tally.targets_meeting),
+            targets_meeting_window_share: share(tally.targets_meeting, tally.targets),
+            target_cells_meeting_window_share: share(
+                tally.target_cells_meeting,
+                tally.target_cells,
+            ),
+        })
+    }
+}
+
 /// Messages the observer dropped and steps it could not measure.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -446,6 +486,7 @@ impl Summary {
             resync_steps_max,
             resync_steps_mean,
             geofence_overrides: agents.iter().map(|a| a.geofence_overrides).sum(),
+            windows: observer.and_then(|o| WindowsSummary::of(&o.windows)),
             agents,
             comms,
             observer: ObserverSummary {

@@ -119,7 +119,10 @@ impl Chaos {
         let uavs = scenario.uavs.count;
         let mut chaos = Chaos {
             period_s,
-            ack_wait_s: Timeouts::default().ack().as_secs_f64(),
+            ack_wait_s: Timeouts::default()
+                .for_scenario(scenario)
+                .ack()
+                .as_secs_f64(),
             guidance_steps,
             uavs,
             first: guidance_steps.max(1),
@@ -331,7 +334,8 @@ mod tests {
                         let p = f.pause_s.expect("a pause duration");
                         assert!((0.5..=8.0).contains(&p), "{f}");
                         // Over before the end, even when the world runs on without the agent.
-                        let run_on = (p - Timeouts::default().ack().as_secs_f64()).max(0.0);
+                        let run_on =
+                            (p - Timeouts::default().for_scenario(&s).ack().as_secs_f64()).max(0.0);
                         assert!(f.at_s + p + run_on * RUN_ON_RATE <= last + 1e-9, "{f}");
                     }
                 }

@@ -288,7 +288,9 @@ impl<'a> Running<'a> {
                 run: run.clone(),
                 scenario: config.scenario.clone(),
                 // An agent killed mid-step is noticed sooner, by the node scan.
-                estimate_wait: Timeouts::default().estimate_wait(),
+                estimate_wait: Timeouts::default()
+                    .for_scenario(&config.scenario)
+                    .estimate_wait(),
                 fault_times: plan.times(),
                 fault_wait: FAULT_WAIT,
                 resumed: resumed.clone(),

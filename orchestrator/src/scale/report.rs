@@ -23,7 +23,7 @@ use super::{REFERENCE_UAVS, ScaleConfig, ScalePoint, Series};
 use crate::run::RunRecord;
 use fleet_bench::{BenchCase, BenchReport, Metrics};
 use fleet_observe::results::resources::ProcessResources;
-use fleet_observe::results::summary::Summary;
+use fleet_observe::results::summary::{Summary, WindowsSummary};
 
 /// The goal: real-time factor of a 16-UAV fleet (on 2 cores).
 pub const GOAL_RTF_16: f64 = 2.0;
@@ -154,6 +154,8 @@ pub struct ScaleRow {
     pub violations: u64,
     /// The run's iceoryx2 files left after it (must be 0).
     pub leftover_ipc_files: Option<usize>,
+    /// The cars' sets the agents held under windows and those that met their window.
+    pub windows: Option<WindowsSummary>,
     /// Bytes per UAV per second over the same figure at [`REFERENCE_UAVS`] UAVs in the same
     /// series (set by [`set_ratios`]).
     pub bytes_per_uav_ratio_to_4: Option<f64>,
@@ -185,6 +187,7 @@ impl ScaleRow {
             memory: PeakMemory::default(),
             violations: 0,
             leftover_ipc_files: None,
+            windows: None,
             bytes_per_uav_ratio_to_4: None,
             cpu_per_uav_step_ratio_to_4: None,
         }
@@ -234,6 +237,7 @@ impl ScaleRow {
             memory: PeakMemory::of(&summary.resources.processes),
             violations: summary.violations,
             leftover_ipc_files: Some(record.leftover_files),
+            windows: summary.windows.clone(),
             ..ScaleRow::empty(point, status)
         }
     }
@@ -339,6 +343,21 @@ impl ScaleRow {
         put("peak_rss_mb_agent_max", self.memory.agent_max_mb);
         put("peak_rss_mb_agents_sum", self.memory.agents_sum_mb);
         put("peak_rss_mb_orchestrator", self.memory.orchestrator_mb);
+        if let Some(w) = &self.windows {
+            put("targets_held_mean", Some(w.targets_held_mean));
+            put(
+                "targets_meeting_window_mean",
+                Some(w.targets_meeting_window_mean),
+            );
+            put(
+                "targets_meeting_window_share",
+                w.targets_meeting_window_share,
+            );
+            put(
+                "target_cells_meeting_window_share",
+                w.target_cells_meeting_window_share,
+            );
+        }
         put("violations", Some(self.violations as f64));
         put(
             "leftover_ipc_files",
@@ -545,6 +564,7 @@ mod tests {
             },
             violations: 0,
             leftover_ipc_files: Some(0),
+            windows: None,
             bytes_per_uav_ratio_to_4: None,
             cpu_per_uav_step_ratio_to_4: None,
         }
@@ -665,6 +685,23 @@ mod tests {
         assert_eq!(case.params["window"], "320");
         assert_eq!(case.params["window_m"], 320.0);
         assert_eq!(rows[0].to_case().params["window_m"], Value::Null);
+        assert_eq!(case.metrics.get("targets_meeting_window_share"), None);
+        rows[3].windows = Some(WindowsSummary {
+            agent_steps: 40,
+            targets_held_mean: 8.0,
+            targets_meeting_window_mean: 2.0,
+            targets_meeting_window_share: Some(0.25),
+            target_cells_meeting_window_share: Some(0.5),
+        });
+        let case = rows[3].to_case();
+        for (key, value) in [
+            ("targets_held_mean", 8.0),
+            ("targets_meeting_window_mean", 2.0),
+            ("targets_meeting_window_share", 0.25),
+            ("target_cells_meeting_window_share", 0.5),
+        ] {
+            assert_eq!(case.metrics.get(key), Some(value), "{key}");
+        }
         assert!(
             rows[3]
                 .progress_line()

@@ -129,6 +129,7 @@ use super::geodesic::{self, geodesic_gap_field};
 use super::{CellBox, CellSet, common_rows};
 use crate::grid::{CellIndex, GroundGrid};
 use crate::math::Real;
+use summary::Summary;
 use window::{Far, FarField, Stored};
 
 mod summary;
@@ -259,6 +260,27 @@ impl ReachSet {
     /// Every cell of `grid`, nothing known, clock 0.
     pub fn full(grid: &GroundGrid) -> Self {
         Self::storing_every_row(CellSet::full(grid), 0.0)
+    }
+
+    /// [`ReachSet::full`] kept over a window ([`ReachSet::keep_window`]) that holds no cell
+    /// yet: every block's bound is 0 and none is settled, so the first
+    /// [`ReachSet::set_window`] gives it exactly the set `full(grid).keep_window()` gets from
+    /// the same window. It never holds the reach of the whole grid, 4 bytes a cell (64 MB for
+    /// a 2 km region of 0.5 m cells), which an agent kept over a window would otherwise
+    /// allocate once at its start.
+    pub fn full_outside_window(grid: &GroundGrid) -> Self {
+        let cells = CellSet::full(grid);
+        Self {
+            reach: Vec::new(),
+            pending: Vec::new(),
+            scanned: Vec::new(),
+            rows: rows_of(&cells),
+            stored: Stored::nothing(),
+            far: Far::Summary(Box::new(Summary::new(cells.nx(), cells.ny()))),
+            margin: None,
+            cells,
+            clock_m: 0.0,
+        }
     }
 
     /// A set of `cells` at the clock `clock_m` (0 when not finite) that stores every row, with

@@ -114,6 +114,14 @@ impl Stored {
         }
     }
 
+    /// No row and no word.
+    pub(super) fn nothing() -> Self {
+        Self {
+            rows: (0, 0),
+            words: (0, 0),
+        }
+    }
+
     /// The rows of `b` and the words holding its columns.
     pub(super) fn of_box(b: &CellBox) -> Self {
         Self {
