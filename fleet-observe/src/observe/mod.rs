@@ -83,6 +83,9 @@ pub struct ObserverConfig {
     pub scenario: Scenario,
     /// Longest wait for the agents' estimates of a step.
     pub estimate_wait: Duration,
+    /// What the wait adds at step 0, as the world's ack wait does
+    /// ([`Timeouts::first_step_extra`](protocol::timeouts::Timeouts::first_step_extra)).
+    pub first_step_extra: Duration,
     /// Simulated times at which faults are due, ascending.
     pub fault_times: Vec<f64>,
     /// Longest wait for the orchestrator to apply due faults.
@@ -476,7 +479,11 @@ impl Observer<'_> {
             .map(|u| u.id)
             .collect();
         let live_agents = awaited.len() as u32;
-        let deadline = Instant::now() + self.config.estimate_wait;
+        let wait = match k {
+            0 => self.config.estimate_wait + self.config.first_step_extra,
+            _ => self.config.estimate_wait,
+        };
+        let deadline = Instant::now() + wait;
         let mut last_scan = Instant::now();
         loop {
             self.drain();

@@ -283,14 +283,14 @@ impl<'a> Running<'a> {
         let resumed = Arc::new(AtomicU64::new(0));
         let stop = Arc::new(AtomicBool::new(false));
         let (events_tx, events) = mpsc::unbounded_channel();
+        let timeouts = Timeouts::default().for_scenario(&config.scenario);
         let (observer, observer_started) = observe::spawn(
             ObserverConfig {
                 run: run.clone(),
                 scenario: config.scenario.clone(),
                 // An agent killed mid-step is noticed sooner, by the node scan.
-                estimate_wait: Timeouts::default()
-                    .for_scenario(&config.scenario)
-                    .estimate_wait(),
+                estimate_wait: timeouts.estimate_wait(),
+                first_step_extra: timeouts.first_step_extra(),
                 fault_times: plan.times(),
                 fault_wait: FAULT_WAIT,
                 resumed: resumed.clone(),

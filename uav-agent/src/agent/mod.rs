@@ -11,7 +11,8 @@
 //! 3. it gathers the live peers' step-`k` estimates (a bounded wait; late ones are taken in
 //!    when they come) and, once the wait is over, takes them in by ascending peer: it applies
 //!    their measurements (late ones at their own clock) and fuses their sets (dilated by the
-//!    steps they lag), then the measurements they forward that it has not applied yet. Under
+//!    steps they lag; whole sets of the measurement exchange wait encoded and are rebuilt one
+//!    at a time then), then the measurements they forward that it has not applied yet. Under
 //!    the measurement exchange it then sends the observers its sets (a
 //!    [`WireKind::State`](protocol::wire::WireKind::State) message on its estimate service,
 //!    which peers skip unread);
