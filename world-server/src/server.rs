@@ -3,8 +3,8 @@
 //!
 //! **Lockstep** (deterministic): at step `k` the server renders frame `k` for every live agent
 //! into a loaned sample, sends it and wakes the agent; publishes truth `k` and wakes the
-//! observers; then waits (at most `ack_timeout`, and at step 0 at least `start_timeout`, for
-//! the agents' first frame and plan) until every live agent has acked `k` (a
+//! observers; then waits (at most `ack_timeout`, at step 0 `start_timeout` more, for the
+//! agents' first frame and plan) until every live agent has acked `k` (a
 //! [`UavCommand`] with `step == k`) and, if asked, the observer too. An agent that misses the
 //! deadline is reported and skipped (no more frames) until it sends a newer command or a hello
 //! (it rejoins, and is served from the next frame). Then yaw references are applied and the
@@ -514,11 +514,11 @@ impl Server<'_> {
             // The next frames are rendered anyway before the next step: now, while the agents
             // work, unless the acks may change the references they depend on.
             self.look_ahead(k, steps);
-            // The first step is every agent's first frame, its first plan and, over hosts,
-            // its first messages through bridges still connecting: it is waited for as long as
-            // the hellos are ([`Timeouts::first_step_extra`]).
+            // The first step is every agent's first frame, the token's first pass round the
+            // ring and, over hosts, the first messages through bridges still connecting: it is
+            // waited for as long again as the hellos are ([`Timeouts::first_step_extra`]).
             let wait = if k == 0 {
-                ack_timeout.max(self.start_timeout)
+                ack_timeout + self.start_timeout
             } else {
                 ack_timeout
             };
