@@ -61,32 +61,16 @@ enum Queued {
 }
 
 impl Queued {
-    fn uav(&self) -> u32 {
+    /// Its sender, step, message counter and sender's incarnation.
+    fn header(&self) -> (u32, u64, u64, u64) {
         match self {
-            Queued::Read(p) => p.uav,
-            Queued::Unread(m) => m.uav,
+            Queued::Read(p) => (p.uav, p.step, p.seq, p.incarnation),
+            Queued::Unread(m) => (m.uav, m.step, m.seq, m.incarnation),
         }
     }
 
     fn step(&self) -> u64 {
-        match self {
-            Queued::Read(p) => p.step,
-            Queued::Unread(m) => m.step,
-        }
-    }
-
-    fn seq(&self) -> u64 {
-        match self {
-            Queued::Read(p) => p.seq,
-            Queued::Unread(m) => m.seq,
-        }
-    }
-
-    fn incarnation(&self) -> u64 {
-        match self {
-            Queued::Read(p) => p.incarnation,
-            Queued::Unread(m) => m.incarnation,
-        }
+        self.header().1
     }
 }
 
@@ -427,44 +411,45 @@ impl PeerExchange {
     /// notes a newcomer or a restart (it gets the whole map) and a missed message (its sender
     /// is asked for whole sets).
     fn queue_peer(&mut self, p: Queued, counters: &mut AgentCounters) {
-        let info = self.peers.entry(p.uav()).or_default();
-        if info.incarnation.is_some_and(|i| p.incarnation() < i) {
-            let detail = format!("from UAV {}'s replaced process", p.uav());
+        let (uav, step, seq, incarnation) = p.header();
+        let info = self.peers.entry(uav).or_default();
+        if info.incarnation.is_some_and(|i| incarnation < i) {
+            let detail = format!("from UAV {uav}'s replaced process");
             counters.drop_message(DropReason::Superseded, "estimate", &detail);
             return;
         }
-        if info.incarnation != Some(p.incarnation()) {
+        if info.incarnation != Some(incarnation) {
             if info.incarnation.is_some() {
-                tracing::info!(peer = p.uav(), "peer restarted: sending it the whole map");
+                tracing::info!(peer = uav, "peer restarted: sending it the whole map");
             }
             // A newcomer or a restarted peer needs the whole map to rebuild its own. It goes
             // with the estimate of the step after the peer's, whenever this message arrived:
             // in lockstep that keeps the traffic, like everything else, reproducible. Under
             // the measurement exchange a peer that starts with the run (its first estimate is
             // of step 0) has missed nothing: the measurements bring it everything.
-            let started_with_run = p.step() == 0 && info.incarnation.is_none();
+            let started_with_run = step == 0 && info.incarnation.is_none();
             if !(started_with_run && self.kind == Exchange::Measurements) {
-                let from = p.step() + 1;
+                let from = step + 1;
                 self.full_map_from = Some(self.full_map_from.map_or(from, |f| f.min(from)));
             }
-            info.incarnation = Some(p.incarnation());
+            info.incarnation = Some(incarnation);
             info.fused_step = None;
             info.last_seq = None;
         }
         // Under the measurement exchange on links that lose nothing, a message missed (this
         // agent was stalled, its buffer overflowed) is a measurement never applied: ask the
         // peer for its whole sets. Lossy and limited links have them periodically instead.
-        let missed = info.last_seq.is_some_and(|last| p.seq() > last + 1);
-        info.last_seq = Some(p.seq());
+        let missed = info.last_seq.is_some_and(|last| seq > last + 1);
+        info.last_seq = Some(seq);
         if missed && self.kind == Exchange::Measurements && !self.radio.loses_or_limits() {
             tracing::info!(
-                peer = p.uav(),
-                seq = p.seq(),
+                peer = uav,
+                seq = seq,
                 "estimates missed: asking for whole sets"
             );
-            self.missed |= uav_bit(p.uav());
+            self.missed |= uav_bit(uav);
         }
-        info.heard_step = info.heard_step.max(Some(p.step()));
+        info.heard_step = info.heard_step.max(Some(step));
         info.pending.push(p);
     }
 
