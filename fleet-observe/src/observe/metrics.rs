@@ -1144,6 +1144,45 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn the_window_tally_counts_the_cars_sets_that_meet_an_agents_window() {
+        use super::super::tally::WindowTally;
+        use crate::results::summary::WindowsSummary;
+        // Car 1's set meets the window (columns 0-1 of rows 0-4) by one of its 3 cells; car
+        // 2's, of 1 cell, lies outside it.
+        let e = estimate(
+            0,
+            CellSet::full(&grid()),
+            &[(1, set(&[(1, 4), (2, 4), (3, 4)])), (2, set(&[(8, 8)]))],
+        );
+        let fused = FusedSets::fuse(&e, [], &config());
+        let window = CellBox {
+            x0: 0,
+            y0: 0,
+            x1: 1,
+            y1: 4,
+        };
+        let mut tally = WindowTally::default();
+        tally.count(&fused, &window);
+        tally.count(&fused, &CellBox { x0: 5, ..window });
+        assert_eq!(
+            tally,
+            WindowTally {
+                agent_steps: 2,
+                targets: 4,
+                targets_meeting: 1,
+                target_cells: 8,
+                target_cells_meeting: 3,
+            }
+        );
+        let summary = WindowsSummary::of(&tally).expect("two agent-steps");
+        assert_eq!(summary.targets_held_mean, 2.0);
+        assert_eq!(summary.targets_meeting_window_mean, 0.5);
+        assert_eq!(summary.targets_meeting_window_share, Some(0.25));
+        assert_eq!(summary.target_cells_meeting_window_share, Some(0.375));
+        assert_eq!(WindowsSummary::of(&WindowTally::default()), None);
+    }
+
+    #[test]
     fn nothing_identified_leaves_the_target_metrics_empty() {
         let e = estimate(0, CellSet::full(&grid()), &[]);
         let m = SetMetrics::measure(&FusedSets::fuse(&e, [], &config()), &[], &grid());

@@ -147,6 +147,40 @@ impl AgentTally {
     }
 }
 
+/// The cars' sets the agents held under windows (`estimator.window_m` smaller than the
+/// region), summed over the agent-steps measured, and how many of them meet the holder's
+/// window: what an agent that kept only the cars whose sets meet its window would hold and
+/// predict (docs/design.md §3, "X̄ over a window").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WindowTally {
+    /// Agent-steps measured under windows.
+    pub agent_steps: u64,
+    /// Cars' sets held, summed over those agent-steps.
+    pub targets: u64,
+    /// Of them, the sets with a cell in the holder's window.
+    pub targets_meeting: u64,
+    /// Cells of the cars' sets held.
+    pub target_cells: u64,
+    /// Cells of the sets that meet the window (all of each such set's cells).
+    pub target_cells_meeting: u64,
+}
+
+impl WindowTally {
+    /// Counts one agent-step: the cars' sets of `fused`, against the agent's `window`.
+    pub fn count(&mut self, fused: &FusedSets, window: &CellBox) {
+        self.agent_steps += 1;
+        for set in fused.targets.values() {
+            let cells = set.count();
+            self.targets += 1;
+            self.target_cells += cells;
+            if set.count_in_box(window) > 0 {
+                self.targets_meeting += 1;
+                self.target_cells_meeting += cells;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use sets::grid::GroundGrid;
@@ -198,39 +232,5 @@ mod tests {
             (2, 150, vec![2.0])
         );
         assert_eq!(c.by_kind[&ServiceKind::Frames].messages, 4);
-    }
-}
-
-/// The cars' sets the agents held under windows (`estimator.window_m` smaller than the
-/// region), summed over the agent-steps measured, and how many of them meet the holder's
-/// window: what an agent that kept only the cars whose sets meet its window would hold and
-/// predict (docs/design.md §3, "X̄ over a window").
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct WindowTally {
-    /// Agent-steps measured under windows.
-    pub agent_steps: u64,
-    /// Cars' sets held, summed over those agent-steps.
-    pub targets: u64,
-    /// Of them, the sets with a cell in the holder's window.
-    pub targets_meeting: u64,
-    /// Cells of the cars' sets held.
-    pub target_cells: u64,
-    /// Cells of the sets that meet the window (all of each such set's cells).
-    pub target_cells_meeting: u64,
-}
-
-impl WindowTally {
-    /// Counts one agent-step: the cars' sets of `fused`, against the agent's `window`.
-    pub fn count(&mut self, fused: &FusedSets, window: &CellBox) {
-        self.agent_steps += 1;
-        for set in fused.targets.values() {
-            let cells = set.count();
-            self.targets += 1;
-            self.target_cells += cells;
-            if set.count_in_box(window) > 0 {
-                self.targets_meeting += 1;
-                self.target_cells_meeting += cells;
-            }
-        }
     }
 }
