@@ -39,16 +39,21 @@ pub struct FleetOptions {
     pub oem_full_every: Option<u64>,
     /// How the yaw references are set.
     pub steering: Steering,
+    /// Whether each UAV also encodes its sets for the observers once it fused its peers', as
+    /// agents do under the measurement exchange ([`Fleet::states`]).
+    pub states: bool,
 }
 
 impl Default for FleetOptions {
-    /// Run tag 1, estimates exchanged, the scenario's map period, steering left to the caller.
+    /// Run tag 1, estimates exchanged, the scenario's map period, steering left to the caller,
+    /// no state messages.
     fn default() -> Self {
         FleetOptions {
             run_tag: 1,
             exchange: true,
             oem_full_every: None,
             steering: Steering::Manual,
+            states: false,
         }
     }
 }
@@ -116,6 +121,9 @@ pub struct Fleet {
     options: FleetOptions,
     frame: Box<CvsFrame>,
     messages: Vec<Vec<u8>>,
+    /// The observers' copy of each UAV's sets, as an agent's state outbox composes it.
+    state_outboxes: Vec<EstimateOutbox>,
+    states: Vec<Vec<u8>>,
 }
 
 impl Fleet {
@@ -144,6 +152,14 @@ impl Fleet {
             measurements: vec![None; n],
             exchange,
             messages: vec![Vec::new(); n],
+            state_outboxes: (0..n)
+                .map(|i| {
+                    EstimateOutbox::new(i as u32, 1, config.oem_full_every)
+                        .with_set_deltas()
+                        .without_map()
+                })
+                .collect(),
+            states: vec![Vec::new(); n],
             frame: CvsFrame::new_boxed(),
             world,
             config,
@@ -179,6 +195,13 @@ impl Fleet {
     /// Each UAV's encoded estimate of the last exchange (empty before the first).
     pub fn messages(&self) -> &[Vec<u8>] {
         &self.messages
+    }
+
+    /// Each UAV's sets of the last exchange as it sends them to the observers, encoded (set
+    /// deltas, no map: an agent's state message), with [`FleetOptions::states`]; empty
+    /// otherwise.
+    pub fn states(&self) -> &[Vec<u8>] {
+        &self.states
     }
 
     /// The options the fleet runs with.
@@ -258,7 +281,8 @@ impl Fleet {
     /// and fuses its sets: receivers in the order of the UAVs, each taking its peers by
     /// ascending id (perfect links: what `protocol::radio::Radio::perfect` delivers). `look`
     /// sees each message taken in. The encoding, each decoding and each fusion or application
-    /// are timed into `sample`.
+    /// are timed into `sample`. With [`FleetOptions::states`], each UAV then encodes its sets
+    /// for the observers ([`Fleet::states`]).
     pub fn share(
         &mut self,
         sample: &mut StepSample,
@@ -303,6 +327,14 @@ impl Fleet {
                     report: report.as_ref(),
                     applied: applied.as_ref(),
                 });
+            }
+        }
+        if self.options.states {
+            let composing = self.estimators.iter_mut().zip(&mut self.state_outboxes);
+            for (uav, (estimator, outbox)) in composing.enumerate() {
+                let msg = outbox.compose(estimator.state_mut());
+                self.states[uav] = message::to_bytes(&msg)
+                    .map_err(|source| FleetStepError::Encode { uav, source })?;
             }
         }
         Ok(())

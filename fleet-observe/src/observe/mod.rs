@@ -41,6 +41,7 @@
 //!
 //! Signals are left to the tokio side ([`SignalHandlingMode::Disabled`]).
 
+mod measure;
 pub mod metrics;
 mod ports;
 mod reception;
@@ -64,10 +65,10 @@ use protocol::service::RunId;
 use protocol::wire::{
     DropReason, HELLO_STEP, TruthState, UavMask, WireHeader, WireKind, unix_now_ns,
 };
-use sets::grid::GroundGrid;
 use tokio::sync::mpsc::UnboundedSender;
 
-use metrics::{AgentSpread, ObservedEstimate, SetMetrics, fleet_areas, identified_ids, violations};
+pub use measure::Measurer;
+use metrics::SetMetrics;
 use ports::Ports;
 use reception::Reception;
 pub use report::{FinalState, ObserverEnd, ObserverReport};
@@ -514,7 +515,6 @@ impl Observer<'_> {
         let before = self.clock.enter(phase::OBSERVE);
         let step = self.measure(truth, live_agents);
         self.clock.enter(before);
-        self.report.steps += 1;
         if let Some(t) = self.first_truth {
             self.report.stepping = Some(t.elapsed());
         }
@@ -523,68 +523,14 @@ impl Observer<'_> {
         Ok(())
     }
 
-    /// Measures step `truth.step`: checks and fuses the agents' estimates, counts the step's
-    /// traffic, shows the step to the sinks and returns its metrics.
+    /// Measures step `truth.step` ([`measure::measure_step`]), shows it to the sinks and
+    /// returns its metrics.
     fn measure(&mut self, truth: &TruthState, live_agents: u32) -> StepMetrics {
-        let k = truth.step;
-        let grid = self.reception.grid();
-        let estimates = self.reception.take(k);
-        let violation_count = check_guarantee(truth, &estimates, &grid);
-        let all_fused = self.reception.fuse(k, &estimates);
-        let mut agents = BTreeMap::new();
-        let mut windowed = false;
-        for ((uav, fused), estimate) in all_fused.iter().zip(&estimates) {
-            // Its `X̄` after this step's fusion, the last it holds if its run ends here.
-            self.report
-                .final_undetected
-                .insert(*uav, (k, fused.undetected.clone()));
-            let mut metrics = SetMetrics::measure(fused, truth.targets(), &grid);
-            // A window over the whole region is no window: the metrics stay today's.
-            let window = self.reception.window_of(estimate);
-            if let Some(window) = window.filter(|w| w.cell_count() < grid.cell_count() as u64) {
-                metrics = metrics.within(fused, &window);
-                self.report.windows.count(fused, &window);
-                windowed = true;
-            }
-            agents.insert(*uav, metrics);
-        }
-        let mut spread = AgentSpread::over(agents.values());
-        // Under windows the fleet's UA and OA stand for the agents' mean (docs/design.md §6).
-        if let (true, Some(spread), Some((ua, oa))) = (
-            windowed,
-            spread.as_mut(),
-            fleet_areas(all_fused.iter().map(|(_, f)| f), &grid),
-        ) {
-            spread.mean.ua = ua;
-            spread.mean.oa = oa;
-        }
-        let estimate_count = estimates.len() as u32;
-        let identified_any = identified_ids(&estimates).len() as u32;
-        self.reception.keep_sent(k, estimates);
-        self.report.record_fleet(truth, live_agents);
-        let step = StepMetrics {
-            step: k,
-            time_s: truth.time_s,
-            live_agents,
-            estimates: estimate_count,
-            identified_any,
-            mean: spread.map(|s| s.mean),
-            worst: spread.map(|s| s.worst),
-            agents,
-            violations: violation_count,
-        };
+        let (step, all_fused) =
+            measure::measure_step(&mut self.reception, truth, live_agents, &mut self.report);
         self.showing
             .show_fused(truth, &all_fused, &step, &mut self.clock, &mut self.report);
-        // The lowest id's sets are the final state (drawn in `sets.png`).
-        if let Some((uav, sets)) = all_fused.into_iter().next() {
-            self.report.final_state = Some(FinalState {
-                step: k,
-                time_s: truth.time_s,
-                uav,
-                sets,
-                targets: truth.targets().to_vec(),
-            });
-        }
+        measure::keep_final_state(&mut self.report, truth, all_fused);
         step
     }
 
@@ -624,24 +570,4 @@ impl Observer<'_> {
         tracing::warn!(step = truth.step, "faults were not applied in time");
         0
     }
-}
-
-/// Checks every estimate against the truth, logs each violation and returns their count.
-fn check_guarantee(truth: &TruthState, estimates: &[ObservedEstimate], grid: &GroundGrid) -> u32 {
-    let k = truth.step;
-    let mut violation_count = 0;
-    for e in estimates {
-        for v in violations(e, truth.targets(), grid) {
-            violation_count += 1;
-            tracing::error!(
-                step = k,
-                agent = v.uav,
-                target = v.target,
-                set = v.set.name(),
-                distance_m = v.distance_m,
-                "guarantee violated: target outside its set"
-            );
-        }
-    }
-    violation_count
 }

@@ -91,7 +91,6 @@ impl Reception {
         run_tag: u64,
         report: &mut ObserverReport,
     ) -> bool {
-        let mut oem_changed = false;
         let header = *sample.user_header();
         let len = sample.payload().len();
         // Under the measurement exchange the agents' sets come in state messages, for the
@@ -113,11 +112,27 @@ impl Reception {
             report.drop_estimate(sender, reason);
             return false;
         }
+        let changed = self.receive_payload(sender, kind, sample.payload(), report);
+        drop(sample);
+        changed
+    }
+
+    /// Receives the payload of one checked message of `sender`'s of `kind` (an estimate, or
+    /// under the measurement exchange a state message): decodes it and stores it for its step,
+    /// or counts it as dropped (see [`Reception::receive`]). Returns whether the fleet map
+    /// changed.
+    pub(super) fn receive_payload(
+        &mut self,
+        sender: u32,
+        kind: WireKind,
+        payload: &[u8],
+        report: &mut ObserverReport,
+    ) -> bool {
+        let mut oem_changed = false;
         if self.exchange == Exchange::Measurements && kind == WireKind::Estimate {
-            let read = message::from_bytes(sample.payload())
+            let read = message::from_bytes(payload)
                 .map_err(EstimateReadError::from)
                 .and_then(|msg| PeerMessage::from_msg(&msg, &self.estimator).map(|_| msg));
-            drop(sample);
             match read {
                 Ok(msg) if msg.uav == sender => {
                     let tally = report.agents.entry(sender).or_default();
@@ -138,8 +153,7 @@ impl Reception {
             }
             return oem_changed;
         }
-        let decoded = ObservedEstimate::read(&mut self.inbox, sample.payload(), &self.estimator);
-        drop(sample);
+        let decoded = ObservedEstimate::read(&mut self.inbox, payload, &self.estimator);
         match decoded {
             Ok((e, _)) if e.uav() != sender => {
                 report.drop_estimate(sender, DropReason::Sender);

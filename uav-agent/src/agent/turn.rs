@@ -312,22 +312,16 @@ impl GuidanceTurn {
         process: &Process<'_>,
         state: &EstimatorState,
     ) -> RequestHeader {
-        let pose = state.pose.unwrap_or(protocol::camera::CameraPose {
-            position: sets::math::Point3::origin(),
-            yaw: 0.0,
-        });
-        let scenario = &process.config.scenario;
-        RequestHeader {
-            run_tag: process.run_tag,
-            step: k,
+        Request::header_at(
+            &process.config.scenario,
+            &self.params,
+            state,
+            process.run_tag,
+            process.uav(),
             round,
-            total_steps: scenario.steps(),
-            uav: process.uav(),
-            fleet_size: scenario.uavs.count,
-            deadline_ms: scenario.timing.external_planner_ms,
+            k,
             flags,
-            ..Request::header(&self.params, state, &pose)
-        }
+        )
     }
 
     /// The external planner's answer for this turn, if this agent asks one and a valid

@@ -21,6 +21,7 @@ use protocol::plan::Steer;
 use protocol::plan::{
     Answer, ArrayId, OTHER_ROW_BYTES, RequestHeader, RequestShape, RequestWriter, TARGET_ROW_BYTES,
 };
+use protocol::scenario::Scenario;
 use protocol::wire::PlannedView;
 use serde::Serialize;
 use sets::raster::{CellBox, CellSet};
@@ -110,6 +111,47 @@ impl Request<'_> {
             targets_m2,
             ..RequestHeader::default()
         }
+    }
+
+    /// The whole header of the request UAV `uav` of the run tagged `run_tag` (of `scenario`)
+    /// sends at step `k` of `round` with `flags`, its state `state` (the origin when it has no
+    /// pose yet).
+    #[allow(clippy::too_many_arguments)]
+    pub fn header_at(
+        scenario: &Scenario,
+        params: &GuidanceParams,
+        state: &EstimatorState,
+        run_tag: u64,
+        uav: u32,
+        round: u64,
+        k: u64,
+        flags: u32,
+    ) -> RequestHeader {
+        let pose = state.pose.unwrap_or(CameraPose {
+            position: sets::math::Point3::origin(),
+            yaw: 0.0,
+        });
+        RequestHeader {
+            run_tag,
+            step: k,
+            round,
+            total_steps: scenario.steps(),
+            uav,
+            fleet_size: scenario.uavs.count,
+            deadline_ms: scenario.timing.external_planner_ms,
+            flags,
+            ..Request::header(params, state, &pose)
+        }
+    }
+
+    /// The request's bytes, as an agent sends them (for a planner in the agent's process).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let boxes = self.target_boxes();
+        let shape = self.shape(&boxes);
+        let (_, total) = shape.layout();
+        let mut buf = vec![0u8; total];
+        self.write(&mut buf, &shape, &boxes);
+        buf
     }
 
     /// Each identified car's box on the planning grid.
