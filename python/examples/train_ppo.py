@@ -185,7 +185,8 @@ def make_sim_env(config: TrainConfig) -> Any:
     from setfleet.vector import SimVectorEnv
 
     return SimVectorEnv(num_envs=config.envs, scenario=config.scenario, overrides=config.overrides,
-                        variant="paper", learner=0, size=config.size, seed=config.seed)
+                        variant="paper", learner=0, size=config.size, seed=config.seed,
+                        seed_range=(TRAIN_SEEDS.start, TRAIN_SEEDS.stop - 1))
 
 
 def _mean(values: Sequence[float]) -> float | None:

@@ -3,8 +3,16 @@
 :class:`SearchEnv` is a :class:`gymnasium.Env` in which one UAV (the *learner*, UAV 0 by
 default) takes its guidance decisions from the agent's actions while the other UAVs keep the
 chosen variant's planner. :class:`ParallelSearchEnv` is a PettingZoo ``ParallelEnv`` with
-several learning UAVs (agents ``uav_{i}``). Each ``reset`` starts a new ``fleet run``; each
-``step`` answers the pending request(s) and waits for the next one: one guidance period.
+several learning UAVs (agents ``uav_{i}``). Each ``reset`` starts a new run; each ``step``
+answers the pending request(s) and waits for the next one: one guidance period.
+:class:`setfleet.vector.SimVectorEnv` steps several runs at once (``gymnasium.vector``).
+
+**Backends** (``backend=``): ``"process"`` (the default) starts ``fleet run``, the real
+distributed fleet, and is the reference for evaluation; ``"sim"`` runs the same run inside this
+process (:class:`setfleet.sim.SimRun`, the compiled ``setfleet._native``), without processes
+or IPC. For the same seed and actions both give the same observations, rewards and
+``timeseries.csv``: the same world, estimators, exchange, token order and planners, and the
+same request and answer bytes.
 
 **Observation** (per agent), a dict:
 
@@ -55,8 +63,22 @@ from gymnasium import spaces
 
 from .layout import DEFAULT_INCREMENTS, Action, Observation, PlanGrid
 from .run import Request, Run, RunEnded, RunResult
+from .sim import SimRun, overrides_list
 
-__all__ = ["SearchEnv", "ParallelSearchEnv", "SetsRaster", "observe", "DEFAULT_INCREMENTS"]
+__all__ = [
+    "SearchEnv",
+    "ParallelSearchEnv",
+    "SetsRaster",
+    "observe",
+    "reward",
+    "observation_space",
+    "BACKENDS",
+    "DEFAULT_INCREMENTS",
+]
+
+#: The environments' backends: ``"process"`` runs ``fleet run`` (the real distributed fleet,
+#: the reference), ``"sim"`` the same run in this process (:class:`setfleet.sim.SimRun`).
+BACKENDS = ("process", "sim")
 
 
 def _overlap_matrix(n_in: int, origin: float, cell: float, lo: float, hi: float, n_out: int) -> np.ndarray:
@@ -110,6 +132,16 @@ def observe(obs: Observation, raster: SetsRaster) -> dict[str, np.ndarray]:
     return {"sets": sets, "pose": pose}
 
 
+def reward(prev: Observation, nxt: Observation, w_ua: float = 1.0, w_targets: float = 1.0) -> float:
+    """The reward between two requests of a learner (the module's documentation)."""
+    b = prev.border_half_m
+    area = (2 * b) ** 2 if b > 0 else 1.0
+    return float(
+        (w_ua * (prev.undetected_m2 - nxt.undetected_m2) + w_targets * (prev.targets_m2 - nxt.targets_m2))
+        / area
+    )
+
+
 def _info(obs: Observation) -> dict[str, Any]:
     return {
         "step": obs.step,
@@ -141,10 +173,14 @@ class _Episodes:
         extra_overrides: Sequence[str] = (),
         extra_args: Sequence[str] = (),
         connect_timeout: float = 60.0,
+        backend: str = "process",
     ) -> None:
-        if isinstance(overrides, Mapping):
-            overrides = [f"{k}={v}" for k, v in overrides.items()]
-        self.overrides = list(overrides) + list(extra_overrides)
+        if backend not in BACKENDS:
+            raise ValueError(f"backend: one of {BACKENDS}, not {backend!r}")
+        if backend == "sim" and extra_args:
+            raise ValueError("extra_args are fleet run's: the sim backend takes none")
+        self.backend = backend
+        self.overrides = overrides_list(overrides) + list(extra_overrides)
         if deadline_ms is not None:
             self.overrides.append(f"timing.external_planner_ms={int(deadline_ms)}")
         self.learners = list(learners)
@@ -157,11 +193,11 @@ class _Episodes:
         self.extra_args = list(extra_args)
         self.connect_timeout = connect_timeout
         self.count = 0
-        self.run: Run | None = None
+        self.run: Run | SimRun | None = None
         self.run_dir: Path | None = None
         self._temp: Path | None = None
 
-    def start(self, seed: int) -> Run:
+    def start(self, seed: int) -> Run | SimRun:
         self.stop()
         self._remove_temp()
         if self.out_dir is not None:
@@ -171,6 +207,18 @@ class _Episodes:
             out = self._temp
         self.count += 1
         self.run_dir = out
+        if self.backend == "sim":
+            self.run = SimRun(
+                scenario=self.scenario,
+                seed=seed,
+                variant=self.variant,
+                external=self.learners,
+                duration=self.duration,
+                out=out,
+                overrides=self.overrides,
+                uavs=self.uavs,
+            )
+            return self.run
         self.run = Run(
             scenario=self.scenario,
             seed=seed,
@@ -212,7 +260,7 @@ class _Episodes:
         self._remove_temp()
 
 
-def _observation_space(size: int) -> spaces.Dict:
+def observation_space(size: int) -> spaces.Dict:
     """One agent's observation space (the module's documentation)."""
     return spaces.Dict(
         {
@@ -255,7 +303,7 @@ class _FleetEnv:
         self.last_result: RunResult | None = None
 
     @property
-    def run(self) -> Run | None:
+    def run(self) -> Run | SimRun | None:
         """The current episode's run."""
         return self._episodes.run
 
@@ -266,15 +314,7 @@ class _FleetEnv:
 
     def _reward(self, prev: Observation, nxt: Observation) -> float:
         """The reward between two requests of a learner (the module's documentation)."""
-        b = prev.border_half_m
-        area = (2 * b) ** 2 if b > 0 else 1.0
-        return float(
-            (
-                self.w_ua * (prev.undetected_m2 - nxt.undetected_m2)
-                + self.w_targets * (prev.targets_m2 - nxt.targets_m2)
-            )
-            / area
-        )
+        return reward(prev, nxt, self.w_ua, self.w_targets)
 
 
 class SearchEnv(_FleetEnv, gymnasium.Env):
@@ -293,6 +333,8 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
         deadline_ms: ``timing.external_planner_ms`` of the runs (default: the scenario's).
         out_dir: where runs are kept (default: temporary directories, see the module's doc).
         request_timeout: longest wait for a request, s (start-up included).
+        backend: ``"process"`` (``fleet run``'s processes, the default and the reference) or
+            ``"sim"`` (the same run in this process; ``fleet`` and ``extra_args`` unused).
     """
 
     metadata = {"render_modes": []}
@@ -315,6 +357,7 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
         out_dir: str | os.PathLike[str] | None = None,
         request_timeout: float = 120.0,
         extra_args: Sequence[str] = (),
+        backend: str = "process",
     ) -> None:
         super().__init__()
         self.learner = int(learner)
@@ -334,8 +377,9 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
             fleet=fleet,
             out_dir=out_dir,
             extra_args=extra_args,
+            backend=backend,
         )
-        self.observation_space = _observation_space(size)
+        self.observation_space = observation_space(size)
         self.action_space = spaces.Discrete(len(self.increments))
         self._pending: Request | None = None
         self._last: dict[str, np.ndarray] | None = None
@@ -438,6 +482,7 @@ class ParallelSearchEnv(_FleetEnv, _ParallelEnv):  # type: ignore[misc,valid-typ
         out_dir: str | os.PathLike[str] | None = None,
         request_timeout: float = 120.0,
         extra_args: Sequence[str] = (),
+        backend: str = "process",
     ) -> None:
         self.learners = tuple(sorted({int(u) for u in learners}))
         if not self.learners:
@@ -462,8 +507,9 @@ class ParallelSearchEnv(_FleetEnv, _ParallelEnv):  # type: ignore[misc,valid-typ
             out_dir=out_dir,
             extra_overrides=["guidance.external_request=round_start"],
             extra_args=extra_args,
+            backend=backend,
         )
-        self._observation_space = _observation_space(size)
+        self._observation_space = observation_space(size)
         self.observation_spaces = {a: self._observation_space for a in self.possible_agents}
         self.action_spaces = {a: spaces.Discrete(len(self.increments)) for a in self.possible_agents}
         self._rng = np.random.default_rng()

@@ -50,6 +50,7 @@ impl Episode {
     /// The run `fleet run` would make of these flags (`--scenario`, `--variant`, `--set`,
     /// `--seed`, `--duration`, `--uavs`, `--planner external:<learners>`).
     #[new]
+    #[allow(clippy::too_many_arguments)] // the flags of `fleet run`, as keyword arguments
     #[pyo3(signature = (scenario, variant, overrides, seed, duration, uavs, learners))]
     fn new(
         py: Python<'_>,

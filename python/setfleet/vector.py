@@ -1,0 +1,239 @@
+"""Vectorised learning: several in-process runs stepped in one call (``gymnasium.vector``).
+
+:class:`SimVectorEnv` is a :class:`gymnasium.vector.VectorEnv` of ``num_envs`` copies of
+:class:`setfleet.gym.SearchEnv` on the in-process backend (``backend="sim"``): the same
+spaces, reward and ending per environment, each episode with its own seed. A ``step``
+answers every environment's request, then the compiled module steps all the runs to their
+next request at once, over ``threads`` threads with the GIL released
+(``setfleet._native.run_many``); the observations are then built here, as ``SearchEnv``
+builds them.
+
+**Autoreset**: ``AutoresetMode.NEXT_STEP``, gymnasium's default: the step after an episode
+ended starts that environment's next episode, ignores its action and returns the new
+episode's first observation with reward 0, ``terminated`` and ``truncated`` False.
+
+**Seeds**: ``reset(seed=s)`` seeds episode ``i``'s run with ``s + i`` and the generator that
+draws the seeds of later episodes from ``seed_range`` (inclusive); ``reset()`` draws them all
+from the generator (seeded by the constructor's ``seed``).
+
+**Info** (arrays of ``num_envs``, each with its ``_key`` mask): ``step``, ``time_s``,
+``undetected_m2`` and ``targets_m2`` of each observation (``SearchEnv``'s info), ``ua`` (the
+fleet's mean undetected fraction at the run's last measured step), ``violations`` (guarantee
+violations of the episode so far) and ``seed`` (the episode's run seed).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from .gym import SetsRaster, _checked_increments, _info, observation_space, observe, reward
+from .layout import DEFAULT_INCREMENTS, Action, Observation, encode_answer
+from .sim import native, overrides_list
+
+__all__ = ["SimVectorEnv"]
+
+_INFO_KEYS = ("step", "time_s", "undetected_m2", "targets_m2", "ua", "violations", "seed")
+
+
+class _Slot:
+    """One environment of the vector: its run, its pending request, its last observation."""
+
+    __slots__ = ("episode", "seed", "request", "obs", "last", "done")
+
+    def __init__(self) -> None:
+        self.episode: Any = None
+        self.seed = 0
+        self.request: tuple[int, Observation] | None = None
+        self.obs: dict[str, np.ndarray] | None = None
+        self.last: Observation | None = None
+        self.done = False
+
+
+class SimVectorEnv(gymnasium.vector.VectorEnv):
+    """``num_envs`` in-process runs with one learning UAV each (see the module's
+    documentation).
+
+    Args:
+        num_envs: how many runs.
+        learner, variant, scenario, uavs, duration, overrides, increments, size, w_ua,
+            w_targets: as :class:`setfleet.gym.SearchEnv`.
+        threads: threads that step the runs (default: the machine's CPUs).
+        seed_range: the range (inclusive) later episodes' seeds are drawn from.
+        seed: seeds the generator that draws them (``reset(seed=...)`` reseeds it).
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        *,
+        learner: int = 0,
+        variant: str = "paper",
+        scenario: str | os.PathLike[str] | None = None,
+        uavs: int | None = None,
+        duration: float | None = None,
+        overrides: Iterable[str] | Mapping[str, Any] = (),
+        increments: Sequence[float] = DEFAULT_INCREMENTS,
+        size: int = 64,
+        w_ua: float = 1.0,
+        w_targets: float = 1.0,
+        threads: int | None = None,
+        seed_range: tuple[int, int] = (1, 2**31 - 2),
+        seed: int | None = None,
+    ) -> None:
+        if num_envs < 1:
+            raise ValueError("num_envs: at least 1")
+        lo, hi = (int(v) for v in seed_range)
+        if not 0 <= lo <= hi:
+            raise ValueError("seed_range: 0 <= low <= high")
+        self._native = native()
+        self.num_envs = int(num_envs)
+        self.learner = int(learner)
+        self.variant = variant
+        self.scenario = None if scenario is None else str(Path(scenario))
+        self.uavs = uavs
+        self.duration = duration
+        self.overrides = overrides_list(overrides)
+        self.increments = _checked_increments(increments)
+        self.w_ua, self.w_targets = float(w_ua), float(w_targets)
+        self.threads = int(threads) if threads is not None else (os.cpu_count() or 1)
+        self.seed_range = (lo, hi)
+        self._raster = SetsRaster(size)
+        self.single_observation_space = observation_space(size)
+        self.single_action_space = spaces.Discrete(len(self.increments))
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._slots = [_Slot() for _ in range(self.num_envs)]
+        self._rng = np.random.default_rng(seed)
+
+    # ---- the runs ----------------------------------------------------------------------
+
+    def _start(self, slot: _Slot, seed: int) -> None:
+        slot.seed = int(seed)
+        slot.episode = self._native.Episode(
+            self.scenario,
+            self.variant,
+            self.overrides,
+            slot.seed,
+            self.duration,
+            self.uavs,
+            [self.learner],
+        )
+        slot.request, slot.obs, slot.last, slot.done = None, None, None, False
+
+    def _draw_seed(self) -> int:
+        return int(self._rng.integers(self.seed_range[0], self.seed_range[1] + 1))
+
+    def _run(self, slots: list[_Slot]) -> None:
+        """Steps the runs of ``slots`` to their learner's next request, all at once; a run
+        that ended is marked done."""
+        if not slots:
+            return
+        asking = self._native.run_many([s.episode for s in slots], self.threads)
+        for slot, asks in zip(slots, asking):
+            if not asks:
+                slot.request, slot.done = None, True
+                continue
+            pending = slot.episode.pending()
+            if len(pending) != 1 or pending[0][0] != self.learner:
+                raise RuntimeError(f"expected one request of UAV {self.learner}, got {len(pending)}")
+            obs = Observation(pending[0][2])
+            slot.request = (self.learner, obs)
+            slot.obs = observe(obs, self._raster)
+            slot.last = obs
+
+    def _answer(self, slot: _Slot, action: Any) -> Observation:
+        assert slot.request is not None
+        uav, obs = slot.request
+        data = encode_answer(obs, Action(increments=[self.increments[int(action)]]))
+        slot.episode.answer(uav, data)
+        slot.request = None
+        return obs
+
+    # ---- the vector API ----------------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Starts a new episode in every environment (seeds as the module's documentation
+        says) and returns their first observations and infos."""
+        if isinstance(seed, int):
+            self._rng = np.random.default_rng(seed)
+            seeds = [seed + i for i in range(self.num_envs)]
+        elif seed is not None:
+            seeds = [int(s) for s in seed]
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
+        else:
+            seeds = [self._draw_seed() for _ in range(self.num_envs)]
+        for slot, s in zip(self._slots, seeds):
+            self._start(slot, s)
+        self._run(self._slots)
+        for i, slot in enumerate(self._slots):
+            if slot.done:
+                raise RuntimeError(f"environment {i}'s run ended before its first decision")
+        return self._batch(), self._infos()
+
+    def step(
+        self, actions: Any
+    ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Answers every environment's request with its action (an environment whose episode
+        ended at the last step starts its next one instead) and steps every run to its next
+        request."""
+        actions = np.asarray(actions)
+        rewards = np.zeros(self.num_envs, dtype=np.float64)
+        terminated = np.zeros(self.num_envs, dtype=np.bool_)
+        prev: dict[int, Observation] = {}
+        for i, slot in enumerate(self._slots):
+            if slot.done:
+                self._start(slot, self._draw_seed())
+            elif slot.request is None:
+                raise RuntimeError("step() needs a reset() first")
+            else:
+                prev[i] = self._answer(slot, actions[i])
+        self._run(self._slots)
+        for i, slot in enumerate(self._slots):
+            if i not in prev:
+                if slot.done:
+                    raise RuntimeError(f"environment {i}'s run ended before its first decision")
+                continue
+            if slot.done:
+                terminated[i] = True
+            else:
+                assert slot.last is not None
+                rewards[i] = reward(prev[i], slot.last, self.w_ua, self.w_targets)
+        return self._batch(), rewards, terminated, np.zeros(self.num_envs, dtype=np.bool_), self._infos()
+
+    def _batch(self) -> dict[str, np.ndarray]:
+        return {
+            key: np.stack([slot.obs[key] for slot in self._slots])  # type: ignore[index]
+            for key in ("sets", "pose")
+        }
+
+    def _infos(self) -> dict[str, Any]:
+        infos: dict[str, Any] = {}
+        rows = []
+        for slot in self._slots:
+            assert slot.last is not None
+            row = _info(slot.last)
+            ua = slot.episode.ua
+            row.update(ua=np.nan if ua is None else ua, violations=slot.episode.violations, seed=slot.seed)
+            rows.append(row)
+        for key in _INFO_KEYS:
+            infos[key] = np.array([row[key] for row in rows])
+            infos[f"_{key}"] = np.ones(self.num_envs, dtype=np.bool_)
+        return infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Drops the runs."""
+        for slot in self._slots:
+            slot.episode = None
