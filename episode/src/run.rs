@@ -159,7 +159,7 @@ impl Episode {
                     asked: BTreeMap::new(),
                 });
                 if self.round_start {
-                    self.ask_at_round_start()?;
+                    self.ask_at_round_start();
                     if !self.pending.is_empty() {
                         return Ok(true);
                     }
@@ -276,7 +276,7 @@ impl Episode {
 
     /// Asks every learner at the round's start (`guidance.external_request =
     /// "round_start"`).
-    fn ask_at_round_start(&mut self) -> Result<(), EpisodeError> {
+    fn ask_at_round_start(&mut self) {
         let round = self.round.take().expect("a round under way");
         for &uav in &self.learners {
             let request = self.request(&round, uav, true);
@@ -284,7 +284,6 @@ impl Episode {
             self.counts.asked += 1;
         }
         self.round = Some(round);
-        Ok(())
     }
 
     /// Lets the round's UAVs decide in turn until a learner's turn needs its answer

@@ -31,7 +31,12 @@ not counted.
 
 from __future__ import annotations
 
-import argparse
+import os
+
+# numpy's BLAS threads would spin beside the fleet's threads on small matrices: one is enough.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
 import csv
 import json
 import math
@@ -97,6 +102,7 @@ class TrainConfig:
     eval_scenario: str | None = None
     eval_overrides: list[str] = field(default_factory=list)
     no_eval: bool = False
+    eval_only: bool = False
     eval_every: int | None = None
     fleet: str | None = None
     max_hours: float | None = None
@@ -127,8 +133,9 @@ def _scenario_path(text: str) -> str:
 def parse_args(argv: Sequence[str] | None = None) -> TrainConfig:
     """The command line as a :class:`TrainConfig` (``--help`` lists the options)."""
     d, dp = TrainConfig(steps=0, out=""), PPOConfig()
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--steps", type=int, required=True, help="environment steps to train for")
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
+    p.add_argument("--steps", type=int, default=None,
+                   help="environment steps to train for (required unless --eval-only)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--envs", type=int, default=d.envs, help="environments in the vector")
     p.add_argument("--scenario", default="scenarios/training.toml",
@@ -142,6 +149,8 @@ def parse_args(argv: Sequence[str] | None = None) -> TrainConfig:
     p.add_argument("--eval-set", dest="eval_overrides", action="append", default=[],
                    metavar="KEY=VALUE", help="evaluation scenario override (repeatable)")
     p.add_argument("--no-eval", action="store_true", help="skip the evaluation")
+    p.add_argument("--eval-only", action="store_true",
+                   help="no training: evaluate the policy already in --out (policy.npz)")
     p.add_argument("--eval-every", type=int, default=None, metavar="N",
                    help="also save and evaluate the policy alone every N updates")
     p.add_argument("--fleet", default=None, help="the fleet binary for the evaluation")
@@ -157,6 +166,12 @@ def parse_args(argv: Sequence[str] | None = None) -> TrainConfig:
     p.add_argument("--hidden", default=",".join(map(str, dp.hidden)), help="hidden layers' widths")
     p.add_argument("--pool", type=int, default=dp.pool, help="side of the pooled set rasters")
     a = p.parse_args(argv)
+    if a.eval_only and a.no_eval:
+        p.error("--eval-only and --no-eval exclude each other")
+    if a.steps is None:
+        if not a.eval_only:
+            p.error("--steps is required (unless --eval-only)")
+        a.steps = 1
     if a.steps < 1 or a.envs < 1 or a.rollout < 1 or a.epochs < 1 or a.minibatch < 1:
         p.error("--steps, --envs, --rollout, --epochs and --minibatch must be at least 1")
     if a.eval_every is not None and a.eval_every < 1:
@@ -171,7 +186,8 @@ def parse_args(argv: Sequence[str] | None = None) -> TrainConfig:
         steps=a.steps, out=a.out, envs=a.envs, scenario=_scenario_path(a.scenario),
         overrides=a.overrides, seed=a.seed, eval_seeds=a.eval_seeds,
         eval_scenario=None if a.eval_scenario is None else _scenario_path(a.eval_scenario),
-        eval_overrides=a.eval_overrides, no_eval=a.no_eval, eval_every=a.eval_every,
+        eval_overrides=a.eval_overrides, no_eval=a.no_eval, eval_only=a.eval_only,
+        eval_every=a.eval_every,
         fleet=a.fleet, max_hours=a.max_hours, ppo=ppo,
     )
 
@@ -403,9 +419,11 @@ def checkpoint_eval(config: TrainConfig, policy: Policy, steps: int) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Trains, then evaluates unless ``--no-eval``; 0 when no evaluation run failed."""
+    """Trains (unless ``--eval-only``), then evaluates unless ``--no-eval``; 0 when no
+    evaluation run failed."""
     config = parse_args(argv)
-    train(config)
+    if not config.eval_only:
+        train(config)
     if config.no_eval:
         return 0
     report = evaluate(config, Policy.load(Path(config.out) / "policy.npz"))

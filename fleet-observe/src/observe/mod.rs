@@ -35,8 +35,9 @@
 //!
 //! The observer's thread is a loop ([`spawn`]) over a few parts, each in its own module:
 //! its ports on the run's services (`ports`), the reception of the agents' estimates as an
-//! agent receives them (`reception`), what the sinks are shown (`showing`) and the record it
-//! hands back ([`ObserverReport`], `report`). The loop owns the order of everything: what is
+//! agent receives them (`reception`), the measurement of a step (`measure`, which
+//! [`Measurer`] offers without ports to a fleet that runs in the caller's process), what the
+//! sinks are shown (`showing`) and the record it hands back ([`ObserverReport`], `report`). The loop owns the order of everything: what is
 //! read when, when a step is acknowledged, measured and shown.
 //!
 //! Signals are left to the tokio side ([`SignalHandlingMode::Disabled`]).

@@ -1,8 +1,8 @@
 //! `setfleet._native`: the in-process backend of the setfleet package's environments.
 //!
-//! A thin layer over the `episode` crate: [`Episode`] is one run of the fleet in this process
+//! A thin layer over the `episode` crate: `Episode` is one run of the fleet in this process
 //! whose learning UAVs ask the caller for their decisions with the request bytes an agent
-//! sends, and [`run_many`] steps several at once over threads. The GIL is released while
+//! sends, and `run_many` steps several at once over threads. The GIL is released while
 //! the fleet steps.
 
 use std::path::PathBuf;
