@@ -192,3 +192,90 @@ impl Measurer {
         &self.report
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use protocol::scenario::{Exchange, Scenario};
+    use protocol::wire::{TruthState, WireKind};
+
+    use super::Measurer;
+
+    /// A small fleet of 3 UAVs flown in process for `steps` steps under `exchange`, each step
+    /// measured from the messages the observers read and checked against the estimators;
+    /// the series.
+    fn measured(exchange: Exchange, steps: u64) -> Vec<super::StepMetrics> {
+        let mut scenario = Scenario::load(
+            None,
+            &[
+                "region.half_extent_m=50".to_owned(),
+                "uavs.count=3".to_owned(),
+                "targets.count=3".to_owned(),
+                "camera.rows=60".to_owned(),
+                "camera.cols=80".to_owned(),
+            ],
+        )
+        .expect("scenario");
+        scenario.comms.exchange = exchange;
+        let options = sim::FleetOptions {
+            states: true,
+            ..sim::FleetOptions::default()
+        };
+        let mut fleet = sim::Fleet::new(&scenario, options).expect("fleet");
+        let mut measurer = Measurer::new(&scenario);
+        let kind = Measurer::measured_kind(&scenario);
+        let mut truth = Box::<TruthState>::default();
+        for _ in 0..steps {
+            let mut sample = fleet.sample();
+            fleet.sense(&mut sample, |_| {}).expect("sense");
+            fleet.share(&mut sample, |_| {}).expect("share");
+            let messages = match kind {
+                WireKind::State => fleet.states(),
+                _ => fleet.messages(),
+            };
+            for (uav, bytes) in messages.iter().enumerate() {
+                measurer.receive(uav as u32, kind, bytes);
+            }
+            fleet.world().truth(1, &mut truth);
+            let m = measurer.measure(&truth);
+            // Each agent is measured on the sets its estimator holds after fusing.
+            let cells = fleet.config().grid.cell_count() as f64;
+            for (uav, estimator) in fleet.estimators().iter().enumerate() {
+                let st = estimator.state();
+                let own = &m.agents[&(uav as u32)];
+                assert_eq!(own.ua, st.undetected.cells().count() as f64 / cells);
+                assert_eq!(own.identified, st.targets.len() as f64);
+            }
+            fleet.advance();
+        }
+        assert_eq!(measurer.report().steps, steps);
+        assert!(
+            measurer.report().dropped.is_empty(),
+            "every message was read"
+        );
+        measurer.series().to_vec()
+    }
+
+    #[test]
+    fn a_fleet_in_process_is_measured_step_by_step_from_what_its_agents_publish() {
+        for exchange in [Exchange::Measurements, Exchange::Sets] {
+            let series = measured(exchange, 6);
+            let steps: Vec<u64> = series.iter().map(|m| m.step).collect();
+            assert_eq!(steps, [0, 1, 2, 3, 4, 5], "{exchange:?}");
+            for m in &series {
+                assert_eq!((m.live_agents, m.estimates), (3, 3), "{exchange:?}");
+                assert_eq!(m.violations, 0);
+                let mean = m.mean.expect("every agent measured");
+                assert!(
+                    mean.ua > 0.0 && mean.ua < 1.0,
+                    "{exchange:?}: UA {}",
+                    mean.ua
+                );
+            }
+        }
+        // A message that cannot be read is counted as the observer counts it.
+        let scenario = Scenario::default();
+        let mut measurer = Measurer::new(&scenario);
+        measurer.receive(0, WireKind::State, b"not a message");
+        assert_eq!(measurer.report().dropped.values().sum::<u64>(), 1);
+    }
+}
