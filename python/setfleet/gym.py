@@ -207,19 +207,7 @@ class _Episodes:
             out = self._temp
         self.count += 1
         self.run_dir = out
-        if self.backend == "sim":
-            self.run = SimRun(
-                scenario=self.scenario,
-                seed=seed,
-                variant=self.variant,
-                external=self.learners,
-                duration=self.duration,
-                out=out,
-                overrides=self.overrides,
-                uavs=self.uavs,
-            )
-            return self.run
-        self.run = Run(
+        common = dict(
             scenario=self.scenario,
             seed=seed,
             variant=self.variant,
@@ -228,6 +216,12 @@ class _Episodes:
             out=out,
             overrides=self.overrides,
             uavs=self.uavs,
+        )
+        if self.backend == "sim":
+            self.run = SimRun(**common)
+            return self.run
+        self.run = Run(
+            **common,
             fleet=self.fleet,
             extra_args=self.extra_args,
             connect_timeout=self.connect_timeout,
