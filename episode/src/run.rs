@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use fleet_observe::observe::{Measurer, StepMetrics};
 use fleet_observe::results::timeseries;
 use protocol::plan::{Answer, FLAG_ROUND_START};
-use protocol::scenario::{ExternalRequest, Scenario};
+use protocol::scenario::{Exchange, ExternalRequest, Scenario};
 use protocol::wire::{PlannedView, TruthState, WireKind};
 use sim::{Fleet, FleetOptions, PlanningState, Steering};
 use uav_agent::guidance::external::{self, Request};
@@ -88,7 +88,9 @@ impl Episode {
             exchange: true,
             oem_full_every: None,
             steering: Steering::Manual,
-            states: true,
+            // The observers read the agents' state messages under the measurement exchange,
+            // their estimates under the sets exchange.
+            states: scenario.comms.exchange == Exchange::Measurements,
         };
         let fleet = Fleet::new(&scenario, options)?;
         let n = fleet.uav_count() as u32;

@@ -159,3 +159,16 @@ fn episodes_over_threads_run_as_they_run_alone() {
         .collect();
     assert_eq!(together, alone);
 }
+
+#[test]
+fn under_the_sets_exchange_the_observers_read_the_estimates() {
+    let mut s = spec(8, &[0]);
+    s.overrides.push("comms.exchange=sets".to_owned());
+    let mut episode = Episode::new(&s).expect("episode");
+    play(&mut episode, |_, _| Some(turn(0.0)));
+    assert_eq!(episode.series().len(), 24);
+    for m in episode.series() {
+        assert_eq!((m.live_agents, m.estimates, m.violations), (3, 3, 0));
+    }
+    assert!(episode.fleet().states().iter().all(Vec::is_empty));
+}
