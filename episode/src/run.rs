@@ -63,6 +63,8 @@ pub struct Episode {
     fleet: Fleet,
     params: GuidanceParams,
     learners: BTreeSet<u32>,
+    /// Every UAV, ascending: the fleet of each round (every UAV is live in process).
+    uavs: Vec<u32>,
     round_start: bool,
     total_steps: u64,
     measurer: Measurer,
@@ -97,6 +99,7 @@ impl Episode {
         Ok(Episode {
             params: GuidanceParams::from_scenario(&scenario),
             learners: (0..n).filter(|&u| scenario.asks_external(u)).collect(),
+            uavs: (0..n).collect(),
             round_start: scenario.guidance.external_request == ExternalRequest::RoundStart,
             total_steps: scenario.steps(),
             measurer: Measurer::new(&scenario),
@@ -245,7 +248,6 @@ impl Episode {
     /// plans ahead) or in its turn (the plans passed on so far).
     fn request(&self, round: &Round, uav: u32, at_start: bool) -> PendingRequest {
         let state = self.fleet.estimators()[uav as usize].state();
-        let fleet: Vec<u32> = (0..self.fleet.uav_count() as u32).collect();
         let hidden = state.hidden_history.recently_hidden();
         let (others, flags): (&[PlannedView], u32) = match at_start {
             true => (&[], FLAG_ROUND_START),
@@ -267,7 +269,7 @@ impl Episode {
             state,
             recently_hidden: &hidden,
             others,
-            fleet: &fleet,
+            fleet: &self.uavs,
         };
         PendingRequest {
             uav,
@@ -293,8 +295,7 @@ impl Episode {
     /// and the world moves on (`Ok(false)`).
     fn continue_round(&mut self) -> Result<bool, EpisodeError> {
         let mut round = self.round.take().expect("a round under way");
-        let n = self.fleet.uav_count() as u32;
-        while round.next < n {
+        while (round.next as usize) < self.uavs.len() {
             let uav = round.next;
             let answer = match self.learners.contains(&uav) {
                 false => None,
@@ -331,8 +332,7 @@ impl Episode {
     ) -> Result<Decision, EpisodeError> {
         let estimator = &self.fleet.estimators()[uav as usize];
         let state = PlanningState::of(uav as usize, estimator)?;
-        let fleet: Vec<u32> = (0..self.fleet.uav_count() as u32).collect();
-        let input = state.input(uav, &round.token, &fleet);
+        let input = state.input(uav, &round.token, &self.uavs);
         Ok(match answer {
             Some(answer) => external::decision(answer, &input),
             None => guidance::decide(&self.params, &input),

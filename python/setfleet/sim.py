@@ -61,8 +61,8 @@ class SimRun:
     """One run of the fleet in this process whose ``external`` UAVs this process answers.
 
     Args: as :class:`setfleet.Run` (``scenario``, ``seed``, ``variant``, ``external``,
-    ``duration``, ``out``, ``overrides``, ``uavs``); ``out`` receives ``timeseries.csv`` when
-    the run ends (:meth:`wait`), none is written without it.
+    ``duration``, ``out``, ``overrides``, ``uavs``); ``out`` (default: a new temporary
+    directory, as ``Run``'s) receives ``timeseries.csv`` when the run ends (:meth:`wait`).
     """
 
     def __init__(
@@ -76,7 +76,11 @@ class SimRun:
         overrides: Iterable[str] | Mapping[str, Any] = (),
         uavs: int | None = None,
     ) -> None:
-        self.out = None if out is None else Path(out)
+        if out is None:
+            import tempfile
+
+            out = tempfile.mkdtemp(prefix="setfleet-sim-")
+        self.out = Path(out)
         self.uavs = tuple(sorted({int(u) for u in external}))
         self.episode = native().Episode(
             None if scenario is None else str(scenario),
@@ -131,16 +135,15 @@ class SimRun:
         while self.episode.run():
             for uav, _step, _data in self.episode.pending():
                 self.episode.answer(uav, b"")
-        if self.out is not None:
-            self.out.mkdir(parents=True, exist_ok=True)
-            (self.out / "timeseries.csv").write_text(self.episode.timeseries_csv())
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "timeseries.csv").write_text(self.episode.timeseries_csv())
         return self.result()
 
     def result(self) -> RunResult:
         """What the run measured so far."""
         asked, answered, malformed = self.episode.counts
         return RunResult(
-            out=self.out if self.out is not None else Path(),
+            out=self.out,
             run_id="sim",
             exit_code=0 if self.episode.finished else None,
             summary=_summary(self.episode),

@@ -98,3 +98,19 @@ def _iceoryx2_files():
     the stand-in and killed processes may leave some)."""
     yield
     _remove_session_files()
+
+
+def check_search_env(env) -> None:
+    """Gymnasium's ``check_env`` on ``env`` (closed after), without the warnings the
+    environments earn by design (an unbounded pose, no rendering)."""
+    import warnings
+
+    from gymnasium.utils.env_checker import check_env
+
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*infinity.*")
+            warnings.filterwarnings("ignore", message=".*render.*")
+            check_env(env, skip_render_check=True)
+    finally:
+        env.close()

@@ -9,13 +9,12 @@ real ``fleet`` binary). Both pass Gymnasium's and PettingZoo's API checks, and
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import SMALL, SMALL_UAVS, real_fleet_or_skip
+from conftest import SMALL, SMALL_UAVS, check_search_env, real_fleet_or_skip
 
 pytest.importorskip("setfleet._native", reason="the compiled module is built by `pip install -e python`")
 
@@ -107,16 +106,7 @@ def test_the_backends_give_the_same_parallel_episode():
 
 
 def test_the_sim_search_env_passes_check_env():
-    from gymnasium.utils.env_checker import check_env
-
-    env = SearchEnv(duration=12, backend="sim", **ENV_KW)
-    try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message=".*infinity.*")
-            warnings.filterwarnings("ignore", message=".*render.*")
-            check_env(env, skip_render_check=True)
-    finally:
-        env.close()
+    check_search_env(SearchEnv(duration=12, backend="sim", **ENV_KW))
 
 
 def test_the_sim_parallel_env_passes_the_api_test():

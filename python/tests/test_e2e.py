@@ -15,13 +15,12 @@ import struct
 import subprocess
 import sys
 import threading
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import SMALL, SMALL_UAVS
+from conftest import SMALL, SMALL_UAVS, check_search_env
 from setfleet import Run, RunEnded, read_summary, read_timeseries, read_tracks
 from setfleet.layout import ANSWER_MAGIC, encode_answer_for
 from setfleet.results import track_of
@@ -229,18 +228,9 @@ ENV_KW = dict(uavs=SMALL_UAVS, overrides=SMALL, size=32, deadline_ms=2000)
 
 
 def test_search_env_passes_check_env(fleet):
-    from gymnasium.utils.env_checker import check_env
-
     from setfleet.gym import SearchEnv
 
-    env = SearchEnv(duration=12, fleet=fleet, **ENV_KW)
-    try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message=".*infinity.*")
-            warnings.filterwarnings("ignore", message=".*render.*")
-            check_env(env, skip_render_check=True)
-    finally:
-        env.close()
+    check_search_env(SearchEnv(duration=12, fleet=fleet, **ENV_KW))
 
 
 def test_parallel_env_passes_the_api_test(fleet):
