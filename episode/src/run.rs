@@ -4,12 +4,12 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use fleet_observe::observe::{Measurer, StepMetrics};
 use fleet_observe::results::timeseries;
-use protocol::plan::{Answer, FLAG_ROUND_START};
+use protocol::plan::{Answer, FLAG_ROUND_START, Steer};
 use protocol::scenario::{Exchange, ExternalRequest, Scenario};
 use protocol::wire::{PlannedView, TruthState, WireKind};
 use sim::{Fleet, FleetOptions, PlanningState, Steering};
 use uav_agent::guidance::external::{self, Request};
-use uav_agent::guidance::{self, Decision, GuidanceParams};
+use uav_agent::guidance::{Decision, GuidanceParams};
 
 use crate::{EpisodeError, EpisodeSpec};
 
@@ -34,6 +34,8 @@ pub struct EpisodeCounts {
     pub asked: u64,
     /// Decisions taken from an answer.
     pub answered: u64,
+    /// Of those, answers that deferred to the UAV's own planner ([`Steer::Defer`]).
+    pub deferred: u64,
     /// Answers refused (they did not decode, or were for another step or UAV): the UAV's own
     /// planner decided.
     pub malformed: u64,
@@ -192,7 +194,10 @@ impl Episode {
         let request = self.pending.remove(at);
         let answer = Answer::decode(bytes, request.step, uav).ok();
         match &answer {
-            Some(_) => self.counts.answered += 1,
+            Some(a) => {
+                self.counts.answered += 1;
+                self.counts.deferred += u64::from(a.steer == Steer::Defer);
+            }
             None => self.counts.malformed += 1,
         }
         if let Some(round) = &mut self.round {
@@ -333,9 +338,6 @@ impl Episode {
         let estimator = &self.fleet.estimators()[uav as usize];
         let state = PlanningState::of(uav as usize, estimator)?;
         let input = state.input(uav, &round.token, &self.uavs);
-        Ok(match answer {
-            Some(answer) => external::decision(answer, &input),
-            None => guidance::decide(&self.params, &input),
-        })
+        Ok(external::decision(answer, &self.params, &input))
     }
 }

@@ -1,5 +1,5 @@
 //! An episode against the fleet it runs: reproducible, its learners asked in token order or
-//! at the round's start, refused answers left to the UAV's own planner, and the same run
+//! at the round's start, refused and deferring answers left to the UAV's own planner, and the same run
 //! whether stepped alone or among others over threads.
 
 use episode::{Episode, EpisodeError, EpisodeSpec, Episodes};
@@ -87,6 +87,38 @@ fn refused_answers_leave_the_decision_to_the_uavs_own_planner() {
     let mut none = Episode::new(&spec(5, &[])).expect("episode");
     assert!(!none.run().expect("no learner: to the end"));
     assert_eq!(refused.timeseries_csv(), none.timeseries_csv());
+}
+
+#[test]
+fn deferring_answers_fly_the_uavs_own_planner_and_count_as_answered() {
+    // Learner 1 deferring every decision flies as UAV 1 does with no learner; half the
+    // rounds deferred and half turned fly another run.
+    let defer = || Answer {
+        steer: Steer::Defer,
+        poses: Vec::new(),
+        planner_ns: 0,
+    };
+    let mut deferring = Episode::new(&spec(5, &[1])).expect("episode");
+    play(&mut deferring, |_, _| Some(defer()));
+    let counts = deferring.counts();
+    assert_eq!(
+        (
+            counts.asked,
+            counts.answered,
+            counts.deferred,
+            counts.malformed
+        ),
+        (4, 4, 4, 0)
+    );
+    let mut none = Episode::new(&spec(5, &[])).expect("episode");
+    assert!(!none.run().expect("no learner: to the end"));
+    assert_eq!(deferring.timeseries_csv(), none.timeseries_csv());
+    let mut mixed = Episode::new(&spec(5, &[1])).expect("episode");
+    play(&mut mixed, |_, step| {
+        Some(if step < 12 { defer() } else { turn(1.0) })
+    });
+    assert_eq!(mixed.counts().deferred, 2);
+    assert_ne!(mixed.timeseries_csv(), none.timeseries_csv());
 }
 
 #[test]

@@ -25,8 +25,18 @@ higher or equal (lower UA is better), and the violations of all evaluation runs.
 ``--eval-every N`` the policy is also saved every N updates (``checkpoints/``) and flown
 alone on the held-out seeds (``eval_curve.csv``).
 
+With ``--defer`` the learner has one more action, the last, that defers the decision to its
+own planner (the paper's, :class:`setfleet.gym.Actions`): the policy learns where to step in.
+``--defer-bias`` is that action's initial logit bias (at 2 an untrained policy defers about 3
+decisions in 5). With ``--baseline`` the rewards are relative to the paper's own run of each
+seed (``SimVectorEnv(baseline=True)``): an episode's return is what the learner gained over
+the paper's planner, the seed's luck cancelled out. The reference run uses both
+(docs/python.md, "The reference trainer").
+
 "Environment steps" count transitions: the autoreset steps of the vector environment are
-not counted.
+not counted. A baseline run already in ``OUT/eval`` (its ``summary.json``) is read instead
+of flown again: an interrupted evaluation resumes, and a second policy evaluated into the
+same directory reuses the baselines.
 """
 
 from __future__ import annotations
@@ -68,6 +78,7 @@ CURVE_COLUMNS = (
     "violations",
     "wall_s",
     "steps_per_s",
+    "defer_share",
     "policy_loss",
     "value_loss",
     "entropy",
@@ -98,6 +109,10 @@ class TrainConfig:
     overrides: list[str] = field(default_factory=list)
     seed: int = 1
     size: int = 64
+    defer: bool = False
+    baseline: bool = False
+    w_ua: float = 1.0
+    w_targets: float = 1.0
     eval_seeds: list[int] = field(default_factory=lambda: list(range(1001, 1031)))
     eval_scenario: str | None = None
     eval_overrides: list[str] = field(default_factory=list)
@@ -143,6 +158,15 @@ def parse_args(argv: Sequence[str] | None = None) -> TrainConfig:
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="training scenario override (repeatable)")
     p.add_argument("--seed", type=int, default=d.seed, help="seed of the environments and of PPO")
+    p.add_argument("--defer", action=argparse.BooleanOptionalAction, default=d.defer,
+                   help="one more action: defer to the UAV's own planner (the paper's)")
+    p.add_argument("--defer-bias", type=float, default=dp.defer_bias,
+                   help="initial logit bias of the deferring action")
+    p.add_argument("--baseline", action=argparse.BooleanOptionalAction, default=d.baseline,
+                   help="rewards relative to the paper's own run of the same seed")
+    p.add_argument("--w-ua", type=float, default=d.w_ua, help="reward weight of the decrease of X̄")
+    p.add_argument("--w-targets", type=float, default=d.w_targets,
+                   help="reward weight of the decrease of the cars' sets")
     p.add_argument("--eval-seeds", type=parse_seeds, default=d.eval_seeds,
                    help="held-out seeds, e.g. 1001..1030 (default)")
     p.add_argument("--eval-scenario", default=None, help="evaluation scenario (default: the paper's)")
@@ -181,10 +205,13 @@ def parse_args(argv: Sequence[str] | None = None) -> TrainConfig:
               "be training seeds", file=sys.stderr)
     ppo = replace(dp, lr=a.lr, rollout=a.rollout, epochs=a.epochs, minibatch=a.minibatch,
                   gamma=a.gamma, gae_lambda=a.gae_lambda, clip=a.clip, ent_coef=a.ent_coef,
-                  hidden=tuple(int(h) for h in a.hidden.split(",")), pool=a.pool)
+                  hidden=tuple(int(h) for h in a.hidden.split(",")), pool=a.pool,
+                  defer_bias=a.defer_bias)
     return TrainConfig(
         steps=a.steps, out=a.out, envs=a.envs, scenario=_scenario_path(a.scenario),
-        overrides=a.overrides, seed=a.seed, eval_seeds=a.eval_seeds,
+        overrides=a.overrides, seed=a.seed, defer=a.defer, baseline=a.baseline,
+        w_ua=a.w_ua, w_targets=a.w_targets,
+        eval_seeds=a.eval_seeds,
         eval_scenario=None if a.eval_scenario is None else _scenario_path(a.eval_scenario),
         eval_overrides=a.eval_overrides, no_eval=a.no_eval, eval_only=a.eval_only,
         eval_every=a.eval_every,
@@ -202,7 +229,9 @@ def make_sim_env(config: TrainConfig) -> Any:
 
     return SimVectorEnv(num_envs=config.envs, scenario=config.scenario, overrides=config.overrides,
                         variant="paper", learner=0, size=config.size, seed=config.seed,
-                        seed_range=(TRAIN_SEEDS.start, TRAIN_SEEDS.stop - 1))
+                        seed_range=(TRAIN_SEEDS.start, TRAIN_SEEDS.stop - 1),
+                        defer=config.defer, baseline=config.baseline,
+                        w_ua=config.w_ua, w_targets=config.w_targets)
 
 
 def _mean(values: Sequence[float]) -> float | None:
@@ -254,13 +283,16 @@ def train(config: TrainConfig, make_env: Callable[[TrainConfig], Any] = make_sim
                     "violations": finished_violations + running,
                     "wall_s": now - start,
                     "steps_per_s": rollout.steps / max(now - t0, 1e-9),
+                    "defer_share": (float(np.mean(rollout.actions == ppo.policy.config.n_actions - 1))
+                                    if ppo.policy.config.defer else None),
                     **stats,
                 }
                 rows.append(row)
                 writer.writerow([_cell(row[c]) for c in CURVE_COLUMNS])
                 f.flush()
                 print(f"update {updates}: {steps} steps, return {_cell(row['mean_return'])}, "
-                      f"UA {_cell(row['mean_final_ua'])}, {row['steps_per_s']:.1f} steps/s", flush=True)
+                      f"UA {_cell(row['mean_final_ua'])}, defer {_cell(row['defer_share'])}, "
+                      f"{row['steps_per_s']:.1f} steps/s", flush=True)
                 if config.eval_every and updates % config.eval_every == 0:
                     checkpoint_eval(config, ppo.policy, steps)
         ppo.policy.save(out / "policy.npz")
@@ -347,6 +379,16 @@ def fly(config: TrainConfig, seed: int, variant: str, policy: Policy | None, out
     a run that failed, with the reason printed)."""
     row: dict[str, Any] = {"seed": seed, "variant": variant, "ua_final": None, "violations": None}
     learned = policy is not None
+    if not learned and (out / "summary.json").exists():
+        # A baseline does not depend on the policy: one flown before (an evaluation resumed,
+        # or another policy evaluated into the same directory) is read back.
+        try:
+            summary = setfleet.read_summary(out)
+            row["ua_final"], row["violations"] = summary["ua_final"], summary["violations"]
+            return row
+        except (OSError, ValueError, KeyError) as e:
+            print(f"seed {seed}, {variant}: {out}/summary.json unreadable ({e}): flown again",
+                  file=sys.stderr)
     try:
         with setfleet.Run(scenario=config.eval_scenario, seed=seed,
                           variant="paper" if learned else variant, external=[0] if learned else None,

@@ -28,7 +28,9 @@ same request and answer bytes.
   ``guidance.border = "geofence"``: ``|x / b| <= 1`` for a UAV inside the border).
 
 **Action**: ``Discrete(len(increments))``, the index of the yaw increment applied now
-(default: the scenario's increments ``-π/3, -π/6, 0, π/6, π/3``).
+(default: the scenario's increments ``-π/3, -π/6, 0, π/6, π/3``). With ``defer=True`` one
+more action, the last, defers the decision to the UAV's own planner (:class:`Actions`): a
+policy that steps in only where it does better than the variant's planner.
 
 **Reward** of a step: ``(w_ua * ΔX̄ + w_targets * ΔX) / (2b)²``, where ``ΔX̄`` is the decrease
 of the agent's ``undetected_m2`` and ``ΔX`` that of its ``targets_m2`` between the request
@@ -69,6 +71,7 @@ __all__ = [
     "SearchEnv",
     "ParallelSearchEnv",
     "SetsRaster",
+    "Actions",
     "observe",
     "reward",
     "observation_space",
@@ -272,6 +275,33 @@ def _checked_increments(increments: Sequence[float]) -> tuple[float, ...]:
     return checked
 
 
+class Actions:
+    """The environments' discrete actions: index ``k < len(increments)`` turns by
+    ``increments[k]`` now; with ``defer``, one more index, ``len(increments)``, defers to the
+    UAV's own planner (:meth:`setfleet.Action.deferred`: the variant's planner decides, at
+    once, as if the UAV had no external planner)."""
+
+    def __init__(self, increments: Sequence[float], defer: bool = False) -> None:
+        self.increments = _checked_increments(increments)
+        self.defer = bool(defer)
+
+    @property
+    def n(self) -> int:
+        """How many actions."""
+        return len(self.increments) + int(self.defer)
+
+    def space(self) -> spaces.Discrete:
+        """``Discrete(n)``."""
+        return spaces.Discrete(self.n)
+
+    def action(self, index: Any) -> Action:
+        """The :class:`setfleet.Action` of action ``index``."""
+        k = int(index)
+        if not 0 <= k < self.n:
+            raise ValueError(f"action {k} outside 0..{self.n - 1}")
+        return Action.deferred() if k == len(self.increments) else Action.turn(self.increments[k])
+
+
 def _draw_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(1, 2**31 - 1))
 
@@ -282,14 +312,15 @@ class _FleetEnv:
     def _setup(
         self,
         learners: Sequence[int],
-        increments: Sequence[float],
+        actions: Actions,
         size: int,
         w_ua: float,
         w_targets: float,
         request_timeout: float,
         **episodes: Any,
     ) -> None:
-        self.increments = _checked_increments(increments)
+        self.actions = actions
+        self.increments = actions.increments
         self.w_ua, self.w_targets = float(w_ua), float(w_targets)
         self.request_timeout = request_timeout
         self._raster = SetsRaster(size)
@@ -322,6 +353,8 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
             and short for tests (e.g. ``overrides=["region.half_extent_m=150"]``, ``uavs=2``,
             ``duration=30``).
         increments: the yaw increments of the actions, rad.
+        defer: one more action, the last, that defers to the UAV's own planner
+            (:class:`Actions`).
         size: side ``S`` of the ``"sets"`` rasters.
         w_ua, w_targets: weights of the decrease of X̄ and of the cars' sets in the reward.
         deadline_ms: ``timing.external_planner_ms`` of the runs (default: the scenario's).
@@ -343,6 +376,7 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
         duration: float | None = None,
         overrides: Iterable[str] | Mapping[str, Any] = (),
         increments: Sequence[float] = DEFAULT_INCREMENTS,
+        defer: bool = False,
         size: int = 64,
         w_ua: float = 1.0,
         w_targets: float = 1.0,
@@ -357,7 +391,7 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
         self.learner = int(learner)
         self._setup(
             [self.learner],
-            increments,
+            Actions(increments, defer),
             size,
             w_ua,
             w_targets,
@@ -374,7 +408,7 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
             backend=backend,
         )
         self.observation_space = observation_space(size)
-        self.action_space = spaces.Discrete(len(self.increments))
+        self.action_space = self.actions.space()
         self._pending: Request | None = None
         self._last: dict[str, np.ndarray] | None = None
         self._last_info: dict[str, Any] | None = None
@@ -414,8 +448,8 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
         return _copy_obs(obs), dict(info)
 
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        """Answers the pending request with increment ``increments[action]`` and waits for the
-        learner's next request (one guidance period)."""
+        """Answers the pending request with action ``action`` (:class:`Actions`) and waits for
+        the learner's next request (one guidance period)."""
         req = self._pending
         run = self._episodes.run
         if req is None or run is None:
@@ -423,7 +457,7 @@ class SearchEnv(_FleetEnv, gymnasium.Env):
         prev = req.obs  # its scalars stay valid once answered; its arrays are not read
         last = prev.is_last_decision
         self._pending = None
-        run.answer(req.handle, Action(increments=[self.increments[int(action)]]))
+        run.answer(req.handle, self.actions.action(action))
         nxt = None if last else self._next(run)
         if nxt is None:
             self.last_result = self._episodes.finish()
@@ -468,6 +502,7 @@ class ParallelSearchEnv(_FleetEnv, _ParallelEnv):  # type: ignore[misc,valid-typ
         duration: float | None = None,
         overrides: Iterable[str] | Mapping[str, Any] = (),
         increments: Sequence[float] = DEFAULT_INCREMENTS,
+        defer: bool = False,
         size: int = 64,
         w_ua: float = 1.0,
         w_targets: float = 1.0,
@@ -486,7 +521,7 @@ class ParallelSearchEnv(_FleetEnv, _ParallelEnv):  # type: ignore[misc,valid-typ
         self._uav_of = {f"uav_{u}": u for u in self.learners}
         self._setup(
             self.learners,
-            increments,
+            Actions(increments, defer),
             size,
             w_ua,
             w_targets,
@@ -505,7 +540,7 @@ class ParallelSearchEnv(_FleetEnv, _ParallelEnv):  # type: ignore[misc,valid-typ
         )
         self._observation_space = observation_space(size)
         self.observation_spaces = {a: self._observation_space for a in self.possible_agents}
-        self.action_spaces = {a: spaces.Discrete(len(self.increments)) for a in self.possible_agents}
+        self.action_spaces = {a: self.actions.space() for a in self.possible_agents}
         self._rng = np.random.default_rng()
         self._pending: dict[str, Request] = {}
         self._last: dict[str, tuple[dict[str, np.ndarray], dict[str, Any]]] = {}
@@ -578,7 +613,7 @@ class ParallelSearchEnv(_FleetEnv, _ParallelEnv):  # type: ignore[misc,valid-typ
         last = any(o.is_last_decision for o in prev.values())
         for agent, req in self._pending.items():
             a = actions.get(agent, default)
-            run.answer(req.handle, Action(increments=[self.increments[int(a)]]))
+            run.answer(req.handle, self.actions.action(a))
         self._pending = {}
         got = None if last else self._collect(run, {self._uav_of[a]: o.step for a, o in prev.items()})
         agents = self.agents

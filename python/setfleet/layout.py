@@ -47,6 +47,7 @@ __all__ = [
     "FLAG_ROUND_START",
     "KIND_INCREMENTS",
     "KIND_YAW_REF",
+    "KIND_DEFER",
     "ARRAY_NAMES",
     "REQUEST_HEADER",
     "ANSWER_HEADER",
@@ -92,6 +93,8 @@ FLAG_ROUND_START = 1
 KIND_INCREMENTS = 0
 #: Answer ``kind`` 1: a yaw reference.
 KIND_YAW_REF = 1
+#: Answer ``kind`` 2: defer, the UAV's own planner decides (increments and views ignored).
+KIND_DEFER = 2
 
 #: The request's arrays, in table order.
 ARRAY_NAMES: tuple[str, ...] = (
@@ -676,6 +679,9 @@ class Action:
       planner means to do next.
     - kind 1 (``yaw_ref`` given): the yaw reference itself, rad; ``increments`` may still
       carry up to 64 values (or none).
+    - kind 2 (``defer=True``, :meth:`deferred`): no decision; the UAV's own planner decides
+      at once, as if no planner served it, but the answer counts as answered (and as
+      ``deferred``), not as a fallback. For a planner that steps in only now and then.
 
     ``views`` is an optional ``(n, 4)`` array of planned camera poses ``x, y, z, yaw``
     (``n`` ≤ 256), shared through the token with the UAVs after this one.
@@ -684,8 +690,11 @@ class Action:
     increments: Any = ()
     yaw_ref: float | None = None
     views: Any = None
+    defer: bool = False
 
     def __post_init__(self) -> None:
+        if self.defer and self.yaw_ref is not None:
+            raise ActionError("an action that defers has no yaw reference")
         self.increments = np.array(self.increments, dtype=np.float64).reshape(-1)
         if self.yaw_ref is not None:
             self.yaw_ref = float(self.yaw_ref)
@@ -697,7 +706,9 @@ class Action:
 
     @property
     def kind(self) -> int:
-        """The answer's ``kind``: 0 for increments, 1 for a yaw reference."""
+        """The answer's ``kind``: 0 for increments, 1 for a yaw reference, 2 to defer."""
+        if self.defer:
+            return KIND_DEFER
         return KIND_INCREMENTS if self.yaw_ref is None else KIND_YAW_REF
 
     @classmethod
@@ -709,6 +720,11 @@ class Action:
     def heading(cls, yaw_ref: float, views: Any = None) -> "Action":
         """Kind 1: fly toward the yaw reference ``yaw_ref``."""
         return cls(yaw_ref=yaw_ref, views=views)
+
+    @classmethod
+    def deferred(cls) -> "Action":
+        """Kind 2: the UAV's own planner decides this time."""
+        return cls(defer=True)
 
 
 def as_action(value: Any) -> Action:
@@ -739,7 +755,7 @@ def _check_action(action: Action) -> None:
     else:
         if n > MAX_ANSWER_INCREMENTS:
             raise ActionError(f"{n} increments: an answer carries at most 64")
-        if not math.isfinite(action.yaw_ref):  # type: ignore[arg-type]
+        if action.kind == KIND_YAW_REF and not math.isfinite(action.yaw_ref):  # type: ignore[arg-type]
             raise ActionError(f"yaw_ref {action.yaw_ref} is not finite")
     if n and not np.all(np.isfinite(action.increments)):
         raise ActionError("an increment is not finite")
@@ -805,13 +821,16 @@ class Answer:
     planner_ns: int
     views: np.ndarray
 
-    def yaw_reference(self, yaw: float) -> float:
-        """The yaw reference this answer sets for a UAV at yaw ``yaw``."""
+    def yaw_reference(self, yaw: float) -> float | None:
+        """The yaw reference this answer sets for a UAV at yaw ``yaw`` (``None`` for kind 2:
+        the UAV's own planner sets it)."""
+        if self.kind == KIND_DEFER:
+            return None
         return yaw + float(self.increments[0]) if self.kind == KIND_INCREMENTS else self.yaw_ref
 
 
 def decode_answer(data: Any, *, step: int | None = None, uav: int | None = None) -> Answer:
-    """Decodes and checks an answer as the agent does: magic, version, a kind of 0 or 1, the
+    """Decodes and checks an answer as the agent does: magic, version, a kind of 0, 1 or 2, the
     request's ``step`` and ``uav`` (when given), counts in range, the length its counts give,
     every increment finite and in ``[-π, π]``, every view finite, and for kind 1 a finite
     ``yaw_ref`` (``reserved`` is not checked, nor kind 0's ``yaw_ref``). Raises
@@ -826,7 +845,7 @@ def decode_answer(data: Any, *, step: int | None = None, uav: int | None = None)
     if int(h["version"]) != VERSION:
         raise LayoutError(f"unsupported version {int(h['version'])}")
     kind = int(h["kind"])
-    if kind not in (KIND_INCREMENTS, KIND_YAW_REF):
+    if kind not in (KIND_INCREMENTS, KIND_YAW_REF, KIND_DEFER):
         raise LayoutError(f"unknown kind {kind}")
     if step is not None and int(h["step"]) != step:
         raise LayoutError(f"answer for step {int(h['step'])}, the request was step {step}")

@@ -47,13 +47,14 @@ def overrides_list(overrides: Iterable[str] | Mapping[str, Any]) -> list[str]:
 
 def _summary(episode: Any) -> dict[str, Any]:
     """What a :class:`SimRun` knows of its run's ``summary.json`` keys."""
-    asked, answered, malformed = episode.counts
+    asked, answered, malformed, deferred = episode.counts
     return {
         "backend": "sim",
         "steps": episode.step,
         "violations": episode.violations,
         "ua_final": episode.ua,
-        "external": {"asked": asked, "answered": answered, "malformed": malformed},
+        "external": {"asked": asked, "answered": answered, "malformed": malformed,
+                     "deferred": deferred},
     }
 
 
@@ -141,7 +142,7 @@ class SimRun:
 
     def result(self) -> RunResult:
         """What the run measured so far."""
-        asked, answered, malformed = self.episode.counts
+        asked, answered, malformed, _deferred = self.episode.counts
         return RunResult(
             out=self.out,
             run_id="sim",

@@ -16,6 +16,14 @@ episode's first observation with reward 0, ``terminated`` and ``truncated`` Fals
 draws the seeds of later episodes from ``seed_range`` (inclusive); ``reset()`` draws them all
 from the generator (seeded by the constructor's ``seed``).
 
+**Baseline** (``baseline=True``): each step's reward less the reward of the same step in
+the run of the same seed where the learner defers every decision (the variant alone: the
+same world, every UAV on the variant's planner). That run is stepped beside the episode's,
+the first time its seed comes, and its values are kept for the seed's later episodes. A
+policy that always defers then earns 0 at every step, and an episode's return is what the
+learner gained over the variant in the reward's terms: the seed's own luck (how many cars,
+where) cancels out. It costs a second run per new seed.
+
 **Info** (arrays of ``num_envs``, each with its ``_key`` mask): ``step``, ``time_s``,
 ``undetected_m2`` and ``targets_m2`` of each observation (``SearchEnv``'s info), ``ua`` (the
 fleet's mean undetected fraction at the run's last measured step), ``violations`` (guarantee
@@ -30,11 +38,10 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import gymnasium
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from .gym import SetsRaster, _checked_increments, _info, observation_space, observe, reward
+from .gym import Actions, SetsRaster, _info, observation_space, observe, reward
 from .layout import DEFAULT_INCREMENTS, Action, Observation, encode_answer
 from .sim import native, overrides_list
 
@@ -44,9 +51,10 @@ _INFO_KEYS = ("step", "time_s", "undetected_m2", "targets_m2", "ua", "violations
 
 
 class _Slot:
-    """One environment of the vector: its run, its pending request, its last observation."""
+    """One environment of the vector: its run, its pending request, its last observation,
+    and the baseline's run beside it (``shadow``, while its values are being measured)."""
 
-    __slots__ = ("episode", "seed", "request", "obs", "last", "done")
+    __slots__ = ("episode", "seed", "request", "obs", "last", "done", "shadow", "shadow_values")
 
     def __init__(self) -> None:
         self.episode: Any = None
@@ -55,6 +63,8 @@ class _Slot:
         self.obs: dict[str, np.ndarray] | None = None
         self.last: Observation | None = None
         self.done = False
+        self.shadow: Any = None
+        self.shadow_values: dict[int, float] = {}
 
 
 class SimVectorEnv(gymnasium.vector.VectorEnv):
@@ -63,8 +73,10 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
 
     Args:
         num_envs: how many runs.
-        learner, variant, scenario, uavs, duration, overrides, increments, size, w_ua,
+        learner, variant, scenario, uavs, duration, overrides, increments, defer, size, w_ua,
             w_targets: as :class:`setfleet.gym.SearchEnv`.
+        baseline: rewards relative to the variant's own run of the same seed (the module's
+            documentation).
         threads: threads that step the runs (default: the machine's CPUs).
         seed_range: the range (inclusive) later episodes' seeds are drawn from.
         seed: seeds the generator that draws them (``reset(seed=...)`` reseeds it).
@@ -83,9 +95,11 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
         duration: float | None = None,
         overrides: Iterable[str] | Mapping[str, Any] = (),
         increments: Sequence[float] = DEFAULT_INCREMENTS,
+        defer: bool = False,
         size: int = 64,
         w_ua: float = 1.0,
         w_targets: float = 1.0,
+        baseline: bool = False,
         threads: int | None = None,
         seed_range: tuple[int, int] = (1, 2**31 - 2),
         seed: int | None = None,
@@ -103,13 +117,17 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
         self.uavs = uavs
         self.duration = duration
         self.overrides = overrides_list(overrides)
-        self.increments = _checked_increments(increments)
+        self.actions = Actions(increments, defer)
+        self.increments = self.actions.increments
         self.w_ua, self.w_targets = float(w_ua), float(w_targets)
+        self.baseline = bool(baseline)
+        #: The baseline's values per seed: ``{step: w_ua undetected_m2 + w_targets targets_m2}``.
+        self._baselines: dict[int, dict[int, float]] = {}
         self.threads = int(threads) if threads is not None else (os.cpu_count() or 1)
         self.seed_range = (lo, hi)
         self._raster = SetsRaster(size)
         self.single_observation_space = observation_space(size)
-        self.single_action_space = spaces.Discrete(len(self.increments))
+        self.single_action_space = self.actions.space()
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._slots = [_Slot() for _ in range(self.num_envs)]
@@ -117,18 +135,28 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
 
     # ---- the runs ----------------------------------------------------------------------
 
-    def _start(self, slot: _Slot, seed: int) -> None:
-        slot.seed = int(seed)
-        slot.episode = self._native.Episode(
+    def _episode(self, seed: int) -> Any:
+        return self._native.Episode(
             self.scenario,
             self.variant,
             self.overrides,
-            slot.seed,
+            seed,
             self.duration,
             self.uavs,
             [self.learner],
         )
+
+    def _start(self, slot: _Slot, seed: int) -> None:
+        slot.seed = int(seed)
+        slot.episode = self._episode(slot.seed)
         slot.request, slot.obs, slot.last, slot.done = None, None, None, False
+        measured = not self.baseline or slot.seed in self._baselines
+        slot.shadow = None if measured else self._episode(slot.seed)
+        slot.shadow_values = {}
+
+    def _value(self, obs: Observation) -> float:
+        """What the reward counts the decrease of, m²."""
+        return self.w_ua * obs.undetected_m2 + self.w_targets * obs.targets_m2
 
     def _draw_seed(self) -> int:
         return int(self._rng.integers(self.seed_range[0], self.seed_range[1] + 1))
@@ -138,8 +166,13 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
         that ended is marked done."""
         if not slots:
             return
-        asking = self._native.run_many([s.episode for s in slots], self.threads)
-        for slot, asks in zip(slots, asking):
+        shadows = [s for s in slots if s.shadow is not None]
+        asking = self._native.run_many(
+            [s.episode for s in slots] + [s.shadow for s in shadows], self.threads
+        )
+        for slot, asks in zip(shadows, asking[len(slots):]):
+            self._shadow_step(slot, asks)
+        for slot, asks in zip(slots, asking[: len(slots)]):
             if not asks:
                 slot.request, slot.done = None, True
                 continue
@@ -151,10 +184,32 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
             slot.obs = observe(obs, self._raster)
             slot.last = obs
 
+    def _shadow_step(self, slot: _Slot, asks: bool) -> None:
+        """Records the baseline run's value at its learner's request and defers the decision;
+        keeps the seed's values once that run ended."""
+        if not asks:
+            self._baselines[slot.seed] = slot.shadow_values
+            slot.shadow, slot.shadow_values = None, {}
+            return
+        ((uav, _step, data),) = slot.shadow.pending()
+        obs = Observation(data)
+        slot.shadow_values[obs.step] = self._value(obs)
+        slot.shadow.answer(uav, encode_answer(obs, Action.deferred()))
+
+    def _baseline_reward(self, slot: _Slot, prev: Observation, nxt: Observation) -> float:
+        """The baseline run's reward between the steps of ``prev`` and ``nxt``."""
+        values = self._baselines.get(slot.seed, slot.shadow_values)
+        try:
+            drop = values[prev.step] - values[nxt.step]
+        except KeyError as e:
+            raise RuntimeError(f"the baseline run of seed {slot.seed} has no request at step {e}") from None
+        b = prev.border_half_m
+        return drop / ((2 * b) ** 2 if b > 0 else 1.0)
+
     def _answer(self, slot: _Slot, action: Any) -> Observation:
         assert slot.request is not None
         uav, obs = slot.request
-        data = encode_answer(obs, Action(increments=[self.increments[int(action)]]))
+        data = encode_answer(obs, self.actions.action(action))
         slot.episode.answer(uav, data)
         slot.request = None
         return obs
@@ -211,6 +266,8 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
             else:
                 assert slot.last is not None
                 rewards[i] = reward(prev[i], slot.last, self.w_ua, self.w_targets)
+                if self.baseline:
+                    rewards[i] -= self._baseline_reward(slot, prev[i], slot.last)
         return self._batch(), rewards, terminated, np.zeros(self.num_envs, dtype=np.bool_), self._infos()
 
     def _batch(self) -> dict[str, np.ndarray]:
@@ -236,4 +293,4 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
     def close_extras(self, **kwargs: Any) -> None:
         """Drops the runs."""
         for slot in self._slots:
-            slot.episode = None
+            slot.episode = slot.shadow = None

@@ -55,20 +55,30 @@ def assert_same_episode(a: list[tuple], b: list[tuple]) -> None:
 
 
 def test_the_backends_give_the_same_episode_and_timeseries(tmp_path: Path):
+    # Action 5 defers to the UAV's own planner: both backends decide by it at once.
     fleet = real_fleet_or_skip()
-    acts = actions(1, 20)
-    episodes, dirs = [], []
+    acts = actions(1, 20, k=6)
+    episodes, dirs, results = [], [], []
     for backend in ("process", "sim"):
         kw = dict(fleet=fleet) if backend == "process" else {}
-        env = SearchEnv(duration=30, backend=backend, out_dir=tmp_path / backend, **ENV_KW, **kw)
+        env = SearchEnv(duration=30, backend=backend, out_dir=tmp_path / backend, defer=True,
+                        **ENV_KW, **kw)
+        assert env.action_space == Discrete(6)
         try:
             episodes.append(play(env, 5, acts))
             dirs.append(env.run_dir)
             assert episodes[-1][-1][2], "the episode ended"
             assert env.last_result is not None and env.last_result.violations == 0
+            results.append(env.last_result)
         finally:
             env.close()
     assert_same_episode(*episodes)
+    answered = acts[: len(episodes[0]) - 1]
+    assert 0 < answered.count(5) < len(answered)
+    process, sim = results
+    assert process.agent(0)["external_decisions"] == len(answered)
+    assert process.agent(0)["external_fallbacks"] == 0
+    assert sim.summary["external"]["deferred"] == answered.count(5)
     process_csv, sim_csv = ((d / "timeseries.csv").read_text() for d in dirs)
     assert process_csv.count("\n") == 61  # header and 60 steps
     assert sim_csv == process_csv
@@ -128,7 +138,7 @@ def test_an_episode_of_the_sim_backend_ends_with_its_timeseries(tmp_path: Path):
         assert len(episode) == 11 and episode[-1][2]
         result = env.last_result
         assert result is not None and result.violations == 0
-        assert result.summary["external"] == {"asked": 10, "answered": 10, "malformed": 0}
+        assert result.summary["external"] == {"asked": 10, "answered": 10, "malformed": 0, "deferred": 0}
         rows = result.timeseries()
         assert len(rows["step"]) == 60 and int(np.sum(rows["violations"])) == 0
     finally:
@@ -187,3 +197,38 @@ def test_the_vector_env_runs_each_environment_as_a_single_one():
         assert not set(infos["seed"]) & {seed + i for i in range(n)}
     finally:
         venv.close()
+
+
+def rewards_of(venv: SimVectorEnv, seed: int, acts: list[list[int]]) -> np.ndarray:
+    """The rewards of one episode of every environment (``acts[t][i]``), from ``reset(seed)``."""
+    venv.reset(seed=seed)
+    out = []
+    for step_acts in acts:
+        _, rewards, terminated, _, _ = venv.step(step_acts)
+        out.append(rewards)
+        if terminated.all():
+            break
+    return np.array(out)
+
+
+def test_the_baseline_reward_is_the_reward_less_the_deferring_runs():
+    seed, n = 7, 2
+    defer = [[5] * n] * 10
+    turns = [[actions(200 + t, 1, k=6)[0] for _ in range(n)] for t in range(10)]
+    plain = SimVectorEnv(n, duration=30, threads=2, defer=True, **SIM_KW)
+    relative = SimVectorEnv(n, duration=30, threads=2, defer=True, baseline=True, **SIM_KW)
+    try:
+        deferring = rewards_of(plain, seed, defer)
+        assert len(deferring) == 10 and np.abs(deferring[:-1]).sum() > 0
+        # A policy that always defers flies the variant's run: 0 at every step.
+        assert (rewards_of(relative, seed, defer) == 0).all()
+        # Any other: its reward less the deferring run's, from the seeds' kept values.
+        assert all(s.shadow is None for s in relative._slots)
+        got = rewards_of(relative, seed, turns)
+        assert all(s.shadow is None for s in relative._slots)
+        expected = rewards_of(plain, seed, turns) - deferring
+        assert np.abs(expected).sum() > 0
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
+    finally:
+        plain.close()
+        relative.close()

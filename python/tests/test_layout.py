@@ -259,7 +259,7 @@ def _answer(**fields) -> bytearray:
         (bytes(20), "shorter"),
         (_answer(magic=0x51504653), "magic"),
         (_answer(version=3), "version"),
-        (_answer(kind=2), "kind"),
+        (_answer(kind=3), "kind"),
         (_answer(step=7), "step"),
         (_answer(uav=0), "UAV"),
         (_answer(n_increments=0), "increments"),

@@ -19,7 +19,7 @@ gymnasium = pytest.importorskip("gymnasium")
 from gymnasium import spaces  # noqa: E402
 from gymnasium.vector import AutoresetMode, SyncVectorEnv  # noqa: E402
 
-from setfleet import Action, Observation, encode_request  # noqa: E402
+from setfleet import Action, Observation, decode_answer, encode_answer, encode_request  # noqa: E402
 from setfleet.ppo import (  # noqa: E402
     PPO,
     NetConfig,
@@ -257,22 +257,42 @@ def test_the_planner_answers_one_of_the_increments():
     obs = request()
     policy = Policy(NetConfig(size=16, pool=4, n_actions=3), seed=2)
     greedy = PolicyPlanner(policy)
-    u = greedy.decide(obs)
-    assert isinstance(u, float) and u in obs.increments.tolist()
-    assert greedy.decide(obs) == u
-    assert isinstance(greedy(obs), Action) and greedy(obs).increments.tolist() == [u]
+    a = greedy.decide(obs)
+    assert isinstance(a, Action) and a.kind == 0 and a.increments.size == 1
+    u = float(a.increments[0])
+    assert u in obs.increments.tolist()
+    assert greedy(obs).increments.tolist() == [u]
 
     sampling = PolicyPlanner(policy, deterministic=False, seed=5)
-    first = [sampling.decide(obs) for _ in range(20)]
+    first = [float(sampling.decide(obs).increments[0]) for _ in range(20)]
     sampling.reset()
-    assert [sampling.decide(obs) for _ in range(20)] == first
+    assert [float(sampling.decide(obs).increments[0]) for _ in range(20)] == first
     assert set(first) <= set(obs.increments.tolist())
+
+
+def test_a_policy_with_defer_defers_with_its_last_action(tmp_path):
+    config = NetConfig(size=16, pool=4, n_actions=4, increments=(-0.4, 0.0, 0.4), defer=True)
+    policy = Policy(config, seed=2)
+    policy.params["bpi"][-1] = 50.0  # the last action always wins
+    policy.save(tmp_path / "p.npz")
+    loaded = Policy.load(tmp_path / "p.npz")
+    assert loaded.config == config
+    action = PolicyPlanner(loaded).decide(request())
+    assert action.defer and action.kind == 2
+    decoded = decode_answer(encode_answer(request(), action))
+    assert decoded.kind == 2 and decoded.yaw_reference(0.3) is None
+    policy.params["bpi"][-1] = -50.0
+    assert PolicyPlanner(policy).decide(request()).kind == 0
+    with pytest.raises(ValueError, match="one defers"):
+        PolicyPlanner(policy).decide(request(increments=(-0.5, 0.5)))
+    with pytest.raises(ValueError, match="and defer"):
+        NetConfig(n_actions=3, increments=(-0.4, 0.0, 0.4), defer=True)
 
 
 def test_the_planner_loads_a_file_and_checks_the_increments(tmp_path):
     Policy(NetConfig(size=16, pool=4, n_actions=3)).save(tmp_path / "p.npz")
     planner = PolicyPlanner(tmp_path / "p.npz")
-    assert planner.decide(request()) in (-0.4, 0.0, 0.4)
+    assert float(planner.decide(request()).increments[0]) in (-0.4, 0.0, 0.4)
     with pytest.raises(ValueError, match="5 increments"):
         planner.decide(request(increments=(-1.0, -0.5, 0.0, 0.5, 1.0)))
 

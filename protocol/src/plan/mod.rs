@@ -304,6 +304,10 @@ pub enum Steer {
     Increments(Vec<f64>),
     /// A yaw reference, rad (and increments the planner may add for its own record).
     YawRef(f64),
+    /// No decision of the planner's: the UAV's own planner decides, at once and without
+    /// counting a fallback. A planner that only means to step in now and then answers this
+    /// the rest of the time (increments it sends are ignored, its poses too).
+    Defer,
 }
 
 /// A planner's answer, checked.
@@ -330,7 +334,7 @@ pub enum AnswerError {
     #[error("layout version {0}, this agent reads version {LAYOUT_VERSION}")]
     Version(u16),
     /// An unknown kind.
-    #[error("kind {0}: 0 (increments) or 1 (yaw reference)")]
+    #[error("kind {0}: 0 (increments), 1 (yaw reference) or 2 (defer)")]
     Kind(u16),
     /// The answer to another request.
     #[error("answers step {got} of UAV {got_uav}, the request was step {step} of UAV {uav}")]
@@ -404,7 +408,7 @@ impl Answer {
             return Err(AnswerError::Version(half(answer_at::VERSION)));
         }
         let kind = half(answer_at::KIND);
-        if kind > 1 {
+        if kind > 2 {
             return Err(AnswerError::Kind(kind));
         }
         let (got, got_uav) = (field(answer_at::STEP), word(answer_at::UAV));
@@ -454,10 +458,10 @@ impl Answer {
                 Ok(p)
             })
             .collect::<Result<Vec<_>, AnswerError>>()?;
-        let steer = if kind == 0 {
-            Steer::Increments(incs)
-        } else {
-            Steer::YawRef(check("yaw_ref", float(answer_at::YAW_REF), true)?)
+        let steer = match kind {
+            0 => Steer::Increments(incs),
+            1 => Steer::YawRef(check("yaw_ref", float(answer_at::YAW_REF), true)?),
+            _ => Steer::Defer,
         };
         Ok(Answer {
             steer,
@@ -472,6 +476,7 @@ impl Answer {
         let (kind, yaw_ref, incs): (u16, f64, &[f64]) = match &self.steer {
             Steer::Increments(v) => (0, 0.0, v),
             Steer::YawRef(y) => (1, *y, &[]),
+            Steer::Defer => (2, 0.0, &[]),
         };
         let mut out = vec![0; ANSWER_HEADER_BYTES];
         out.reserve(8 * incs.len() + POSE_BYTES * self.poses.len());
@@ -562,6 +567,15 @@ mod tests {
             planner_ns: 0,
         };
         assert_eq!(Answer::decode(&yaw.encode(3, 0), 3, 0), Ok(yaw));
+        let defer = Answer {
+            steer: Steer::Defer,
+            poses: vec![],
+            planner_ns: 7,
+        };
+        assert_eq!(Answer::decode(&defer.encode(4, 2), 4, 2), Ok(defer));
+        let mut unknown = bytes.clone();
+        unknown[6..8].copy_from_slice(&3u16.to_le_bytes());
+        assert_eq!(Answer::decode(&unknown, 9, 1), Err(AnswerError::Kind(3)));
         assert!(matches!(
             Answer::decode(&bytes, 12, 1),
             Err(AnswerError::Other { got: 9, .. })
@@ -613,6 +627,7 @@ mod tests {
                 match a.steer {
                     Steer::Increments(v) => prop_assert!(v.iter().all(|u| u.is_finite())),
                     Steer::YawRef(y) => prop_assert!(y.is_finite()),
+                    Steer::Defer => {}
                 }
             }
         }

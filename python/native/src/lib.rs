@@ -123,11 +123,12 @@ impl Episode {
         Ok(self.get()?.violations())
     }
 
-    /// Requests made, answers taken, answers refused.
+    /// Requests made, answers taken, answers refused, and of the answers taken those that
+    /// deferred to the UAV's own planner.
     #[getter]
-    fn counts(&self) -> PyResult<(u64, u64, u64)> {
+    fn counts(&self) -> PyResult<(u64, u64, u64, u64)> {
         let c = self.get()?.counts();
-        Ok((c.asked, c.answered, c.malformed))
+        Ok((c.asked, c.answered, c.malformed, c.deferred))
     }
 
     /// The last measured step's mean UA over the agents (`None` before any step).

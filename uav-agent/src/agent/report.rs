@@ -170,7 +170,7 @@ mod tests {
         r#""checkpoint_failures":20,"checkpoint_ms":21.5,"checkpoint_flushes":22,"#,
         r#""checkpoint_flush_failures":23,"checkpoint_flush_ms":24.25,"end":"EndOfRun","#,
         r#""pid":25,"phases":{},"peak_rss_kb":26,"external":{"asked":27,"answered":0,"#,
-        r#""late":0,"malformed":0,"absent":0,"round_trip_ms":null,"overhead_ms":null}}"#,
+        r#""deferred":0,"late":0,"malformed":0,"absent":0,"round_trip_ms":null,"overhead_ms":null}}"#,
     );
 
     /// A default report as it was printed then.

@@ -27,7 +27,7 @@ use super::liveness::Presence;
 use super::phase;
 use super::process::{Process, WAIT_SLICE};
 use crate::guidance::external::{self, Asked, ExternalPlanner, ExternalReport, Fallback, Request};
-use crate::guidance::{self, GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
+use crate::guidance::{GuidanceParams, ObstacleCell, PlanningInput, TokenRing, Turn};
 
 /// How long an agent that asks an external planner waits for one to serve it before its first
 /// hello: well within the world's start wait, so a planner started with the run answers from
@@ -254,10 +254,7 @@ impl GuidanceTurn {
             others,
             fleet: &fleet,
         };
-        let decision = match answer {
-            Some(answer) => external::decision(answer, &input),
-            None => guidance::decide(&self.params, &input),
-        };
+        let decision = external::decision(answer, &self.params, &input);
         process.counters.shared.decisions += 1;
         let mut token = self.ring.pass(round, k, live, decision.view);
         token.pose = Some(pose);
@@ -354,8 +351,8 @@ impl GuidanceTurn {
         let answer = asked.and_then(|asked| await_answer(&mut planner, &asked, ctx));
         let counters = &mut ctx.process.counters.shared;
         match &answer {
-            Ok(_) => {
-                planner.answered();
+            Ok(answer) => {
+                planner.answered(answer);
                 counters.external_decisions += 1;
             }
             Err(why) => {

@@ -26,7 +26,7 @@ use protocol::wire::PlannedView;
 use serde::Serialize;
 use sets::raster::{CellBox, CellSet};
 
-use crate::guidance::{CoarseGrid, Cost, Decision, GuidanceParams, PlanningInput};
+use crate::guidance::{self, CoarseGrid, Cost, Decision, GuidanceParams, PlanningInput};
 use estimator::EstimatorState;
 
 /// Initial size of a request sample; it grows (powers of two) for a larger request.
@@ -279,19 +279,29 @@ impl Request<'_> {
     }
 }
 
-/// The decision an answer gives at `input`: its yaw reference (the UAV's yaw plus its first
-/// increment, or the reference it gave) and its planned views for the token. It has no cost:
-/// the planner evaluated no sequence of this agent's.
-pub fn decision(answer: Answer, input: &PlanningInput<'_>) -> Decision {
-    let (increments, yaw_ref) = match answer.steer {
-        Steer::Increments(v) => {
+/// The decision at `input` given an external planner's `answer`: the UAV's own planner's
+/// ([`guidance::decide`] with `params`) without an answer or when the answer defers
+/// ([`Steer::Defer`]); else its yaw reference (the UAV's yaw plus its first increment, or the
+/// reference it gave) and its planned views for the token, with no cost (the planner
+/// evaluated no sequence of this agent's). The agent's turn and the in-process episode both
+/// decide by it.
+pub fn decision(
+    answer: Option<Answer>,
+    params: &GuidanceParams,
+    input: &PlanningInput<'_>,
+) -> Decision {
+    let Some(Answer { steer, poses, .. }) = answer else {
+        return guidance::decide(params, input);
+    };
+    let (increments, yaw_ref) = match steer {
+        Steer::Increments(v) if !v.is_empty() => {
             let yaw_ref = input.state.yaw + v[0];
             (v, yaw_ref)
         }
         Steer::YawRef(y) => (Vec::new(), y),
+        Steer::Increments(_) | Steer::Defer => return guidance::decide(params, input),
     };
-    let poses = answer
-        .poses
+    let poses = poses
         .iter()
         .map(|&[x, y, z, yaw]| CameraPose {
             position: sets::math::Point3::new(x, y, z),
@@ -497,9 +507,12 @@ impl ExternalPlanner {
         }
     }
 
-    /// Counts a decision taken from an answer.
-    pub fn answered(&mut self) {
+    /// Counts a decision taken from an answer (one that defers, too).
+    pub fn answered(&mut self, answer: &Answer) {
         self.report.answered += 1;
+        if answer.steer == Steer::Defer {
+            self.report.deferred += 1;
+        }
     }
 
     /// Counts a fallback decision, logging the first of each reason.
@@ -538,6 +551,8 @@ pub struct ExternalReport {
     pub asked: u64,
     /// Decisions taken from an answer.
     pub answered: u64,
+    /// Of those, answers that deferred to the UAV's own planner ([`Steer::Defer`]).
+    pub deferred: u64,
     /// Fallbacks for want of an answer in time.
     pub late: u64,
     /// Fallbacks for a refused answer.
