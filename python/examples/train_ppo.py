@@ -19,9 +19,11 @@ Then, unless ``--no-eval``, every held-out seed of ``--eval-seeds`` (default 100
 runs three times with ``fleet run`` (``--eval-scenario``, default the paper's): the policy
 flying UAV 0 (:class:`setfleet.ppo.PolicyPlanner`, greedy) with the paper's planner on the
 others, and the ``paper`` and ``setfleet`` variants alone. ``eval.csv`` holds each run's final
-UA and violations, ``eval.json`` the paired differences learned − baseline of the final UA
-with their 95 % Student's t intervals and the counts of seeds where the policy was lower,
-higher or equal (lower UA is better), and the violations of all evaluation runs. With
+UA and violations (and for the policy's runs the share of its decisions that deferred),
+``eval.json`` the paired differences learned − baseline of the final UA with their 95 %
+Student's t intervals and the counts of seeds where the policy was lower, higher or equal
+(lower UA is better), the mean share of deferred decisions and the violations of all
+evaluation runs. With
 ``--eval-every N`` the policy is also saved every N updates (``checkpoints/``) and flown
 alone on the held-out seeds (``eval_curve.csv``).
 
@@ -377,7 +379,8 @@ def fly(config: TrainConfig, seed: int, variant: str, policy: Policy | None, out
     """One evaluation run of ``seed``: ``policy`` flying UAV 0 over the paper's planner
     (variant ``learned``), or ``variant`` alone; its final UA and violations (``None`` for
     a run that failed, with the reason printed)."""
-    row: dict[str, Any] = {"seed": seed, "variant": variant, "ua_final": None, "violations": None}
+    row: dict[str, Any] = {"seed": seed, "variant": variant, "ua_final": None, "violations": None,
+                           "deferred": None}
     learned = policy is not None
     if not learned and (out / "summary.json").exists():
         # A baseline does not depend on the policy: one flown before (an evaluation resumed,
@@ -393,7 +396,8 @@ def fly(config: TrainConfig, seed: int, variant: str, policy: Policy | None, out
         with setfleet.Run(scenario=config.eval_scenario, seed=seed,
                           variant="paper" if learned else variant, external=[0] if learned else None,
                           out=out, overrides=config.eval_overrides, fleet=config.fleet) as run:
-            result = run.serve(PolicyPlanner(policy)) if learned else run.wait()
+            planner = PolicyPlanner(policy) if learned else None
+            result = run.serve(planner) if planner else run.wait()
     except Exception as e:  # noqa: BLE001 - one failed run must not lose the others
         print(f"seed {seed}, {variant}: the run failed: {e}", file=sys.stderr)
         return row
@@ -401,6 +405,8 @@ def fly(config: TrainConfig, seed: int, variant: str, policy: Policy | None, out
         print(f"seed {seed}, {variant}: no summary (exit code {result.exit_code}), see {out}",
               file=sys.stderr)
     row["ua_final"], row["violations"] = result.ua_final, result.violations
+    if planner is not None and planner.decisions:
+        row["deferred"] = planner.deferrals / planner.decisions
     return row
 
 
@@ -416,8 +422,9 @@ def evaluate(config: TrainConfig, policy: Policy) -> dict[str, Any]:
                             out / "eval" / f"seed-{seed}" / variant))
     with open(out / "eval.csv", "w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(("seed", "variant", "ua_final", "violations"))
-        writer.writerows((r["seed"], r["variant"], _cell(r["ua_final"]), _cell(r["violations"])) for r in rows)
+        writer.writerow(("seed", "variant", "ua_final", "violations", "deferred"))
+        writer.writerows((r["seed"], r["variant"], _cell(r["ua_final"]), _cell(r["violations"]),
+                          _cell(r["deferred"])) for r in rows)
     ua = {v: [r["ua_final"] for r in rows if r["variant"] == v] for v in EVAL_VARIANTS}
     report = {
         "scenario": config.eval_scenario,
@@ -426,6 +433,7 @@ def evaluate(config: TrainConfig, policy: Policy) -> dict[str, Any]:
         "mean_ua_final": {v: _mean([u for u in ua[v] if u is not None]) for v in EVAL_VARIANTS},
         "learned-paper": paired_interval(ua["learned"], ua["paper"]),
         "learned-setfleet": paired_interval(ua["learned"], ua["setfleet"]),
+        "learned_deferred": _mean([r["deferred"] for r in rows if r["deferred"] is not None]),
         "violations": sum(r["violations"] or 0 for r in rows),
         "failed_runs": sum(r["ua_final"] is None for r in rows),
     }
@@ -437,6 +445,7 @@ def evaluate(config: TrainConfig, policy: Policy) -> dict[str, Any]:
         c = report[key]
         print(f"  {key}: {_cell(c['mean_diff'])} [{_cell(c['ci95_low'])}, {_cell(c['ci95_high'])}], "
               f"lower on {c['lower']}, higher on {c['higher']}, tied on {c['tie']} of {c['n']}")
+    print(f"  decisions deferred by the policy: {_cell(report['learned_deferred'])}")
     print(f"  violations: {report['violations']}; failed runs: {report['failed_runs']}")
     return report
 

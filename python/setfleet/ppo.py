@@ -518,10 +518,13 @@ class PolicyPlanner(Planner):
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._raster = SetsRaster(self.policy.config.size)
+        #: Decisions taken since the last :meth:`reset`, and how many of them deferred.
+        self.decisions = self.deferrals = 0
 
     def reset(self) -> None:
-        """Restarts the sampling generator from ``seed``."""
+        """Restarts the sampling generator from ``seed`` and the counts of decisions."""
         self.rng = np.random.default_rng(self.seed)
+        self.decisions = self.deferrals = 0
 
     def decide(self, obs: Observation) -> Action:
         """The action the policy picks for request ``obs``."""
@@ -535,7 +538,10 @@ class PolicyPlanner(Planner):
         o = observe(obs, self._raster)
         x = self.policy.features({k: v[None] for k, v in o.items()})
         action, _, _ = self.policy.act(x, None if self.deterministic else self.rng)
-        return actions.action(action[0])
+        chosen = actions.action(action[0])
+        self.decisions += 1
+        self.deferrals += chosen.defer
+        return chosen
 
     def __repr__(self) -> str:
         return f"PolicyPlanner({self.policy.config}, deterministic={self.deterministic})"

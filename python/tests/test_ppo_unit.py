@@ -360,3 +360,36 @@ def test_the_paired_interval_of_a_hand_made_example(trainer):
     assert (four["ci95_low"], four["ci95_high"]) == pytest.approx((2 - 3.4374, 2 + 3.4374), abs=1e-3)
     assert trainer.paired_interval([1.0], [0.0])["ci95_low"] is None
     assert trainer.t_quantile_975(100) == pytest.approx(1.96, abs=0.02)
+
+
+def test_a_baseline_flown_before_is_read_back(trainer, tmp_path):
+    config = trainer.parse_args(["--eval-only", "--out", str(tmp_path), "--eval-seeds", "1..2",
+                                 "--fleet", str(tmp_path / "no-such-fleet")])
+    done = tmp_path / "eval" / "seed-1" / "paper"
+    done.mkdir(parents=True)
+    (done / "summary.json").write_text(json.dumps({"ua_final": 0.5, "violations": 0}))
+    # Read back, so the missing fleet binary is never started.
+    assert trainer.fly(config, 1, "paper", None, done) == {
+        "seed": 1, "variant": "paper", "ua_final": 0.5, "violations": 0, "deferred": None}
+
+
+def test_the_evaluation_pairs_each_seeds_runs(trainer, tmp_path, monkeypatch):
+    config = trainer.parse_args(["--eval-only", "--out", str(tmp_path), "--eval-seeds", "1..4"])
+    base = {"learned": 0.40, "paper": 0.45, "setfleet": 0.30}
+
+    def fake_fly(cfg, seed, variant, policy, out):  # noqa: ANN001, ANN202
+        assert (policy is not None) == (variant == "learned")
+        return {"seed": seed, "variant": variant, "ua_final": base[variant] + 0.01 * seed * (variant == "learned"),
+                "violations": 0, "deferred": 0.25 * seed if variant == "learned" else None}
+
+    monkeypatch.setattr(trainer, "fly", fake_fly)
+    report = trainer.evaluate(config, Policy(NetConfig(size=16, pool=4, n_actions=3)))
+    # learned − paper: −0.04, −0.03, −0.02, −0.01.
+    paper = report["learned-paper"]
+    assert paper["n"] == 4 and paper["lower"] == 4 and math.isclose(paper["mean_diff"], -0.025)
+    assert paper["ci95_low"] < -0.025 < paper["ci95_high"] < 0
+    assert report["learned-setfleet"]["higher"] == 4
+    assert math.isclose(report["learned_deferred"], 0.625) and report["violations"] == 0
+    with open(tmp_path / "eval.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 12 and rows[0]["deferred"] == "0.25" and rows[1]["deferred"] == ""
