@@ -17,7 +17,8 @@ trains :mod:`setfleet.ppo` on ``--envs`` environments of ``setfleet.vector.SimVe
 
 Then, unless ``--no-eval``, every held-out seed of ``--eval-seeds`` (default 1001..1030)
 runs three times with ``fleet run`` (``--eval-scenario``, default the paper's): the policy
-flying UAV 0 (:class:`setfleet.ppo.PolicyPlanner`, greedy) with the paper's planner on the
+flying UAV 0 (:class:`setfleet.ppo.PolicyPlanner`, greedy; with ``--eval-sampled`` its
+actions sampled, seeded by the run's seed) with the paper's planner on the
 others, and the ``paper`` and ``setfleet`` variants alone. ``eval.csv`` holds each run's final
 UA and violations (and for the policy's runs the share of its decisions that deferred),
 ``eval.json`` the paired differences learned − baseline of the final UA with their 95 %
@@ -120,6 +121,7 @@ class TrainConfig:
     eval_overrides: list[str] = field(default_factory=list)
     no_eval: bool = False
     eval_only: bool = False
+    eval_sampled: bool = False
     eval_every: int | None = None
     fleet: str | None = None
     max_hours: float | None = None
@@ -177,6 +179,9 @@ def parse_args(argv: Sequence[str] | None = None) -> TrainConfig:
     p.add_argument("--no-eval", action="store_true", help="skip the evaluation")
     p.add_argument("--eval-only", action="store_true",
                    help="no training: evaluate the policy already in --out (policy.npz)")
+    p.add_argument("--eval-sampled", action="store_true",
+                   help="evaluate the policy's sampled actions (seeded by each run's seed), "
+                        "not its most probable ones")
     p.add_argument("--eval-every", type=int, default=None, metavar="N",
                    help="also save and evaluate the policy alone every N updates")
     p.add_argument("--fleet", default=None, help="the fleet binary for the evaluation")
@@ -216,6 +221,7 @@ def parse_args(argv: Sequence[str] | None = None) -> TrainConfig:
         eval_seeds=a.eval_seeds,
         eval_scenario=None if a.eval_scenario is None else _scenario_path(a.eval_scenario),
         eval_overrides=a.eval_overrides, no_eval=a.no_eval, eval_only=a.eval_only,
+        eval_sampled=a.eval_sampled,
         eval_every=a.eval_every,
         fleet=a.fleet, max_hours=a.max_hours, ppo=ppo,
     )
@@ -396,7 +402,8 @@ def fly(config: TrainConfig, seed: int, variant: str, policy: Policy | None, out
         with setfleet.Run(scenario=config.eval_scenario, seed=seed,
                           variant="paper" if learned else variant, external=[0] if learned else None,
                           out=out, overrides=config.eval_overrides, fleet=config.fleet) as run:
-            planner = PolicyPlanner(policy) if learned else None
+            planner = (PolicyPlanner(policy, deterministic=not config.eval_sampled, seed=seed)
+                       if learned else None)
             result = run.serve(planner) if planner else run.wait()
     except Exception as e:  # noqa: BLE001 - one failed run must not lose the others
         print(f"seed {seed}, {variant}: the run failed: {e}", file=sys.stderr)
@@ -429,6 +436,7 @@ def evaluate(config: TrainConfig, policy: Policy) -> dict[str, Any]:
     report = {
         "scenario": config.eval_scenario,
         "overrides": config.eval_overrides,
+        "sampled": config.eval_sampled,
         "seeds": config.eval_seeds,
         "mean_ua_final": {v: _mean([u for u in ua[v] if u is not None]) for v in EVAL_VARIANTS},
         "learned-paper": paired_interval(ua["learned"], ua["paper"]),
