@@ -18,15 +18,14 @@ trains :mod:`setfleet.ppo` on ``--envs`` environments of ``setfleet.vector.SimVe
 Then, unless ``--no-eval``, every held-out seed of ``--eval-seeds`` (default 1001..1030)
 runs three times with ``fleet run`` (``--eval-scenario``, default the paper's): the policy
 flying UAV 0 (:class:`setfleet.ppo.PolicyPlanner`, greedy; with ``--eval-sampled`` its
-actions sampled, seeded by the run's seed) with the paper's planner on the
-others, and the ``paper`` and ``setfleet`` variants alone. ``eval.csv`` holds each run's final
-UA and violations (and for the policy's runs the share of its decisions that deferred),
+actions sampled, seeded by the run's seed) with the paper's planner on the others, and the
+``paper`` and ``setfleet`` variants alone. ``eval.csv`` holds each run's final UA and
+violations (and for the policy's runs the share of its decisions that deferred),
 ``eval.json`` the paired differences learned − baseline of the final UA with their 95 %
 Student's t intervals and the counts of seeds where the policy was lower, higher or equal
 (lower UA is better), the mean share of deferred decisions and the violations of all
-evaluation runs. With
-``--eval-every N`` the policy is also saved every N updates (``checkpoints/``) and flown
-alone on the held-out seeds (``eval_curve.csv``).
+evaluation runs. With ``--eval-every N`` the policy is also saved every N updates
+(``checkpoints/``) and flown alone on the held-out seeds (``eval_curve.csv``).
 
 With ``--defer`` the learner has one more action, the last, that defers the decision to its
 own planner (the paper's, :class:`setfleet.gym.Actions`): the policy learns where to step in.
@@ -404,7 +403,7 @@ def fly(config: TrainConfig, seed: int, variant: str, policy: Policy | None, out
                           out=out, overrides=config.eval_overrides, fleet=config.fleet) as run:
             planner = (PolicyPlanner(policy, deterministic=not config.eval_sampled, seed=seed)
                        if learned else None)
-            result = run.serve(planner) if planner else run.wait()
+            result = run.serve(planner) if planner is not None else run.wait()
     except Exception as e:  # noqa: BLE001 - one failed run must not lose the others
         print(f"seed {seed}, {variant}: the run failed: {e}", file=sys.stderr)
         return row
