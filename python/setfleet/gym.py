@@ -74,6 +74,7 @@ __all__ = [
     "Actions",
     "observe",
     "reward",
+    "square_m2",
     "observation_space",
     "BACKENDS",
     "DEFAULT_INCREMENTS",
@@ -135,13 +136,17 @@ def observe(obs: Observation, raster: SetsRaster) -> dict[str, np.ndarray]:
     return {"sets": sets, "pose": pose}
 
 
+def square_m2(obs: Observation) -> float:
+    """The area rewards are fractions of: the planning square ``(2b)²`` (1 without a border)."""
+    b = obs.border_half_m
+    return (2 * b) ** 2 if b > 0 else 1.0
+
+
 def reward(prev: Observation, nxt: Observation, w_ua: float = 1.0, w_targets: float = 1.0) -> float:
     """The reward between two requests of a learner (the module's documentation)."""
-    b = prev.border_half_m
-    area = (2 * b) ** 2 if b > 0 else 1.0
     return float(
         (w_ua * (prev.undetected_m2 - nxt.undetected_m2) + w_targets * (prev.targets_m2 - nxt.targets_m2))
-        / area
+        / square_m2(prev)
     )
 
 
@@ -320,12 +325,16 @@ class _FleetEnv:
         **episodes: Any,
     ) -> None:
         self.actions = actions
-        self.increments = actions.increments
         self.w_ua, self.w_targets = float(w_ua), float(w_targets)
         self.request_timeout = request_timeout
         self._raster = SetsRaster(size)
         self._episodes = _Episodes(learners=learners, **episodes)
         self.last_result: RunResult | None = None
+
+    @property
+    def increments(self) -> tuple[float, ...]:
+        """The actions' yaw increments, rad."""
+        return self.actions.increments
 
     @property
     def run(self) -> Run | SimRun | None:

@@ -142,14 +142,14 @@ class SimRun:
 
     def result(self) -> RunResult:
         """What the run measured so far."""
-        asked, answered, malformed, _deferred = self.episode.counts
+        summary = _summary(self.episode)
         return RunResult(
             out=self.out,
             run_id="sim",
             exit_code=0 if self.episode.finished else None,
-            summary=_summary(self.episode),
-            decisions=answered,
-            errors=malformed,
+            summary=summary,
+            decisions=summary["external"]["answered"],
+            errors=summary["external"]["malformed"],
         )
 
     def close(self, timeout: float = 30.0) -> None:

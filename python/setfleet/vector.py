@@ -41,7 +41,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from .gym import Actions, SetsRaster, _info, observation_space, observe, reward
+from .gym import Actions, SetsRaster, _info, observation_space, observe, reward, square_m2
 from .layout import DEFAULT_INCREMENTS, Action, Observation, encode_answer
 from .sim import native, overrides_list
 
@@ -118,7 +118,6 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
         self.duration = duration
         self.overrides = overrides_list(overrides)
         self.actions = Actions(increments, defer)
-        self.increments = self.actions.increments
         self.w_ua, self.w_targets = float(w_ua), float(w_targets)
         self.baseline = bool(baseline)
         #: The baseline's values per seed: ``{step: w_ua undetected_m2 + w_targets targets_m2}``.
@@ -132,6 +131,11 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._slots = [_Slot() for _ in range(self.num_envs)]
         self._rng = np.random.default_rng(seed)
+
+    @property
+    def increments(self) -> tuple[float, ...]:
+        """The actions' yaw increments, rad."""
+        return self.actions.increments
 
     # ---- the runs ----------------------------------------------------------------------
 
@@ -203,8 +207,7 @@ class SimVectorEnv(gymnasium.vector.VectorEnv):
             drop = values[prev.step] - values[nxt.step]
         except KeyError as e:
             raise RuntimeError(f"the baseline run of seed {slot.seed} has no request at step {e}") from None
-        b = prev.border_half_m
-        return drop / ((2 * b) ** 2 if b > 0 else 1.0)
+        return drop / square_m2(prev)
 
     def _answer(self, slot: _Slot, action: Any) -> Observation:
         assert slot.request is not None
